@@ -1,0 +1,95 @@
+#include "simdvol/volume.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "simdvol/error.hpp"
+
+namespace simdvol {
+
+std::string_view to_string(VoxelType t) {
+  switch (t) {
+    case VoxelType::u8: return "u8";
+    case VoxelType::u16: return "u16";
+    case VoxelType::i16: return "i16";
+    case VoxelType::f32: return "f32";
+  }
+  return "?";
+}
+
+VoxelType parse_voxel_type(std::string_view s, const std::string& argument) {
+  if (s == "u8" || s == "uint8" || s == "uchar") return VoxelType::u8;
+  if (s == "u16" || s == "uint16" || s == "ushort") return VoxelType::u16;
+  if (s == "i16" || s == "int16" || s == "short") return VoxelType::i16;
+  if (s == "f32" || s == "float" || s == "float32") return VoxelType::f32;
+  throw ArgumentError(argument, "unknown voxel type '" + std::string(s) +
+                                    "' (expected u8, u16, i16 or f32)");
+}
+
+std::size_t voxel_bytes(VoxelType t) {
+  switch (t) {
+    case VoxelType::u8: return 1;
+    case VoxelType::u16:
+    case VoxelType::i16: return 2;
+    case VoxelType::f32: return 4;
+  }
+  return 0;
+}
+
+std::size_t checked_voxel_count(const std::array<int64_t, 3>& dims, const std::string& what,
+                                std::size_t bytes_per_voxel) {
+  std::size_t n = 1;
+  for (int a = 0; a < 3; ++a) {
+    if (dims[a] <= 0)
+      throw ArgumentError(what, "dimension " + std::to_string(a) + " is " +
+                                    std::to_string(dims[a]) + " (must be positive)");
+    const auto d = static_cast<std::size_t>(dims[a]);
+    if (n > std::numeric_limits<std::size_t>::max() / d)
+      throw ArgumentError(what, "dims " + std::to_string(dims[0]) + " x " +
+                                    std::to_string(dims[1]) + " x " + std::to_string(dims[2]) +
+                                    " overflow the voxel count");
+    n *= d;
+  }
+  if (bytes_per_voxel > 0 && n > std::numeric_limits<std::size_t>::max() / bytes_per_voxel)
+    throw ArgumentError(what, "dims " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) +
+                                  " x " + std::to_string(dims[2]) + " overflow the byte count");
+  return n;
+}
+
+Volume::Volume(std::array<int64_t, 3> dims, VoxelType type, std::array<double, 3> spacing)
+    : dims_(dims), type_(type) {
+  const std::size_t n = checked_voxel_count(dims, "volume");
+  set_spacing(spacing);
+  data_.assign(n, 0.0f);
+}
+
+void Volume::set_spacing(std::array<double, 3> s) {
+  for (int a = 0; a < 3; ++a)
+    if (!(s[a] > 0.0) || !std::isfinite(s[a]))
+      throw ArgumentError("spacing", "voxel spacing " + std::to_string(s[a]) +
+                                         " along axis " + std::to_string(a) +
+                                         " must be positive and finite");
+  spacing_ = s;
+}
+
+float Volume::at_clamped(int64_t x, int64_t y, int64_t z) const {
+  x = std::clamp<int64_t>(x, 0, dims_[0] - 1);
+  y = std::clamp<int64_t>(y, 0, dims_[1] - 1);
+  z = std::clamp<int64_t>(z, 0, dims_[2] - 1);
+  return at(x, y, z);
+}
+
+ValueRange Volume::range() const {
+  float lo = std::numeric_limits<float>::infinity();
+  float hi = -lo;
+  for (float v : data_) {
+    if (!std::isfinite(v)) continue;
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  if (lo > hi) return {0.0f, 0.0f};
+  return {lo, hi};
+}
+
+}  // namespace simdvol

@@ -1,0 +1,49 @@
+// Float RGBA images (premultiplied, i.e. associative colour over black) and
+// their output through OpenImageIO.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+#include <vector>
+
+namespace simdvol {
+
+struct Rgba {
+  float r = 0, g = 0, b = 0, a = 0;
+};
+
+class Image {
+ public:
+  Image() = default;
+  Image(int width, int height);  // throws ArgumentError if not positive
+  int width() const { return w_; }
+  int height() const { return h_; }
+  Rgba& at(int x, int y) { return px_[static_cast<std::size_t>(y) * w_ + x]; }
+  const Rgba& at(int x, int y) const { return px_[static_cast<std::size_t>(y) * w_ + x]; }
+  std::vector<Rgba>& pixels() { return px_; }
+  const std::vector<Rgba>& pixels() const { return px_; }
+
+ private:
+  int w_ = 0, h_ = 0;
+  std::vector<Rgba> px_;
+};
+
+/// Writes by extension: .png (8-bit RGB over black, alpha dropped), .exr
+/// (half-float RGBA, premultiplied), .tif/.tiff (32-bit float RGBA). Written
+/// to a temporary file beside `path` and renamed, so a failure never leaves a
+/// partial or clobbered file. Throws FileError on any problem (unknown
+/// extension, missing directory, OpenImageIO error).
+void write_image(const Image& img, const std::filesystem::path& path);
+
+/// Reads an image written by write_image (any format OpenImageIO reads) as
+/// float RGBA; a missing alpha becomes 1. Throws FileError.
+Image read_image(const std::filesystem::path& path);
+
+/// Peak signal-to-noise ratio in dB over the RGB channels, peak 1.0.
+/// Returns +infinity for identical images. Throws ArgumentError on size mismatch.
+double psnr(const Image& a, const Image& b);
+
+/// Largest absolute difference over all four channels.
+float max_abs_diff(const Image& a, const Image& b);
+
+}  // namespace simdvol

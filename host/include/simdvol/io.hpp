@@ -1,0 +1,48 @@
+// Volume loaders and writers. Every malformed input throws FileError naming
+// the file and the problem: missing file, directory, truncated data, header
+// dims that disagree with the data size, overflowing dims, unknown type,
+// non-positive dimension.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+
+#include "simdvol/volume.hpp"
+
+namespace simdvol {
+
+enum class Endian { little, big };
+
+/// What a raw file cannot say about itself.
+struct RawLayout {
+  std::array<int64_t, 3> dims{0, 0, 0};
+  VoxelType type = VoxelType::u8;
+  Endian endian = Endian::little;
+  std::array<double, 3> spacing{1.0, 1.0, 1.0};
+  uint64_t header_bytes = 0;  ///< bytes to skip before the voxels
+};
+
+/// Raw voxels, x fastest. The file must hold exactly header_bytes + voxels.
+Volume load_raw(const std::filesystem::path& path, const RawLayout& layout);
+/// VolPack's .den format (brainsmall.den): a 64-byte header of 16-bit
+/// big-endian fields, then 8-bit voxels.
+Volume load_den(const std::filesystem::path& path);
+/// NRRD through teem: attached and detached headers (.nrrd, .nhdr), raw and
+/// gzip encodings, 3-D scalar data of a supported type.
+Volume load_nrrd(const std::filesystem::path& path);
+/// NIfTI-1 through niftilib: .nii and .nii.gz, 3-D scalar (or 4-D with one
+/// volume), scl_slope/scl_inter applied.
+Volume load_nifti(const std::filesystem::path& path);
+
+/// Chooses the loader by extension (.den, .nrrd, .nhdr, .nii, .nii.gz, and
+/// .raw which needs `raw`). Throws FileError for an unknown extension.
+Volume load_volume(const std::filesystem::path& path,
+                   const std::optional<RawLayout>& raw = std::nullopt);
+
+/// Writes an attached-header NRRD (raw encoding) in the volume's own type,
+/// atomically: a temporary file beside `path`, then rename.
+void save_nrrd(const Volume& vol, const std::filesystem::path& path);
+
+}  // namespace simdvol

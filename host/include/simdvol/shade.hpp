@@ -1,0 +1,49 @@
+// Shading (thesis eq 4.1–4.3): central-difference gradients and Phong
+// lighting with depth cueing, for a constant parallel light and an
+// orthographic view. Lighting is two-sided (|N.L|, |N.H|), so the sign
+// convention of eq 4.3's normal does not matter.
+#pragma once
+
+#include <vector>
+
+#include "simdvol/view.hpp"
+#include "simdvol/volume.hpp"
+
+namespace simdvol {
+
+struct ShadeParams {
+  bool enabled = true;       ///< false: Id = 1, Is = 0 everywhere (unlit)
+  Vec3 light{-0.4, -0.5, -1.0};  ///< direction towards the light, viewing space (normalised)
+  double ka = 0.25;          ///< ambient
+  double kd = 0.75;          ///< diffuse
+  double ks = 0.35;          ///< specular
+  double shininess = 24.0;   ///< Phong exponent n
+  double k1 = 1.0;           ///< depth cue 1 / (k1 + k2 * d), d in [0, 1] front to back
+  double k2 = 0.6;
+};
+
+/// Per-voxel result of the shade stage.
+struct ShadeSample {
+  float diffuse = 0;   ///< Id = ka + cue * kd * |N.L|
+  float specular = 0;  ///< Is = cue * ks * |N.H|^n
+  float gradient = 0;  ///< |grad f| (value units per smallest voxel spacing)
+  float pad = 0;
+};
+
+/// Quantities derived once per view, in object (index-aligned) space.
+struct ShadeFrame {
+  Vec3 light_obj{}, halfway_obj{};  ///< unit L and H in object space
+  Vec3 depth_dir{};                 ///< viewing z in object index units: d = dot(depth_dir, x) + depth_offset
+  double depth_offset = 0;
+  Vec3 grad_scale{};                ///< multiply index-space differences by this (min spacing / spacing)
+};
+ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p);
+
+/// Central-difference gradient at voxel (x, y, z), neighbours clamped at the
+/// volume's edges, in value units per smallest voxel spacing.
+Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& grad_scale);
+
+/// The shade stage over the whole volume (reference, serial).
+std::vector<ShadeSample> shade(const Volume& vol, const ViewGeometry& view, const ShadeParams& p);
+
+}  // namespace simdvol

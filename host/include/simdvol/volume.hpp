@@ -1,0 +1,71 @@
+// A scalar volume: dims, voxel spacing, the type it was stored as, and its
+// values as float (x fastest, then y, then z).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace simdvol {
+
+enum class VoxelType { u8, u16, i16, f32 };
+
+std::string_view to_string(VoxelType t);
+/// Parses "u8", "u16", "i16", "f32" (also "uint8", "uint16", "int16", "float").
+/// Throws ArgumentError naming `argument` otherwise.
+VoxelType parse_voxel_type(std::string_view s, const std::string& argument = "type");
+std::size_t voxel_bytes(VoxelType t);
+
+struct ValueRange {
+  float min = 0.0f;
+  float max = 0.0f;
+};
+
+class Volume {
+ public:
+  Volume() = default;
+  /// Allocates a zero-filled volume. Throws ArgumentError for a non-positive
+  /// dimension or a voxel count that overflows.
+  Volume(std::array<int64_t, 3> dims, VoxelType type,
+         std::array<double, 3> spacing = {1.0, 1.0, 1.0});
+
+  const std::array<int64_t, 3>& dims() const { return dims_; }
+  int64_t nx() const { return dims_[0]; }
+  int64_t ny() const { return dims_[1]; }
+  int64_t nz() const { return dims_[2]; }
+  std::size_t voxel_count() const { return data_.size(); }
+
+  const std::array<double, 3>& spacing() const { return spacing_; }
+  void set_spacing(std::array<double, 3> s);  // throws ArgumentError if not > 0 and finite
+  VoxelType type() const { return type_; }
+
+  std::size_t index(int64_t x, int64_t y, int64_t z) const {
+    return static_cast<std::size_t>((z * dims_[1] + y) * dims_[0] + x);
+  }
+  float at(int64_t x, int64_t y, int64_t z) const { return data_[index(x, y, z)]; }
+  float& at(int64_t x, int64_t y, int64_t z) { return data_[index(x, y, z)]; }
+  /// Value at (x, y, z) with each coordinate clamped into the volume.
+  float at_clamped(int64_t x, int64_t y, int64_t z) const;
+
+  const std::vector<float>& data() const { return data_; }
+  std::vector<float>& data() { return data_; }
+
+  /// Smallest and largest finite value (computed on demand).
+  ValueRange range() const;
+
+ private:
+  std::array<int64_t, 3> dims_{0, 0, 0};
+  std::array<double, 3> spacing_{1.0, 1.0, 1.0};
+  VoxelType type_ = VoxelType::f32;
+  std::vector<float> data_;
+};
+
+/// Multiplies the three dims, throwing ArgumentError (naming `what`) if any is
+/// non-positive or the product (times `bytes_per_voxel`) overflows size_t.
+std::size_t checked_voxel_count(const std::array<int64_t, 3>& dims, const std::string& what,
+                                std::size_t bytes_per_voxel = sizeof(float));
+
+}  // namespace simdvol
