@@ -3,7 +3,7 @@
 // composite -> (voxel sampling) 2-D scale to the output size.
 #pragma once
 
-#include <functional>
+#include <vector>
 
 #include "simdvol/classify.hpp"
 #include "simdvol/composite.hpp"
@@ -36,6 +36,13 @@ struct RenderTimes {
 /// pixel sampling it equals the result.
 Image render_reference(const Volume& vol, const RenderOptions& opt, RenderTimes* times = nullptr,
                        Image* intermediate = nullptr);
+
+/// The stages after classification (match, resample, composite, warp), from
+/// classified premultiplied RGBA voxels (x fastest, the volume's dims). The
+/// OpenCL engine uses this while its own later stages are being built.
+Image render_classified(const std::vector<Rgba>& voxels, const Volume& vol, const ViewGeometry& view,
+                        const RenderOptions& opt, RenderTimes* times = nullptr,
+                        Image* intermediate = nullptr);
 
 /// Bilinear 2-D scale of the intermediate image to the output size (the
 /// final warp of voxel sampling); outside the intermediate image is
