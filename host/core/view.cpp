@@ -1,0 +1,176 @@
+#include "simdvol/view.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "simdvol/error.hpp"
+
+namespace simdvol {
+
+Mat3 multiply(const Mat3& a, const Mat3& b) {
+  Mat3 c{};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) c[i][j] += a[i][k] * b[k][j];
+  return c;
+}
+
+Vec3 multiply(const Mat3& a, const Vec3& v) {
+  Vec3 r{};
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) r[i] += a[i][k] * v[k];
+  return r;
+}
+
+Mat3 transpose(const Mat3& a) {
+  Mat3 t{};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) t[i][j] = a[j][i];
+  return t;
+}
+
+double determinant(const Mat3& a) {
+  return a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) -
+         a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+         a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+}
+
+Mat3 rotation(double theta_deg, double phi_deg, double varphi_deg) {
+  const double d = std::numbers::pi / 180.0;
+  const double ct = std::cos(theta_deg * d), st = std::sin(theta_deg * d);
+  const double cp = std::cos(phi_deg * d), sp = std::sin(phi_deg * d);
+  const double cv = std::cos(varphi_deg * d), sv = std::sin(varphi_deg * d);
+  // Eq 5.2, factor by factor: T = A(varphi) B(phi) C(theta).
+  const Mat3 a{{{0, 0, 1}, {-sv, cv, 0}, {cv, sv, 0}}};
+  const Mat3 b{{{sp, 0, cp}, {0, 1, 0}, {cp, 0, -sp}}};
+  const Mat3 c{{{ct, st, 0}, {-st, ct, 0}, {0, 0, 1}}};
+  return multiply(a, multiply(b, c));
+}
+
+namespace {
+
+int64_t to_fixed(double x) {
+  return std::llround(std::ldexp(x, SV_FRAC_BITS));
+}
+
+// floor(a / b) and ceil(a / b) for b > 0, exact in 128-bit integers.
+__int128 floor_div(__int128 a, __int128 b) {
+  __int128 q = a / b;
+  if ((a % b != 0) && (a < 0)) --q;
+  return q;
+}
+__int128 ceil_div(__int128 a, __int128 b) {
+  return -floor_div(-a, b);
+}
+
+}  // namespace
+
+bool ViewGeometry::inside(int64_t i, int64_t j, int64_t k) const {
+  for (int a = 0; a < 3; ++a) {
+    const int64_t f = fixed_floor(fixed(a, i, j, k));
+    if (f < 0 || f >= grid.dims[a]) return false;
+  }
+  return true;
+}
+
+std::array<int64_t, 2> ViewGeometry::ray_range(int64_t i, int64_t j) const {
+  // Sample k is inside along axis a iff 0 <= base + k * d < n * 2^F.
+  __int128 lo = 0, hi = grid.grid[2];  // [lo, hi)
+  for (int a = 0; a < 3; ++a) {
+    const __int128 base = fixed(a, i, j, 0);
+    const __int128 d = grid.step[a][2];
+    const __int128 top = static_cast<__int128>(grid.dims[a]) << SV_FRAC_BITS;
+    if (d == 0) {
+      if (base < 0 || base >= top) return {0, 0};
+    } else if (d > 0) {
+      // k >= ceil(-base / d) and k < ceil((top - base) / d)
+      lo = std::max(lo, ceil_div(-base, d));
+      hi = std::min(hi, ceil_div(top - base, d));
+    } else {
+      // base + k d < top  <=>  k > (top - base) / d  <=> k >= floor((base - top) / -d) + 1
+      // base + k d >= 0   <=>  k <= base / -d          <=> k <  floor(base / -d) + 1
+      lo = std::max(lo, floor_div(base - top, -d) + 1);
+      hi = std::min(hi, floor_div(base, -d) + 1);
+    }
+  }
+  if (lo >= hi) return {0, 0};
+  return {static_cast<int64_t>(lo), static_cast<int64_t>(hi)};
+}
+
+std::array<double, 2> ViewGeometry::output_to_intermediate(int x, int y) const {
+  if (sampling == Sampling::pixel) return {double(x), double(y)};
+  // Output pixel centres in viewing units (the longest side spans
+  // min(out_width, out_height) pixels), then intermediate pixel coordinates.
+  const double scale = std::min(out_width, out_height) / longest;  // pixels per unit
+  const double u = (x + 0.5 - 0.5 * out_width) / scale;
+  const double v = (y + 0.5 - 0.5 * out_height) / scale;
+  return {u / step + 0.5 * width() - 0.5, v / step + 0.5 * height() - 0.5};
+}
+
+ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int out_height,
+                       Sampling sampling) {
+  if (out_width <= 0 || out_height <= 0)
+    throw ArgumentError("--size", "image size " + std::to_string(out_width) + "x" +
+                                      std::to_string(out_height) + " must be positive");
+  if (vol.voxel_count() == 0) throw ArgumentError("volume", "the volume is empty");
+  for (double a : {angles.theta, angles.phi, angles.varphi})
+    if (!std::isfinite(a)) throw ArgumentError("--view", "angles must be finite");
+  if (vol.nx() > (int64_t{1} << 24) || vol.ny() > (int64_t{1} << 24) ||
+      vol.nz() > (int64_t{1} << 24))
+    throw ArgumentError("volume", "a dimension exceeds 2^24 voxels");
+
+  ViewGeometry g;
+  g.sampling = sampling;
+  g.out_width = out_width;
+  g.out_height = out_height;
+  g.rot = rotation(angles.theta, angles.phi, angles.varphi);
+
+  const auto& sp = vol.spacing();
+  const double smin = std::min({sp[0], sp[1], sp[2]});
+  Vec3 extent{};
+  double diag2 = 0;
+  for (int a = 0; a < 3; ++a) {
+    extent[a] = static_cast<double>(vol.dims()[a]) * sp[a] / smin;
+    diag2 += extent[a] * extent[a];
+    g.longest = std::max(g.longest, extent[a]);
+  }
+  g.radius = 0.5 * std::sqrt(diag2);
+
+  int wi = out_width, hi = out_height;
+  if (sampling == Sampling::pixel) {
+    g.step = g.longest / std::min(out_width, out_height);
+  } else {
+    g.step = 1.0;
+    const double scale = std::min(out_width, out_height) / g.longest;
+    wi = static_cast<int>(std::ceil(out_width / scale)) + 2;
+    hi = static_cast<int>(std::ceil(out_height / scale)) + 2;
+  }
+  const int depth = std::max(1, static_cast<int>(std::ceil(2.0 * g.radius / g.step)));
+
+  // Viewing position of sample (i, j, k): step * (i + 1/2 - W/2, j + 1/2 - H/2,
+  // k + 1/2 - D/2); object index position X_a = (T^T p)_a * smin / s_a + n_a / 2.
+  const Mat3 tt = transpose(g.rot);
+  const Vec3 c0{0.5 - 0.5 * wi, 0.5 - 0.5 * hi, 0.5 - 0.5 * depth};
+  for (int a = 0; a < 3; ++a) {
+    const double f = g.step * smin / sp[a];
+    double o = 0.5 * static_cast<double>(vol.dims()[a]);
+    for (int b = 0; b < 3; ++b) {
+      g.grid.step[a][b] = to_fixed(tt[a][b] * f);
+      o += tt[a][b] * f * c0[b];
+    }
+    g.grid.step[a][3] = 0;
+    g.grid.origin[a] = to_fixed(o);
+    g.grid.dims[a] = static_cast<sv_i32>(vol.dims()[a]);
+  }
+  g.grid.origin[3] = 0;
+  g.grid.dims[3] = 0;
+  g.grid.grid[0] = wi;
+  g.grid.grid[1] = hi;
+  g.grid.grid[2] = depth;
+  g.grid.grid[3] = 0;
+  g.view_dir_obj = multiply(tt, Vec3{0, 0, 1});
+  return g;
+}
+
+}  // namespace simdvol
