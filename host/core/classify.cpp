@@ -1,0 +1,460 @@
+// The classify stage, serial reference (thesis ch. 4.4, eq 4.4), the
+// classifier presets and the classifier file format.
+//
+// Conventions (the OpenCL kernel implements exactly these formulas):
+//
+//  Ramp r(v), points (x_k, y_k) with x non-decreasing:
+//      v <= x_0            -> y_0
+//      v >= x_last         -> y_last
+//      x_k <= v < x_{k+1}  -> y_k + (v - x_k) * (y_{k+1} - y_k) / (x_{k+1} - x_k)
+//  (k is the last point with x_k <= v, so equal x give a step and never a
+//  division by zero). An empty ramp is the constant 1. NaN -> y_0.
+//
+//  Material mixture (eq 4.4, two materials at most, as thesis fig 4.2).
+//  Materials must be sorted by strictly ascending mean (presets and
+//  load_classifier sort them; a Classifier built by hand that is not sorted
+//  is rejected with ArgumentError rather than silently re-sorted per voxel).
+//      I = v                                   (absolute)
+//      I = (v - range.min) / (range.max - range.min), 0 if max == min
+//                                              (relative)
+//      I <= mean_0     : p_0 = 1                (pure first material)
+//      I >= mean_last  : p_last = 1             (pure last material)
+//      otherwise, i = last material with mean_i <= I, j = i + 1:
+//          L_m = -(I - mean_m)^2 / (2 sigma_m^2) - ln(sigma_m)   (log N(mean, sigma))
+//          p_i = 1 / (1 + exp(L_j - L_i)),  p_j = 1 - p_i
+//      (= P_i / (P_i + P_j) for Gaussian P, without overflow or 0/0).
+//      alpha     = p_i a_i + p_j a_j
+//      colour[c] = p_i a_i col_i[c] + p_j a_j col_j[c]     (premultiplied)
+//
+//  Transfer function (VolPack's example):
+//      alpha     = density(v) * gradient(|g|)
+//      colour[c] = alpha * colour_c(v)      (empty colour ramps: white)
+//
+//  A NaN voxel value classifies as transparent (alpha 0, colour 0).
+//
+//  The classify stage, per voxel, with (Id, Is, |g|) from the shade stage:
+//      a  = classify_voxel(v, |g|)
+//      a' = a                          if opacity_step == 1 exactly
+//           1 - (1 - a)^opacity_step   otherwise (opacity of a sample
+//                                      opacity_step voxels long)
+//      a <= 0:  output (0, 0, 0, 0)
+//      else:    C_c = min(1, (colour_c / a) * Id + Is)
+//               output (a' C_r, a' C_g, a' C_b, a')    (premultiplied)
+#include "simdvol/classify.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "simdvol/error.hpp"
+
+namespace simdvol {
+namespace {
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+void validate_ramp(const Ramp& r, const std::string& what) {
+  if (r.x.size() != r.y.size())
+    throw ArgumentError(what, "ramp has " + std::to_string(r.x.size()) + " x values but " +
+                                  std::to_string(r.y.size()) + " y values");
+  for (std::size_t k = 0; k < r.x.size(); ++k) {
+    if (!std::isfinite(r.x[k]) || !std::isfinite(r.y[k]))
+      throw ArgumentError(what, "ramp point " + std::to_string(k) + " is not finite");
+    if (r.y[k] < 0.0f || r.y[k] > 1.0f)
+      throw ArgumentError(
+          what, "ramp value " + fmt(r.y[k]) + " at x = " + fmt(r.x[k]) + " is outside [0, 1]");
+    if (k > 0 && r.x[k] < r.x[k - 1])
+      throw ArgumentError(what, "ramp x values must be ascending (" + fmt(r.x[k]) + " after " +
+                                    fmt(r.x[k - 1]) + ")");
+  }
+}
+
+void validate(const Classifier& c) {
+  if (c.kind == Classifier::Kind::transfer) {
+    validate_ramp(c.transfer.density, "classifier.density");
+    validate_ramp(c.transfer.gradient, "classifier.gradient");
+    validate_ramp(c.transfer.red, "classifier.red");
+    validate_ramp(c.transfer.green, "classifier.green");
+    validate_ramp(c.transfer.blue, "classifier.blue");
+    return;
+  }
+  const auto& m = c.mixture.materials;
+  if (m.empty()) throw ArgumentError("classifier", "the material mixture has no materials");
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    const Material& mat = m[i];
+    const std::string what = "classifier.material '" + mat.name + "'";
+    if (!std::isfinite(mat.mean)) throw ArgumentError(what, "mean is not finite");
+    if (!(mat.sigma > 0.0f) || !std::isfinite(mat.sigma))
+      throw ArgumentError(what, "sigma must be > 0 (got " + fmt(mat.sigma) + ")");
+    for (float v : {mat.r, mat.g, mat.b})
+      if (!(v >= 0.0f && v <= 1.0f))
+        throw ArgumentError(what, "colour component " + fmt(v) + " is outside [0, 1]");
+    if (!(mat.opacity >= 0.0f && mat.opacity <= 1.0f))
+      throw ArgumentError(what, "opacity " + fmt(mat.opacity) + " is outside [0, 1]");
+    if (i > 0 && !(m[i - 1].mean < mat.mean))
+      throw ArgumentError("classifier", "material means must be strictly ascending ('" +
+                                            m[i - 1].name + "' " + fmt(m[i - 1].mean) + ", then '" +
+                                            mat.name + "' " + fmt(mat.mean) + ")");
+  }
+}
+
+// Log-likelihood of intensity I under N(mean, sigma), less the constant
+// -ln(sqrt(2 pi)) shared by every material.
+double log_likelihood(const Material& m, double I) {
+  const double d = I - static_cast<double>(m.mean);
+  const double s = static_cast<double>(m.sigma);
+  return -(d * d) / (2.0 * s * s) - std::log(s);
+}
+
+float classify_mixture(const MaterialMixture& mix, const ValueRange& range, float value,
+                       float colour[3]) {
+  double I = value;
+  if (mix.relative) {
+    const double span = static_cast<double>(range.max) - static_cast<double>(range.min);
+    I = span > 0.0 ? (static_cast<double>(value) - static_cast<double>(range.min)) / span : 0.0;
+  }
+  const auto& m = mix.materials;
+  std::size_t i = 0, j = 0;  // the bracketing pair
+  double pi = 1.0;           // fraction of material i; material j has 1 - pi
+  if (I <= m.front().mean) {
+    i = j = 0;
+  } else if (I >= m.back().mean) {
+    i = j = m.size() - 1;
+  } else {
+    // i = last material with mean_i <= I (exists and is not the last one).
+    i = static_cast<std::size_t>(
+            std::upper_bound(m.begin(), m.end(), I,
+                             [](double v, const Material& mm) { return v < mm.mean; }) -
+            m.begin()) -
+        1;
+    j = i + 1;
+    pi = 1.0 / (1.0 + std::exp(log_likelihood(m[j], I) - log_likelihood(m[i], I)));
+  }
+  const double pj = 1.0 - pi;
+  const double ai = pi * m[i].opacity, aj = pj * m[j].opacity;
+  colour[0] = static_cast<float>(ai * m[i].r + aj * m[j].r);
+  colour[1] = static_cast<float>(ai * m[i].g + aj * m[j].g);
+  colour[2] = static_cast<float>(ai * m[i].b + aj * m[j].b);
+  return static_cast<float>(ai + aj);
+}
+
+float classify_transfer(const TransferFunction& t, float value, float grad_mag, float colour[3]) {
+  const float alpha = t.density(value) * t.gradient(grad_mag);
+  colour[0] = alpha * t.red(value);
+  colour[1] = alpha * t.green(value);
+  colour[2] = alpha * t.blue(value);
+  return alpha;
+}
+
+// classify_voxel without the validation (done once per volume by classify()).
+float classify_unchecked(const Classifier& c, const ValueRange& range, float value, float grad_mag,
+                         float colour[3]) {
+  if (std::isnan(value)) {
+    colour[0] = colour[1] = colour[2] = 0.0f;
+    return 0.0f;
+  }
+  if (c.kind == Classifier::Kind::transfer)
+    return classify_transfer(c.transfer, value, grad_mag, colour);
+  return classify_mixture(c.mixture, range, value, colour);
+}
+
+void sort_materials(std::vector<Material>& m) {
+  std::stable_sort(m.begin(), m.end(),
+                   [](const Material& a, const Material& b) { return a.mean < b.mean; });
+}
+
+Ramp ramp(std::vector<float> x, std::vector<float> y) {
+  Ramp r;
+  r.x = std::move(x);
+  r.y = std::move(y);
+  return r;
+}
+
+Classifier mixture_of(std::vector<Material> m, bool relative) {
+  Classifier c;
+  c.kind = Classifier::Kind::mixture;
+  sort_materials(m);
+  c.mixture.materials = std::move(m);
+  c.mixture.relative = relative;
+  return c;
+}
+
+}  // namespace
+
+float Ramp::operator()(float v) const {
+  if (x.size() != y.size())
+    throw ArgumentError("ramp", "has " + std::to_string(x.size()) + " x values but " +
+                                    std::to_string(y.size()) + " y values");
+  if (x.empty()) return 1.0f;
+  if (std::isnan(v) || v <= x.front()) return y.front();
+  if (v >= x.back()) return y.back();
+  // k = last point with x_k <= v; here 0 <= k < size - 1 and x_{k+1} > v >= x_k.
+  const std::size_t k =
+      static_cast<std::size_t>(std::upper_bound(x.begin(), x.end(), v) - x.begin()) - 1;
+  const float t = (v - x[k]) / (x[k + 1] - x[k]);
+  return y[k] + t * (y[k + 1] - y[k]);
+}
+
+float classify_voxel(const Classifier& c, const ValueRange& range, float value, float grad_mag,
+                     float colour[3]) {
+  validate(c);
+  return classify_unchecked(c, range, value, grad_mag, colour);
+}
+
+std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& shading,
+                           const Classifier& c, double opacity_step) {
+  if (shading.size() != vol.voxel_count())
+    throw ArgumentError("shading", "has " + std::to_string(shading.size()) +
+                                       " samples for a volume of " +
+                                       std::to_string(vol.voxel_count()) + " voxels");
+  if (!(opacity_step > 0.0) || !std::isfinite(opacity_step))
+    throw ArgumentError("opacity_step",
+                        "must be positive and finite (got " + fmt(opacity_step) + ")");
+  validate(c);
+  const bool need_range = c.kind == Classifier::Kind::mixture && c.mixture.relative;
+  const ValueRange range = need_range ? vol.range() : ValueRange{};
+
+  std::vector<Rgba> out(vol.voxel_count());
+  const auto& data = vol.data();
+  for (std::size_t n = 0; n < data.size(); ++n) {
+    float col[3];
+    const float a = classify_unchecked(c, range, data[n], shading[n].gradient, col);
+    if (!(a > 0.0f)) continue;  // out[n] stays (0, 0, 0, 0)
+    const double a1 = opacity_step == 1.0
+                          ? static_cast<double>(a)
+                          : 1.0 - std::pow(1.0 - static_cast<double>(a), opacity_step);
+    double C[3];
+    for (int k = 0; k < 3; ++k)
+      C[k] =
+          std::min(1.0, static_cast<double>(col[k]) / a * shading[n].diffuse + shading[n].specular);
+    out[n] = Rgba{static_cast<float>(a1 * C[0]), static_cast<float>(a1 * C[1]),
+                  static_cast<float>(a1 * C[2]), static_cast<float>(a1)};
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------- presets
+
+std::vector<std::string> classifier_preset_names() {
+  return {"ct", "ct-bone", "mri", "volpack"};
+}
+
+Classifier classifier_preset(std::string_view name) {
+  if (name == "ct") {
+    // Hounsfield units. The renderer composites ~200 samples along a ray
+    // through a head, so soft tissue must be nearly transparent per voxel.
+    return mixture_of({{"air", -1000.0f, 120.0f, 0.0f, 0.0f, 0.0f, 0.0f},
+                       {"fat", -100.0f, 60.0f, 0.95f, 0.8f, 0.55f, 0.002f},
+                       {"soft tissue", 40.0f, 60.0f, 0.85f, 0.45f, 0.4f, 0.004f},
+                       {"bone", 1000.0f, 250.0f, 1.0f, 0.97f, 0.9f, 0.3f}},
+                      false);
+  }
+  if (name == "ct-bone") {
+    return mixture_of({{"air", -1000.0f, 120.0f, 0.0f, 0.0f, 0.0f, 0.0f},
+                       {"fat", -100.0f, 60.0f, 0.95f, 0.8f, 0.55f, 0.0f},
+                       {"soft tissue", 40.0f, 60.0f, 0.85f, 0.45f, 0.4f, 0.0f},
+                       {"bone", 1000.0f, 250.0f, 1.0f, 0.97f, 0.9f, 1.0f}},
+                      false);
+  }
+  if (name == "mri") {
+    // T1-weighted head, intensities relative to the volume's range.
+    return mixture_of({{"background", 0.0f, 0.05f, 0.0f, 0.0f, 0.0f, 0.0f},
+                       {"csf", 0.15f, 0.05f, 0.3f, 0.4f, 0.8f, 0.0f},
+                       {"grey matter", 0.45f, 0.07f, 0.8f, 0.6f, 0.55f, 0.01f},
+                       {"white matter", 0.6f, 0.06f, 0.95f, 0.9f, 0.85f, 0.02f},
+                       {"fat/skin", 0.85f, 0.1f, 1.0f, 0.8f, 0.65f, 0.15f}},
+                      true);
+  }
+  if (name == "volpack") {
+    // VolPack's examples/classifyvolume.c for brainsmall.den (u8 densities,
+    // gradient magnitudes 0..VP_GRAD_MAX = 221): the density ramp
+    // {0, 24, 255} -> {0, 1, 1}, the gradient ramp {0, 5, 20, 221} ->
+    // {0, 0, 1, 1}, white (a luminance image). Its shading (rendervolume.c:
+    // ambient 0.18, diffuse 0.35, specular 0.39, shininess 10, light
+    // (0.3, 0.3, 1), depth cue 1.4 / 1.5) is a ShadeParams matter.
+    Classifier c;
+    c.kind = Classifier::Kind::transfer;
+    c.transfer.density = ramp({0.0f, 24.0f, 255.0f}, {0.0f, 1.0f, 1.0f});
+    c.transfer.gradient = ramp({0.0f, 5.0f, 20.0f, 221.0f}, {0.0f, 0.0f, 1.0f, 1.0f});
+    return c;
+  }
+  std::string names;
+  for (const auto& n : classifier_preset_names()) names += (names.empty() ? "" : ", ") + n;
+  throw ArgumentError("classifier",
+                      "unknown preset '" + std::string(name) + "' (presets: " + names + ")");
+}
+
+// ------------------------------------------------------------ file format
+//
+// One directive per line; '#' starts a comment; blank lines are ignored.
+//   density  x y [x y ...]          opacity of the value (transfer function)
+//   gradient x y [x y ...]          opacity factor of |grad| (transfer function)
+//   color    x r g b [x r g b ...]  colour of the value (transfer function)
+//   material NAME MEAN SIGMA R G B OPACITY     (mixture; any order, sorted by mean)
+//   relative                        mixture means/sigmas are fractions of the range
+// A ramp directive may be repeated: its points are appended, x strictly
+// ascending across the lines. Ramp values, colours and opacities lie in
+// [0, 1]; sigma > 0; material means are distinct. Material lines and ramp
+// lines cannot be mixed.
+
+namespace {
+
+struct Parser {
+  const std::filesystem::path& path;
+  int line = 0;
+
+  [[noreturn]] void fail(const std::string& problem) const {
+    throw FileError(path, "line " + std::to_string(line) + ": " + problem);
+  }
+
+  float number(const std::string& tok) const {
+    const char* s = tok.c_str();
+    char* end = nullptr;
+    errno = 0;
+    const double v = std::strtod(s, &end);
+    if (end == s || *end != '\0') fail("'" + tok + "' is not a number");
+    if (errno == ERANGE || !std::isfinite(v) || std::fabs(v) > 3.0e38)
+      fail("'" + tok + "' is out of range");
+    return static_cast<float>(v);
+  }
+
+  float unit(const std::string& tok, const char* what) const {
+    const float v = number(tok);
+    if (v < 0.0f || v > 1.0f) fail(std::string(what) + " " + tok + " is outside [0, 1]");
+    return v;
+  }
+
+  void append_x(std::vector<float>& xs, float x, const std::string& directive) const {
+    if (!xs.empty() && !(x > xs.back()))
+      fail(directive + " x values must be ascending (" + fmt(x) + " after " + fmt(xs.back()) + ")");
+    xs.push_back(x);
+  }
+};
+
+}  // namespace
+
+Classifier load_classifier(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw FileError(path, "cannot open classifier file");
+
+  Classifier c;
+  Parser ps{path};
+  bool any_transfer = false, any_material = false;
+  int relative_line = 0;
+  std::vector<int> material_lines;  // parallel to c.mixture.materials before sorting
+  TransferFunction& t = c.transfer;
+  std::vector<float> colour_x;
+
+  std::string text;
+  while (std::getline(in, text)) {
+    ++ps.line;
+    if (const auto hash = text.find('#'); hash != std::string::npos) text.erase(hash);
+    std::istringstream ss(text);
+    std::vector<std::string> tok;
+    for (std::string w; ss >> w;) tok.push_back(w);
+    if (tok.empty()) continue;
+    const std::string& d = tok[0];
+    const std::size_t nv = tok.size() - 1;
+
+    if (d == "density" || d == "gradient") {
+      if (any_material) ps.fail("'" + d + "' cannot be mixed with material lines");
+      if (nv == 0 || nv % 2 != 0)
+        ps.fail(d + " needs pairs of values (x y ...), got " + std::to_string(nv) + " values");
+      Ramp& r = d == "density" ? t.density : t.gradient;
+      for (std::size_t k = 1; k < tok.size(); k += 2) {
+        ps.append_x(r.x, ps.number(tok[k]), d);
+        r.y.push_back(ps.unit(tok[k + 1], (d + " value").c_str()));
+      }
+      any_transfer = true;
+    } else if (d == "color" || d == "colour") {
+      if (any_material) ps.fail("'" + d + "' cannot be mixed with material lines");
+      if (nv == 0 || nv % 4 != 0)
+        ps.fail(d + " needs groups of four values (x r g b ...), got " + std::to_string(nv) +
+                " values");
+      for (std::size_t k = 1; k < tok.size(); k += 4) {
+        ps.append_x(colour_x, ps.number(tok[k]), d);
+        t.red.y.push_back(ps.unit(tok[k + 1], "red"));
+        t.green.y.push_back(ps.unit(tok[k + 2], "green"));
+        t.blue.y.push_back(ps.unit(tok[k + 3], "blue"));
+      }
+      any_transfer = true;
+    } else if (d == "material") {
+      if (any_transfer) ps.fail("material lines cannot be mixed with density/gradient/color lines");
+      if (nv != 7)
+        ps.fail("material needs NAME MEAN SIGMA R G B OPACITY (7 values), got " +
+                std::to_string(nv));
+      Material m;
+      m.name = tok[1];
+      m.mean = ps.number(tok[2]);
+      m.sigma = ps.number(tok[3]);
+      if (!(m.sigma > 0.0f)) ps.fail("sigma " + tok[3] + " of '" + m.name + "' must be > 0");
+      m.r = ps.unit(tok[4], "red");
+      m.g = ps.unit(tok[5], "green");
+      m.b = ps.unit(tok[6], "blue");
+      m.opacity = ps.unit(tok[7], "opacity");
+      c.mixture.materials.push_back(m);
+      material_lines.push_back(ps.line);
+      any_material = true;
+    } else if (d == "relative") {
+      if (nv != 0) ps.fail("relative takes no values");
+      if (any_transfer) ps.fail("relative applies only to material lines");
+      relative_line = ps.line;
+    } else {
+      ps.fail("unknown directive '" + d +
+              "' (expected density, gradient, color, material or relative)");
+    }
+  }
+  if (in.bad()) throw FileError(path, "read error");
+  if (!any_transfer && !any_material) throw FileError(path, "no directives");
+  if (any_transfer && relative_line != 0) {
+    ps.line = relative_line;
+    ps.fail("relative applies only to material lines");
+  }
+
+  if (any_transfer) {
+    c.kind = Classifier::Kind::transfer;
+    t.red.x = t.green.x = t.blue.x = colour_x;
+    return c;
+  }
+  c.kind = Classifier::Kind::mixture;
+  c.mixture.relative = relative_line != 0;
+  // Sort by mean, keeping each material's line number for the messages.
+  std::vector<std::size_t> order(c.mixture.materials.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  auto& mats = c.mixture.materials;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return mats[a].mean < mats[b].mean; });
+  std::vector<Material> sorted;
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    if (k > 0 && mats[order[k]].mean == mats[order[k - 1]].mean) {
+      ps.line = std::max(material_lines[order[k]], material_lines[order[k - 1]]);
+      ps.fail("materials '" + mats[order[k - 1]].name + "' and '" + mats[order[k]].name +
+              "' have the same mean " + fmt(mats[order[k]].mean));
+    }
+    sorted.push_back(mats[order[k]]);
+  }
+  mats = std::move(sorted);
+  return c;
+}
+
+Classifier classifier_from_spec(const std::string& spec) {
+  const auto names = classifier_preset_names();
+  if (std::find(names.begin(), names.end(), spec) != names.end()) return classifier_preset(spec);
+  const std::filesystem::path p(spec);
+  std::error_code ec;
+  if (!std::filesystem::exists(p, ec)) {
+    std::string list;
+    for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+    throw FileError(p, "no such classifier file, and not a preset (" + list + ")");
+  }
+  return load_classifier(p);
+}
+
+}  // namespace simdvol
