@@ -1,1 +1,300 @@
-int main() { return 0; }
+// simdvol: the command-line program, a thin layer over the library.
+#include <CLI/CLI.hpp>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cli_commands.hpp"
+#include "simdvol/error.hpp"
+#include "simdvol/io.hpp"
+#include "simdvol/phantom.hpp"
+#include "simdvol/render.hpp"
+
+namespace fs = std::filesystem;
+using namespace simdvol;
+
+namespace {
+
+std::vector<std::string> split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, sep)) out.push_back(item);
+  return out;
+}
+
+double parse_number(const std::string& s, const std::string& arg) {
+  try {
+    std::size_t used = 0;
+    const double v = std::stod(s, &used);
+    if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument(s);
+    return v;
+  } catch (const std::exception&) {
+    throw ArgumentError(arg, "'" + s + "' is not a number");
+  }
+}
+
+int64_t parse_int(const std::string& s, const std::string& arg) {
+  const double v = parse_number(s, arg);
+  if (v != std::floor(v) || std::fabs(v) > 9.0e15)
+    throw ArgumentError(arg, "'" + s + "' is not an integer");
+  return static_cast<int64_t>(v);
+}
+
+ViewAngles parse_view(const std::string& s) {
+  const auto parts = split(s, ',');
+  if (parts.size() != 3) throw ArgumentError("--view", "expected THETA,PHI,VARPHI in degrees");
+  return {parse_number(parts[0], "--view"), parse_number(parts[1], "--view"),
+          parse_number(parts[2], "--view")};
+}
+
+std::array<int, 2> parse_size(const std::string& s) {
+  const auto parts = split(s, 'x');
+  if (parts.size() == 1) {
+    const int64_t n = parse_int(parts[0], "--size");
+    return {static_cast<int>(std::clamp<int64_t>(n, -1, 1 << 30)),
+            static_cast<int>(std::clamp<int64_t>(n, -1, 1 << 30))};
+  }
+  if (parts.size() != 2) throw ArgumentError("--size", "expected WxH, e.g. 256x256");
+  const int64_t w = parse_int(parts[0], "--size"), h = parse_int(parts[1], "--size");
+  if (w <= 0 || h <= 0 || w > 16384 || h > 16384)
+    throw ArgumentError("--size", s + " is outside 1x1 .. 16384x16384");
+  return {static_cast<int>(w), static_cast<int>(h)};
+}
+
+struct VolumeArgs {
+  std::string path;
+  std::string raw_dims, raw_type = "u8", raw_endian = "little", raw_spacing;
+  uint64_t raw_header = 0;
+
+  void add(CLI::App* app) {
+    app->add_option("--raw-dims", raw_dims, "raw volumes: NX,NY,NZ");
+    app->add_option("--raw-type", raw_type, "raw volumes: u8, u16, i16 or f32")
+        ->capture_default_str();
+    app->add_option("--raw-endian", raw_endian, "raw volumes: little or big")
+        ->capture_default_str();
+    app->add_option("--raw-spacing", raw_spacing, "raw volumes: SX,SY,SZ (default 1,1,1)");
+    app->add_option("--raw-header", raw_header, "raw volumes: bytes to skip before the voxels");
+  }
+
+  Volume load() const {
+    std::optional<RawLayout> raw;
+    if (!raw_dims.empty()) {
+      RawLayout l;
+      const auto d = split(raw_dims, ',');
+      if (d.size() != 3) throw ArgumentError("--raw-dims", "expected NX,NY,NZ");
+      for (int a = 0; a < 3; ++a) l.dims[a] = parse_int(d[a], "--raw-dims");
+      l.type = parse_voxel_type(raw_type, "--raw-type");
+      if (raw_endian == "little")
+        l.endian = Endian::little;
+      else if (raw_endian == "big")
+        l.endian = Endian::big;
+      else
+        throw ArgumentError("--raw-endian", "expected little or big, not '" + raw_endian + "'");
+      if (!raw_spacing.empty()) {
+        const auto s = split(raw_spacing, ',');
+        if (s.size() != 3) throw ArgumentError("--raw-spacing", "expected SX,SY,SZ");
+        for (int a = 0; a < 3; ++a) l.spacing[a] = parse_number(s[a], "--raw-spacing");
+      }
+      l.header_bytes = raw_header;
+      raw = l;
+    }
+    return load_volume(path, raw);
+  }
+};
+
+fs::path numbered(const fs::path& out, int frame, int frames) {
+  if (frames <= 1) return out;
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "_%04d", frame);
+  fs::path p = out;
+  const std::string ext = p.extension().string();
+  return p.replace_filename(p.stem().string() + buf + ext);
+}
+
+void progress(int done, int total) {
+  if (!isatty(fileno(stderr))) return;
+  const int width = 40;
+  const int filled = total > 0 ? done * width / total : width;
+  std::fprintf(stderr, "\r[%s%s] %d/%d frames", std::string(filled, '#').c_str(),
+               std::string(width - filled, '.').c_str(), done, total);
+  if (done == total) std::fprintf(stderr, "\n");
+  std::fflush(stderr);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "simdvol: data-parallel volume rendering (Zou 1995) on OpenCL, with a serial reference"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "simdvol 0.1.0");
+
+  // render
+  auto* render = app.add_subcommand("render", "render a volume (the built-in CT phantom if none)");
+  VolumeArgs rv;
+  std::string view = "0,0,0", size = "256x256", sampling = "voxel", composite = "direct",
+              streams = "per-ray", classify = "auto", engine = "reference", out = "simdvol.png";
+  int order = 1, samples = 32, frames = 1, phantom_size = 256;
+  uint64_t seed = 1;
+  double step = 5.0;
+  float threshold = 0.95f;
+  bool no_shade = false, show_times = false;
+  render->add_option("volume", rv.path, "volume file (.den, .nrrd, .nhdr, .nii, .nii.gz, .raw)");
+  rv.add(render);
+  render->add_option("--view", view, "THETA,PHI,VARPHI in degrees (thesis eq 5.2)")
+      ->capture_default_str();
+  render->add_option("--size", size, "output WxH")->capture_default_str();
+  render->add_option("--sampling", sampling, "voxel or pixel")->capture_default_str();
+  render->add_option("--order", order, "interpolation order 0..3 (Aitken)")
+      ->capture_default_str();
+  render->add_option("--composite", composite, "direct, adaptive or mc")->capture_default_str();
+  render->add_option("--samples", samples, "Monte Carlo walks per ray")->capture_default_str();
+  render->add_option("--seed", seed, "Monte Carlo seed")->capture_default_str();
+  render->add_option("--streams", streams, "Monte Carlo random streams: per-ray or shared")
+      ->capture_default_str();
+  render->add_option("--threshold", threshold, "adaptive termination opacity")
+      ->capture_default_str();
+  render
+      ->add_option("--classify", classify,
+                   "preset (ct, ct-bone, mri, volpack) or transfer-function file; auto: ct for "
+                   "Hounsfield data, mri otherwise")
+      ->capture_default_str();
+  render->add_flag("--no-shade", no_shade, "skip lighting (colour = material colour)");
+  render->add_option("--engine", engine, "reference")->capture_default_str();
+  render->add_option("--phantom-size", phantom_size, "size of the built-in CT phantom")
+      ->capture_default_str();
+  render->add_option("--frames", frames, "turntable: number of frames")->capture_default_str();
+  render->add_option("--step", step, "turntable: degrees of PHI per frame")->capture_default_str();
+  render->add_flag("--times", show_times, "print per-stage times");
+  render->add_option("-o,--output", out, "output image (.png, .exr, .tif)")
+      ->capture_default_str();
+
+  // info
+  auto* info = app.add_subcommand("info", "describe a volume");
+  VolumeArgs iv;
+  info->add_option("volume", iv.path, "volume file")->required();
+  iv.add(info);
+
+  // phantom
+  auto* phantom = app.add_subcommand("phantom", "write a generated test volume");
+  std::string phantom_kind, phantom_out;
+  int phantom_n = 128;
+  phantom->add_option("kind", phantom_kind, "shepp-logan or marschner-lobb")
+      ->required()
+      ->check(CLI::IsMember({"shepp-logan", "marschner-lobb"}));
+  phantom->add_option("--size", phantom_n, "N (an N^3 grid)")->capture_default_str();
+  phantom->add_option("-o,--output", phantom_out, "output .nrrd")->required();
+
+  // devices
+  auto* devices = app.add_subcommand("devices", "list OpenCL platforms and devices");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+
+  try {
+    if (*render) {
+      RenderOptions opt;
+      opt.view = parse_view(view);
+      const auto wh = parse_size(size);
+      opt.width = wh[0];
+      opt.height = wh[1];
+      if (sampling == "voxel")
+        opt.sampling = Sampling::voxel;
+      else if (sampling == "pixel")
+        opt.sampling = Sampling::pixel;
+      else
+        throw ArgumentError("--sampling", "expected voxel or pixel, not '" + sampling + "'");
+      opt.order = order;
+      if (composite == "direct")
+        opt.composite.mode = CompositeMode::direct;
+      else if (composite == "adaptive")
+        opt.composite.mode = CompositeMode::adaptive;
+      else if (composite == "mc")
+        opt.composite.mode = CompositeMode::mc;
+      else
+        throw ArgumentError("--composite",
+                            "expected direct, adaptive or mc, not '" + composite + "'");
+      opt.composite.samples = samples;
+      opt.composite.seed = seed;
+      opt.composite.threshold = threshold;
+      if (streams == "per-ray")
+        opt.composite.streams = RandomStreams::per_ray;
+      else if (streams == "shared")
+        opt.composite.streams = RandomStreams::shared;
+      else
+        throw ArgumentError("--streams", "expected per-ray or shared, not '" + streams + "'");
+      opt.shade.enabled = !no_shade;
+      if (frames < 1 || frames > 100000)
+        throw ArgumentError("--frames", std::to_string(frames) + " is outside 1..100000");
+      if (!std::isfinite(step)) throw ArgumentError("--step", "must be finite");
+      if (engine != "reference")
+        throw ArgumentError("--engine", "unknown engine '" + engine + "' (available: reference)");
+      validate(opt);
+      const fs::path outp = out;
+      check_output_path(outp, "-o");
+
+      Volume vol;
+      if (rv.path.empty()) {
+        if (phantom_size < 2 || phantom_size > 1024)
+          throw ArgumentError("--phantom-size", std::to_string(phantom_size) +
+                                                    " is outside 2..1024");
+        vol = shepp_logan(phantom_size);
+      } else {
+        vol = rv.load();
+      }
+      if (classify == "auto") classify = vol.range().min < -500.0f ? "ct" : "mri";
+      opt.classifier = classifier_from_spec(classify);
+
+      const double phi0 = opt.view.phi;
+      for (int f = 0; f < frames; ++f) {
+        opt.view.phi = phi0 + f * step;
+        RenderTimes t;
+        const Image img = render_reference(vol, opt, &t);
+        const fs::path p = numbered(outp, f, frames);
+        write_image(img, p);
+        if (show_times)
+          std::cerr << "frame " << f << ": shade " << t.shade_ms << " ms, classify "
+                    << t.classify_ms << " ms, resample+composite " << t.resample_composite_ms
+                    << " ms, warp " << t.warp_ms << " ms\n";
+        if (frames == 1)
+          std::cout << "wrote " << fs::absolute(p).string() << "\n";
+        progress(f + 1, frames);
+      }
+      if (frames > 1)
+        std::cout << "wrote " << frames << " frames: " << fs::absolute(numbered(outp, 0, frames))
+                  << " .. " << numbered(outp, frames - 1, frames).filename().string() << "\n";
+    } else if (*info) {
+      print_info(std::cout, iv.path, iv.load());
+    } else if (*phantom) {
+      if (phantom_n < 2 || phantom_n > 1024)
+        throw ArgumentError("--size", std::to_string(phantom_n) + " is outside 2..1024");
+      const fs::path p = phantom_out;
+      check_output_path(p, "-o");
+      const Volume vol =
+          phantom_kind == "shepp-logan" ? shepp_logan(phantom_n) : marschner_lobb(phantom_n);
+      save_nrrd(vol, p);
+      std::cout << "wrote " << fs::absolute(p).string() << "\n";
+    } else if (*devices) {
+      return print_devices(std::cout);
+    }
+  } catch (const Error& e) {
+    std::cerr << "simdvol: error: " << e.what() << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "simdvol: unexpected error: " << e.what() << "\n";
+    return 2;
+  }
+  return 0;
+}

@@ -1,0 +1,82 @@
+#include "cli_commands.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <iomanip>
+#include <iostream>
+#include <vector>
+
+#include "simdvol/error.hpp"
+
+namespace fs = std::filesystem;
+
+namespace simdvol {
+
+void check_output_path(const fs::path& p, const char* arg) {
+  if (p.empty()) throw ArgumentError(arg, "empty output path");
+  if (fs::is_directory(p)) throw ArgumentError(arg, p.string() + " is a directory");
+  const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
+  if (!fs::is_directory(dir))
+    throw ArgumentError(arg, "directory " + dir.string() + " of " + p.string() + " does not exist");
+}
+
+void print_info(std::ostream& os, const fs::path& path, const Volume& vol) {
+  const auto& d = vol.dims();
+  const auto& s = vol.spacing();
+  const ValueRange r = vol.range();
+  os << "file:     " << path.string() << "\n";
+  os << "dims:     " << d[0] << " x " << d[1] << " x " << d[2] << " (" << vol.voxel_count()
+     << " voxels)\n";
+  os << "type:     " << to_string(vol.type()) << "\n";
+  os << "spacing:  " << s[0] << " x " << s[1] << " x " << s[2] << "\n";
+  os << "range:    " << r.min << " .. " << r.max << "\n";
+  std::size_t nonfinite = 0;
+  double sum = 0;
+  for (float v : vol.data()) {
+    if (!std::isfinite(v))
+      ++nonfinite;
+    else
+      sum += v;
+  }
+  const std::size_t finite = vol.voxel_count() - nonfinite;
+  os << "mean:     " << (finite ? sum / static_cast<double>(finite) : 0.0) << "\n";
+  if (nonfinite) os << "nonfinite voxels: " << nonfinite << "\n";
+  // Histogram summary: 16 equal bins over the range, and percentiles.
+  constexpr int kBins = 16;
+  std::vector<std::size_t> bins(kBins, 0);
+  const double width = r.max > r.min ? (double(r.max) - r.min) / kBins : 1.0;
+  for (float v : vol.data()) {
+    if (!std::isfinite(v)) continue;
+    int b = static_cast<int>((v - r.min) / width);
+    bins[std::clamp(b, 0, kBins - 1)]++;
+  }
+  os << "histogram (" << kBins << " bins):\n";
+  const std::size_t most = *std::max_element(bins.begin(), bins.end());
+  for (int b = 0; b < kBins; ++b) {
+    const double lo = r.min + b * width;
+    const int bar = most ? static_cast<int>(40.0 * bins[b] / most) : 0;
+    os << "  " << std::setw(12) << lo << " " << std::setw(10) << bins[b] << " "
+       << std::string(bar, '#') << "\n";
+  }
+  std::vector<float> sorted;
+  sorted.reserve(finite);
+  for (float v : vol.data())
+    if (std::isfinite(v)) sorted.push_back(v);
+  if (!sorted.empty()) {
+    os << "percentiles:";
+    for (double q : {0.01, 0.5, 0.99}) {
+      const auto k = static_cast<std::size_t>(q * static_cast<double>(sorted.size() - 1));
+      std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k),
+                       sorted.end());
+      os << " p" << static_cast<int>(q * 100) << "=" << sorted[k];
+    }
+    os << "\n";
+  }
+}
+
+int print_devices(std::ostream& os) {
+  os << "OpenCL support is not built yet\n";
+  return 1;
+}
+
+}  // namespace simdvol
