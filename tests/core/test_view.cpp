@@ -1,0 +1,143 @@
+// The rotation of eq 5.2 and the viewing grid (matching: which samples fall
+// inside the volume).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "simdvol/error.hpp"
+#include "simdvol/view.hpp"
+
+using namespace simdvol;
+
+TEST(Rotation, OrthonormalWithDeterminantPlusOne) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> ang(-360.0, 360.0);
+  for (int n = 0; n < 2000; ++n) {
+    const Mat3 t = rotation(ang(rng), ang(rng), ang(rng));
+    const Mat3 ttt = multiply(t, transpose(t));
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) EXPECT_NEAR(ttt[i][j], i == j ? 1.0 : 0.0, 1e-12);
+    EXPECT_NEAR(determinant(t), 1.0, 1e-12);
+  }
+}
+
+TEST(Rotation, ZeroAnglesAreIdentityAndPhiTurnsAboutVertical) {
+  const Mat3 t = rotation(0, 0, 0);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) EXPECT_NEAR(t[i][j], i == j ? 1.0 : 0.0, 1e-15);
+  // phi alone keeps the viewing y axis (image vertical) fixed.
+  const Mat3 r = rotation(0, 37, 0);
+  const Vec3 y = multiply(r, Vec3{0, 1, 0});
+  EXPECT_NEAR(y[0], 0.0, 1e-15);
+  EXPECT_NEAR(y[1], 1.0, 1e-15);
+  EXPECT_NEAR(y[2], 0.0, 1e-15);
+  // and turns object x by phi about it.
+  const Vec3 x = multiply(r, Vec3{1, 0, 0});
+  EXPECT_NEAR(x[0], std::cos(37 * M_PI / 180), 1e-15);
+  EXPECT_NEAR(std::fabs(x[2]), std::sin(37 * M_PI / 180), 1e-15);
+  // theta alone turns about the viewing z axis.
+  const Vec3 z = multiply(rotation(25, 0, 0), Vec3{0, 0, 1});
+  EXPECT_NEAR(z[2], 1.0, 1e-15);
+}
+
+TEST(ViewGeometry, RayRangeEqualsTestingEverySample) {
+  Volume vol({23, 17, 11}, VoxelType::u8, {1.0, 1.5, 2.0});
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> ang(0.0, 360.0);
+  std::vector<ViewAngles> views = {{0, 0, 0}, {0, 90, 0}, {0, 45, 0}, {30, 0, 0}, {90, 90, 90}};
+  for (int n = 0; n < 12; ++n) views.push_back({ang(rng), ang(rng), ang(rng)});
+  for (const auto& v : views) {
+    for (Sampling s : {Sampling::voxel, Sampling::pixel}) {
+      const ViewGeometry g = make_view(vol, v, 40, 29, s);
+      std::size_t inside = 0;
+      for (int j = 0; j < g.height(); ++j) {
+        for (int i = 0; i < g.width(); ++i) {
+          const auto [k0, k1] = g.ray_range(i, j);
+          for (int64_t k = 0; k < g.depth(); ++k) {
+            const bool in = g.inside(i, j, k);
+            ASSERT_EQ(in, k >= k0 && k < k1) << "ray " << i << "," << j << " k " << k;
+            inside += in;
+          }
+        }
+      }
+      EXPECT_GT(inside, 0u);
+    }
+  }
+}
+
+TEST(ViewGeometry, VoxelSamplingVisitsEachVoxelAboutOnce) {
+  // Rotation only, unit step: the viewing grid has one sample per unit volume,
+  // so the number of samples inside equals the voxel count up to the boundary.
+  // (A 40 x 8 x 8 box: its diagonal is shorter than the 42-unit frame, so no
+  // view crops it.)
+  Volume bar({40, 8, 8}, VoxelType::u8);
+  for (const ViewAngles v : {ViewAngles{30, 45, 10}, ViewAngles{12, 71, 33}}) {
+    const ViewGeometry g = make_view(bar, v, 64, 64, Sampling::voxel);
+    int64_t inside = 0;
+    for (int j = 0; j < g.height(); ++j)
+      for (int i = 0; i < g.width(); ++i) {
+        const auto r = g.ray_range(i, j);
+        inside += r[1] - r[0];
+      }
+    EXPECT_NEAR(static_cast<double>(inside), 2560.0, 2560.0 * 0.03);
+  }
+  Volume vol({40, 40, 40}, VoxelType::u8);
+  // Axis-aligned: exactly one sample per voxel.
+  const ViewGeometry g = make_view(vol, {0, 0, 0}, 64, 64, Sampling::voxel);
+  int64_t inside = 0;
+  for (int j = 0; j < g.height(); ++j)
+    for (int i = 0; i < g.width(); ++i) {
+      const auto r = g.ray_range(i, j);
+      inside += r[1] - r[0];
+    }
+  EXPECT_EQ(inside, 64000);
+}
+
+TEST(ViewGeometry, LongestSideSpansTheImage) {
+  Volume vol({100, 50, 20}, VoxelType::u8);
+  // Pixel sampling, view along z: x spans the 200-pixel width exactly.
+  const ViewGeometry g = make_view(vol, {0, 0, 0}, 200, 300, Sampling::pixel);
+  EXPECT_DOUBLE_EQ(g.step, 0.5);
+  int first = -1, last = -1;
+  const int j = g.height() / 2;
+  for (int i = 0; i < g.width(); ++i) {
+    const auto r = g.ray_range(i, j);
+    if (r[1] > r[0]) {
+      if (first < 0) first = i;
+      last = i;
+    }
+  }
+  EXPECT_EQ(first, 0);
+  EXPECT_EQ(last, 199);
+  // Voxel sampling: output pixel centres map back onto the volume's extent.
+  const ViewGeometry v = make_view(vol, {0, 0, 0}, 200, 200, Sampling::voxel);
+  const auto a = v.output_to_intermediate(0, 100);
+  const auto b = v.output_to_intermediate(199, 100);
+  // 100 voxels across 200 pixels: pixel centres 0.5 voxel apart, 99.5 apart end to end.
+  EXPECT_NEAR(b[0] - a[0], 99.5, 1e-9);
+}
+
+TEST(ViewGeometry, RejectsBadSizes) {
+  Volume vol({4, 4, 4}, VoxelType::u8);
+  EXPECT_THROW(make_view(vol, {}, 0, 10, Sampling::voxel), ArgumentError);
+  EXPECT_THROW(make_view(vol, {}, 10, -1, Sampling::pixel), ArgumentError);
+  EXPECT_THROW(make_view(vol, {NAN, 0, 0}, 10, 10, Sampling::pixel), ArgumentError);
+}
+
+TEST(Philox, KnownAnswer) {
+  // Random123's known-answer test for philox4x32-10 with zero counter and key.
+  sv_u32x4 c{{0, 0, 0, 0}};
+  const sv_u32x4 r = sv_philox4x32_10(c, 0, 0);
+  EXPECT_EQ(r.v[0], 0x6627e8d5u);
+  EXPECT_EQ(r.v[1], 0xe169c58du);
+  EXPECT_EQ(r.v[2], 0xbc57ac4cu);
+  EXPECT_EQ(r.v[3], 0x9b00dbd8u);
+  // And with all-ones counter and key {0xffffffff, 0xffffffff}.
+  sv_u32x4 c1{{0xffffffffu, 0xffffffffu, 0xffffffffu, 0xffffffffu}};
+  const sv_u32x4 r1 = sv_philox4x32_10(c1, 0xffffffffu, 0xffffffffu);
+  EXPECT_EQ(r1.v[0], 0x408f276du);
+  EXPECT_EQ(r1.v[1], 0x41c83b0eu);
+  EXPECT_EQ(r1.v[2], 0xa20bc7c6u);
+  EXPECT_EQ(r1.v[3], 0x6d5451fdu);
+}
