@@ -1,0 +1,418 @@
+// The OpenCL device layer (see device.hpp).
+#include "simdvol/device.hpp"
+
+#include <algorithm>
+#include <cstdlib>
+#include <sstream>
+
+#include "kernel_files.hpp"
+
+namespace simdvol {
+
+std::string_view cl_error_name(cl_int code) {
+  switch (code) {
+#define SIMDVOL_CL_CODE(c) \
+  case c:                  \
+    return #c;
+    SIMDVOL_CL_CODE(CL_SUCCESS)
+    SIMDVOL_CL_CODE(CL_DEVICE_NOT_FOUND)
+    SIMDVOL_CL_CODE(CL_DEVICE_NOT_AVAILABLE)
+    SIMDVOL_CL_CODE(CL_COMPILER_NOT_AVAILABLE)
+    SIMDVOL_CL_CODE(CL_MEM_OBJECT_ALLOCATION_FAILURE)
+    SIMDVOL_CL_CODE(CL_OUT_OF_RESOURCES)
+    SIMDVOL_CL_CODE(CL_OUT_OF_HOST_MEMORY)
+    SIMDVOL_CL_CODE(CL_PROFILING_INFO_NOT_AVAILABLE)
+    SIMDVOL_CL_CODE(CL_MEM_COPY_OVERLAP)
+    SIMDVOL_CL_CODE(CL_IMAGE_FORMAT_MISMATCH)
+    SIMDVOL_CL_CODE(CL_IMAGE_FORMAT_NOT_SUPPORTED)
+    SIMDVOL_CL_CODE(CL_BUILD_PROGRAM_FAILURE)
+    SIMDVOL_CL_CODE(CL_MAP_FAILURE)
+    SIMDVOL_CL_CODE(CL_MISALIGNED_SUB_BUFFER_OFFSET)
+    SIMDVOL_CL_CODE(CL_EXEC_STATUS_ERROR_FOR_EVENTS_IN_WAIT_LIST)
+    SIMDVOL_CL_CODE(CL_COMPILE_PROGRAM_FAILURE)
+    SIMDVOL_CL_CODE(CL_LINKER_NOT_AVAILABLE)
+    SIMDVOL_CL_CODE(CL_LINK_PROGRAM_FAILURE)
+    SIMDVOL_CL_CODE(CL_DEVICE_PARTITION_FAILED)
+    SIMDVOL_CL_CODE(CL_KERNEL_ARG_INFO_NOT_AVAILABLE)
+    SIMDVOL_CL_CODE(CL_INVALID_VALUE)
+    SIMDVOL_CL_CODE(CL_INVALID_DEVICE_TYPE)
+    SIMDVOL_CL_CODE(CL_INVALID_PLATFORM)
+    SIMDVOL_CL_CODE(CL_INVALID_DEVICE)
+    SIMDVOL_CL_CODE(CL_INVALID_CONTEXT)
+    SIMDVOL_CL_CODE(CL_INVALID_QUEUE_PROPERTIES)
+    SIMDVOL_CL_CODE(CL_INVALID_COMMAND_QUEUE)
+    SIMDVOL_CL_CODE(CL_INVALID_HOST_PTR)
+    SIMDVOL_CL_CODE(CL_INVALID_MEM_OBJECT)
+    SIMDVOL_CL_CODE(CL_INVALID_IMAGE_FORMAT_DESCRIPTOR)
+    SIMDVOL_CL_CODE(CL_INVALID_IMAGE_SIZE)
+    SIMDVOL_CL_CODE(CL_INVALID_SAMPLER)
+    SIMDVOL_CL_CODE(CL_INVALID_BINARY)
+    SIMDVOL_CL_CODE(CL_INVALID_BUILD_OPTIONS)
+    SIMDVOL_CL_CODE(CL_INVALID_PROGRAM)
+    SIMDVOL_CL_CODE(CL_INVALID_PROGRAM_EXECUTABLE)
+    SIMDVOL_CL_CODE(CL_INVALID_KERNEL_NAME)
+    SIMDVOL_CL_CODE(CL_INVALID_KERNEL_DEFINITION)
+    SIMDVOL_CL_CODE(CL_INVALID_KERNEL)
+    SIMDVOL_CL_CODE(CL_INVALID_ARG_INDEX)
+    SIMDVOL_CL_CODE(CL_INVALID_ARG_VALUE)
+    SIMDVOL_CL_CODE(CL_INVALID_ARG_SIZE)
+    SIMDVOL_CL_CODE(CL_INVALID_KERNEL_ARGS)
+    SIMDVOL_CL_CODE(CL_INVALID_WORK_DIMENSION)
+    SIMDVOL_CL_CODE(CL_INVALID_WORK_GROUP_SIZE)
+    SIMDVOL_CL_CODE(CL_INVALID_WORK_ITEM_SIZE)
+    SIMDVOL_CL_CODE(CL_INVALID_GLOBAL_OFFSET)
+    SIMDVOL_CL_CODE(CL_INVALID_EVENT_WAIT_LIST)
+    SIMDVOL_CL_CODE(CL_INVALID_EVENT)
+    SIMDVOL_CL_CODE(CL_INVALID_OPERATION)
+    SIMDVOL_CL_CODE(CL_INVALID_GL_OBJECT)
+    SIMDVOL_CL_CODE(CL_INVALID_BUFFER_SIZE)
+    SIMDVOL_CL_CODE(CL_INVALID_MIP_LEVEL)
+    SIMDVOL_CL_CODE(CL_INVALID_GLOBAL_WORK_SIZE)
+    SIMDVOL_CL_CODE(CL_INVALID_PROPERTY)
+    SIMDVOL_CL_CODE(CL_INVALID_IMAGE_DESCRIPTOR)
+    SIMDVOL_CL_CODE(CL_INVALID_COMPILER_OPTIONS)
+    SIMDVOL_CL_CODE(CL_INVALID_LINKER_OPTIONS)
+    SIMDVOL_CL_CODE(CL_INVALID_DEVICE_PARTITION_COUNT)
+#undef SIMDVOL_CL_CODE
+    case -1001:
+      return "CL_PLATFORM_NOT_FOUND_KHR";
+    default:
+      return "unknown OpenCL error";
+  }
+}
+
+namespace {
+
+std::string cl_error_message(const std::string& call, cl_int code, const std::string& detail) {
+  std::string m =
+      call + ": " + std::string(cl_error_name(code)) + " (" + std::to_string(code) + ")";
+  if (!detail.empty()) m += ": " + detail;
+  return m;
+}
+
+constexpr const char* kInstallHint =
+    "no OpenCL platform found: install an OpenCL driver, e.g. the pocl-opencl-icd package "
+    "(apt-get install pocl-opencl-icd) for the CPU";
+
+std::string trim(std::string s) {
+  while (!s.empty() && (s.back() == '\0' || s.back() == ' ' || s.back() == '\n')) s.pop_back();
+  return s;
+}
+
+template <cl_device_info Name, typename T>
+T device_query(const cl::Device& d, const char* what) {
+  T value{};
+  cl_int err = d.getInfo(Name, &value);
+  if (err != CL_SUCCESS) throw CLError(std::string("clGetDeviceInfo(") + what + ")", err);
+  return value;
+}
+
+std::string type_name(cl_device_type t) {
+  if (t & CL_DEVICE_TYPE_CPU) return "CPU";
+  if (t & CL_DEVICE_TYPE_GPU) return "GPU";
+  if (t & CL_DEVICE_TYPE_ACCELERATOR) return "accelerator";
+  return "other";
+}
+
+DeviceInfo query_device(const cl::Device& d) {
+  DeviceInfo info;
+  info.name = trim(device_query<CL_DEVICE_NAME, std::string>(d, "CL_DEVICE_NAME"));
+  info.vendor = trim(device_query<CL_DEVICE_VENDOR, std::string>(d, "CL_DEVICE_VENDOR"));
+  info.version = trim(device_query<CL_DEVICE_VERSION, std::string>(d, "CL_DEVICE_VERSION"));
+  info.driver_version = trim(device_query<CL_DRIVER_VERSION, std::string>(d, "CL_DRIVER_VERSION"));
+  auto type = device_query<CL_DEVICE_TYPE, cl_device_type>(d, "CL_DEVICE_TYPE");
+  info.type = type_name(type);
+  info.is_cpu = (type & CL_DEVICE_TYPE_CPU) != 0;
+  info.compute_units =
+      device_query<CL_DEVICE_MAX_COMPUTE_UNITS, cl_uint>(d, "CL_DEVICE_MAX_COMPUTE_UNITS");
+  info.local_mem_bytes =
+      device_query<CL_DEVICE_LOCAL_MEM_SIZE, cl_ulong>(d, "CL_DEVICE_LOCAL_MEM_SIZE");
+  info.global_mem_bytes =
+      device_query<CL_DEVICE_GLOBAL_MEM_SIZE, cl_ulong>(d, "CL_DEVICE_GLOBAL_MEM_SIZE");
+  info.max_alloc_bytes =
+      device_query<CL_DEVICE_MAX_MEM_ALLOC_SIZE, cl_ulong>(d, "CL_DEVICE_MAX_MEM_ALLOC_SIZE");
+  info.max_work_group_size =
+      device_query<CL_DEVICE_MAX_WORK_GROUP_SIZE, std::size_t>(d, "CL_DEVICE_MAX_WORK_GROUP_SIZE");
+  return info;
+}
+
+std::vector<cl::Platform> platforms_or_throw() {
+  std::vector<cl::Platform> platforms;
+  cl_int err = cl::Platform::get(&platforms);
+  // ocl-icd answers CL_PLATFORM_NOT_FOUND_KHR (-1001) when no ICD is installed.
+  if (err == -1001 || (err == CL_SUCCESS && platforms.empty())) throw NoDeviceError(kInstallHint);
+  if (err != CL_SUCCESS)
+    throw NoDeviceError(cl_error_message("clGetPlatformIDs", err, kInstallHint));
+  return platforms;
+}
+
+struct Found {
+  cl::Device device;
+  int platform_index;
+  std::string platform;
+};
+
+std::vector<Found> all_devices() {
+  std::vector<Found> out;
+  auto platforms = platforms_or_throw();
+  for (std::size_t p = 0; p < platforms.size(); ++p) {
+    std::string pname;
+    platforms[p].getInfo(CL_PLATFORM_NAME, &pname);
+    std::vector<cl::Device> devices;
+    cl_int err = platforms[p].getDevices(CL_DEVICE_TYPE_ALL, &devices);
+    if (err == CL_DEVICE_NOT_FOUND) continue;
+    cl_check(err, "clGetDeviceIDs");
+    for (auto& d : devices) out.push_back({d, static_cast<int>(p), trim(pname)});
+  }
+  if (out.empty())
+    throw NoDeviceError(
+        "no OpenCL device found on any platform: install an OpenCL driver, e.g. "
+        "the pocl-opencl-icd package (apt-get install pocl-opencl-icd)");
+  return out;
+}
+
+std::string mib(std::uint64_t bytes) {
+  std::ostringstream s;
+  s << (bytes >> 20) << " MiB";
+  return s.str();
+}
+
+}  // namespace
+
+CLError::CLError(const std::string& call, cl_int code, const std::string& detail)
+    : Error(cl_error_message(call, code, detail)), call_(call), code_(code) {}
+
+BuildError::BuildError(cl_int code, const std::string& options, const std::string& log)
+    : CLError("clBuildProgram", code, "options \"" + options + "\", build log:\n" + log),
+      options_(options),
+      log_(log) {}
+
+std::vector<DeviceInfo> list_devices() {
+  std::vector<DeviceInfo> out;
+  auto found = all_devices();
+  for (std::size_t i = 0; i < found.size(); ++i) {
+    DeviceInfo info = query_device(found[i].device);
+    info.index = static_cast<int>(i);
+    info.platform_index = found[i].platform_index;
+    info.platform = found[i].platform;
+    out.push_back(std::move(info));
+  }
+  return out;
+}
+
+std::string describe_devices(const std::vector<DeviceInfo>& devices, int chosen) {
+  std::ostringstream s;
+  for (const auto& d : devices) {
+    s << (d.index == chosen ? "* " : "  ") << d.index << ": " << d.name << " [" << d.type << "]\n"
+      << "     platform " << d.platform_index << ": " << d.platform << "\n"
+      << "     vendor: " << d.vendor << "\n"
+      << "     version: " << d.version << ", driver " << d.driver_version << "\n"
+      << "     compute units: " << d.compute_units << ", max work-group size "
+      << d.max_work_group_size << "\n"
+      << "     global memory: " << mib(d.global_mem_bytes) << ", max allocation "
+      << mib(d.max_alloc_bytes) << ", local memory " << (d.local_mem_bytes >> 10) << " KiB\n";
+  }
+  return s.str();
+}
+
+int choose_device(const std::vector<DeviceInfo>& devices, std::optional<int> requested) {
+  const int n = static_cast<int>(devices.size());
+  auto check = [&](long i, const std::string& argument) {
+    if (i < 0 || i >= n)
+      throw ArgumentError(argument,
+                          "no OpenCL device " + std::to_string(i) + " (there " +
+                              (n == 1 ? "is 1 device" : "are " + std::to_string(n) + " devices") +
+                              ", numbered from 0; see `simdvol devices`)");
+    return static_cast<int>(i);
+  };
+  if (requested) return check(*requested, "--device");
+  if (const char* env = std::getenv("SIMDVOL_DEVICE"); env && *env) {
+    char* end = nullptr;
+    long i = std::strtol(env, &end, 10);
+    if (end == env || *end != '\0')
+      throw ArgumentError("SIMDVOL_DEVICE", std::string("\"") + env +
+                                                "\" is not a device index (see `simdvol devices`)");
+    return check(i, "SIMDVOL_DEVICE");
+  }
+  for (const auto& d : devices)
+    if (d.is_cpu) return d.index;
+  if (n == 0) throw NoDeviceError(kInstallHint);
+  return 0;
+}
+
+std::string_view kernel_file(std::string_view name) {
+  for (const auto& f : detail::embedded_kernel_files())
+    if (f.name == name) return f.source;
+  throw ArgumentError("kernel file", "no embedded kernel file \"" + std::string(name) + "\"");
+}
+
+std::vector<std::string> kernel_files() {
+  std::vector<std::string> names;
+  for (const auto& f : detail::embedded_kernel_files()) names.emplace_back(f.name);
+  return names;
+}
+
+std::string program_source(std::string_view stage, const Defines& defines) {
+  std::string stage_file = std::string(stage) + ".cl";
+  std::string_view stage_text = kernel_file(stage_file);  // throws first if missing
+  std::string s;
+  for (const auto& [name, value] : defines) s += "#define " + name + " " + value + "\n";
+  auto part = [&](std::string_view file, std::string_view text) {
+    s += "#line 1 \"";
+    s += file;
+    s += "\"\n";
+    s += text;
+    if (!text.empty() && text.back() != '\n') s += '\n';
+  };
+  part("simdvol_shared.h", kernel_file("simdvol_shared.h"));
+  if (stage != "common") part("common.cl", kernel_file("common.cl"));
+  part(stage_file, stage_text);
+  return s;
+}
+
+void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what) {
+  if (bytes == 0) throw ArgumentError(what, "buffer of 0 bytes");
+  if (bytes > max_alloc_bytes)
+    throw ArgumentError(what, "needs a buffer of " + std::to_string(bytes) +
+                                  " bytes, more than the device's largest allocation of " +
+                                  std::to_string(max_alloc_bytes) +
+                                  " bytes (CL_DEVICE_MAX_MEM_ALLOC_SIZE): use a smaller "
+                                  "volume or fewer PEs/less halo");
+}
+
+Device::Device(std::optional<int> index) : cache_(std::make_unique<Cache>()) {
+  auto found = all_devices();
+  std::vector<DeviceInfo> infos;
+  for (std::size_t i = 0; i < found.size(); ++i) {
+    DeviceInfo info = query_device(found[i].device);
+    info.index = static_cast<int>(i);
+    infos.push_back(std::move(info));
+  }
+  int chosen = choose_device(infos, index);
+  device_ = found[chosen].device;
+  cl_int err = CL_SUCCESS;
+  context_ = cl::Context(device_, nullptr, nullptr, nullptr, &err);
+  cl_check(err, "clCreateContext");
+  queue_ = cl::CommandQueue(context_, device_, CL_QUEUE_PROFILING_ENABLE, &err);
+  cl_check(err, "clCreateCommandQueue");
+  profiling_ = true;
+  describe_self(chosen, found[chosen].platform_index, found[chosen].platform);
+}
+
+Device::Device(cl_context context, cl_command_queue queue) : cache_(std::make_unique<Cache>()) {
+  if (!context || !queue) throw ArgumentError("Device", "null cl_context or cl_command_queue");
+  context_ = cl::Context(context, /*retainObject=*/true);
+  queue_ = cl::CommandQueue(queue, /*retainObject=*/true);
+  cl_device_id id = nullptr;
+  cl_check(clGetCommandQueueInfo(queue, CL_QUEUE_DEVICE, sizeof(id), &id, nullptr),
+           "clGetCommandQueueInfo(CL_QUEUE_DEVICE)");
+  device_ = cl::Device(id, /*retainObject=*/true);
+  cl_command_queue_properties props = 0;
+  cl_check(clGetCommandQueueInfo(queue, CL_QUEUE_PROPERTIES, sizeof(props), &props, nullptr),
+           "clGetCommandQueueInfo(CL_QUEUE_PROPERTIES)");
+  profiling_ = (props & CL_QUEUE_PROFILING_ENABLE) != 0;
+  cl_platform_id platform = nullptr;
+  cl_check(clGetDeviceInfo(id, CL_DEVICE_PLATFORM, sizeof(platform), &platform, nullptr),
+           "clGetDeviceInfo(CL_DEVICE_PLATFORM)");
+  std::string pname;
+  cl::Platform(platform, false).getInfo(CL_PLATFORM_NAME, &pname);
+  describe_self(-1, -1, trim(pname));
+}
+
+Device::Device(Device&&) noexcept = default;
+Device& Device::operator=(Device&&) noexcept = default;
+Device::~Device() = default;
+
+void Device::describe_self(int index, int platform_index, const std::string& platform) {
+  info_ = query_device(device_);
+  info_.index = index;
+  info_.platform_index = platform_index;
+  info_.platform = platform;
+}
+
+std::string Device::build_options(const std::string& options) {
+  std::string all = options;
+  if (const char* env = std::getenv("SIMDVOL_CL_OPTIONS"); env && *env) {
+    if (!all.empty()) all += ' ';
+    all += env;
+  }
+  return all;
+}
+
+cl::Program Device::build(const std::string& source, const std::string& options) {
+  const std::string opts = build_options(options);
+  std::lock_guard<std::mutex> lock(cache_->mutex);
+  auto key = std::make_pair(source, opts);
+  if (auto it = cache_->programs.find(key); it != cache_->programs.end()) return it->second;
+  cl_int err = CL_SUCCESS;
+  cl::Program program(context_, source, /*build=*/false, &err);
+  cl_check(err, "clCreateProgramWithSource");
+  err = program.build(std::vector<cl::Device>{device_}, opts.c_str());
+  if (err != CL_SUCCESS) {
+    std::string log;
+    program.getBuildInfo(device_, CL_PROGRAM_BUILD_LOG, &log);
+    throw BuildError(err, opts, trim(log));
+  }
+  cache_->programs.emplace(std::move(key), program);
+  return program;
+}
+
+cl::Program Device::program(std::string_view stage, const Defines& defines,
+                            const std::string& options) {
+  return build(program_source(stage, defines), options);
+}
+
+cl::Kernel Device::kernel(std::string_view stage, const std::string& name, const Defines& defines,
+                          const std::string& options) {
+  cl::Program p = program(stage, defines, options);
+  cl_int err = CL_SUCCESS;
+  cl::Kernel k(p, name.c_str(), &err);
+  if (err != CL_SUCCESS) throw CLError("clCreateKernel(" + name + ")", err);
+  return k;
+}
+
+std::size_t Device::cached_programs() const {
+  std::lock_guard<std::mutex> lock(cache_->mutex);
+  return cache_->programs.size();
+}
+
+cl::Buffer Device::buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr,
+                          const std::string& what) {
+  check_allocation(bytes, info_.max_alloc_bytes, what);
+  cl_int err = CL_SUCCESS;
+  cl::Buffer b(context_, flags, bytes, host_ptr, &err);
+  if (err != CL_SUCCESS) throw CLError("clCreateBuffer(" + what + ")", err);
+  return b;
+}
+
+cl::Event Device::run(const cl::Kernel& kernel, const std::string& what, const cl::NDRange& global,
+                      const cl::NDRange& local) {
+  if (global.dimensions() != local.dimensions() || global.dimensions() == 0)
+    throw ArgumentError(what, "global and local ranges must have the same 1-3 dimensions");
+  std::size_t g[3] = {1, 1, 1};
+  for (cl_uint d = 0; d < global.dimensions(); ++d) {
+    if (local.get()[d] == 0) throw ArgumentError(what, "local size 0");
+    g[d] = round_up(global.get()[d], local.get()[d]);
+    if (g[d] == 0) throw ArgumentError(what, "empty global range");
+  }
+  cl::NDRange rounded = global.dimensions() == 1   ? cl::NDRange(g[0])
+                        : global.dimensions() == 2 ? cl::NDRange(g[0], g[1])
+                                                   : cl::NDRange(g[0], g[1], g[2]);
+  cl::Event event;
+  cl_int err = queue_.enqueueNDRangeKernel(kernel, cl::NullRange, rounded, local, nullptr, &event);
+  if (err != CL_SUCCESS) throw CLError("clEnqueueNDRangeKernel(" + what + ")", err);
+  return event;
+}
+
+void Device::finish() {
+  cl_check(queue_.finish(), "clFinish");
+}
+
+std::uint64_t event_ns(const cl::Event& event) {
+  cl_ulong start = 0, end = 0;
+  if (event.getProfilingInfo(CL_PROFILING_COMMAND_START, &start) != CL_SUCCESS) return 0;
+  if (event.getProfilingInfo(CL_PROFILING_COMMAND_END, &end) != CL_SUCCESS) return 0;
+  return end > start ? end - start : 0;
+}
+
+}  // namespace simdvol

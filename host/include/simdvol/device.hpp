@@ -1,0 +1,237 @@
+// The OpenCL device layer: finding and choosing a device, one context and one
+// in-order profiling queue, building programs from the embedded kernel
+// sources (with a program cache), and error checking that names the failing
+// call.
+//
+// How a stage is written on top of this layer (the pattern layout.cpp follows):
+//   1. Validate the arguments on the host and throw ArgumentError before
+//      anything is enqueued.
+//   2. cl::Kernel k = device.kernel("shade", "simdvol_shade", {{"WGS", "64"}});
+//      builds (once; later calls hit the cache) the program
+//        "#define WGS 64" + simdvol_shared.h + common.cl + shade.cl
+//      and creates the kernel. Kernel objects are not thread-safe; ask for a
+//      fresh one per call (creating one from a cached program is cheap).
+//   3. set_args(k, "simdvol_shade", a, b, c) sets all arguments, checking each.
+//   4. device.run(k, "simdvol_shade", global, local) enqueues with an explicit
+//      local size (the global size is rounded up to a multiple of it, so the
+//      kernel must bounds-check its ids) and returns the profiling event.
+// Kernel files live in kernels/<stage>.cl. Each is valid OpenCL C on its own
+// (compile with -I kernels): it starts with
+//   #ifndef SIMDVOL_COMMON_CL
+//   #include "common.cl"
+//   #endif
+// (common.cl includes simdvol_shared.h the same way), and every tunable has
+// an #ifndef default. In the assembled source both guards are already
+// defined, so the #include lines are skipped.
+//
+// Errors: every failing OpenCL call throws CLError naming the call and the
+// error code (CL_OUT_OF_RESOURCES, ...); a failed build throws BuildError with
+// the full build log; no OpenCL platform at all throws NoDeviceError. No
+// destructor throws.
+#pragma once
+
+#ifndef CL_TARGET_OPENCL_VERSION
+#define CL_TARGET_OPENCL_VERSION 120
+#endif
+#ifndef CL_HPP_TARGET_OPENCL_VERSION
+#define CL_HPP_TARGET_OPENCL_VERSION 120
+#endif
+#ifndef CL_HPP_MINIMUM_OPENCL_VERSION
+#define CL_HPP_MINIMUM_OPENCL_VERSION 120
+#endif
+// CL_HPP_ENABLE_EXCEPTIONS is deliberately not defined: simdvol checks the
+// returned error codes itself (cl_check) and throws its own errors.
+#include <CL/opencl.hpp>
+
+#include <cstddef>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "simdvol/error.hpp"
+
+namespace simdvol {
+
+/// Name of an OpenCL error code ("CL_OUT_OF_RESOURCES"), or "unknown OpenCL error".
+std::string_view cl_error_name(cl_int code);
+
+/// An OpenCL call failed. what() is "<call>: <CL_NAME> (<code>)" plus ": <detail>"
+/// when a detail is given.
+class CLError : public Error {
+ public:
+  CLError(const std::string& call, cl_int code, const std::string& detail = "");
+  const std::string& call() const { return call_; }
+  cl_int code() const { return code_; }
+
+ private:
+  std::string call_;
+  cl_int code_;
+};
+
+/// clBuildProgram failed. log() is the device's full build log (also in what()).
+class BuildError : public CLError {
+ public:
+  BuildError(cl_int code, const std::string& options, const std::string& log);
+  const std::string& options() const { return options_; }
+  const std::string& log() const { return log_; }
+
+ private:
+  std::string options_;
+  std::string log_;
+};
+
+/// There is no OpenCL platform or no device. The message says what to install.
+class NoDeviceError : public Error {
+ public:
+  using Error::Error;
+};
+
+/// Throws CLError(call, code) unless code == CL_SUCCESS.
+inline void cl_check(cl_int code, const char* call) {
+  if (code != CL_SUCCESS) throw CLError(call, code);
+}
+
+/// One OpenCL device as `simdvol devices` lists it.
+struct DeviceInfo {
+  int index = -1;  ///< position in list_devices() (-1 for a wrapped external device)
+  int platform_index = 0;
+  std::string platform;
+  std::string name;
+  std::string vendor;
+  std::string version;         ///< CL_DEVICE_VERSION
+  std::string driver_version;  ///< CL_DRIVER_VERSION
+  std::string type;            ///< "CPU", "GPU", "accelerator", "other"
+  bool is_cpu = false;
+  unsigned compute_units = 0;
+  std::uint64_t local_mem_bytes = 0;
+  std::uint64_t global_mem_bytes = 0;
+  std::uint64_t max_alloc_bytes = 0;
+  std::size_t max_work_group_size = 0;
+};
+
+/// Every device of every platform, platforms in ICD order, indices 0, 1, ...
+/// Throws NoDeviceError if there is no platform or no device.
+std::vector<DeviceInfo> list_devices();
+
+/// A human-readable table of the devices (for `simdvol devices`); `chosen`
+/// marks the default device.
+std::string describe_devices(const std::vector<DeviceInfo>& devices, int chosen = -1);
+
+/// Picks a device index: `requested` (e.g. --device N) if given, else the
+/// environment variable SIMDVOL_DEVICE if set, else the first CPU device,
+/// else device 0. Throws ArgumentError (naming "--device" or "SIMDVOL_DEVICE")
+/// for an index that is not listed or not a number.
+int choose_device(const std::vector<DeviceInfo>& devices, std::optional<int> requested = {});
+
+/// Preprocessor definitions for a program: {"WGS", "64"} becomes "#define WGS 64".
+using Defines = std::vector<std::pair<std::string, std::string>>;
+
+/// The embedded text of one kernel file ("layout.cl", "common.cl",
+/// "simdvol_shared.h"). Throws ArgumentError if there is no such file.
+std::string_view kernel_file(std::string_view name);
+/// Names of all embedded kernel files.
+std::vector<std::string> kernel_files();
+
+/// The program source of a stage: the #define lines, simdvol_shared.h,
+/// common.cl and <stage>.cl, each part preceded by a #line directive naming
+/// its file so that build logs point into the right file.
+std::string program_source(std::string_view stage, const Defines& defines = {});
+
+/// Throws ArgumentError naming `what` if a buffer of `bytes` exceeds the
+/// device's largest allocation `max_alloc_bytes` (or is zero).
+void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what);
+
+/// Rounds n up to a multiple of m (m > 0).
+inline std::size_t round_up(std::size_t n, std::size_t m) {
+  return (n + m - 1) / m * m;
+}
+
+/// A device with its context, in-order queue and program cache.
+/// Movable, not copyable; thread-safe for build()/program()/kernel().
+class Device {
+ public:
+  /// Opens device `index` as listed by list_devices(), or the one
+  /// choose_device() picks. The queue is in-order with profiling enabled.
+  explicit Device(std::optional<int> index = std::nullopt);
+  /// Wraps an existing context and queue (both retained, not taken over), for
+  /// programs that embed simdvol's kernels. The device is the queue's device.
+  Device(cl_context context, cl_command_queue queue);
+  Device(Device&&) noexcept;
+  Device& operator=(Device&&) noexcept;
+  Device(const Device&) = delete;
+  Device& operator=(const Device&) = delete;
+  ~Device();
+
+  const DeviceInfo& info() const { return info_; }
+  const cl::Context& context() const { return context_; }
+  const cl::Device& device() const { return device_; }
+  const cl::CommandQueue& queue() const { return queue_; }
+  /// Whether the queue has CL_QUEUE_PROFILING_ENABLE (always for our own queues).
+  bool profiling() const { return profiling_; }
+
+  /// The build options actually used: `options` plus SIMDVOL_CL_OPTIONS.
+  static std::string build_options(const std::string& options);
+  /// Builds `source` with build_options(options), cached by (source, options).
+  /// Throws BuildError with the build log on failure.
+  cl::Program build(const std::string& source, const std::string& options = "");
+  /// build(program_source(stage, defines), options).
+  cl::Program program(std::string_view stage, const Defines& defines = {},
+                      const std::string& options = "");
+  /// A fresh kernel `name` from program(stage, defines, options).
+  cl::Kernel kernel(std::string_view stage, const std::string& name, const Defines& defines = {},
+                    const std::string& options = "");
+  /// Number of programs in the cache.
+  std::size_t cached_programs() const;
+
+  /// Allocates a buffer, checking the size against the device's max
+  /// allocation first (ArgumentError naming `what`).
+  cl::Buffer buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr, const std::string& what);
+
+  /// Enqueues a 1-D, 2-D or 3-D range; each global size is rounded up to a
+  /// multiple of the local size. Returns the event (profiling info available
+  /// when profiling()). `what` names the kernel in errors.
+  cl::Event run(const cl::Kernel& kernel, const std::string& what, const cl::NDRange& global,
+                const cl::NDRange& local);
+  /// clFinish on the queue.
+  void finish();
+
+ private:
+  void describe_self(int index, int platform_index, const std::string& platform);
+
+  DeviceInfo info_;
+  cl::Context context_;
+  cl::Device device_;
+  cl::CommandQueue queue_;
+  bool profiling_ = false;
+  struct Cache {
+    std::mutex mutex;
+    std::map<std::pair<std::string, std::string>, cl::Program> programs;
+  };
+  std::unique_ptr<Cache> cache_;
+};
+
+/// Sets every argument of `kernel`, throwing CLError naming the kernel and
+/// the argument index if one fails.
+template <typename... Args>
+void set_args(cl::Kernel& kernel, const std::string& what, const Args&... args) {
+  cl_uint index = 0;
+  auto one = [&](const auto& arg) {
+    cl_int err = kernel.setArg(index, arg);
+    if (err != CL_SUCCESS)
+      throw CLError("clSetKernelArg(" + what + ", " + std::to_string(index) + ")", err);
+    ++index;
+  };
+  (one(args), ...);
+}
+
+/// Duration of a profiled event in nanoseconds (end - start); 0 if the
+/// information is not available.
+std::uint64_t event_ns(const cl::Event& event);
+
+}  // namespace simdvol
