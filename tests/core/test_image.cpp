@@ -1,0 +1,272 @@
+// Images: construction, PSNR and differences, and atomic output through
+// OpenImageIO (.png, .exr, .tif/.tiff).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <set>
+#include <string>
+
+#include <unistd.h>
+
+#include "simdvol/error.hpp"
+#include "simdvol/image.hpp"
+
+namespace simdvol {
+namespace {
+
+namespace fs = std::filesystem;
+
+Image constant(int w, int h, Rgba c) {
+  Image img(w, h);
+  std::fill(img.pixels().begin(), img.pixels().end(), c);
+  return img;
+}
+
+// A premultiplied test pattern with every channel varying.
+Image pattern(int w, int h) {
+  Image img(w, h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float a = static_cast<float>(x + 1) / static_cast<float>(w);
+      const float u = static_cast<float>(y) / static_cast<float>(h - 1);
+      img.at(x, y) = {a * u, a * (1.0f - u),
+                      a * 0.5f * static_cast<float>((x * 7 + y * 3) % 11) / 10.0f, a};
+    }
+  return img;
+}
+
+std::string read_bytes(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+std::set<std::string> listing(const fs::path& dir) {
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir)) names.insert(e.path().filename().string());
+  return names;
+}
+
+class ImageFiles : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() /
+           ("simdvol_test_image_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  fs::path dir_;
+};
+
+TEST(Image, ConstructsZeroedAndRejectsBadSizes) {
+  Image img(3, 2);
+  EXPECT_EQ(img.width(), 3);
+  EXPECT_EQ(img.height(), 2);
+  ASSERT_EQ(img.pixels().size(), 6u);
+  for (const Rgba& p : img.pixels()) EXPECT_TRUE(p.r == 0 && p.g == 0 && p.b == 0 && p.a == 0);
+  img.at(2, 1).g = 0.5f;
+  EXPECT_EQ(img.pixels()[5].g, 0.5f);
+  EXPECT_THROW(Image(0, 5), ArgumentError);
+  EXPECT_THROW(Image(5, 0), ArgumentError);
+  EXPECT_THROW(Image(-1, 5), ArgumentError);
+}
+
+TEST(Psnr, KnownValues) {
+  // Offset 0.125 (exact in float): MSE = 1/64, PSNR = 10 log10(64).
+  const Image a = constant(8, 5, {0.25f, 0.5f, 0.75f, 1.0f});
+  const Image b = constant(8, 5, {0.375f, 0.625f, 0.875f, 1.0f});
+  EXPECT_NEAR(psnr(a, b), 10.0 * std::log10(64.0), 1e-9);
+  EXPECT_NEAR(psnr(b, a), 10.0 * std::log10(64.0), 1e-9);
+
+  // Offset 0.1 (as close as float gets): 20 dB.
+  const Image c = constant(4, 4, {0.5f, 0.5f, 0.5f, 1.0f});
+  const Image d = constant(4, 4, {0.6f, 0.6f, 0.6f, 1.0f});
+  const double off = static_cast<double>(0.6f) - static_cast<double>(0.5f);
+  EXPECT_NEAR(psnr(c, d), -20.0 * std::log10(off), 1e-9);
+  EXPECT_NEAR(psnr(c, d), 20.0, 1e-5);
+
+  // One channel of one pixel off by 0.5 in a 4x4 image: MSE = 0.25 / 48.
+  Image e = c;
+  e.at(1, 2).g += 0.5f;
+  EXPECT_NEAR(psnr(c, e), 10.0 * std::log10(48.0 / 0.25), 1e-9);
+
+  // Identical (alpha is not part of PSNR).
+  EXPECT_EQ(psnr(c, c), std::numeric_limits<double>::infinity());
+  Image f = c;
+  f.at(0, 0).a = 0.0f;
+  EXPECT_EQ(psnr(c, f), std::numeric_limits<double>::infinity());
+}
+
+TEST(Psnr, SizeMismatchThrows) {
+  EXPECT_THROW(psnr(Image(4, 4), Image(4, 5)), ArgumentError);
+  EXPECT_THROW(psnr(Image(3, 4), Image(4, 4)), ArgumentError);
+  EXPECT_THROW(max_abs_diff(Image(4, 4), Image(5, 4)), ArgumentError);
+}
+
+TEST(MaxAbsDiff, CoversAllFourChannels) {
+  const Image a = constant(3, 3, {0.1f, 0.2f, 0.3f, 0.4f});
+  EXPECT_EQ(max_abs_diff(a, a), 0.0f);
+  Image b = a;
+  b.at(2, 2).a = 0.9f;
+  EXPECT_NEAR(max_abs_diff(a, b), 0.5f, 1e-7f);
+  b.at(0, 1).r = -0.7f;
+  EXPECT_NEAR(max_abs_diff(a, b), 0.8f, 1e-7f);
+  b.at(1, 1).b = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_TRUE(std::isnan(max_abs_diff(a, b)));
+}
+
+TEST_F(ImageFiles, PngRoundTripQuantisesOverBlack) {
+  Image img = pattern(37, 23);
+  img.at(0, 0) = {1.7f, -0.3f, 0.5f, 1.0f};  // clamped to [0, 1]
+  const fs::path p = dir_ / "out.png";
+  write_image(img, p);
+  const Image back = read_image(p);
+  ASSERT_EQ(back.width(), 37);
+  ASSERT_EQ(back.height(), 23);
+  for (int y = 0; y < 23; ++y)
+    for (int x = 0; x < 37; ++x) {
+      const Rgba& o = img.at(x, y);
+      const Rgba& r = back.at(x, y);
+      auto q = [](float v) { return std::round(std::clamp(v, 0.0f, 1.0f) * 255.0f) / 255.0f; };
+      ASSERT_NEAR(r.r, q(o.r), 1e-6f) << x << "," << y;
+      ASSERT_NEAR(r.g, q(o.g), 1e-6f) << x << "," << y;
+      ASSERT_NEAR(r.b, q(o.b), 1e-6f) << x << "," << y;
+      ASSERT_EQ(r.a, 1.0f);  // no alpha in the file
+    }
+  EXPECT_EQ(back.at(0, 0).r, 1.0f);
+  EXPECT_EQ(back.at(0, 0).g, 0.0f);
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"out.png"}));
+}
+
+TEST_F(ImageFiles, ExrRoundTripIsHalfPrecision) {
+  Image img = pattern(31, 17);
+  img.at(3, 4) = {2.5f, 0.001f, 0.0f, 1.0f};  // outside [0, 1] survives in EXR
+  const fs::path p = dir_ / "out.exr";
+  write_image(img, p);
+  const Image back = read_image(p);
+  ASSERT_EQ(back.width(), 31);
+  ASSERT_EQ(back.height(), 17);
+  for (std::size_t i = 0; i < img.pixels().size(); ++i) {
+    const Rgba& o = img.pixels()[i];
+    const Rgba& r = back.pixels()[i];
+    // half: 11 significant bits, relative error <= 2^-11.
+    ASSERT_NEAR(r.r, o.r, 1e-3f * std::fabs(o.r) + 1e-7f) << i;
+    ASSERT_NEAR(r.g, o.g, 1e-3f * std::fabs(o.g) + 1e-7f) << i;
+    ASSERT_NEAR(r.b, o.b, 1e-3f * std::fabs(o.b) + 1e-7f) << i;
+    ASSERT_NEAR(r.a, o.a, 1e-3f * std::fabs(o.a) + 1e-7f) << i;
+  }
+  EXPECT_NEAR(back.at(3, 4).r, 2.5f, 1e-6f);  // exactly representable
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"out.exr"}));
+}
+
+TEST_F(ImageFiles, TiffRoundTripIsExact) {
+  Image img = pattern(29, 13);
+  img.at(5, 6) = {-0.25f, 3.0f, 1e-20f, 0.123456789f};
+  for (const char* name : {"out.tif", "out.tiff"}) {
+    const fs::path p = dir_ / name;
+    write_image(img, p);
+    const Image back = read_image(p);
+    ASSERT_EQ(back.width(), 29);
+    ASSERT_EQ(back.height(), 13);
+    EXPECT_EQ(max_abs_diff(img, back), 0.0f) << name;
+    EXPECT_EQ(back.at(5, 6).a, 0.123456789f);
+  }
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"out.tif", "out.tiff"}));
+}
+
+TEST_F(ImageFiles, OverwriteReplacesTheFile) {
+  const fs::path p = dir_ / "out.tif";
+  write_image(constant(4, 4, {0.1f, 0.2f, 0.3f, 0.4f}), p);
+  const Image second = constant(6, 2, {0.5f, 0.6f, 0.7f, 0.8f});
+  write_image(second, p);
+  const Image back = read_image(p);
+  ASSERT_EQ(back.width(), 6);
+  ASSERT_EQ(back.height(), 2);
+  EXPECT_EQ(max_abs_diff(second, back), 0.0f);
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"out.tif"}));
+}
+
+TEST_F(ImageFiles, UnknownExtensionThrowsNamingThePath) {
+  for (const char* name : {"out.bmp", "out.jpg", "out", "out.png.txt"}) {
+    const fs::path p = dir_ / name;
+    try {
+      write_image(pattern(4, 4), p);
+      ADD_FAILURE() << "no error for " << p;
+    } catch (const FileError& e) {
+      EXPECT_EQ(e.path(), p);
+      EXPECT_NE(std::string(e.what()).find(p.string()), std::string::npos) << e.what();
+      EXPECT_NE(e.problem().find("unknown image extension"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_TRUE(listing(dir_).empty());
+}
+
+TEST_F(ImageFiles, MissingDirectoryThrows) {
+  const fs::path p = dir_ / "no_such_dir" / "out.png";
+  try {
+    write_image(pattern(4, 4), p);
+    ADD_FAILURE() << "no error";
+  } catch (const FileError& e) {
+    EXPECT_EQ(e.path(), p);
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "no_such_dir"));
+  EXPECT_TRUE(listing(dir_).empty());
+}
+
+// The temporary file is written completely, then the rename onto `path`
+// fails because `path` is a directory: the temporary must be removed and the
+// directory left as it was.
+TEST_F(ImageFiles, FailedRenameLeavesTargetAndNoTemporary) {
+  const fs::path p = dir_ / "out.png";
+  fs::create_directory(p);
+  { std::ofstream(p / "inside.txt") << "keep me"; }
+  for (const char* ext : {".png", ".exr", ".tif"}) {
+    const fs::path target = fs::path(p).replace_extension(ext);
+    if (ext != std::string(".png")) fs::create_directory(target);
+    EXPECT_THROW(write_image(pattern(8, 8), target), FileError) << target;
+  }
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"out.png", "out.exr", "out.tif"}));
+  EXPECT_TRUE(fs::is_directory(p));
+  EXPECT_EQ(listing(p), (std::set<std::string>{"inside.txt"}));
+  EXPECT_EQ(read_bytes(p / "inside.txt"), "keep me");
+}
+
+// libpng refuses widths over 1,000,000 once the temporary file is already
+// open, so this fails in the middle of writing: the existing file must stay
+// byte-identical and the temporary must be gone.
+TEST_F(ImageFiles, FailedWriteLeavesExistingFileUntouched) {
+  const fs::path p = dir_ / "out.png";
+  write_image(pattern(16, 9), p);
+  const std::string before = read_bytes(p);
+  ASSERT_FALSE(before.empty());
+  try {
+    write_image(Image(1000001, 1), p);
+    ADD_FAILURE() << "no error";
+  } catch (const FileError& e) {
+    EXPECT_EQ(e.path(), p);
+  }
+  EXPECT_EQ(read_bytes(p), before);
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"out.png"}));
+  // And it still reads as the first image.
+  EXPECT_EQ(read_image(p).width(), 16);
+}
+
+TEST_F(ImageFiles, ReadErrorsAreFileErrors) {
+  EXPECT_THROW(read_image(dir_ / "missing.png"), FileError);
+  const fs::path junk = dir_ / "junk.png";
+  { std::ofstream(junk) << "this is not a png"; }
+  EXPECT_THROW(read_image(junk), FileError);
+  EXPECT_THROW(read_image(dir_), FileError);
+}
+
+}  // namespace
+}  // namespace simdvol
