@@ -1,0 +1,316 @@
+// The OpenCL device layer: listing and choosing devices, error names, the
+// embedded kernel sources, program building with cache, build logs and
+// options, running kernels, wrapping an external context and queue.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "simdvol/device.hpp"
+#include "testing.hpp"
+
+namespace simdvol {
+namespace {
+
+// Skips the test when there is no OpenCL platform (PoCL is installed here,
+// so on this project's machines the tests run).
+#define SIMDVOL_REQUIRE_OPENCL()                          \
+  do {                                                    \
+    try {                                                 \
+      list_devices();                                     \
+    } catch (const NoDeviceError& e) {                    \
+      GTEST_SKIP() << "no OpenCL platform: " << e.what(); \
+    }                                                     \
+  } while (0)
+
+// Restores an environment variable when it goes out of scope.
+class EnvGuard {
+ public:
+  explicit EnvGuard(const char* name) : name_(name) {
+    if (const char* v = std::getenv(name)) old_ = v, had_ = true;
+  }
+  ~EnvGuard() {
+    if (had_)
+      setenv(name_, old_.c_str(), 1);
+    else
+      unsetenv(name_);
+  }
+
+ private:
+  const char* name_;
+  std::string old_;
+  bool had_ = false;
+};
+
+std::string read_text(const std::filesystem::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+DeviceInfo fake(int index, bool cpu) {
+  DeviceInfo d;
+  d.index = index;
+  d.is_cpu = cpu;
+  d.type = cpu ? "CPU" : "GPU";
+  return d;
+}
+
+TEST(ClErrors, NamesAndMessages) {
+  EXPECT_EQ(cl_error_name(CL_OUT_OF_RESOURCES), "CL_OUT_OF_RESOURCES");
+  EXPECT_EQ(cl_error_name(CL_INVALID_KERNEL_NAME), "CL_INVALID_KERNEL_NAME");
+  EXPECT_EQ(cl_error_name(CL_BUILD_PROGRAM_FAILURE), "CL_BUILD_PROGRAM_FAILURE");
+  EXPECT_EQ(cl_error_name(-1001), "CL_PLATFORM_NOT_FOUND_KHR");
+  EXPECT_EQ(cl_error_name(-12345), "unknown OpenCL error");
+  CLError e("clEnqueueNDRangeKernel(simdvol_layout)", CL_OUT_OF_RESOURCES);
+  EXPECT_STREQ(e.what(), "clEnqueueNDRangeKernel(simdvol_layout): CL_OUT_OF_RESOURCES (-5)");
+  EXPECT_EQ(e.code(), CL_OUT_OF_RESOURCES);
+  EXPECT_THROW(cl_check(CL_INVALID_VALUE, "clFoo"), CLError);
+  EXPECT_NO_THROW(cl_check(CL_SUCCESS, "clFoo"));
+}
+
+TEST(ChooseDevice, DefaultIsFirstCpuAndOverrides) {
+  EnvGuard env("SIMDVOL_DEVICE");
+  unsetenv("SIMDVOL_DEVICE");
+  std::vector<DeviceInfo> devs{fake(0, false), fake(1, true), fake(2, true)};
+  EXPECT_EQ(choose_device(devs), 1);
+  EXPECT_EQ(choose_device(devs, 2), 2);
+  EXPECT_EQ(choose_device(devs, 0), 0);
+  EXPECT_EQ(choose_device({fake(0, false), fake(1, false)}), 0);  // no CPU: the first device
+  setenv("SIMDVOL_DEVICE", "2", 1);
+  EXPECT_EQ(choose_device(devs), 2);
+  EXPECT_EQ(choose_device(devs, 0), 0);  // --device wins over the environment
+  setenv("SIMDVOL_DEVICE", "7", 1);
+  try {
+    choose_device(devs);
+    FAIL() << "expected ArgumentError";
+  } catch (const ArgumentError& e) {
+    EXPECT_NE(std::string(e.what()).find("SIMDVOL_DEVICE"), std::string::npos) << e.what();
+  }
+  setenv("SIMDVOL_DEVICE", "one", 1);
+  EXPECT_THROW(choose_device(devs), ArgumentError);
+  unsetenv("SIMDVOL_DEVICE");
+  try {
+    choose_device(devs, 3);
+    FAIL() << "expected ArgumentError";
+  } catch (const ArgumentError& e) {
+    EXPECT_NE(std::string(e.what()).find("--device"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(choose_device(devs, -1), ArgumentError);
+}
+
+TEST(Devices, ListedWithTheirProperties) {
+  SIMDVOL_REQUIRE_OPENCL();
+  auto devs = list_devices();
+  ASSERT_FALSE(devs.empty());
+  for (std::size_t i = 0; i < devs.size(); ++i) {
+    const auto& d = devs[i];
+    EXPECT_EQ(d.index, static_cast<int>(i));
+    EXPECT_FALSE(d.name.empty());
+    EXPECT_FALSE(d.platform.empty());
+    EXPECT_EQ(d.version.rfind("OpenCL ", 0), 0u) << d.version;
+    EXPECT_GT(d.compute_units, 0u);
+    EXPECT_GT(d.local_mem_bytes, 0u);
+    EXPECT_GE(d.global_mem_bytes, d.max_alloc_bytes);
+    EXPECT_GT(d.max_alloc_bytes, 0u);
+    EXPECT_GE(d.max_work_group_size, 64u);
+  }
+  std::string table = describe_devices(devs, 0);
+  EXPECT_NE(table.find("* 0: " + devs[0].name), std::string::npos) << table;
+  EXPECT_NE(table.find("max allocation"), std::string::npos);
+}
+
+// With no ICD at all, the error names the package to install. Runs in a
+// re-executed child (threadsafe death test) so that the ICD loader starts
+// fresh with an empty vendor directory.
+TEST(DevicesDeathTest, NoPlatformNamesThePackage) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const auto empty = std::filesystem::temp_directory_path() / "simdvol-no-icd";
+  std::filesystem::create_directories(empty);
+  EXPECT_EXIT(
+      {
+        setenv("OCL_ICD_VENDORS", empty.c_str(), 1);
+        try {
+          list_devices();
+        } catch (const NoDeviceError& e) {
+          std::cerr << e.what() << std::endl;
+          std::exit(3);
+        }
+        std::exit(0);
+      },
+      ::testing::ExitedWithCode(3), "pocl-opencl-icd");
+}
+
+TEST(KernelFiles, EmbeddedExactlyAsOnDisk) {
+  auto names = kernel_files();
+  for (const char* required : {"simdvol_shared.h", "common.cl", "layout.cl"})
+    EXPECT_NE(std::find(names.begin(), names.end(), required), names.end()) << required;
+  const std::filesystem::path dir = std::filesystem::path(SIMDVOL_SOURCE_DIR) / "kernels";
+  for (const auto& n : names) EXPECT_EQ(std::string(kernel_file(n)), read_text(dir / n)) << n;
+  EXPECT_THROW(kernel_file("no_such_stage.cl"), ArgumentError);
+}
+
+TEST(KernelFiles, ProgramSourceIsDefinesSharedCommonStage) {
+  std::string s = program_source("layout", {{"WGS", "32"}, {"SIMDVOL_X", "1"}});
+  EXPECT_EQ(s.rfind("#define WGS 32\n#define SIMDVOL_X 1\n#line 1 \"simdvol_shared.h\"\n", 0), 0u)
+      << s.substr(0, 200);
+  auto shared = s.find("#define SIMDVOL_SHARED_H");
+  auto common = s.find("#line 1 \"common.cl\"");
+  auto stage = s.find("#line 1 \"layout.cl\"");
+  ASSERT_NE(shared, std::string::npos);
+  ASSERT_NE(common, std::string::npos);
+  ASSERT_NE(stage, std::string::npos);
+  EXPECT_LT(shared, common);
+  EXPECT_LT(common, stage);
+  EXPECT_THROW(program_source("no_such_stage"), ArgumentError);
+}
+
+TEST(DeviceTest, EveryKernelFileCompilesOnItsOwn) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device dev;
+  const std::string include = "-I " + std::string(SIMDVOL_SOURCE_DIR) + "/kernels";
+  for (const auto& n : kernel_files()) {
+    if (n.size() < 3 || n.substr(n.size() - 3) != ".cl") continue;
+    EXPECT_NO_THROW(dev.build(std::string(kernel_file(n)), include)) << n;
+  }
+}
+
+TEST(DeviceTest, ProgramCacheKeyedBySourceAndOptions) {
+  SIMDVOL_REQUIRE_OPENCL();
+  EnvGuard env("SIMDVOL_CL_OPTIONS");
+  unsetenv("SIMDVOL_CL_OPTIONS");
+  Device dev;
+  EXPECT_EQ(dev.cached_programs(), 0u);
+  cl::Program a = dev.program("layout");
+  EXPECT_EQ(dev.cached_programs(), 1u);
+  cl::Program b = dev.program("layout");
+  EXPECT_EQ(a(), b());  // the same cl_program
+  EXPECT_EQ(dev.cached_programs(), 1u);
+  dev.program("layout", {{"WGS", "32"}});
+  EXPECT_EQ(dev.cached_programs(), 2u);
+  dev.program("layout", {}, "-cl-fast-relaxed-math");
+  EXPECT_EQ(dev.cached_programs(), 3u);
+}
+
+TEST(DeviceTest, BuildErrorCarriesTheLog) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device dev;
+  try {
+    dev.build("__kernel void broken(__global float* x) { x[0] = undeclared_name; }");
+    FAIL() << "expected BuildError";
+  } catch (const BuildError& e) {
+    EXPECT_EQ(e.code(), CL_BUILD_PROGRAM_FAILURE);
+    EXPECT_NE(e.log().find("undeclared_name"), std::string::npos) << e.log();
+    std::string what = e.what();
+    EXPECT_NE(what.find("clBuildProgram: CL_BUILD_PROGRAM_FAILURE"), std::string::npos) << what;
+    EXPECT_NE(what.find(e.log()), std::string::npos);
+  }
+  EXPECT_EQ(dev.cached_programs(), 0u);  // failures are not cached
+}
+
+TEST(DeviceTest, EnvironmentBuildOptionsReachTheCompiler) {
+  SIMDVOL_REQUIRE_OPENCL();
+  EnvGuard env("SIMDVOL_CL_OPTIONS");
+  setenv("SIMDVOL_CL_OPTIONS", "-DSIMDVOL_TEST_VALUE=7", 1);
+  EXPECT_EQ(Device::build_options("-Werror"), "-Werror -DSIMDVOL_TEST_VALUE=7");
+  Device dev;
+  cl::Program p = dev.build("__kernel void k(__global int* x) { x[0] = SIMDVOL_TEST_VALUE; }");
+  cl_int err = CL_SUCCESS;
+  cl::Kernel k(p, "k", &err);
+  ASSERT_EQ(err, CL_SUCCESS);
+  cl::Buffer out = dev.buffer(CL_MEM_READ_WRITE, sizeof(cl_int), nullptr, "out");
+  set_args(k, "k", out);
+  dev.run(k, "k", cl::NDRange(1), cl::NDRange(1));
+  cl_int v = 0;
+  cl_check(dev.queue().enqueueReadBuffer(out, CL_TRUE, 0, sizeof v, &v), "read");
+  EXPECT_EQ(v, 7);
+}
+
+const char* kIotaSource =
+    "__kernel void iota(__global int* x, int n) {\n"
+    "  int i = get_global_id(0);\n"
+    "  if (i < n) x[i] = 3 * i + 1;\n"
+    "}\n";
+
+std::vector<cl_int> run_iota(Device& dev, int n, std::size_t local) {
+  cl::Program p = dev.build(kIotaSource);
+  cl_int err = CL_SUCCESS;
+  cl::Kernel k(p, "iota", &err);
+  cl_check(err, "clCreateKernel");
+  std::vector<cl_int> host(n + 1, -1);
+  cl::Buffer out = dev.buffer(CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR,
+                              host.size() * sizeof(cl_int), host.data(), "out");
+  set_args(k, "iota", out, static_cast<cl_int>(n));
+  dev.run(k, "iota", cl::NDRange(n), cl::NDRange(local));
+  cl_check(
+      dev.queue().enqueueReadBuffer(out, CL_TRUE, 0, host.size() * sizeof(cl_int), host.data()),
+      "read");
+  return host;
+}
+
+TEST(DeviceTest, RunRoundsTheGlobalSizeUp) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device dev;
+  EXPECT_TRUE(dev.profiling());
+  auto v = run_iota(dev, 1000, 64);  // 1000 is not a multiple of 64
+  for (int i = 0; i < 1000; ++i) ASSERT_EQ(v[i], 3 * i + 1) << i;
+  EXPECT_EQ(v[1000], -1);  // untouched past n
+  EXPECT_THROW(dev.run(cl::Kernel(), "k", cl::NDRange(8), cl::NDRange(8, 1)), ArgumentError);
+}
+
+TEST(DeviceTest, ErrorsNameTheCall) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device dev;
+  try {
+    dev.kernel("layout", "no_such_kernel");
+    FAIL() << "expected CLError";
+  } catch (const CLError& e) {
+    EXPECT_EQ(e.code(), CL_INVALID_KERNEL_NAME);
+    EXPECT_EQ(e.call(), "clCreateKernel(no_such_kernel)");
+  }
+  EXPECT_THROW(Device(1 << 20), ArgumentError);
+  try {
+    dev.buffer(CL_MEM_READ_WRITE, dev.info().max_alloc_bytes + 1, nullptr, "huge");
+    FAIL() << "expected ArgumentError";
+  } catch (const ArgumentError& e) {
+    EXPECT_NE(std::string(e.what()).find("huge"), std::string::npos);
+  }
+}
+
+TEST(DeviceTest, WrapsAnExistingContextAndQueue) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device own;
+  cl_int err = CL_SUCCESS;
+  // A queue without profiling, owned by "the embedding program".
+  cl::CommandQueue q(own.context(), own.device(), 0, &err);
+  ASSERT_EQ(err, CL_SUCCESS);
+  {
+    Device wrapped(own.context()(), q());
+    EXPECT_EQ(wrapped.info().name, own.info().name);
+    EXPECT_EQ(wrapped.info().index, -1);
+    EXPECT_FALSE(wrapped.profiling());
+    EXPECT_EQ(wrapped.queue()(), q());
+    auto v = run_iota(wrapped, 100, 32);
+    for (int i = 0; i < 100; ++i) ASSERT_EQ(v[i], 3 * i + 1) << i;
+  }
+  // The wrapper released only its own references: the queue still works.
+  EXPECT_EQ(q.finish(), CL_SUCCESS);
+  EXPECT_THROW(Device(nullptr, nullptr), ArgumentError);
+}
+
+TEST(DeviceTest, MovedDeviceKeepsWorking) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device a;
+  a.program("layout");
+  Device b(std::move(a));
+  EXPECT_EQ(b.cached_programs(), 1u);
+  auto v = run_iota(b, 10, 8);
+  EXPECT_EQ(v[9], 28);
+}
+
+}  // namespace
+}  // namespace simdvol
