@@ -26,8 +26,10 @@ struct RawLayout {
 
 /// Raw voxels, x fastest. The file must hold exactly header_bytes + voxels.
 Volume load_raw(const std::filesystem::path& path, const RawLayout& layout);
-/// VolPack's .den format (brainsmall.den): a 64-byte header of 16-bit
-/// big-endian fields, then 8-bit voxels.
+/// VolPack's .den format (brainsmall.den, from examples/denfile.c): a 62-byte
+/// header in the writer's byte order (int16 version 1, whose byte order gives
+/// the file's; 27 int16 min/max/len fields, the dims being map_len at byte 50;
+/// int16 map_warps; int32 map_length = voxel count), then 8-bit voxels.
 Volume load_den(const std::filesystem::path& path);
 /// NRRD through teem: attached and detached headers (.nrrd, .nhdr), raw and
 /// gzip encodings, 3-D scalar data of a supported type.

@@ -1,0 +1,899 @@
+// Volume loaders (raw, VolPack .den, NRRD through teem, NIfTI-1 through
+// niftilib) and the NRRD writer. Every malformed input throws FileError
+// naming the file and the problem; sizes are checked before large buffers
+// are allocated, so a header that claims huge dims fails early.
+#include "simdvol/io.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include "simdvol/error.hpp"
+
+extern "C" {
+#include <nifti/nifti1_io.h>
+#include <teem/biff.h>
+#include <teem/nrrd.h>
+}
+
+namespace simdvol {
+namespace {
+
+namespace fs = std::filesystem;
+
+// ---------------------------------------------------------------- helpers
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+std::string errno_text(int e) {
+  return std::generic_category().message(e);
+}
+
+/// Checks that `path` names a readable, non-empty regular file; returns its size.
+uint64_t require_regular_file(const fs::path& path) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) {
+    if (ec && ec != std::errc::no_such_file_or_directory)
+      throw FileError(path, "cannot access file: " + ec.message());
+    throw FileError(path, "file not found (no such file)");
+  }
+  if (fs::is_directory(st)) throw FileError(path, "is a directory, not a volume file");
+  if (!fs::is_regular_file(st)) throw FileError(path, "is not a regular file");
+  const uintmax_t size = fs::file_size(path, ec);
+  if (ec) throw FileError(path, "cannot read file size: " + ec.message());
+  if (size == 0) throw FileError(path, "file is empty (0 bytes)");
+  return static_cast<uint64_t>(size);
+}
+
+/// checked_voxel_count, but malformed dims are a FileError of `path`.
+std::size_t checked_count(const fs::path& path, const std::array<int64_t, 3>& dims,
+                          std::size_t bytes_per_voxel) {
+  try {
+    // The float copy we keep must fit as well as the file's own bytes.
+    checked_voxel_count(dims, path.string(), sizeof(float));
+    return checked_voxel_count(dims, path.string(), bytes_per_voxel);
+  } catch (const ArgumentError& e) {
+    const std::string msg = e.what();
+    const std::string prefix = path.string() + ": ";
+    throw FileError(path, msg.rfind(prefix, 0) == 0 ? msg.substr(prefix.size()) : msg);
+  }
+}
+
+std::string dims_text(const std::array<int64_t, 3>& d) {
+  return std::to_string(d[0]) + " x " + std::to_string(d[1]) + " x " + std::to_string(d[2]);
+}
+
+std::array<double, 3> sane_spacing(std::array<double, 3> s) {
+  for (double& v : s) {
+    v = std::fabs(v);
+    if (!(v > 0.0) || !std::isfinite(v)) v = 1.0;
+  }
+  return s;
+}
+
+template <typename T>
+T load_scalar(const unsigned char* p, bool swap) {
+  unsigned char b[sizeof(T)];
+  std::memcpy(b, p, sizeof(T));
+  if (swap) std::reverse(b, b + sizeof(T));
+  T v;
+  std::memcpy(&v, b, sizeof(T));
+  return v;
+}
+
+/// Converts `n` voxels of `type` stored at `src` (byte order `swap`ped or not)
+/// to floats at `dst`.
+void convert_to_float(VoxelType type, const unsigned char* src, std::size_t n, bool swap,
+                      float* dst) {
+  switch (type) {
+    case VoxelType::u8:
+      for (std::size_t i = 0; i < n; ++i) dst[i] = static_cast<float>(src[i]);
+      break;
+    case VoxelType::u16:
+      for (std::size_t i = 0; i < n; ++i)
+        dst[i] = static_cast<float>(load_scalar<uint16_t>(src + 2 * i, swap));
+      break;
+    case VoxelType::i16:
+      for (std::size_t i = 0; i < n; ++i)
+        dst[i] = static_cast<float>(load_scalar<int16_t>(src + 2 * i, swap));
+      break;
+    case VoxelType::f32:
+      for (std::size_t i = 0; i < n; ++i) dst[i] = load_scalar<float>(src + 4 * i, swap);
+      break;
+  }
+}
+
+/// Reads `n` voxels of `type` from `in` (already positioned) into `vol`.
+void read_voxels(const fs::path& path, std::ifstream& in, VoxelType type, bool swap, Volume& vol) {
+  const std::size_t bpv = voxel_bytes(type);
+  const std::size_t n = vol.voxel_count();
+  constexpr std::size_t chunk_voxels = std::size_t{1} << 20;
+  std::vector<unsigned char> buf(std::min(n, chunk_voxels) * bpv);
+  float* out = vol.data().data();
+  for (std::size_t done = 0; done < n;) {
+    const std::size_t m = std::min(chunk_voxels, n - done);
+    in.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(m * bpv));
+    if (static_cast<std::size_t>(in.gcount()) != m * bpv)
+      throw FileError(path, "truncated data: read failed after " +
+                                std::to_string(done * bpv + static_cast<std::size_t>(in.gcount())) +
+                                " voxel bytes of " + std::to_string(n * bpv));
+    convert_to_float(type, buf.data(), m, swap, out + done);
+    done += m;
+  }
+}
+
+// ---------------------------------------------------------------- teem RAII
+
+std::string biff_message(const char* key) {
+  char* err = biffGetDone(key);
+  if (!err) return "unknown teem error";
+  std::string s(err);
+  std::free(err);
+  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+  // biff stacks messages one per line; keep them readable on one line.
+  for (char& c : s)
+    if (c == '\n') c = ';';
+  return s;
+}
+
+struct NrrdDeleter {
+  void operator()(Nrrd* n) const { nrrdNuke(n); }
+};
+struct NioDeleter {
+  void operator()(NrrdIoState* n) const { nrrdIoStateNix(n); }
+};
+using NrrdPtr = std::unique_ptr<Nrrd, NrrdDeleter>;
+using NioPtr = std::unique_ptr<NrrdIoState, NioDeleter>;
+
+struct NrrdShape {
+  std::array<int64_t, 3> dims{};
+  std::array<double, 3> spacing{1.0, 1.0, 1.0};
+  std::array<unsigned int, 3> axes{0, 1, 2};  ///< which nrrd axes are x, y, z
+};
+
+double nrrd_axis_spacing(const Nrrd* n, unsigned int ax) {
+  const NrrdAxisInfo& a = n->axis[ax];
+  if (std::isfinite(a.spacing) && a.spacing != 0.0) return std::fabs(a.spacing);
+  if (n->spaceDim > 0) {
+    double s2 = 0.0;
+    bool ok = true;
+    for (unsigned int i = 0; i < n->spaceDim; ++i) {
+      if (!std::isfinite(a.spaceDirection[i])) ok = false;
+      s2 += a.spaceDirection[i] * a.spaceDirection[i];
+    }
+    if (ok && s2 > 0.0) return std::sqrt(s2);
+  }
+  return 1.0;
+}
+
+/// Dims and spacing of a 3-D nrrd (or a 4-D one with one axis of size 1).
+NrrdShape nrrd_shape(const fs::path& path, const Nrrd* n) {
+  NrrdShape s;
+  if (n->dim == 3) {
+    // axes 0, 1, 2
+  } else if (n->dim == 4) {
+    int drop = -1;
+    for (unsigned int a = 0; a < 4; ++a)
+      if (n->axis[a].size == 1) {
+        drop = static_cast<int>(a);
+        break;
+      }
+    if (drop < 0)
+      throw FileError(path, "4-D NRRD with sizes " + std::to_string(n->axis[0].size) + " " +
+                                std::to_string(n->axis[1].size) + " " +
+                                std::to_string(n->axis[2].size) + " " +
+                                std::to_string(n->axis[3].size) +
+                                " is not a scalar volume (a 3-D volume is expected)");
+    unsigned int k = 0;
+    for (unsigned int a = 0; a < 4; ++a)
+      if (static_cast<int>(a) != drop) s.axes[k++] = a;
+  } else {
+    throw FileError(path, "dimension " + std::to_string(n->dim) +
+                              " is not supported (a 3-D volume is expected)");
+  }
+  for (int i = 0; i < 3; ++i) {
+    const size_t sz = n->axis[s.axes[i]].size;
+    if (sz > static_cast<size_t>(std::numeric_limits<int64_t>::max()))
+      throw FileError(path, "axis size " + std::to_string(sz) + " overflows");
+    s.dims[i] = static_cast<int64_t>(sz);
+    s.spacing[i] = nrrd_axis_spacing(n, s.axes[i]);
+  }
+  s.spacing = sane_spacing(s.spacing);
+  return s;
+}
+
+/// The VoxelType a nrrd type maps to (other integer and double types are
+/// converted: int8 -> i16, wider types -> f32).
+VoxelType nrrd_voxel_type(const fs::path& path, int type) {
+  switch (type) {
+    case nrrdTypeUChar:
+      return VoxelType::u8;
+    case nrrdTypeUShort:
+      return VoxelType::u16;
+    case nrrdTypeShort:
+    case nrrdTypeChar:
+      return VoxelType::i16;
+    case nrrdTypeFloat:
+    case nrrdTypeInt:
+    case nrrdTypeUInt:
+    case nrrdTypeLLong:
+    case nrrdTypeULLong:
+    case nrrdTypeDouble:
+      return VoxelType::f32;
+    default:
+      break;
+  }
+  throw FileError(path, std::string("unsupported NRRD type '") + airEnumStr(nrrdType, type) +
+                            "' (expected an integer or floating-point scalar type)");
+}
+
+template <typename T>
+void nrrd_copy(const Nrrd* n, const NrrdShape& s, float* out) {
+  const T* src = static_cast<const T*>(n->data);
+  // Strides of the nrrd axes (a dropped size-1 axis contributes nothing).
+  std::array<size_t, 4> stride{1, 1, 1, 1};
+  for (unsigned int a = 1; a < n->dim; ++a) stride[a] = stride[a - 1] * n->axis[a - 1].size;
+  const size_t sx = stride[s.axes[0]], sy = stride[s.axes[1]], sz = stride[s.axes[2]];
+  size_t o = 0;
+  for (int64_t z = 0; z < s.dims[2]; ++z)
+    for (int64_t y = 0; y < s.dims[1]; ++y) {
+      const T* row = src + static_cast<size_t>(z) * sz + static_cast<size_t>(y) * sy;
+      for (int64_t x = 0; x < s.dims[0]; ++x) out[o++] = static_cast<float>(row[x * sx]);
+    }
+}
+
+/// Names of the data files of a detached-header nrrd (after a header-only
+/// read), resolved relative to the header's directory.
+std::vector<fs::path> nrrd_data_files(const fs::path& path, const NrrdIoState* nio) {
+  std::vector<fs::path> files;
+  const fs::path dir = path.parent_path();
+  auto resolve = [&](const std::string& name) {
+    fs::path p(name);
+    return p.is_absolute() ? p : dir / p;
+  };
+  if (nio->dataFNFormat) {
+    const int step = nio->dataFNStep;
+    if (step == 0) return files;
+    for (int i = nio->dataFNMin; step > 0 ? i <= nio->dataFNMax : i >= nio->dataFNMax; i += step) {
+      char name[4096];
+      std::snprintf(name, sizeof name, nio->dataFNFormat, i);
+      files.push_back(resolve(name));
+      if (files.size() > 100000) break;
+    }
+  } else if (nio->dataFNArr) {
+    for (unsigned int i = 0; i < nio->dataFNArr->len; ++i)
+      if (nio->dataFN[i] && std::string(nio->dataFN[i]) != "-")
+        files.push_back(resolve(nio->dataFN[i]));
+  }
+  return files;
+}
+
+/// Offset of the first byte after the blank line that ends an attached NRRD
+/// header, or nothing if it cannot be found in the first 16 MiB.
+std::optional<uint64_t> nrrd_header_end(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return std::nullopt;
+  std::vector<char> buf(1 << 16);
+  uint64_t pos = 0;
+  char prev = 0;  // the last character seen, carriage returns aside
+  while (pos < (uint64_t{16} << 20)) {
+    in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+    const auto got = static_cast<std::size_t>(in.gcount());
+    if (got == 0) break;
+    for (std::size_t i = 0; i < got; ++i) {
+      const char c = buf[i];
+      if (c == '\r') continue;  // tolerate CRLF line endings
+      if (c == '\n' && prev == '\n') return pos + i + 1;
+      prev = c;
+    }
+    pos += got;
+  }
+  return std::nullopt;
+}
+
+// ---------------------------------------------------------------- NIfTI
+
+struct NiftiHeaderInfo {
+  std::array<int64_t, 3> dims{};
+  int datatype = 0;
+  int bitpix = 0;
+  uint64_t vox_offset = 0;
+};
+
+/// Reads the 348-byte NIfTI-1 header (plain or gzip) and counts the
+/// decompressed bytes, so that a truncated or corrupt file is found before
+/// niftilib allocates or reads anything.
+NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size) {
+  gzFile gz = gzopen(path.c_str(), "rb");
+  if (!gz) throw FileError(path, "cannot open file: " + errno_text(errno));
+  struct GzCloser {
+    gzFile g;
+    ~GzCloser() { gzclose(g); }
+  } closer{gz};
+
+  unsigned char h[348];
+  const int got = gzread(gz, h, sizeof h);
+  if (got < 0) {
+    int zerr = 0;
+    const char* msg = gzerror(gz, &zerr);
+    throw FileError(path, std::string("corrupt compressed data in header: ") + (msg ? msg : "?"));
+  }
+  if (got < 4) throw FileError(path, "truncated header (" + std::to_string(got) + " bytes)");
+  const int32_t sizeof_hdr_le = load_scalar<int32_t>(h, std::endian::native == std::endian::big);
+  const int32_t sizeof_hdr_be = load_scalar<int32_t>(h, std::endian::native == std::endian::little);
+  bool file_be;  // byte order of the file
+  if (sizeof_hdr_le == 348)
+    file_be = false;
+  else if (sizeof_hdr_be == 348)
+    file_be = true;
+  else if (sizeof_hdr_le == 540 || sizeof_hdr_be == 540)
+    throw FileError(path, "NIfTI-2 files are not supported (only NIfTI-1)");
+  else
+    throw FileError(path, "not a NIfTI-1 file (garbage header: sizeof_hdr is " +
+                              std::to_string(sizeof_hdr_le) + ", expected 348)");
+  if (got < 348)
+    throw FileError(path, "truncated header (" + std::to_string(got) + " of 348 bytes)");
+  const bool swap = file_be != (std::endian::native == std::endian::big);
+  auto i16 = [&](int off) { return load_scalar<int16_t>(h + off, swap); };
+  auto f32 = [&](int off) { return load_scalar<float>(h + off, swap); };
+
+  if (std::memcmp(h + 344, "n+1", 4) != 0) {
+    if (std::memcmp(h + 344, "ni1", 4) == 0)
+      throw FileError(path,
+                      "a NIfTI-1 header-only file (magic ni1, .hdr/.img pair) is not "
+                      "supported; expected a single-file .nii (magic n+1)");
+    throw FileError(path, "not a single-file NIfTI-1 (bad magic; expected n+1)");
+  }
+  const int ndim = i16(40);
+  if (ndim < 1 || ndim > 7)
+    throw FileError(path, "garbage header: dim[0] is " + std::to_string(ndim) + " (1..7)");
+  int64_t d[8];
+  for (int i = 0; i < 8; ++i) d[i] = i <= ndim ? i16(40 + 2 * i) : 1;
+  for (int i = 1; i <= ndim; ++i)
+    if (d[i] <= 0)
+      throw FileError(path, "non-positive dimension: dim[" + std::to_string(i) + "] is " +
+                                std::to_string(d[i]));
+  int64_t nvol = 1;
+  for (int i = 4; i <= ndim; ++i) nvol *= d[i];
+  if (nvol > 1)
+    throw FileError(path, "holds " + std::to_string(nvol) +
+                              " volumes (nt > 1); only a single 3-D volume is supported");
+
+  NiftiHeaderInfo info;
+  info.dims = {ndim >= 1 ? d[1] : 1, ndim >= 2 ? d[2] : 1, ndim >= 3 ? d[3] : 1};
+  info.datatype = i16(70);
+  info.bitpix = i16(72);
+  int want_bits = 0;
+  switch (info.datatype) {
+    case DT_UINT8:
+    case DT_INT8:
+      want_bits = 8;
+      break;
+    case DT_INT16:
+    case DT_UINT16:
+      want_bits = 16;
+      break;
+    case DT_INT32:
+    case DT_UINT32:
+    case DT_FLOAT32:
+      want_bits = 32;
+      break;
+    case DT_FLOAT64:
+    case DT_INT64:
+    case DT_UINT64:
+      want_bits = 64;
+      break;
+    default:
+      throw FileError(path, "unsupported NIfTI datatype " + std::to_string(info.datatype) +
+                                " (expected a scalar integer or float type)");
+  }
+  if (info.bitpix != want_bits)
+    throw FileError(path, "garbage header: bitpix " + std::to_string(info.bitpix) +
+                              " does not match datatype " + std::to_string(info.datatype));
+  const float vox = f32(108);
+  if (!std::isfinite(vox) || vox < 348.0f || vox > 1e15f)
+    throw FileError(path, "garbage header: vox_offset " + std::to_string(vox));
+  info.vox_offset = static_cast<uint64_t>(vox);
+
+  const std::size_t n = checked_count(path, info.dims, static_cast<std::size_t>(want_bits / 8));
+  const uint64_t data_bytes = static_cast<uint64_t>(n) * static_cast<uint64_t>(want_bits / 8);
+  if (data_bytes > std::numeric_limits<uint64_t>::max() - info.vox_offset)
+    throw FileError(path, "dims " + dims_text(info.dims) + " overflow the file size");
+  const uint64_t need = info.vox_offset + data_bytes;
+
+  const bool compressed = gzdirect(gz) == 0;
+  if (!compressed) {
+    if (file_size < need)
+      throw FileError(path, "truncated data: file has " + std::to_string(file_size) +
+                                " bytes, header (dims " + dims_text(info.dims) + ") needs " +
+                                std::to_string(need));
+    return info;
+  }
+  // deflate expands at most ~1032:1: reject absurd claims before decompressing.
+  if (need / 1032 > file_size + 1024)
+    throw FileError(path, "truncated data: " + std::to_string(file_size) +
+                              " compressed bytes cannot hold the " + std::to_string(need) +
+                              " bytes the header (dims " + dims_text(info.dims) + ") needs");
+  uint64_t total = 348;
+  std::vector<unsigned char> buf(1 << 16);
+  while (total < need) {
+    const int r = gzread(gz, buf.data(), static_cast<unsigned>(buf.size()));
+    if (r < 0) {
+      int zerr = 0;
+      const char* msg = gzerror(gz, &zerr);
+      throw FileError(path, std::string("corrupt compressed data: ") + (msg ? msg : "?"));
+    }
+    if (r == 0) break;
+    total += static_cast<uint64_t>(r);
+  }
+  if (total < need)
+    throw FileError(path, "truncated data: decompresses to " + std::to_string(total) +
+                              " bytes, header (dims " + dims_text(info.dims) + ") needs " +
+                              std::to_string(need));
+  return info;
+}
+
+template <typename T>
+void nifti_copy(const void* data, std::size_t n, float* out, double slope, double inter,
+                bool scaled) {
+  const T* src = static_cast<const T*>(data);
+  if (scaled)
+    for (std::size_t i = 0; i < n; ++i)
+      out[i] = static_cast<float>(static_cast<double>(src[i]) * slope + inter);
+  else
+    for (std::size_t i = 0; i < n; ++i) out[i] = static_cast<float>(src[i]);
+}
+
+// ---------------------------------------------------------------- writing
+
+template <typename T>
+void store_integer(const fs::path& path, const std::vector<float>& src, unsigned char* dst) {
+  constexpr double lo = static_cast<double>(std::numeric_limits<T>::min());
+  constexpr double hi = static_cast<double>(std::numeric_limits<T>::max());
+  for (std::size_t i = 0; i < src.size(); ++i) {
+    const float v = src[i];
+    if (std::isnan(v))
+      throw FileError(
+          path, "voxel " + std::to_string(i) + " is NaN and cannot be stored as an integer type");
+    const double r = std::clamp(std::nearbyint(static_cast<double>(v)), lo, hi);
+    const T t = static_cast<T>(r);
+    std::memcpy(dst + i * sizeof(T), &t, sizeof(T));
+  }
+}
+
+std::string format_double(double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+}  // namespace
+
+// ================================================================ loaders
+
+Volume load_raw(const std::filesystem::path& path, const RawLayout& layout) {
+  const uint64_t file_size = require_regular_file(path);
+  const std::size_t bpv = voxel_bytes(layout.type);
+  if (bpv == 0)
+    throw FileError(path, "unknown voxel type " + std::to_string(static_cast<int>(layout.type)) +
+                              " in the raw layout");
+  const std::size_t n = checked_count(path, layout.dims, bpv);
+  const uint64_t data_bytes = static_cast<uint64_t>(n) * bpv;
+  if (data_bytes > std::numeric_limits<uint64_t>::max() - layout.header_bytes)
+    throw FileError(path,
+                    "header bytes plus dims " + dims_text(layout.dims) + " overflow the file size");
+  const uint64_t need = layout.header_bytes + data_bytes;
+  if (file_size < need)
+    throw FileError(path, "truncated data: file has " + std::to_string(file_size) + " bytes, but " +
+                              std::to_string(layout.header_bytes) + " header bytes + " +
+                              dims_text(layout.dims) + " " + std::string(to_string(layout.type)) +
+                              " voxels need " + std::to_string(need));
+  if (file_size > need)
+    throw FileError(path,
+                    "file size disagrees with the layout: file has " + std::to_string(file_size) +
+                        " bytes, but " + std::to_string(layout.header_bytes) + " header bytes + " +
+                        dims_text(layout.dims) + " " + std::string(to_string(layout.type)) +
+                        " voxels need " + std::to_string(need) + " (file is larger than expected)");
+  std::array<double, 3> spacing = layout.spacing;
+  for (int a = 0; a < 3; ++a)
+    if (!(spacing[a] > 0.0) || !std::isfinite(spacing[a]))
+      throw FileError(path, "voxel spacing " + std::to_string(spacing[a]) + " along axis " +
+                                std::to_string(a) + " must be positive and finite");
+
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path, "cannot open file: " + errno_text(errno));
+  in.seekg(static_cast<std::streamoff>(layout.header_bytes));
+  if (!in) throw FileError(path, "cannot seek past the header");
+  Volume vol(layout.dims, layout.type, spacing);
+  const bool file_big = layout.endian == Endian::big;
+  const bool swap = file_big != (std::endian::native == std::endian::big);
+  read_voxels(path, in, layout.type, swap, vol);
+  return vol;
+}
+
+Volume load_den(const std::filesystem::path& path) {
+  // VolPack 1.0b3 examples/denfile.c (read_den/write_den): a 62-byte header
+  // written in the writer's native byte order:
+  //   int16 map_version (1; 0x0100 when byte-swapped, which gives the order)
+  //   int16 orig_min[3], orig_max[3], orig_len[3],
+  //         extr_min[3], extr_max[3], extr_len[3],
+  //         map_min[3],  map_max[3],  map_len[3]   (map_len at byte 50)
+  //   int16 map_warps                               (byte 56)
+  //   int32 map_length = product of map_len         (byte 58)
+  // then map_length 8-bit voxels, x fastest.
+  constexpr std::size_t header = 62;
+  const uint64_t file_size = require_regular_file(path);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path, "cannot open file: " + errno_text(errno));
+  unsigned char h[header];
+  in.read(reinterpret_cast<char*>(h), header);
+  const auto got = static_cast<std::size_t>(in.gcount());
+  if (got < 2) throw FileError(path, "truncated header (" + std::to_string(got) + " bytes)");
+  bool file_be;
+  if (h[0] == 1 && h[1] == 0)
+    file_be = false;
+  else if (h[0] == 0 && h[1] == 1)
+    file_be = true;
+  else
+    throw FileError(path, "not a VolPack .den file (garbage header: bad version/magic " +
+                              std::to_string(h[0]) + " " + std::to_string(h[1]) + ")");
+  if (got < header)
+    throw FileError(path, "truncated header (" + std::to_string(got) + " of 62 bytes)");
+  const bool swap = file_be != (std::endian::native == std::endian::big);
+  const std::array<int64_t, 3> dims{load_scalar<int16_t>(h + 50, swap),
+                                    load_scalar<int16_t>(h + 52, swap),
+                                    load_scalar<int16_t>(h + 54, swap)};
+  const std::size_t n = checked_count(path, dims, 1);
+  const int32_t map_length = load_scalar<int32_t>(h + 58, swap);
+  if (map_length < 0 || static_cast<uint64_t>(map_length) != n)
+    throw FileError(path, "inconsistent header: map_length " + std::to_string(map_length) +
+                              " is not the product of the dims " + dims_text(dims));
+  const uint64_t need = header + static_cast<uint64_t>(n);
+  if (file_size < need)
+    throw FileError(path, "truncated data: file has " + std::to_string(file_size) +
+                              " bytes, header (dims " + dims_text(dims) + ") needs " +
+                              std::to_string(need));
+  if (file_size > need)
+    throw FileError(path, "file size disagrees with the header: file has " +
+                              std::to_string(file_size) + " bytes, dims " + dims_text(dims) +
+                              " need " + std::to_string(need) + " (trailing bytes)");
+  Volume vol(dims, VoxelType::u8);
+  read_voxels(path, in, VoxelType::u8, false, vol);
+  return vol;
+}
+
+Volume load_nrrd(const std::filesystem::path& path) {
+  const uint64_t file_size = require_regular_file(path);
+  const std::string name = path.string();
+
+  // Pass 1: the header only, to validate the shape and the data size
+  // before teem allocates anything.
+  NrrdShape shape;
+  VoxelType vtype;
+  {
+    NrrdPtr hdr(nrrdNew());
+    NioPtr nio(nrrdIoStateNew());
+    if (!hdr || !nio) throw FileError(path, "out of memory");
+    nio->skipData = 1;
+    if (nrrdLoad(hdr.get(), name.c_str(), nio.get()))
+      throw FileError(path, "cannot read NRRD header: " + biff_message(NRRD));
+    if (nio->format != nrrdFormatNRRD)
+      throw FileError(path,
+                      std::string("not a NRRD file (teem read it as ") + nio->format->name + ")");
+    shape = nrrd_shape(path, hdr.get());
+    vtype = nrrd_voxel_type(path, hdr->type);
+    const std::size_t esize = nrrdElementSize(hdr.get());
+    const std::size_t n = checked_count(path, shape.dims, esize);
+    const uint64_t need = static_cast<uint64_t>(n) * esize;
+
+    uint64_t available = 0;
+    const std::vector<fs::path> files = nrrd_data_files(path, nio.get());
+    if (files.empty()) {
+      available = file_size;  // attached: data follows the header in this file
+    } else {
+      for (const fs::path& f : files) {
+        std::error_code ec;
+        const uintmax_t s = fs::file_size(f, ec);
+        if (ec) throw FileError(path, "data file " + f.string() + ": " + ec.message());
+        available += static_cast<uint64_t>(s);
+      }
+    }
+    const NrrdEncoding* enc = nio->encoding;
+    const std::string ename = enc ? enc->name : "?";
+    bool enough = true;
+    if (ename == "raw")
+      enough = need <= available;
+    else if (ename == "gzip")
+      enough = need / 1032 <= available + 1024;
+    else if (ename == "ascii" || ename == "text" || ename == "txt")
+      enough = n <= available / 2 + 1;
+    else if (ename == "hex")
+      enough = need <= available / 2 + 1;
+    // bzip2 can compress without useful bound; teem's own read reports shortness.
+    if (!enough)
+      throw FileError(path, "truncated data: " + std::to_string(available) + " bytes of " + ename +
+                                " data cannot hold the " + std::to_string(need) +
+                                " bytes the header (dims " + dims_text(shape.dims) + ") needs");
+    // Raw data in one file with no skips must match the header exactly
+    // (teem itself only notices data that are too short).
+    if (ename == "raw" && files.size() <= 1 && nio->lineSkip == 0 && nio->byteSkip == 0 &&
+        !nio->dataFSkip) {
+      uint64_t data_bytes = available;
+      bool known = true;
+      if (files.empty()) {
+        const std::optional<uint64_t> off = nrrd_header_end(path);
+        if (off)
+          data_bytes = file_size - *off;
+        else
+          known = false;
+      }
+      if (known && data_bytes != need)
+        throw FileError(path, std::string(data_bytes < need ? "truncated data"
+                                                            : "data size disagrees "
+                                                              "with the header") +
+                                  ": " + std::to_string(data_bytes) +
+                                  " bytes of raw data, but dims " + dims_text(shape.dims) + " of " +
+                                  airEnumStr(nrrdType, hdr->type) + " need " +
+                                  std::to_string(need));
+    }
+  }
+
+  // Pass 2: the data.
+  NrrdPtr nrrd(nrrdNew());
+  NioPtr nio(nrrdIoStateNew());
+  if (!nrrd || !nio) throw FileError(path, "out of memory");
+  if (nrrdLoad(nrrd.get(), name.c_str(), nio.get()))
+    throw FileError(path, "cannot read NRRD data: " + biff_message(NRRD));
+  if (!nrrd->data) throw FileError(path, "NRRD has no data");
+  const NrrdShape s = nrrd_shape(path, nrrd.get());
+  if (s.dims != shape.dims) throw FileError(path, "NRRD changed while being read");
+
+  Volume vol(s.dims, vtype, s.spacing);
+  float* out = vol.data().data();
+  switch (nrrd->type) {
+    case nrrdTypeChar:
+      nrrd_copy<signed char>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeUChar:
+      nrrd_copy<unsigned char>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeShort:
+      nrrd_copy<int16_t>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeUShort:
+      nrrd_copy<uint16_t>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeInt:
+      nrrd_copy<int32_t>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeUInt:
+      nrrd_copy<uint32_t>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeLLong:
+      nrrd_copy<long long>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeULLong:
+      nrrd_copy<unsigned long long>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeFloat:
+      nrrd_copy<float>(nrrd.get(), s, out);
+      break;
+    case nrrdTypeDouble:
+      nrrd_copy<double>(nrrd.get(), s, out);
+      break;
+    default:
+      throw FileError(path, "unsupported NRRD type");
+  }
+  return vol;
+}
+
+Volume load_nifti(const std::filesystem::path& path) {
+  const uint64_t file_size = require_regular_file(path);
+  const NiftiHeaderInfo info = nifti_precheck(path, file_size);
+
+  nifti_set_debug_level(0);  // niftilib reports on stderr otherwise
+  struct NimDeleter {
+    void operator()(nifti_image* p) const { nifti_image_free(p); }
+  };
+  std::unique_ptr<nifti_image, NimDeleter> nim(nifti_image_read(path.c_str(), 1));
+  if (!nim) throw FileError(path, "niftilib could not read the file (corrupt or truncated)");
+  if (!nim->data) throw FileError(path, "niftilib read no voxel data (truncated?)");
+  const std::array<int64_t, 3> dims{nim->nx, nim->ny, nim->nz};
+  if (dims != info.dims)
+    throw FileError(path, "niftilib dims " + dims_text(dims) + " disagree with the header " +
+                              dims_text(info.dims));
+  if (nim->nt > 1 || nim->nu > 1 || nim->nv > 1 || nim->nw > 1)
+    throw FileError(path, "holds more than one volume (nt > 1)");
+  const std::size_t n = checked_count(path, dims, static_cast<std::size_t>(nim->nbyper));
+  if (nim->nvox != n) throw FileError(path, "voxel count disagrees with the dims");
+
+  const double slope = nim->scl_slope, inter = nim->scl_inter;
+  const bool scaled = std::isfinite(slope) && slope != 0.0 &&
+                      (slope != 1.0 || (std::isfinite(inter) && inter != 0.0));
+  const double inter_used = std::isfinite(inter) ? inter : 0.0;
+
+  VoxelType vtype = VoxelType::f32;
+  if (!scaled) switch (nim->datatype) {
+      case DT_UINT8:
+        vtype = VoxelType::u8;
+        break;
+      case DT_UINT16:
+        vtype = VoxelType::u16;
+        break;
+      case DT_INT16:
+      case DT_INT8:
+        vtype = VoxelType::i16;
+        break;
+      default:
+        vtype = VoxelType::f32;
+        break;
+    }
+  const std::array<double, 3> spacing = sane_spacing(
+      {static_cast<double>(nim->dx), static_cast<double>(nim->dy), static_cast<double>(nim->dz)});
+  Volume vol(dims, vtype, spacing);
+  float* out = vol.data().data();
+  const void* d = nim->data;
+  switch (nim->datatype) {
+    case DT_UINT8:
+      nifti_copy<uint8_t>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_INT8:
+      nifti_copy<int8_t>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_INT16:
+      nifti_copy<int16_t>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_UINT16:
+      nifti_copy<uint16_t>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_INT32:
+      nifti_copy<int32_t>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_UINT32:
+      nifti_copy<uint32_t>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_INT64:
+      nifti_copy<int64_t>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_UINT64:
+      nifti_copy<uint64_t>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_FLOAT32:
+      nifti_copy<float>(d, n, out, slope, inter_used, scaled);
+      break;
+    case DT_FLOAT64:
+      nifti_copy<double>(d, n, out, slope, inter_used, scaled);
+      break;
+    default:
+      throw FileError(path, "unsupported NIfTI datatype " + std::to_string(nim->datatype));
+  }
+  return vol;
+}
+
+Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw) {
+  const std::string name = lower(path.filename().string());
+  auto ends_with = [&](const std::string& suffix) {
+    return name.size() > suffix.size() &&
+           name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
+  };
+  if (ends_with(".nii.gz") || ends_with(".nii")) return load_nifti(path);
+  if (ends_with(".nrrd") || ends_with(".nhdr")) return load_nrrd(path);
+  if (ends_with(".den")) return load_den(path);
+  if (ends_with(".raw")) {
+    if (!raw)
+      throw FileError(path, "a .raw file needs its layout (dims, type, endianness) to be given");
+    return load_raw(path, *raw);
+  }
+  throw FileError(path, "unknown volume file extension '" + path.extension().string() +
+                            "' (expected .den, .nrrd, .nhdr, .nii, .nii.gz or .raw)");
+}
+
+// ================================================================ writer
+
+void save_nrrd(const Volume& vol, const std::filesystem::path& path) {
+  if (vol.voxel_count() == 0) throw FileError(path, "cannot save an empty volume");
+  const VoxelType t = vol.type();
+  const std::size_t bpv = voxel_bytes(t);
+  const std::size_t n = checked_count(path, vol.dims(), bpv);
+  if (n != vol.voxel_count()) throw FileError(path, "volume data disagree with its dims");
+
+  std::vector<unsigned char> bytes(n * bpv);
+  switch (t) {
+    case VoxelType::u8:
+      store_integer<uint8_t>(path, vol.data(), bytes.data());
+      break;
+    case VoxelType::u16:
+      store_integer<uint16_t>(path, vol.data(), bytes.data());
+      break;
+    case VoxelType::i16:
+      store_integer<int16_t>(path, vol.data(), bytes.data());
+      break;
+    case VoxelType::f32:
+      std::memcpy(bytes.data(), vol.data().data(), n * sizeof(float));
+      break;
+  }
+
+  const char* type_name = t == VoxelType::u8    ? "uint8"
+                          : t == VoxelType::u16 ? "uint16"
+                          : t == VoxelType::i16 ? "int16"
+                                                : "float";
+  std::string header = "NRRD0004\n";
+  header += "# Complete NRRD file format specification at:\n";
+  header += "# http://teem.sourceforge.net/nrrd/format.html\n";
+  header += std::string("type: ") + type_name + "\n";
+  header += "dimension: 3\n";
+  header += "sizes: " + std::to_string(vol.nx()) + " " + std::to_string(vol.ny()) + " " +
+            std::to_string(vol.nz()) + "\n";
+  header += "spacings: " + format_double(vol.spacing()[0]) + " " + format_double(vol.spacing()[1]) +
+            " " + format_double(vol.spacing()[2]) + "\n";
+  if (bpv > 1)
+    header += std::string("endian: ") +
+              (std::endian::native == std::endian::little ? "little" : "big") + "\n";
+  header += "encoding: raw\n\n";
+
+  // Atomic write: a temporary file in the same directory, then rename.
+  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  std::string tmpl = (dir / (path.filename().string() + ".tmp-XXXXXX")).string();
+  std::vector<char> tbuf(tmpl.begin(), tmpl.end());
+  tbuf.push_back('\0');
+  const int fd = ::mkstemp(tbuf.data());
+  if (fd < 0)
+    throw FileError(path,
+                    "cannot create a temporary file in " + dir.string() + ": " + errno_text(errno));
+  const fs::path tmp(tbuf.data());
+  auto fail = [&](const std::string& problem) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw FileError(path, problem);
+  };
+  ::fchmod(fd, 0644);
+  auto write_all = [&](const unsigned char* p, std::size_t len) {
+    while (len > 0) {
+      const ssize_t w = ::write(fd, p, std::min<std::size_t>(len, std::size_t{1} << 30));
+      if (w < 0) {
+        if (errno == EINTR) continue;
+        return false;
+      }
+      p += w;
+      len -= static_cast<std::size_t>(w);
+    }
+    return true;
+  };
+  const bool ok = write_all(reinterpret_cast<const unsigned char*>(header.data()), header.size()) &&
+                  write_all(bytes.data(), bytes.size());
+  const int write_errno = errno;
+  if (!ok) {
+    ::close(fd);
+    fail("write failed: " + errno_text(write_errno));
+  }
+  if (::fsync(fd) != 0 && errno != EINVAL) {
+    const int e = errno;
+    ::close(fd);
+    fail("fsync failed: " + errno_text(e));
+  }
+  if (::close(fd) != 0) fail("close failed: " + errno_text(errno));
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) fail("cannot rename the temporary file into place: " + ec.message());
+}
+
+}  // namespace simdvol
