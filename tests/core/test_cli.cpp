@@ -1,0 +1,147 @@
+// The simdvol program as a user meets it: exit codes, messages, files.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+
+#include "simdvol/image.hpp"
+#include "simdvol/io.hpp"
+#include "simdvol/phantom.hpp"
+#include "testing.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Result {
+  int code = -1;
+  std::string output;  // stdout and stderr together
+};
+
+Result run(const std::string& args) {
+  const std::string cmd = std::string(SIMDVOL_CLI) + " " + args + " 2>&1";
+  Result r;
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  std::size_t n;
+  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::random_device rd;
+    dir_ = fs::temp_directory_path() / ("simdvol-cli-" + std::to_string(rd()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+}  // namespace
+
+TEST_F(Cli, HelpAndNoSubcommand) {
+  const Result h = run("--help");
+  EXPECT_EQ(h.code, 0);
+  EXPECT_NE(h.output.find("render"), std::string::npos);
+  EXPECT_NE(h.output.find("phantom"), std::string::npos);
+  for (const char* sub : {"render", "info", "phantom", "devices"}) {
+    const Result s = run(std::string(sub) + " --help");
+    EXPECT_EQ(s.code, 0) << sub;
+  }
+  EXPECT_NE(run("").code, 0);
+}
+
+TEST_F(Cli, PhantomRoundTripsThroughInfoAndLoader) {
+  const Result r = run("phantom shepp-logan --size 24 -o " + path("p.nrrd"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("p.nrrd"), std::string::npos);
+  const simdvol::Volume back = simdvol::load_volume(path("p.nrrd"));
+  const simdvol::Volume orig = simdvol::shepp_logan(24);
+  ASSERT_EQ(back.dims(), orig.dims());
+  EXPECT_EQ(back.data(), orig.data());  // i16 values survive exactly
+  const Result info = run("info " + path("p.nrrd"));
+  ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("24 x 24 x 24"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("-1000"), std::string::npos) << info.output;
+  EXPECT_EQ(run("phantom marschner-lobb --size 16 -o " + path("m.nrrd")).code, 0);
+  EXPECT_EQ(simdvol::load_volume(path("m.nrrd")).nx(), 16);
+}
+
+TEST_F(Cli, RenderWritesTheImageItNames) {
+  const Result r = run("render --phantom-size 32 --size 48x40 -o " + path("r.png"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find(path("r.png")), std::string::npos) << r.output;
+  const simdvol::Image img = simdvol::read_image(path("r.png"));
+  EXPECT_EQ(img.width(), 48);
+  EXPECT_EQ(img.height(), 40);
+  double sum = 0;
+  for (const auto& p : img.pixels()) sum += p.r + p.g + p.b;
+  EXPECT_GT(sum, 1.0);  // something was drawn
+}
+
+TEST_F(Cli, TurntableWritesNumberedFrames) {
+  const Result r =
+      run("render --phantom-size 16 --size 16x16 --frames 3 --step 5 -o " + path("t.png"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : {"t_0000.png", "t_0001.png", "t_0002.png"})
+    EXPECT_TRUE(fs::exists(dir_ / f)) << f;
+}
+
+TEST_F(Cli, BadArgumentsFailClearly) {
+  struct Case {
+    std::string args, needle;
+  };
+  const Case cases[] = {
+      {"render --order 4 -o " + path("x.png"), "--order"},
+      {"render --view 1,2 -o " + path("x.png"), "--view"},
+      {"render --size 0x10 -o " + path("x.png"), "--size"},
+      {"render --size abc -o " + path("x.png"), "--size"},
+      {"render --sampling warp -o " + path("x.png"), "--sampling"},
+      {"render --composite fancy -o " + path("x.png"), "--composite"},
+      {"render --classify nosuchpreset -o " + path("x.png"), "nosuchpreset"},
+      {"render --engine gpu -o " + path("x.png"), "--engine"},
+      {"render --phantom-size 16 -o " + path("nodir/x.png"), "nodir"},
+      {"render --phantom-size 16 -o " + path("x.bmpx"), "x.bmpx"},
+      {"render " + path("missing.nrrd") + " -o " + path("x.png"), "missing.nrrd"},
+      {"render " + path("vol.xyz") + " -o " + path("x.png"), "vol.xyz"},
+      {"info " + path("missing.den"), "missing.den"},
+      {"phantom cube --size 8 -o " + path("c.nrrd"), "cube"},
+      {"phantom shepp-logan --size 0 -o " + path("c.nrrd"), "--size"},
+  };
+  std::ofstream(dir_ / "vol.xyz") << "junk";
+  for (const Case& c : cases) {
+    const Result r = run(c.args);
+    EXPECT_NE(r.code, 0) << c.args;
+    EXPECT_NE(r.output.find(c.needle), std::string::npos) << c.args << "\n" << r.output;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "x.png"));
+}
+
+TEST_F(Cli, FailedRenderLeavesExistingOutputUntouched) {
+  ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("keep.png")).code, 0);
+  std::ifstream in(path("keep.png"), std::ios::binary);
+  const std::string before((std::istreambuf_iterator<char>(in)), {});
+  // A bad volume fails after argument parsing; the old image must survive.
+  std::ofstream(dir_ / "bad.nrrd") << "NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\n"
+                                      "encoding: raw\n\n12";
+  const Result r = run("render " + path("bad.nrrd") + " -o " + path("keep.png"));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("bad.nrrd"), std::string::npos) << r.output;
+  std::ifstream again(path("keep.png"), std::ios::binary);
+  const std::string after((std::istreambuf_iterator<char>(again)), {});
+  EXPECT_EQ(before, after);
+  // No temporary files left behind.
+  int files = 0;
+  for (const auto& e : fs::directory_iterator(dir_)) files += e.is_regular_file();
+  EXPECT_EQ(files, 2);
+}
