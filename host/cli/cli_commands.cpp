@@ -6,6 +6,7 @@
 #include <iostream>
 #include <vector>
 
+#include "simdvol/device.hpp"
 #include "simdvol/error.hpp"
 
 namespace fs = std::filesystem;
@@ -75,8 +76,11 @@ void print_info(std::ostream& os, const fs::path& path, const Volume& vol) {
 }
 
 int print_devices(std::ostream& os) {
-  os << "OpenCL support is not built yet\n";
-  return 1;
+  // NoDeviceError (no platform: names the package to install) propagates to
+  // main(), which prints it and exits non-zero.
+  const std::vector<DeviceInfo> devices = list_devices();
+  os << describe_devices(devices, choose_device(devices));
+  return 0;
 }
 
 }  // namespace simdvol
