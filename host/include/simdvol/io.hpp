@@ -32,10 +32,14 @@ Volume load_raw(const std::filesystem::path& path, const RawLayout& layout);
 /// int16 map_warps; int32 map_length = voxel count), then 8-bit voxels.
 Volume load_den(const std::filesystem::path& path);
 /// NRRD through teem: attached and detached headers (.nrrd, .nhdr), raw and
-/// gzip encodings, 3-D scalar data of a supported type.
+/// gzip encodings, 3-D scalar data (or 4-D with one axis of size 1). uint8,
+/// uint16, int16 and float keep their type; int8 loads as i16; int32, uint32,
+/// int64, uint64 and double load as f32. Spacing from "spacings" or the norms
+/// of "space directions", else 1. Not thread-safe (teem's biff is global).
 Volume load_nrrd(const std::filesystem::path& path);
 /// NIfTI-1 through niftilib: .nii and .nii.gz, 3-D scalar (or 4-D with one
-/// volume), scl_slope/scl_inter applied.
+/// volume), scl_slope/scl_inter applied. The type follows the datatype as for
+/// NRRD, but a volume with a non-identity scaling loads as f32.
 Volume load_nifti(const std::filesystem::path& path);
 
 /// Chooses the loader by extension (.den, .nrrd, .nhdr, .nii, .nii.gz, and
