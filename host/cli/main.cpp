@@ -194,6 +194,12 @@ int main(int argc, char** argv) {
   phantom->add_option("--size", phantom_n, "N (an N^3 grid)")->capture_default_str();
   phantom->add_option("-o,--output", phantom_out, "output .nrrd")->required();
 
+  // compare
+  auto* compare = app.add_subcommand("compare", "PSNR and largest difference of two images");
+  std::string img_a, img_b;
+  compare->add_option("a", img_a, "first image")->required();
+  compare->add_option("b", img_b, "second image")->required();
+
   // devices
   auto* devices = app.add_subcommand("devices", "list OpenCL platforms and devices");
 
@@ -286,6 +292,9 @@ int main(int argc, char** argv) {
           phantom_kind == "shepp-logan" ? shepp_logan(phantom_n) : marschner_lobb(phantom_n);
       save_nrrd(vol, p);
       std::cout << "wrote " << fs::absolute(p).string() << "\n";
+    } else if (*compare) {
+      const Image a = read_image(img_a), b = read_image(img_b);
+      std::cout << "psnr_db " << psnr(a, b) << "\nmax_abs_diff " << max_abs_diff(a, b) << "\n";
     } else if (*devices) {
       return print_devices(std::cout);
     }
