@@ -187,11 +187,15 @@ int main(int argc, char** argv) {
   // phantom
   auto* phantom = app.add_subcommand("phantom", "write a generated test volume");
   std::string phantom_kind, phantom_out;
-  int phantom_n = 128;
+  int phantom_n = 128, phantom_ss = 4;
   phantom->add_option("kind", phantom_kind, "shepp-logan or marschner-lobb")
       ->required()
       ->check(CLI::IsMember({"shepp-logan", "marschner-lobb"}));
   phantom->add_option("--size", phantom_n, "N (an N^3 grid)")->capture_default_str();
+  phantom
+      ->add_option("--supersample", phantom_ss, "shepp-logan partial-volume sub-samples per axis")
+      ->check(CLI::Range(1, 8))
+      ->capture_default_str();
   phantom->add_option("-o,--output", phantom_out, "output .nrrd")->required();
 
   // compare
@@ -256,7 +260,7 @@ int main(int argc, char** argv) {
         if (phantom_size < 2 || phantom_size > 1024)
           throw ArgumentError("--phantom-size", std::to_string(phantom_size) +
                                                     " is outside 2..1024");
-        vol = shepp_logan(phantom_size);
+        vol = shepp_logan(phantom_size, 4);  // partial-volume boundaries
       } else {
         vol = rv.load();
       }
@@ -288,8 +292,8 @@ int main(int argc, char** argv) {
         throw ArgumentError("--size", std::to_string(phantom_n) + " is outside 2..1024");
       const fs::path p = phantom_out;
       check_output_path(p, "-o");
-      const Volume vol =
-          phantom_kind == "shepp-logan" ? shepp_logan(phantom_n) : marschner_lobb(phantom_n);
+      const Volume vol = phantom_kind == "shepp-logan" ? shepp_logan(phantom_n, phantom_ss)
+                                                       : marschner_lobb(phantom_n);
       save_nrrd(vol, p);
       std::cout << "wrote " << fs::absolute(p).string() << "\n";
     } else if (*compare) {

@@ -66,7 +66,7 @@ TEST_F(Cli, PhantomRoundTripsThroughInfoAndLoader) {
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("p.nrrd"), std::string::npos);
   const simdvol::Volume back = simdvol::load_volume(path("p.nrrd"));
-  const simdvol::Volume orig = simdvol::shepp_logan(24);
+  const simdvol::Volume orig = simdvol::shepp_logan(24, 4);  // the CLI default
   ASSERT_EQ(back.dims(), orig.dims());
   EXPECT_EQ(back.data(), orig.data());  // i16 values survive exactly
   const Result info = run("info " + path("p.nrrd"));
