@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "cli_commands.hpp"
+#include "mismatch_cmd.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
 #include "simdvol/phantom.hpp"
@@ -207,6 +208,9 @@ int main(int argc, char** argv) {
   // devices
   auto* devices = app.add_subcommand("devices", "list OpenCL platforms and devices");
 
+  // mismatch
+  auto* mm = add_mismatch_command(app);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -301,6 +305,8 @@ int main(int argc, char** argv) {
       std::cout << "psnr_db " << psnr(a, b) << "\nmax_abs_diff " << max_abs_diff(a, b) << "\n";
     } else if (*devices) {
       return print_devices(std::cout);
+    } else if (*mm) {
+      return run_mismatch_command(std::cout);
     }
   } catch (const Error& e) {
     std::cerr << "simdvol: error: " << e.what() << "\n";
