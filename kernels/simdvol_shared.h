@@ -87,4 +87,54 @@ SV_FN float sv_uniform(sv_u64 seed, sv_u32 ray, sv_u32 sample, sv_u32 step) {
   return (float)(r.v[0] >> 8) * (1.0f / 16777216.0f);
 }
 
+/* ---- shade and classify stages (kernels/shade.cl, kernels/classify.cl) ----
+ * Parameters are plain float/int members only, so the layout is identical in
+ * C++ and OpenCL C (the host static_asserts the sizes). The host fills them
+ * from ShadeParams/ShadeFrame and Classifier (host/cl/shade.cpp,
+ * host/cl/classify.cpp); the kernels read them from a __constant buffer. */
+#define SV_MAX_MATERIALS 16
+#define SV_MAX_KNOTS 32
+#define SV_CLASSIFY_MIXTURE 0
+#define SV_CLASSIFY_TRANSFER 1
+
+typedef struct sv_shade_params {
+  float light[4];      /* unit L in object space ([3] unused) */
+  float halfway[4];    /* unit H in object space ([3] unused) */
+  float depth_dir[4];  /* d = dot(depth_dir, voxel index) + depth_offset ([3] unused) */
+  float grad_scale[4]; /* min spacing / spacing per axis ([3] unused) */
+  float depth_offset;
+  float ka, kd, ks;
+  float shininess; /* Phong exponent n */
+  float k1, k2;    /* depth cue 1 / (k1 + k2 d) */
+  sv_i32 enabled;  /* 0: Id = 1, Is = 0 */
+} sv_shade_params;
+
+typedef struct sv_material {
+  float mean, sigma;
+  float half_inv_var; /* 1 / (2 sigma^2) */
+  float log_sigma;    /* ln(sigma) */
+  float r, g, b, opacity;
+} sv_material;
+
+/* Piecewise-linear ramp: count points (x ascending); count 0 is the constant 1. */
+typedef struct sv_ramp {
+  sv_i32 count;
+  sv_i32 pad[3];
+  float x[SV_MAX_KNOTS];
+  float y[SV_MAX_KNOTS];
+} sv_ramp;
+
+typedef struct sv_classify_params {
+  sv_i32 kind;           /* SV_CLASSIFY_MIXTURE or SV_CLASSIFY_TRANSFER */
+  sv_i32 relative;       /* mixture: I = (v - range_min) * range_scale */
+  sv_i32 material_count; /* 1..SV_MAX_MATERIALS, strictly ascending means */
+  sv_i32 step_is_one;    /* opacity_step == 1 exactly: no opacity correction */
+  float range_min;
+  float range_scale; /* 1 / (max - min), or 0 when max == min (then I = 0) */
+  float opacity_step;
+  float pad;
+  sv_material materials[SV_MAX_MATERIALS];
+  sv_ramp density, gradient, red, green, blue;
+} sv_classify_params;
+
 #endif /* SIMDVOL_SHARED_H */

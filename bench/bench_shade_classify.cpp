@@ -1,0 +1,310 @@
+// simdvol-bench-shade: the shade and classify stages on the PE array.
+//
+//   simdvol-bench-shade [--size N] [--pes P] [--runs R] [--classifier NAME]
+//                       [--no-reference] [--sweep]
+//
+// The N^3 Shepp-Logan CT phantom (default 256) on P PEs (default 8192), laid
+// out once; then, after a warm-up launch of every kernel (the first launch of
+// each local size compiles), R runs (default 7) of each variant, interleaved,
+// reporting the median device time (profiling events) and the median wall
+// time (enqueue + clFinish). Also: the serial reference's shade + classify on
+// the same volume, bytes moved per stage against the machine's triad
+// bandwidth measured here (two threads, 256 MiB per array), and flat
+// (x-fastest, non-PE-major) variants for the PE-major/flat ratio. --sweep
+// also times the work-group sizes 64/256/1024 and the shade decompositions.
+//
+// PoCL compiles kernels into its cache (POCL_CACHE_DIR, default
+// ~/.cache/pocl); the environment is left to the user. Timings on these
+// shared 2-core machines vary up to 2x from run to run: compare variants
+// within one run.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "simdvol/classify.hpp"
+#include "simdvol/device.hpp"
+#include "simdvol/layout.hpp"
+#include "simdvol/phantom.hpp"
+#include "simdvol/shade.hpp"
+#include "simdvol/stages.hpp"
+#include "simdvol/view.hpp"
+
+using namespace simdvol;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+// Triad a = b + s c over three arrays of `bytes` each, two threads (the
+// machine's cores), best of 3 runs; bytes moved counted as 3 arrays (reads
+// of b and c, write of a; write-allocate traffic not counted).
+double triad_gbs(std::size_t bytes) {
+  const std::size_t n = bytes / sizeof(float);
+  std::vector<float> a(n), b(n, 1.0f), c(n, 2.0f);
+  const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
+  double best = 1e30;
+  for (int rep = 0; rep < 4; ++rep) {
+    const auto t0 = Clock::now();
+    std::vector<std::thread> pool;
+    for (unsigned t = 0; t < threads; ++t)
+      pool.emplace_back([&, t] {
+        const std::size_t lo = n * t / threads, hi = n * (t + 1) / threads;
+        for (std::size_t i = lo; i < hi; ++i) a[i] = b[i] + 3.0f * c[i];
+      });
+    for (auto& th : pool) th.join();
+    if (rep > 0) best = std::min(best, ms_since(t0));  // rep 0 touches the pages
+  }
+  if (a[n / 2] != 7.0f) std::printf("triad check failed\n");
+  return 3.0 * static_cast<double>(bytes) / (best * 1e-3) / 1e9;
+}
+
+struct Result {
+  std::string name;
+  double device_ms = 0, wall_ms = 0, bytes = 0;
+};
+
+// Runs `enqueue` (which returns the events whose device times add up) R
+// times with a finish after each, returns medians.
+Result time_variant(Device& dev, const std::string& name, int runs, double bytes,
+                    const std::function<std::vector<cl::Event>()>& enqueue) {
+  std::vector<double> d, w;
+  for (int r = 0; r < runs; ++r) {
+    const auto t0 = Clock::now();
+    std::vector<cl::Event> ev = enqueue();
+    dev.finish();
+    w.push_back(ms_since(t0));
+    double ns = 0;
+    for (auto& e : ev) ns += static_cast<double>(event_ns(e));
+    d.push_back(ns * 1e-6);
+  }
+  return {name, median(d), median(w), bytes};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int size = 256, runs = 7;
+  int64_t pes = 8192;
+  std::string cname = "ct";
+  bool reference = true, sweep = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s needs a value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--size")
+      size = std::atoi(next().c_str());
+    else if (a == "--pes")
+      pes = std::atoll(next().c_str());
+    else if (a == "--runs")
+      runs = std::atoi(next().c_str());
+    else if (a == "--classifier")
+      cname = next();
+    else if (a == "--no-reference")
+      reference = false;
+    else if (a == "--sweep")
+      sweep = true;
+    else {
+      std::fprintf(stderr,
+                   "usage: simdvol-bench-shade [--size N] [--pes P] [--runs R] "
+                   "[--classifier NAME] [--no-reference] [--sweep]\n");
+      return 2;
+    }
+  }
+  if (size < 2 || runs < 1) {
+    std::fprintf(stderr, "bad --size or --runs\n");
+    return 2;
+  }
+  try {
+    Device dev;
+    std::printf("device: %s (%s), %u compute units\n", dev.info().name.c_str(),
+                dev.info().version.c_str(), dev.info().compute_units);
+    auto t0 = Clock::now();
+    const Volume vol = shepp_logan(size);
+    std::printf("volume: Shepp-Logan %d^3 (%.0f ms to build), %lld PEs, classifier %s\n", size,
+                ms_since(t0), static_cast<long long>(pes), cname.c_str());
+    const double voxels = static_cast<double>(vol.voxel_count());
+    const ViewGeometry view = make_view(vol, {30, 45, 10}, size, size, Sampling::voxel);
+    const ShadeParams shp{};
+    const Classifier cls = classifier_from_spec(cname);
+    const sv_shade_params sp = shade_params(make_shade_frame(vol, view, shp), shp);
+    const bool relative = cls.kind == Classifier::Kind::mixture && cls.mixture.relative;
+    const sv_classify_params cp =
+        classify_params(cls, relative ? vol.range() : ValueRange{}, view.step);
+
+    const double triad = triad_gbs(std::size_t(256) << 20);
+    std::printf("triad bandwidth (host, %u threads, 3 x 256 MiB): %.1f GB/s\n\n",
+                std::max(1u, std::thread::hardware_concurrency()), triad);
+
+    PeArray array(dev, pe_grid(pes));
+    t0 = Clock::now();
+    cl::Event e_layout;
+    CellBuffer cells = array.layout(vol, 1, LayoutKernel::rows, &e_layout);
+    const VoxelLayout L = make_voxel_layout(cells.layout());
+    VoxelBuffer shading(dev, L), rgba(dev, L);
+    const std::size_t n = vol.voxel_count();
+    cl::Buffer flat_vol = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(float),
+                                     const_cast<float*>(vol.data().data()), "flat volume");
+    cl::Buffer flat_shade = dev.buffer(CL_MEM_READ_WRITE, n * 16, nullptr, "flat shading");
+    cl::Buffer flat_rgba = dev.buffer(CL_MEM_READ_WRITE, n * 16, nullptr, "flat rgba");
+    // The flat kernels: simdvol_classify on a flat float4 array, and the
+    // fused flat kernel of the shade+classify program.
+    const Defines defs = classify_defines(cp);
+    cl::Buffer cbuf = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof cp,
+                                 const_cast<sv_classify_params*>(&cp), "classify parameters");
+    cl::Buffer sbuf = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof sp,
+                                 const_cast<sv_shade_params*>(&sp), "shade parameters");
+    const std::string fused_src = program_source("shade", defs) + "\n#line 1 \"classify.cl\"\n" +
+                                  std::string(kernel_file("classify.cl"));
+    cl::Program fused_prog = dev.build(fused_src);
+    cl::Kernel k_flat_fused(fused_prog, "simdvol_shade_classify_flat");
+    cl::Kernel k_flat_cls = dev.kernel("classify", "simdvol_classify", defs);
+    const cl_int4 dims{{static_cast<cl_int>(vol.nx()), static_cast<cl_int>(vol.ny()),
+                        static_cast<cl_int>(vol.nz()), 0}};
+    set_args(k_flat_fused, "flat fused", flat_vol, flat_rgba, dims, sbuf, cbuf);
+    set_args(k_flat_cls, "flat classify", flat_shade, flat_rgba, static_cast<cl_long>(n), cbuf);
+    const std::size_t lx = std::min<std::size_t>(64, round_up(vol.nx(), 8));
+    const cl::NDRange flat3(vol.nx(), vol.ny(), vol.nz()), flat3_local(lx, 256 / lx, 1);
+    // Flat shading input for the flat classify: the PE-major shading gathered.
+    enqueue_shade(dev, cells, sp, shading);
+    enqueue_gather_voxels(dev, shading, flat_shade);
+    dev.finish();
+    std::printf("set-up (layout, buffers, builds): %.0f ms; layout kernel %.2f ms\n", ms_since(t0),
+                event_ns(e_layout) * 1e-6);
+
+    const double cells_bytes = static_cast<double>(cells.layout().bytes());
+    const double vox_bytes = static_cast<double>(L.bytes());
+    const double flat4 = 16.0 * voxels;
+    struct Variant {
+      std::string name;
+      double bytes;
+      std::function<std::vector<cl::Event>()> run;
+    };
+    std::vector<Variant> variants = {
+        {"shade", cells_bytes + vox_bytes,
+         [&] { return std::vector{enqueue_shade(dev, cells, sp, shading)}; }},
+        {"classify", 2 * vox_bytes,
+         [&] { return std::vector{enqueue_classify(dev, shading, cp, rgba)}; }},
+        {"shade+classify (2 launches)", cells_bytes + 3 * vox_bytes,
+         [&] {
+           return std::vector{enqueue_shade(dev, cells, sp, shading),
+                              enqueue_classify(dev, shading, cp, rgba)};
+         }},
+        {"shade+classify fused", cells_bytes + vox_bytes,
+         [&] { return std::vector{enqueue_shade_classify(dev, cells, sp, cp, rgba)}; }},
+        {"flat classify", 2 * flat4,
+         [&] {
+           return std::vector{
+               dev.run(k_flat_cls, "flat classify", cl::NDRange(n), cl::NDRange(256))};
+         }},
+        {"flat shade+classify fused", 4.0 * voxels + flat4,
+         [&] { return std::vector{dev.run(k_flat_fused, "flat fused", flat3, flat3_local)}; }},
+    };
+    if (sweep) {
+      variants.push_back({"shade (1-D, divisions)", cells_bytes + vox_bytes, [&] {
+                            return std::vector{
+                                enqueue_shade(dev, cells, sp, shading, ShadeKernel::voxel)};
+                          }});
+      variants.push_back(
+          {"shade (row loop)", cells_bytes + vox_bytes,
+           [&] { return std::vector{enqueue_shade(dev, cells, sp, shading, ShadeKernel::rows)}; }});
+    }
+    std::vector<const char*> wgs = {"256"};
+    if (sweep) wgs = {"64", "256", "1024"};
+    const char* old_wgs = std::getenv("SIMDVOL_VOXEL_WGS");
+    const std::string saved = old_wgs ? old_wgs : "";
+
+    std::vector<std::vector<Result>> results(wgs.size());
+    for (std::size_t w = 0; w < wgs.size(); ++w) {
+      setenv("SIMDVOL_VOXEL_WGS", wgs[w], 1);
+      for (auto& v : variants) {  // warm-up: compiles each local size
+        v.run();
+        dev.finish();
+      }
+      results[w].resize(variants.size());
+    }
+    // Interleave: one run of every (wgs, variant) per round.
+    std::vector<std::vector<std::vector<double>>> dms(wgs.size()), wms(wgs.size());
+    for (std::size_t w = 0; w < wgs.size(); ++w) {
+      dms[w].resize(variants.size());
+      wms[w].resize(variants.size());
+    }
+    for (int r = 0; r < runs; ++r)
+      for (std::size_t w = 0; w < wgs.size(); ++w) {
+        setenv("SIMDVOL_VOXEL_WGS", wgs[w], 1);
+        for (std::size_t i = 0; i < variants.size(); ++i) {
+          const Result one =
+              time_variant(dev, variants[i].name, 1, variants[i].bytes, variants[i].run);
+          dms[w][i].push_back(one.device_ms);
+          wms[w][i].push_back(one.wall_ms);
+        }
+      }
+    if (old_wgs)
+      setenv("SIMDVOL_VOXEL_WGS", saved.c_str(), 1);
+    else
+      unsetenv("SIMDVOL_VOXEL_WGS");
+
+    double ref_ms = 0;
+    if (reference) {
+      t0 = Clock::now();
+      const auto s = shade(vol, view, shp);
+      const double shade_ref = ms_since(t0);
+      t0 = Clock::now();
+      const auto c = classify(vol, s, cls, view.step);
+      const double cls_ref = ms_since(t0);
+      ref_ms = shade_ref + cls_ref;
+      std::printf(
+          "serial reference: shade %.0f ms, classify %.0f ms, total %.0f ms "
+          "(%.1f Mvoxel/s)\n",
+          shade_ref, cls_ref, ref_ms, voxels / (ref_ms * 1e-3) / 1e6);
+    }
+
+    std::printf("\n%-30s %6s %10s %10s %9s %9s %8s %9s\n", "variant", "wgs", "device ms", "wall ms",
+                "Gvox/s", "GB/s", "%triad", "x serial");
+    double pe_cls = 0, flat_cls = 0, pe_fused = 0, flat_fused = 0;
+    for (std::size_t w = 0; w < wgs.size(); ++w)
+      for (std::size_t i = 0; i < variants.size(); ++i) {
+        const double d = median(dms[w][i]), wall = median(wms[w][i]);
+        const double gbs = variants[i].bytes / (d * 1e-3) / 1e9;
+        const bool both = variants[i].name.find("shade+classify") != std::string::npos;
+        char ratio[32] = "";
+        if (both && ref_ms > 0) std::snprintf(ratio, sizeof ratio, "%.1f", ref_ms / d);
+        std::printf("%-30s %6s %10.2f %10.2f %9.2f %9.1f %7.0f%% %9s\n", variants[i].name.c_str(),
+                    wgs[w], d, wall, voxels / (d * 1e-3) / 1e9, gbs, 100.0 * gbs / triad, ratio);
+        if (std::strcmp(wgs[w], "256") == 0) {
+          if (variants[i].name == "classify") pe_cls = d;
+          if (variants[i].name == "flat classify") flat_cls = d;
+          if (variants[i].name == "shade+classify fused") pe_fused = d;
+          if (variants[i].name == "flat shade+classify fused") flat_fused = d;
+        }
+      }
+    std::printf("\nPE-major / flat: classify %.2f, fused shade+classify %.2f (goal <= 1.5)\n",
+                pe_cls / flat_cls, pe_fused / flat_fused);
+    std::printf(
+        "bytes counted: reads + writes of each kernel's buffers (cells with halo: "
+        "%.0f MiB, voxel cells: %.0f MiB); write-allocate traffic not counted\n",
+        cells_bytes / 1048576.0, vox_bytes / 1048576.0);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "simdvol-bench-shade: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

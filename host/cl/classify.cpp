@@ -1,0 +1,208 @@
+// The classify stage on the device, the fused shade + classify launch and the
+// gather of voxel cells (stages.hpp).
+#include <cmath>
+#include <string>
+
+#include "simdvol/stages.hpp"
+#include "voxel_ranges.hpp"
+
+namespace simdvol {
+
+static_assert(sizeof(sv_material) == 8 * 4, "sv_material must be plain floats");
+static_assert(sizeof(sv_ramp) == 4 * 4 + 2 * SV_MAX_KNOTS * 4, "sv_ramp must be plain");
+static_assert(sizeof(sv_classify_params) ==
+                  8 * 4 + SV_MAX_MATERIALS * sizeof(sv_material) + 5 * sizeof(sv_ramp),
+              "sv_classify_params must be plain floats/ints");
+
+namespace {
+
+void fill_ramp(sv_ramp& r, const Ramp& in, const std::string& what) {
+  if (in.x.size() != in.y.size())
+    throw ArgumentError(what, "ramp has " + std::to_string(in.x.size()) + " x values but " +
+                                  std::to_string(in.y.size()) + " y values");
+  if (in.x.size() > SV_MAX_KNOTS)
+    throw ArgumentError(what, "ramp has " + std::to_string(in.x.size()) +
+                                  " points; the OpenCL classify kernel takes at most " +
+                                  std::to_string(SV_MAX_KNOTS));
+  r = sv_ramp{};
+  r.count = static_cast<sv_i32>(in.x.size());
+  for (std::size_t k = 0; k < in.x.size(); ++k) {
+    r.x[k] = in.x[k];
+    r.y[k] = in.y[k];
+  }
+}
+
+void check_same(const VoxelLayout& a, const VoxelLayout& b, const char* what) {
+  if (!a.same_cells(b))
+    throw ArgumentError(what, "voxel buffers were made for different volumes or PE counts");
+}
+
+cl::Buffer params_buffer(Device& device, const void* p, std::size_t bytes, const char* what) {
+  return device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, const_cast<void*>(p), what);
+}
+
+// The fused program: shade.cl followed by classify.cl (which then also
+// compiles simdvol_shade_classify), with the classifier's specialisation.
+cl::Kernel fused_kernel(Device& device, const std::string& name, const Defines& defines) {
+  const std::string source = program_source("shade", defines) + "\n#line 1 \"classify.cl\"\n" +
+                             std::string(kernel_file("classify.cl"));
+  cl::Program program = device.build(source);
+  cl_int err = CL_SUCCESS;
+  cl::Kernel k(program, name.c_str(), &err);
+  if (err != CL_SUCCESS) throw CLError("clCreateKernel(" + name + ")", err);
+  return k;
+}
+
+}  // namespace
+
+sv_classify_params classify_params(const Classifier& c, const ValueRange& range,
+                                   double opacity_step) {
+  if (!(opacity_step > 0.0) || !std::isfinite(opacity_step))
+    throw ArgumentError("opacity_step",
+                        "must be positive and finite (got " + std::to_string(opacity_step) + ")");
+  {
+    // The reference's own validation (throws ArgumentError naming the problem).
+    float col[3];
+    classify_voxel(c, range, 0.0f, 0.0f, col);
+  }
+  sv_classify_params p{};
+  p.step_is_one = opacity_step == 1.0 ? 1 : 0;
+  p.opacity_step = static_cast<float>(opacity_step);
+  if (c.kind == Classifier::Kind::transfer) {
+    p.kind = SV_CLASSIFY_TRANSFER;
+    fill_ramp(p.density, c.transfer.density, "classifier.density");
+    fill_ramp(p.gradient, c.transfer.gradient, "classifier.gradient");
+    fill_ramp(p.red, c.transfer.red, "classifier.red");
+    fill_ramp(p.green, c.transfer.green, "classifier.green");
+    fill_ramp(p.blue, c.transfer.blue, "classifier.blue");
+    return p;
+  }
+  p.kind = SV_CLASSIFY_MIXTURE;
+  const auto& m = c.mixture.materials;
+  if (m.size() > SV_MAX_MATERIALS)
+    throw ArgumentError("classifier", "has " + std::to_string(m.size()) +
+                                          " materials; the OpenCL classify kernel takes at most " +
+                                          std::to_string(SV_MAX_MATERIALS));
+  p.material_count = static_cast<sv_i32>(m.size());
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    sv_material& s = p.materials[i];
+    s.mean = m[i].mean;
+    s.sigma = m[i].sigma;
+    const double sigma = m[i].sigma;
+    s.half_inv_var = static_cast<float>(1.0 / (2.0 * sigma * sigma));
+    s.log_sigma = static_cast<float>(std::log(sigma));
+    if (!std::isfinite(s.half_inv_var))
+      throw ArgumentError("classifier.material '" + m[i].name + "'",
+                          "sigma is too small for float arithmetic");
+    s.r = m[i].r;
+    s.g = m[i].g;
+    s.b = m[i].b;
+    s.opacity = m[i].opacity;
+  }
+  p.relative = c.mixture.relative ? 1 : 0;
+  if (c.mixture.relative) {
+    if (!std::isfinite(range.min) || !std::isfinite(range.max))
+      throw ArgumentError("range", "the value range must be finite for a relative mixture");
+    const double span = static_cast<double>(range.max) - static_cast<double>(range.min);
+    p.range_min = range.min;
+    p.range_scale = span > 0.0 ? static_cast<float>(1.0 / span) : 0.0f;
+  }
+  return p;
+}
+
+Defines classify_defines(const sv_classify_params& p) {
+  Defines d{{"SV_KIND", std::to_string(p.kind)}};
+  if (p.kind == SV_CLASSIFY_MIXTURE) {
+    d.emplace_back("SV_NMAT", std::to_string(p.material_count));
+  } else {
+    d.emplace_back("SV_NK_DENSITY", std::to_string(p.density.count));
+    d.emplace_back("SV_NK_GRADIENT", std::to_string(p.gradient.count));
+    d.emplace_back("SV_NK_RED", std::to_string(p.red.count));
+    d.emplace_back("SV_NK_GREEN", std::to_string(p.green.count));
+    d.emplace_back("SV_NK_BLUE", std::to_string(p.blue.count));
+  }
+  return d;
+}
+
+cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
+                           const sv_classify_params& params, VoxelBuffer& out) {
+  check_same(shading.layout(), out.layout(), "classify output");
+  if (shading.buffer()() == out.buffer()())
+    throw ArgumentError("classify output", "must not be the shading buffer");
+  cl::Buffer pbuf = params_buffer(device, &params, sizeof params, "classify parameters");
+  const std::string name = "simdvol_classify";
+  cl::Kernel k = device.kernel("classify", name, classify_defines(params));
+  const std::size_t n = static_cast<std::size_t>(out.layout().elements());
+  set_args(k, name, shading.buffer(), out.buffer(), static_cast<cl_long>(n), pbuf);
+  return device.run(k, name, cl::NDRange(n), cl::NDRange(detail::voxel_wgs()));
+}
+
+cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
+                                 const sv_shade_params& shade, const sv_classify_params& classify,
+                                 VoxelBuffer& out) {
+  const CellLayout& C = cells.layout();
+  const VoxelLayout& V = out.layout();
+  if (C.halo < 1) throw ArgumentError("cells", "the shade stage needs a halo of at least 1");
+  if (C.dims() != V.dims() || C.pes() != V.pes() || C.cell() != V.cell())
+    throw ArgumentError("shade_classify output",
+                        "voxel buffer was made for a different volume or PE count");
+  cl::Buffer sbuf = params_buffer(device, &shade, sizeof shade, "shade parameters");
+  cl::Buffer cbuf = params_buffer(device, &classify, sizeof classify, "classify parameters");
+  const std::string name = "simdvol_shade_classify";
+  cl::Kernel k = fused_kernel(device, name, classify_defines(classify));
+  set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
+           cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
+           static_cast<cl_int>(V.stride), sbuf, cbuf);
+  const detail::CellRange r = detail::cell_range(V);
+  return device.run(k, name, r.global, r.local);
+}
+
+cl::Event enqueue_gather_voxels(Device& device, const VoxelBuffer& voxels, const cl::Buffer& flat) {
+  const VoxelLayout& V = voxels.layout();
+  const std::size_t n = static_cast<std::size_t>(V.dims()[0] * V.dims()[1] * V.dims()[2]);
+  std::size_t size = 0;
+  cl_check(flat.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(flat voxels)");
+  if (size < n * 16)
+    throw ArgumentError("flat voxels", "buffer of " + std::to_string(size) + " bytes is too small");
+  // The origins table comes from a cell buffer of the same geometry; build it
+  // here (PE count small against the voxels).
+  std::vector<cl_int4> origins(static_cast<std::size_t>(V.pes()));
+  for (int64_t p = 0; p < V.pes(); ++p) {
+    const Dims3 o = V.cells.split.cell_origin(p);
+    origins[p] = cl_int4{
+        {static_cast<cl_int>(o[0]), static_cast<cl_int>(o[1]), static_cast<cl_int>(o[2]), 0}};
+  }
+  cl::Buffer obuf =
+      device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, origins.size() * sizeof(cl_int4),
+                    origins.data(), "PE origin table");
+  const std::string name = "simdvol_gather_voxels";
+  cl::Kernel k = device.kernel("classify", name);
+  const cl_int4 dims{{static_cast<cl_int>(V.dims()[0]), static_cast<cl_int>(V.dims()[1]),
+                      static_cast<cl_int>(V.dims()[2]), 0}};
+  const cl_int4 cell{{static_cast<cl_int>(V.cell()[0]), static_cast<cl_int>(V.cell()[1]),
+                      static_cast<cl_int>(V.cell()[2]), 0}};
+  set_args(k, name, voxels.buffer(), flat, obuf, dims, cell, static_cast<cl_int>(V.pes()),
+           static_cast<cl_int>(V.stride));
+  const detail::CellRange r = detail::cell_range(V);
+  return device.run(k, name, r.global, r.local);
+}
+
+void gather_rgba(Device& device, const VoxelBuffer& voxels, Rgba* out, cl::Event* event) {
+  if (!out) throw ArgumentError("gather", "null output");
+  const Dims3& d = voxels.layout().dims();
+  const std::size_t bytes = static_cast<std::size_t>(d[0] * d[1] * d[2]) * sizeof(Rgba);
+  static_assert(sizeof(Rgba) == 16, "Rgba is four floats");
+  cl::Buffer flat = device.buffer(CL_MEM_WRITE_ONLY | CL_MEM_USE_HOST_PTR, bytes, out,
+                                  "classified voxels (flat)");
+  cl::Event e = enqueue_gather_voxels(device, voxels, flat);
+  // Map/unmap makes the results visible in `out` (no copy on PoCL).
+  cl_int err = CL_SUCCESS;
+  void* p =
+      device.queue().enqueueMapBuffer(flat, CL_TRUE, CL_MAP_READ, 0, bytes, nullptr, nullptr, &err);
+  cl_check(err, "clEnqueueMapBuffer(classified voxels)");
+  cl_check(device.queue().enqueueUnmapMemObject(flat, p), "clEnqueueUnmapMemObject");
+  device.finish();
+  if (event) *event = e;
+}
+
+}  // namespace simdvol

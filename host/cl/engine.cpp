@@ -1,0 +1,58 @@
+// The OpenCL render engine (engine.hpp).
+#include "simdvol/engine.hpp"
+
+#include <chrono>
+
+#include "simdvol/layout.hpp"
+#include "simdvol/stages.hpp"
+
+namespace simdvol {
+
+namespace {
+double ms(const cl::Event& e) {
+  return static_cast<double>(event_ns(e)) * 1e-6;
+}
+}  // namespace
+
+Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt, EngineTimes* times,
+                    int64_t pes, bool fused) {
+  validate(opt);
+  if (vol.voxel_count() == 0) throw ArgumentError("volume", "is empty");
+  const PeGrid grid = pe_grid(pes, "pes");
+  const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
+  // Parameters first: every argument error is thrown before anything runs.
+  const sv_shade_params sp = shade_params(make_shade_frame(vol, view, opt.shade), opt.shade);
+  const bool need_range =
+      opt.classifier.kind == Classifier::Kind::mixture && opt.classifier.mixture.relative;
+  const sv_classify_params cp =
+      classify_params(opt.classifier, need_range ? vol.range() : ValueRange{}, view.step);
+
+  const auto t0 = std::chrono::steady_clock::now();
+  PeArray array(device, grid);
+  const CellLayout cl_layout = array.cell_layout(vol.dims(), 1);
+  const VoxelLayout vl = make_voxel_layout(cl_layout);
+  check_allocation(vl.bytes(), device.info().max_alloc_bytes, "volume (voxel cells)");
+  cl::Event e_layout, e_shade, e_classify, e_gather;
+  CellBuffer cells = array.layout(vol, 1, LayoutKernel::rows, &e_layout);
+  VoxelBuffer rgba(device, vl);
+  if (fused) {
+    e_classify = enqueue_shade_classify(device, cells, sp, cp, rgba);
+  } else {
+    VoxelBuffer shading(device, vl);
+    e_shade = enqueue_shade(device, cells, sp, shading);
+    e_classify = enqueue_classify(device, shading, cp, rgba);
+  }
+  std::vector<Rgba> voxels(vol.voxel_count());
+  gather_rgba(device, rgba, voxels.data(), &e_gather);  // blocking
+  if (times) {
+    times->layout_ms = ms(e_layout);
+    times->shade_ms = fused ? 0.0 : ms(e_shade);
+    times->classify_ms = ms(e_classify);
+    times->gather_ms = ms(e_gather);
+    times->device_wall_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  }
+  return render_classified(voxels, vol, view, opt, times ? &times->host : nullptr);
+}
+
+}  // namespace simdvol

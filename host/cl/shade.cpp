@@ -1,0 +1,111 @@
+// The shade stage on the device and the voxel-cells buffers (stages.hpp).
+#include <climits>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "simdvol/stages.hpp"
+#include "voxel_ranges.hpp"
+
+namespace simdvol {
+
+static_assert(sizeof(sv_shade_params) == 24 * 4, "sv_shade_params must be plain floats/ints");
+
+namespace {
+
+float finite_float(double v, const char* what) {
+  const float f = static_cast<float>(v);
+  if (!std::isfinite(v) || !std::isfinite(f))
+    throw ArgumentError(std::string("shade.") + what,
+                        "must be finite in float (got " + std::to_string(v) + ")");
+  return f;
+}
+
+void check_same_cells(const CellLayout& a, const VoxelLayout& v, const char* what) {
+  if (a.dims() != v.dims() || a.pes() != v.pes() || a.cell() != v.cell())
+    throw ArgumentError(what, "voxel buffer was made for a different volume or PE count");
+}
+
+}  // namespace
+
+bool VoxelLayout::same_cells(const VoxelLayout& o) const {
+  return dims() == o.dims() && pes() == o.pes() && cell() == o.cell() && stride == o.stride;
+}
+
+VoxelLayout make_voxel_layout(const CellLayout& cells) {
+  VoxelLayout L;
+  L.cells = cells;
+  const int64_t n = cells.cell()[0] * cells.cell()[1] * cells.cell()[2];
+  L.stride = (n + 3) / 4 * 4;
+  if (L.stride > INT_MAX) throw ArgumentError("volume", "cell too large for 32-bit kernel indices");
+  if (L.stride > std::numeric_limits<int64_t>::max() / 16 / cells.pes())
+    throw ArgumentError("volume", "voxel buffer size overflows");
+  return L;
+}
+
+VoxelBuffer::VoxelBuffer(Device& device, const VoxelLayout& layout) : layout_(layout) {
+  buffer_ = device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(layout.bytes()), nullptr,
+                          "voxel cell buffer");
+}
+
+void VoxelBuffer::read_raw(Device& device, void* out) const {
+  cl_check(device.queue().enqueueReadBuffer(buffer_, CL_TRUE, 0,
+                                            static_cast<std::size_t>(layout_.bytes()), out),
+           "clEnqueueReadBuffer(voxel cells)");
+}
+
+void VoxelBuffer::write_raw(Device& device, const void* in) {
+  cl_check(device.queue().enqueueWriteBuffer(buffer_, CL_TRUE, 0,
+                                             static_cast<std::size_t>(layout_.bytes()), in),
+           "clEnqueueWriteBuffer(voxel cells)");
+}
+
+sv_shade_params shade_params(const ShadeFrame& f, const ShadeParams& p) {
+  sv_shade_params s{};
+  for (int a = 0; a < 3; ++a) {
+    s.light[a] = finite_float(f.light_obj[a], "light");
+    s.halfway[a] = finite_float(f.halfway_obj[a], "halfway");
+    s.depth_dir[a] = finite_float(f.depth_dir[a], "depth_dir");
+    s.grad_scale[a] = finite_float(f.grad_scale[a], "grad_scale");
+  }
+  s.depth_offset = finite_float(f.depth_offset, "depth_offset");
+  s.ka = finite_float(p.ka, "ka");
+  s.kd = finite_float(p.kd, "kd");
+  s.ks = finite_float(p.ks, "ks");
+  s.shininess = finite_float(p.shininess, "shininess");
+  s.k1 = finite_float(p.k1, "k1");
+  s.k2 = finite_float(p.k2, "k2");
+  s.enabled = p.enabled ? 1 : 0;
+  return s;
+}
+
+cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_params& params,
+                        VoxelBuffer& out, ShadeKernel variant) {
+  const CellLayout& C = cells.layout();
+  const VoxelLayout& V = out.layout();
+  if (C.halo < 1) throw ArgumentError("cells", "the shade stage needs a halo of at least 1");
+  check_same_cells(C, V, "shade output");
+  cl::Buffer pbuf = device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof params,
+                                  const_cast<sv_shade_params*>(&params), "shade parameters");
+  const char* name = variant == ShadeKernel::range3d ? "simdvol_shade"
+                     : variant == ShadeKernel::voxel ? "simdvol_shade_voxel"
+                                                     : "simdvol_shade_rows";
+  cl::Kernel k = device.kernel("shade", name);
+  set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
+           cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
+           static_cast<cl_int>(V.stride), pbuf);
+  if (variant == ShadeKernel::range3d) {
+    const detail::CellRange r = detail::cell_range(V);
+    return device.run(k, name, r.global, r.local);
+  }
+  if (variant == ShadeKernel::voxel)
+    return device.run(k, name, cl::NDRange(static_cast<std::size_t>(V.elements())),
+                      cl::NDRange(detail::voxel_wgs()));
+  const std::size_t rows = static_cast<std::size_t>(V.cell()[1] * V.cell()[2]);
+  const std::size_t lr = std::min<std::size_t>(64, detail::pow2_at_least(rows));
+  return device.run(
+      k, name, cl::NDRange(rows, static_cast<std::size_t>(V.pes())),
+      cl::NDRange(lr, std::max<std::size_t>(1, std::min<std::size_t>(64 / lr, V.pes()))));
+}
+
+}  // namespace simdvol

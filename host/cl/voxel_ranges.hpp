@@ -1,0 +1,48 @@
+// Internal: the NDRanges of the per-voxel kernels (shade, classify, gather).
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdlib>
+
+#include "simdvol/stages.hpp"
+
+namespace simdvol::detail {
+
+/// Work-items per work-group of the per-voxel kernels. 256 measured best
+/// against 64 and 1024 (PoCL 3.1, 2 cores, 256^3 at 8192 and 512 PEs; see
+/// bench/bench_shade_classify.cpp).
+inline std::size_t voxel_wgs() {
+  if (const char* e = std::getenv("SIMDVOL_VOXEL_WGS")) {  // benchmarking knob
+    const long v = std::strtol(e, nullptr, 10);
+    if (v >= 8 && v <= 4096 && (v & (v - 1)) == 0) return static_cast<std::size_t>(v);
+  }
+  return 256;
+}
+
+inline std::size_t pow2_at_least(std::size_t n) {
+  std::size_t p = 1;
+  while (p < n) p <<= 1;
+  return p;
+}
+
+/// The 3-D range (x, row, PE) over the interiors of `L`'s cells: x rounded up
+/// to LX in {8, 16, 32, 64}, rows = cy * cz rounded up to LY, all PEs; local
+/// size (LX, LY, LZ) with LX * LY * LZ <= voxel_wgs() (a few distinct local
+/// sizes only, since PoCL compiles each one).
+struct CellRange {
+  cl::NDRange global, local;
+};
+inline CellRange cell_range(const VoxelLayout& L) {
+  const std::size_t wg = voxel_wgs();
+  const std::size_t cx = static_cast<std::size_t>(L.cell()[0]);
+  const std::size_t rows = static_cast<std::size_t>(L.cell()[1] * L.cell()[2]);
+  const std::size_t pes = static_cast<std::size_t>(L.pes());
+  const std::size_t lx =
+      std::min<std::size_t>(std::clamp<std::size_t>(pow2_at_least(cx), 8, 64), wg);
+  const std::size_t ly = std::max<std::size_t>(1, std::min(wg / lx, pow2_at_least(rows)));
+  const std::size_t lz = std::max<std::size_t>(1, std::min(wg / (lx * ly), pes));
+  return {cl::NDRange(round_up(cx, lx), round_up(rows, ly), pes), cl::NDRange(lx, ly, lz)};
+}
+
+}  // namespace simdvol::detail

@@ -1,0 +1,179 @@
+// The per-voxel stages on the device: shade (kernels/shade.cl) and classify
+// (kernels/classify.cl), their parameter conversion from the reference's
+// types, and the "voxel cells" buffers they produce.
+//
+// Voxel cells. A PE-major buffer of one 16-byte element (four floats) per
+// interior voxel of each PE's cell (no halo): PE p's block starts at element
+// p * stride; interior voxel (lx, ly, lz), 0 <= l < cell, is element
+// (lz * cy + ly) * cx + lx of the block; stride = cx * cy * cz rounded up to a
+// multiple of 4 elements (64 bytes), the tail is zero (shade) or unspecified
+// (classify). Interior positions past the volume's far faces (padding) hold
+// the result for the edge-replicated value there; gathers skip them.
+//   shade output:    (Id, Is, |g|, v)  diffuse, specular, gradient magnitude
+//                    (as ShadeSample) and the voxel's value
+//   classify output: (a' C_r, a' C_g, a' C_b, a')  premultiplied RGBA (as Rgba)
+//
+// Every enqueue_* function validates its arguments (ArgumentError before
+// anything is enqueued), enqueues without waiting, and returns the kernel's
+// profiling event. Buffers must stay alive until the queue has finished.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "simdvol/classify.hpp"
+#include "simdvol/device.hpp"
+#include "simdvol/error.hpp"
+#include "simdvol/image.hpp"
+#include "simdvol/layout.hpp"
+#include "simdvol/pe_array.hpp"
+#include "simdvol/shade.hpp"
+
+#include "simdvol_shared.h"
+
+namespace simdvol {
+
+/// Geometry of a voxel-cells buffer (see the file comment).
+struct VoxelLayout {
+  CellLayout cells;    ///< the cell geometry it was derived from (its halo is irrelevant here)
+  int64_t stride = 0;  ///< elements per PE block
+
+  int64_t pes() const { return cells.pes(); }
+  const Dims3& dims() const { return cells.dims(); }
+  const Dims3& cell() const { return cells.cell(); }
+  int64_t cell_voxels() const { return cell()[0] * cell()[1] * cell()[2]; }
+  int64_t elements() const { return pes() * stride; }
+  std::uint64_t bytes() const { return static_cast<std::uint64_t>(elements()) * 16u; }
+  /// Element index of interior voxel (lx, ly, lz) of `pe`.
+  int64_t index(int64_t pe, int64_t lx, int64_t ly, int64_t lz) const {
+    return pe * stride + (lz * cell()[1] + ly) * cell()[0] + lx;
+  }
+  /// Same cell geometry (dims, PE count, cell extent)?
+  bool same_cells(const VoxelLayout& o) const;
+};
+
+/// The voxel layout of `cells`' interiors.
+VoxelLayout make_voxel_layout(const CellLayout& cells);
+
+/// Serial reference of the voxel-cells layout for any 16-byte element type
+/// (ShadeSample, Rgba, cl_float4): a flat x-fastest array to voxel cells (pad
+/// positions take the clamped voxel's element, tails are zero) and back.
+template <class T>
+std::vector<T> voxels_to_cells(const std::vector<T>& flat, const VoxelLayout& L) {
+  static_assert(sizeof(T) == 16, "voxel cells hold 16-byte elements");
+  const Dims3& n = L.dims();
+  if (flat.size() != static_cast<std::size_t>(n[0] * n[1] * n[2]))
+    throw ArgumentError("voxels", "size does not match the layout's dims");
+  std::vector<T> cells(static_cast<std::size_t>(L.elements()), T{});
+  for (int64_t pe = 0; pe < L.pes(); ++pe) {
+    const Dims3 o = L.cells.split.cell_origin(pe);
+    for (int64_t lz = 0; lz < L.cell()[2]; ++lz)
+      for (int64_t ly = 0; ly < L.cell()[1]; ++ly)
+        for (int64_t lx = 0; lx < L.cell()[0]; ++lx) {
+          const int64_t x = std::min(o[0] + lx, n[0] - 1), y = std::min(o[1] + ly, n[1] - 1),
+                        z = std::min(o[2] + lz, n[2] - 1);
+          cells[static_cast<std::size_t>(L.index(pe, lx, ly, lz))] =
+              flat[static_cast<std::size_t>((z * n[1] + y) * n[0] + x)];
+        }
+  }
+  return cells;
+}
+template <class T>
+std::vector<T> voxels_from_cells(const std::vector<T>& cells, const VoxelLayout& L) {
+  static_assert(sizeof(T) == 16, "voxel cells hold 16-byte elements");
+  if (cells.size() != static_cast<std::size_t>(L.elements()))
+    throw ArgumentError("cells", "size does not match the voxel layout");
+  const Dims3& n = L.dims();
+  std::vector<T> flat(static_cast<std::size_t>(n[0] * n[1] * n[2]));
+  for (int64_t pe = 0; pe < L.pes(); ++pe) {
+    const Dims3 o = L.cells.split.cell_origin(pe);
+    for (int64_t lz = 0; lz < L.cell()[2] && o[2] + lz < n[2]; ++lz)
+      for (int64_t ly = 0; ly < L.cell()[1] && o[1] + ly < n[1]; ++ly)
+        for (int64_t lx = 0; lx < L.cell()[0] && o[0] + lx < n[0]; ++lx)
+          flat[static_cast<std::size_t>(((o[2] + lz) * n[1] + o[1] + ly) * n[0] + o[0] + lx)] =
+              cells[static_cast<std::size_t>(L.index(pe, lx, ly, lz))];
+  }
+  return flat;
+}
+
+/// A voxel-cells buffer on the device.
+class VoxelBuffer {
+ public:
+  /// Allocates layout.bytes() (ArgumentError if over the device's max allocation).
+  VoxelBuffer(Device& device, const VoxelLayout& layout);
+  const VoxelLayout& layout() const { return layout_; }
+  const cl::Buffer& buffer() const { return buffer_; }
+  /// Blocking copy of the whole buffer to the host.
+  template <class T>
+  std::vector<T> read(Device& device) const {
+    static_assert(sizeof(T) == 16, "voxel cells hold 16-byte elements");
+    std::vector<T> out(static_cast<std::size_t>(layout_.elements()));
+    read_raw(device, out.data());
+    return out;
+  }
+  /// Blocking copy of host data (layout().elements() elements) to the buffer.
+  template <class T>
+  void write(Device& device, const std::vector<T>& cells) {
+    static_assert(sizeof(T) == 16, "voxel cells hold 16-byte elements");
+    if (cells.size() != static_cast<std::size_t>(layout_.elements()))
+      throw ArgumentError("cells", "size does not match the voxel layout");
+    write_raw(device, cells.data());
+  }
+
+ private:
+  void read_raw(Device& device, void* out) const;
+  void write_raw(Device& device, const void* in);
+  VoxelLayout layout_;
+  cl::Buffer buffer_;
+};
+
+// ------------------------------------------------------------------ shade
+
+/// The kernel parameters from the reference's per-view frame and parameters
+/// (make_shade_frame(vol, view, p) gives the frame). Throws ArgumentError for
+/// non-finite values.
+sv_shade_params shade_params(const ShadeFrame& frame, const ShadeParams& p);
+
+/// Decomposition of the shade kernel (kernels/shade.cl): range3d (the
+/// default, fastest) or the two alternatives kept for benchmarking.
+enum class ShadeKernel { range3d, voxel, rows };
+
+/// Shades `cells` (halo >= 1, filled by the layout stage) into `out` (a voxel
+/// buffer of the same cells).
+cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_params& params,
+                        VoxelBuffer& out, ShadeKernel variant = ShadeKernel::range3d);
+
+// --------------------------------------------------------------- classify
+
+/// The kernel parameters from a classifier, the volume's value range (used by
+/// relative mixtures only) and the opacity step. Throws ArgumentError for an
+/// invalid classifier (as the reference does), more than SV_MAX_MATERIALS
+/// materials or SV_MAX_KNOTS ramp points, or a step that is not positive.
+sv_classify_params classify_params(const Classifier& c, const ValueRange& range,
+                                   double opacity_step);
+
+/// Compile-time specialisation of the classify kernel for these parameters
+/// (kind and counts; see kernels/classify.cl).
+Defines classify_defines(const sv_classify_params& params);
+
+/// Classifies the shade stage's output `shading` into `out` (both voxel
+/// buffers of the same cells; they may not be the same buffer).
+cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
+                           const sv_classify_params& params, VoxelBuffer& out);
+
+/// Shade and classify fused in one launch: `out` receives what
+/// enqueue_classify would (the same float code).
+cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
+                                 const sv_shade_params& shade, const sv_classify_params& classify,
+                                 VoxelBuffer& out);
+
+/// Gathers the in-volume voxels of `voxels` into `flat` (a buffer of at
+/// least dims-product 16-byte elements, x fastest).
+cl::Event enqueue_gather_voxels(Device& device, const VoxelBuffer& voxels, const cl::Buffer& flat);
+
+/// Blocking gather into host memory (dims-product Rgba): zero-copy on PoCL.
+void gather_rgba(Device& device, const VoxelBuffer& voxels, Rgba* out, cl::Event* event = nullptr);
+
+}  // namespace simdvol

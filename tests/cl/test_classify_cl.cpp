@@ -1,0 +1,225 @@
+// The classify kernel (kernels/classify.cl), the fused shade + classify
+// kernel and render_opencl against the serial reference.
+//
+// Tolerance: 1e-5 absolute per channel of the premultiplied RGBA.
+//  - classify alone is fed the reference's own shading, so only its float
+//    arithmetic differs from the reference's double: the mixture's exponent
+//    L_j - L_i (terms up to ~130 for CT between soft tissue and bone, float
+//    error ~1e-5 there) moves p_i by at most p_i (1 - p_i) times that, and
+//    a' = -expm1(step log1p(-a)) is accurate to a few ulp: observed <= 1e-6.
+//  - shade -> classify on the device against shade -> classify in the
+//    reference adds the shade kernel's differences (test_shade_cl.cpp);
+//    transfer functions see |g| only through ramps of slope <= 1/15 here.
+//  - the fused kernel equals the two stages to 1e-6 (same float code,
+//    compiled in another program).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "simdvol/engine.hpp"
+#include "simdvol/io.hpp"
+#include "simdvol/phantom.hpp"
+#include "simdvol/render.hpp"
+#include "simdvol/stages.hpp"
+#include "stage_testing.hpp"
+#include "testing.hpp"
+
+namespace simdvol {
+namespace {
+
+constexpr double kTol = 1e-5;
+
+double max_diff(const std::vector<Rgba>& a, const std::vector<Rgba>& b) {
+  EXPECT_EQ(a.size(), b.size());
+  double d = 0;
+  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) {
+    d = std::max(d, static_cast<double>(std::fabs(a[i].r - b[i].r)));
+    d = std::max(d, static_cast<double>(std::fabs(a[i].g - b[i].g)));
+    d = std::max(d, static_cast<double>(std::fabs(a[i].b - b[i].b)));
+    d = std::max(d, static_cast<double>(std::fabs(a[i].a - b[i].a)));
+    if (std::isnan(b[i].r) || std::isnan(b[i].a)) return INFINITY;
+  }
+  return d;
+}
+
+// A transfer function with several knots, colour ramps and a step.
+Classifier many_knots() {
+  Classifier c;
+  c.kind = Classifier::Kind::transfer;
+  c.transfer.density.x = {-1000, -300, -100, 0, 80, 80, 300, 1200, 1800};
+  c.transfer.density.y = {0, 0, 0.05f, 0.02f, 0.3f, 0.5f, 0.6f, 0.9f, 1};
+  c.transfer.gradient.x = {0, 5, 20, 300};
+  c.transfer.gradient.y = {0.1f, 0.2f, 1, 1};
+  c.transfer.red.x = c.transfer.green.x = c.transfer.blue.x = {-1000, 0, 500, 1500};
+  c.transfer.red.y = {0.2f, 0.9f, 1, 1};
+  c.transfer.green.y = {0.1f, 0.5f, 0.8f, 1};
+  c.transfer.blue.y = {0.8f, 0.3f, 0.6f, 1};
+  return c;
+}
+
+Classifier by_name(const std::string& name) {
+  return name == "knots" ? many_knots() : classifier_preset(name);
+}
+
+ValueRange range_for(const Classifier& c, const Volume& vol) {
+  return c.kind == Classifier::Kind::mixture && c.mixture.relative ? vol.range() : ValueRange{};
+}
+
+struct Case {
+  const Volume* vol;
+  std::string classifier;
+  ViewAngles view;
+  int64_t pes;
+  double step = 1.0;
+  ShadeParams shade{};
+};
+
+// Runs classify alone (fed the reference's shading), the two device stages,
+// and the fused kernel; compares each with the reference.
+void check_case(const Case& k) {
+  const Volume& vol = *k.vol;
+  SCOPED_TRACE(k.classifier + " pes=" + std::to_string(k.pes) + " step=" + std::to_string(k.step) +
+               " view=(" + std::to_string(k.view.theta) + "," + std::to_string(k.view.phi) + ")");
+  Device& dev = *testing::test_device();
+  const Classifier c = by_name(k.classifier);
+  const ViewGeometry view = make_view(vol, k.view, 64, 64, Sampling::voxel);
+  const std::vector<ShadeSample> shading = shade(vol, view, k.shade);
+  const std::vector<Rgba> ref = classify(vol, shading, c, k.step);
+  const sv_classify_params cp = classify_params(c, range_for(c, vol), k.step);
+  const sv_shade_params sp = shade_params(make_shade_frame(vol, view, k.shade), k.shade);
+
+  PeArray array(dev, pe_grid(k.pes));
+  CellBuffer cells = array.layout(vol, 1);
+  const VoxelLayout L = make_voxel_layout(cells.layout());
+  VoxelBuffer shade_buf(dev, L), out(dev, L), fused(dev, L);
+
+  // 1. classify alone, on the reference's shading (with v in the 4th channel).
+  std::vector<ShadeSample> s4 = shading;
+  for (std::size_t i = 0; i < s4.size(); ++i) s4[i].pad = vol.data()[i];
+  shade_buf.write(dev, voxels_to_cells(s4, L));
+  enqueue_classify(dev, shade_buf, cp, out);
+  dev.finish();
+  const double d_alone = max_diff(ref, voxels_from_cells(out.read<Rgba>(dev), L));
+  EXPECT_LE(d_alone, kTol) << "classify alone";
+
+  // 2. shade -> classify on the device, gathered by the device gather.
+  enqueue_shade(dev, cells, sp, shade_buf);
+  enqueue_classify(dev, shade_buf, cp, out);
+  std::vector<Rgba> staged(vol.voxel_count());
+  gather_rgba(dev, out, staged.data());
+  const double d_staged = max_diff(ref, staged);
+  EXPECT_LE(d_staged, kTol) << "shade + classify";
+
+  // 3. fused.
+  enqueue_shade_classify(dev, cells, sp, cp, fused);
+  dev.finish();
+  const double d_fused = max_diff(staged, voxels_from_cells(fused.read<Rgba>(dev), L));
+  EXPECT_LE(d_fused, 1e-6) << "fused vs staged";
+}
+
+const ViewAngles kViews[] = {{0, 0, 0}, {30, 45, 10}, {-70, 120, 200}};
+
+TEST(ClassifyKernel, SheppLoganPresetsAndPeCounts) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(48);
+  for (const char* name : {"ct", "ct-bone", "mri", "volpack", "knots"})
+    for (int64_t pes : {1, 8, 512, 8192}) check_case({&vol, name, kViews[1], pes});
+  check_case({&vol, "ct", kViews[2], 512});
+  check_case({&vol, "knots", kViews[0], 8});
+}
+
+TEST(ClassifyKernel, MarschnerLobbRelativeMixture) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = marschner_lobb(48);
+  for (int64_t pes : {8, 8192}) check_case({&vol, "mri", kViews[1], pes});
+}
+
+TEST(ClassifyKernel, OddVolumeAndOpacitySteps) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = testing::random_volume({37, 29, 23}, -1100.0f, 2000.0f, {1.0, 0.8, 2.5}, 7);
+  for (const char* name : {"ct", "ct-bone", "mri", "knots"})
+    for (int64_t pes : {1, 8, 512, 8192}) check_case({&vol, name, kViews[2], pes});
+  for (double step : {0.37, 1.7, 3.0}) {
+    check_case({&vol, "ct", kViews[1], 512, step});
+    check_case({&vol, "knots", kViews[1], 8, step});
+  }
+  ShadeParams unlit;
+  unlit.enabled = false;
+  check_case({&vol, "ct", kViews[0], 8, 1.0, unlit});
+}
+
+TEST(ClassifyKernel, BrainSmall) {
+  const auto path = testing::data_dir() / "brainsmall.den";
+  SIMDVOL_REQUIRE_FILE(path);
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = load_den(path);
+  ShadeParams p;  // VolPack's rendervolume.c lighting
+  p.ka = 0.18;
+  p.kd = 0.35;
+  p.ks = 0.39;
+  p.shininess = 10;
+  p.light = {0.3, 0.3, 1.0};
+  check_case({&vol, "volpack", kViews[1], 8192, 1.0, p});
+  check_case({&vol, "volpack", kViews[2], 512, 1.0, p});
+  check_case({&vol, "mri", kViews[1], 8, 1.0, p});
+}
+
+TEST(ClassifyKernel, NanVoxelsAreTransparent) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Volume vol = testing::random_volume({12, 10, 9}, -200.0f, 1500.0f, {1, 1, 1}, 13);
+  vol.at(3, 3, 3) = std::nanf("");
+  for (const char* name : {"ct", "knots"}) check_case({&vol, name, kViews[1], 8});
+}
+
+TEST(ClassifyKernel, RejectsBadArguments) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Classifier c = classifier_preset("ct");
+  EXPECT_THROW(classify_params(c, {}, 0.0), ArgumentError);
+  EXPECT_THROW(classify_params(c, {}, NAN), ArgumentError);
+  Classifier many = c;
+  many.mixture.materials.clear();
+  for (int i = 0; i <= SV_MAX_MATERIALS; ++i)
+    many.mixture.materials.push_back({"m", static_cast<float>(i), 1, 1, 1, 1, 0.5f});
+  EXPECT_THROW(classify_params(many, {}, 1.0), ArgumentError);
+  Classifier unsorted = c;
+  std::swap(unsorted.mixture.materials[0], unsorted.mixture.materials[1]);
+  EXPECT_THROW(classify_params(unsorted, {}, 1.0), ArgumentError);
+  Classifier knots = many_knots();
+  knots.transfer.density.x.assign(SV_MAX_KNOTS + 1, 0.0f);
+  knots.transfer.density.y.assign(SV_MAX_KNOTS + 1, 0.5f);
+  EXPECT_THROW(classify_params(knots, {}, 1.0), ArgumentError);
+
+  const Volume vol = testing::random_volume({16, 16, 16}, 0, 1, {1, 1, 1}, 1);
+  PeArray a8(dev, pe_grid(8)), a64(dev, pe_grid(64));
+  CellBuffer c8 = a8.layout(vol, 1), c64 = a64.layout(vol, 1);
+  VoxelBuffer v8(dev, make_voxel_layout(c8.layout())), v64(dev, make_voxel_layout(c64.layout()));
+  const auto cp = classify_params(c, {}, 1.0);
+  EXPECT_THROW(enqueue_classify(dev, v8, cp, v64), ArgumentError);
+  EXPECT_THROW(enqueue_classify(dev, v8, cp, v8), ArgumentError);
+}
+
+TEST(RenderOpenCL, EqualsReference) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(40);
+  for (const char* name : {"ct", "knots"}) {
+    RenderOptions opt;
+    opt.width = opt.height = 48;
+    opt.view = {30, 45, 10};
+    opt.classifier = by_name(name);
+    const Image ref = render_reference(vol, opt);
+    for (bool fused : {false, true}) {
+      EngineTimes t;
+      const Image img = render_opencl(dev, vol, opt, &t, 512, fused);
+      EXPECT_LE(max_abs_diff(ref, img), 1e-5) << name << (fused ? " fused" : " staged");
+      EXPECT_GT(psnr(ref, img), 80.0);
+    }
+  }
+  RenderOptions bad;
+  bad.width = 0;
+  EXPECT_THROW(render_opencl(dev, vol, bad), ArgumentError);
+  EXPECT_THROW(render_opencl(dev, vol, RenderOptions{}, nullptr, 100), ArgumentError);
+}
+
+}  // namespace
+}  // namespace simdvol

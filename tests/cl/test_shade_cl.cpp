@@ -1,0 +1,201 @@
+// The shade kernel (kernels/shade.cl) against the serial reference
+// (host/core/shade.cpp) on phantoms, an odd-sized anisotropic random volume
+// and brainsmall.den, over several views and PE counts.
+//
+// Tolerances (absolute, per channel):
+//   Id, Is:  1e-5. Id <= ka + kd and Is <= ks (cue <= 1/k1), so float
+//            rounding in the kernel gives ~1e-7 for Id; Is = ks*cue*|N.H|^n
+//            amplifies the ~3e-7 error of |N.H| by n (24 here): <= 3e-6.
+//   |g|:     1e-6 * max(1, |g|), i.e. relative for large gradients (largest
+//            seen: 2.3e-7). The
+//            central differences of integer-valued data are exact in float,
+//            but g.g and its square root round in float (a few ulp relative,
+//            against the reference's double rounded once to float): CT
+//            gradients reach ~1000 HU per voxel, where one float ulp is 6e-5.
+//   v:       exact (the fourth channel copies the voxel's value).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "simdvol/io.hpp"
+#include "simdvol/phantom.hpp"
+#include "simdvol/shade.hpp"
+#include "simdvol/stages.hpp"
+#include "simdvol/view.hpp"
+#include "stage_testing.hpp"
+#include "testing.hpp"
+
+namespace simdvol {
+namespace {
+
+using testing::run_shade;
+
+constexpr double kTolLight = 1e-5;
+constexpr double kTolGradRel = 1e-6;
+
+struct Diff {
+  double id = 0, is = 0, grad_rel = 0;
+  bool value_exact = true;
+};
+
+Diff compare(const Volume& vol, const std::vector<ShadeSample>& ref,
+             const std::vector<ShadeSample>& got) {
+  Diff d;
+  EXPECT_EQ(ref.size(), got.size());
+  for (std::size_t i = 0; i < ref.size() && i < got.size(); ++i) {
+    d.id = std::max(d.id, static_cast<double>(std::fabs(ref[i].diffuse - got[i].diffuse)));
+    d.is = std::max(d.is, static_cast<double>(std::fabs(ref[i].specular - got[i].specular)));
+    d.grad_rel = std::max(d.grad_rel, std::fabs(static_cast<double>(ref[i].gradient) -
+                                                static_cast<double>(got[i].gradient)) /
+                                          std::max(1.0, static_cast<double>(ref[i].gradient)));
+    if (!(got[i].pad == vol.data()[i])) d.value_exact = false;
+  }
+  return d;
+}
+
+void check_case(const Volume& vol, ViewAngles angles, const ShadeParams& p, int64_t pes,
+                const std::string& what) {
+  SCOPED_TRACE(what + " pes=" + std::to_string(pes) + " view=(" + std::to_string(angles.theta) +
+               "," + std::to_string(angles.phi) + "," + std::to_string(angles.varphi) + ")");
+  Device* dev = testing::test_device();
+  ASSERT_NE(dev, nullptr);
+  const ViewGeometry view = make_view(vol, angles, 64, 64, Sampling::voxel);
+  const std::vector<ShadeSample> ref = shade(vol, view, p);
+  const sv_shade_params sp = shade_params(make_shade_frame(vol, view, p), p);
+  const auto run = run_shade(*dev, vol, sp, pes);
+  const Diff d = compare(vol, ref, run.flat);
+  EXPECT_LE(d.id, kTolLight);
+  EXPECT_LE(d.is, kTolLight);
+  EXPECT_LE(d.grad_rel, kTolGradRel);
+  EXPECT_TRUE(d.value_exact);
+  // Block tails are zero.
+  const VoxelLayout& L = run.layout;
+  for (int64_t pe = 0; pe < L.pes(); ++pe)
+    for (int64_t e = L.cell_voxels(); e < L.stride; ++e) {
+      const ShadeSample& s = run.cells[static_cast<std::size_t>(pe * L.stride + e)];
+      ASSERT_TRUE(s.diffuse == 0 && s.specular == 0 && s.gradient == 0 && s.pad == 0);
+    }
+}
+
+const ViewAngles kViews[] = {{0, 0, 0}, {30, 45, 10}, {-70, 120, 200}};
+
+TEST(ShadeKernel, SheppLoganAllPeCounts) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(48);
+  for (int64_t pes : {1, 8, 512, 8192})
+    for (const ViewAngles& v : kViews) check_case(vol, v, ShadeParams{}, pes, "shepp_logan(48)");
+}
+
+TEST(ShadeKernel, MarschnerLobb) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = marschner_lobb(48);
+  ShadeParams p;
+  p.shininess = 10;
+  p.light = {0.3, 0.3, 1.0};
+  for (int64_t pes : {8, 512})
+    for (const ViewAngles& v : kViews) check_case(vol, v, p, pes, "marschner_lobb(48)");
+}
+
+TEST(ShadeKernel, OddAnisotropicVolume) {
+  SIMDVOL_TEST_DEVICE(dev);
+  // 37 x 29 x 23 with unequal spacing (grad_scale != 1), values in HU range.
+  const Volume vol = testing::random_volume({37, 29, 23}, -1000.0f, 2000.0f, {1.0, 0.8, 2.5}, 7);
+  for (int64_t pes : {1, 8, 512, 8192})
+    for (const ViewAngles& v : kViews) check_case(vol, v, ShadeParams{}, pes, "random 37x29x23");
+}
+
+TEST(ShadeKernel, UnlitAndAxisOfLengthOne) {
+  SIMDVOL_TEST_DEVICE(dev);
+  ShadeParams p;
+  p.enabled = false;
+  check_case(testing::random_volume({19, 1, 6}, 0.0f, 255.0f, {1, 1, 1}, 3), kViews[1], p, 8,
+             "unlit 19x1x6");
+  check_case(testing::random_volume({19, 1, 6}, 0.0f, 255.0f, {1, 1, 1}, 3), kViews[1],
+             ShadeParams{}, 8, "lit 19x1x6");
+  // Single-voxel slabs: every gradient is 0 (ambient only).
+  check_case(Volume({1, 1, 1}, VoxelType::f32), kViews[0], ShadeParams{}, 1, "1x1x1");
+}
+
+TEST(ShadeKernel, NonFiniteNeighboursMeanNoSurface) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Volume vol = testing::random_volume({12, 10, 9}, 0.0f, 100.0f, {1, 1, 1}, 11);
+  vol.at(4, 4, 4) = std::nanf("");
+  vol.at(7, 3, 2) = INFINITY;
+  const ViewGeometry view = make_view(vol, kViews[1], 32, 32, Sampling::voxel);
+  const auto ref = shade(vol, view, ShadeParams{});
+  const auto run = run_shade(
+      dev, vol, shade_params(make_shade_frame(vol, view, ShadeParams{}), ShadeParams{}), 8);
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    ASSERT_NEAR(ref[i].diffuse, run.flat[i].diffuse, kTolLight) << i;
+    ASSERT_NEAR(ref[i].specular, run.flat[i].specular, kTolLight) << i;
+    ASSERT_NEAR(ref[i].gradient, run.flat[i].gradient,
+                kTolGradRel * std::max(1.0f, ref[i].gradient))
+        << i;
+  }
+  EXPECT_EQ(run.flat[vol.index(5, 4, 4)].gradient, 0.0f);        // next to the NaN
+  EXPECT_FLOAT_EQ(run.flat[vol.index(5, 4, 4)].diffuse, 0.25f);  // ka
+}
+
+TEST(ShadeKernel, BrainSmall) {
+  const auto path = testing::data_dir() / "brainsmall.den";
+  SIMDVOL_REQUIRE_FILE(path);
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = load_den(path);
+  ShadeParams p;  // VolPack's rendervolume.c lighting
+  p.ka = 0.18;
+  p.kd = 0.35;
+  p.ks = 0.39;
+  p.shininess = 10;
+  p.light = {0.3, 0.3, 1.0};
+  p.k1 = 1.0;
+  p.k2 = 0.5;
+  for (int64_t pes : {512, 8192}) check_case(vol, kViews[1], p, pes, "brainsmall.den");
+  check_case(vol, kViews[2], p, 8, "brainsmall.den");
+}
+
+TEST(ShadeKernel, DecompositionsAgree) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = testing::random_volume({37, 29, 23}, -1000.0f, 2000.0f, {1, 1, 1}, 5);
+  const ViewGeometry view = make_view(vol, kViews[1], 32, 32, Sampling::voxel);
+  const auto sp = shade_params(make_shade_frame(vol, view, ShadeParams{}), ShadeParams{});
+  for (int64_t pes : {1, 512}) {
+    const auto a = run_shade(dev, vol, sp, pes, ShadeKernel::range3d);
+    for (ShadeKernel k : {ShadeKernel::voxel, ShadeKernel::rows}) {
+      const auto b = run_shade(dev, vol, sp, pes, k);
+      ASSERT_EQ(a.cells.size(), b.cells.size());
+      double worst = 0;
+      for (std::size_t i = 0; i < a.cells.size(); ++i) {
+        worst = std::max(worst,
+                         static_cast<double>(std::fabs(a.cells[i].diffuse - b.cells[i].diffuse)));
+        worst = std::max(worst,
+                         static_cast<double>(std::fabs(a.cells[i].specular - b.cells[i].specular)));
+        worst = std::max(worst,
+                         std::fabs(static_cast<double>(a.cells[i].gradient - b.cells[i].gradient)) /
+                             std::max(1.0f, a.cells[i].gradient));
+      }
+      EXPECT_LE(worst, 1e-6) << "pes " << pes;
+    }
+  }
+}
+
+TEST(ShadeKernel, RejectsBadArguments) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = testing::random_volume({16, 16, 16}, 0, 1, {1, 1, 1}, 1);
+  PeArray array(dev, pe_grid(8));
+  CellBuffer no_halo = array.layout(vol, 0);
+  CellBuffer cells = array.layout(vol, 1);
+  VoxelBuffer out(dev, make_voxel_layout(cells.layout()));
+  const ViewGeometry view = make_view(vol, kViews[0], 16, 16, Sampling::voxel);
+  const auto sp = shade_params(make_shade_frame(vol, view, ShadeParams{}), ShadeParams{});
+  EXPECT_THROW(enqueue_shade(dev, no_halo, sp, out), ArgumentError);
+  PeArray other(dev, pe_grid(64));
+  CellBuffer cells64 = other.layout(vol, 1);
+  EXPECT_THROW(enqueue_shade(dev, cells64, sp, out), ArgumentError);
+  ShadeFrame f = make_shade_frame(vol, view, ShadeParams{});
+  f.depth_offset = NAN;
+  EXPECT_THROW(shade_params(f, ShadeParams{}), ArgumentError);
+}
+
+}  // namespace
+}  // namespace simdvol
