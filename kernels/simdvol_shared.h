@@ -137,4 +137,21 @@ typedef struct sv_classify_params {
   sv_ramp density, gradient, red, green, blue;
 } sv_classify_params;
 
+
+/* ---- match, balance, resample, local (kernels/match.cl ... local.cl) ----
+ * A segment: the samples [k0, k1) of ray (i, j) that one PE resamples. A PE's
+ * segments are stored contiguously (CSR: seg_offset[p] .. seg_offset[p+1]),
+ * sorted by (j, i). Balancing only moves k0/k1 between face neighbours; a
+ * segment may become empty (k0 == k1). */
+typedef struct sv_segment {
+  sv_i32 i, j;   /* ray = intermediate-image pixel */
+  sv_i32 k0, k1; /* depth range, front to back */
+} sv_segment;
+
+/* A PE's footprint: the bounding rectangle of its segments' rays
+ * (w = h = 0 when it has none). */
+typedef struct sv_rect {
+  sv_i32 i0, j0, w, h;
+} sv_rect;
+
 #endif /* SIMDVOL_SHARED_H */
