@@ -1,6 +1,6 @@
 // simdvol: the command-line program, a thin layer over the library.
-#include <CLI/CLI.hpp>
 #include <unistd.h>
+#include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -14,8 +14,11 @@
 
 #include "cli_commands.hpp"
 #include "mismatch_cmd.hpp"
+#include "simdvol/device.hpp"
+#include "simdvol/engine.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
+#include "simdvol/pe_array.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 
@@ -155,8 +158,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render->add_option("--size", size, "output WxH")->capture_default_str();
   render->add_option("--sampling", sampling, "voxel or pixel")->capture_default_str();
-  render->add_option("--order", order, "interpolation order 0..3 (Aitken)")
-      ->capture_default_str();
+  render->add_option("--order", order, "interpolation order 0..3 (Aitken)")->capture_default_str();
   render->add_option("--composite", composite, "direct, adaptive or mc")->capture_default_str();
   render->add_option("--samples", samples, "Monte Carlo walks per ray")->capture_default_str();
   render->add_option("--seed", seed, "Monte Carlo seed")->capture_default_str();
@@ -170,14 +172,21 @@ int main(int argc, char** argv) {
                    "Hounsfield data, mri otherwise")
       ->capture_default_str();
   render->add_flag("--no-shade", no_shade, "skip lighting (colour = material colour)");
-  render->add_option("--engine", engine, "reference")->capture_default_str();
+  render->add_option("--engine", engine, "reference (serial CPU) or opencl (the PE array)")
+      ->capture_default_str();
+  std::string pe_spec = "128x64";
+  int device_index = -1;
+  render->add_option("--pe", pe_spec, "opencl engine: PE count N or grid WxH (a power of two)")
+      ->capture_default_str();
+  render->add_option("--device", device_index,
+                     "opencl engine: device index as `simdvol devices` lists (default: "
+                     "SIMDVOL_DEVICE, else the first CPU device)");
   render->add_option("--phantom-size", phantom_size, "size of the built-in CT phantom")
       ->capture_default_str();
   render->add_option("--frames", frames, "turntable: number of frames")->capture_default_str();
   render->add_option("--step", step, "turntable: degrees of PHI per frame")->capture_default_str();
   render->add_flag("--times", show_times, "print per-stage times");
-  render->add_option("-o,--output", out, "output image (.png, .exr, .tif)")
-      ->capture_default_str();
+  render->add_option("-o,--output", out, "output image (.png, .exr, .tif)")->capture_default_str();
 
   // info
   auto* info = app.add_subcommand("info", "describe a volume");
@@ -253,8 +262,10 @@ int main(int argc, char** argv) {
       if (frames < 1 || frames > 100000)
         throw ArgumentError("--frames", std::to_string(frames) + " is outside 1..100000");
       if (!std::isfinite(step)) throw ArgumentError("--step", "must be finite");
-      if (engine != "reference")
-        throw ArgumentError("--engine", "unknown engine '" + engine + "' (available: reference)");
+      if (engine != "reference" && engine != "opencl")
+        throw ArgumentError("--engine",
+                            "unknown engine '" + engine + "' (available: reference, opencl)");
+      const PeGrid pes = parse_pe_grid(pe_spec, "--pe");
       validate(opt);
       const fs::path outp = out;
       check_output_path(outp, "-o");
@@ -262,8 +273,8 @@ int main(int argc, char** argv) {
       Volume vol;
       if (rv.path.empty()) {
         if (phantom_size < 2 || phantom_size > 1024)
-          throw ArgumentError("--phantom-size", std::to_string(phantom_size) +
-                                                    " is outside 2..1024");
+          throw ArgumentError("--phantom-size",
+                              std::to_string(phantom_size) + " is outside 2..1024");
         vol = shepp_logan(phantom_size, 4);  // partial-volume boundaries
       } else {
         vol = rv.load();
@@ -271,19 +282,33 @@ int main(int argc, char** argv) {
       if (classify == "auto") classify = vol.range().min < -500.0f ? "ct" : "mri";
       opt.classifier = classifier_from_spec(classify);
 
+      std::optional<Device> device;
+      if (engine == "opencl")
+        device.emplace(device_index >= 0 ? std::optional<int>(device_index) : std::nullopt);
       const double phi0 = opt.view.phi;
       for (int f = 0; f < frames; ++f) {
         opt.view.phi = phi0 + f * step;
-        RenderTimes t;
-        const Image img = render_reference(vol, opt, &t);
+        Image img;
+        if (device) {
+          EngineTimes t;
+          img = render_opencl(*device, vol, opt, &t, pes.count());
+          if (show_times)
+            std::cerr << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
+                      << " PEs): layout " << t.layout_ms << " ms, shade " << t.shade_ms
+                      << " ms, classify " << t.classify_ms << " ms, gather " << t.gather_ms
+                      << " ms (device), host stages: resample+composite "
+                      << t.host.resample_composite_ms << " ms, warp " << t.host.warp_ms << " ms\n";
+        } else {
+          RenderTimes t;
+          img = render_reference(vol, opt, &t);
+          if (show_times)
+            std::cerr << "frame " << f << " (reference): shade " << t.shade_ms << " ms, classify "
+                      << t.classify_ms << " ms, resample+composite " << t.resample_composite_ms
+                      << " ms, warp " << t.warp_ms << " ms\n";
+        }
         const fs::path p = numbered(outp, f, frames);
         write_image(img, p);
-        if (show_times)
-          std::cerr << "frame " << f << ": shade " << t.shade_ms << " ms, classify "
-                    << t.classify_ms << " ms, resample+composite " << t.resample_composite_ms
-                    << " ms, warp " << t.warp_ms << " ms\n";
-        if (frames == 1)
-          std::cout << "wrote " << fs::absolute(p).string() << "\n";
+        if (frames == 1) std::cout << "wrote " << fs::absolute(p).string() << "\n";
         progress(f + 1, frames);
       }
       if (frames > 1)
