@@ -110,14 +110,22 @@ std::array<double, 2> ViewGeometry::output_to_intermediate(int x, int y) const {
 
 ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int out_height,
                        Sampling sampling) {
+  return make_view(vol.dims(), vol.spacing(), angles, out_width, out_height, sampling);
+}
+
+ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<double, 3>& sp,
+                       ViewAngles angles, int out_width, int out_height, Sampling sampling) {
   if (out_width <= 0 || out_height <= 0)
     throw ArgumentError("--size", "image size " + std::to_string(out_width) + "x" +
                                       std::to_string(out_height) + " must be positive");
-  if (vol.voxel_count() == 0) throw ArgumentError("volume", "the volume is empty");
+  for (int a = 0; a < 3; ++a) {
+    if (dims[a] <= 0) throw ArgumentError("volume", "the volume is empty");
+    if (!(sp[a] > 0.0) || !std::isfinite(sp[a]))
+      throw ArgumentError("volume", "voxel spacing must be positive and finite");
+  }
   for (double a : {angles.theta, angles.phi, angles.varphi})
     if (!std::isfinite(a)) throw ArgumentError("--view", "angles must be finite");
-  if (vol.nx() > (int64_t{1} << 24) || vol.ny() > (int64_t{1} << 24) ||
-      vol.nz() > (int64_t{1} << 24))
+  if (dims[0] > (int64_t{1} << 24) || dims[1] > (int64_t{1} << 24) || dims[2] > (int64_t{1} << 24))
     throw ArgumentError("volume", "a dimension exceeds 2^24 voxels");
 
   ViewGeometry g;
@@ -126,12 +134,11 @@ ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int 
   g.out_height = out_height;
   g.rot = rotation(angles.theta, angles.phi, angles.varphi);
 
-  const auto& sp = vol.spacing();
   const double smin = std::min({sp[0], sp[1], sp[2]});
   Vec3 extent{};
   double diag2 = 0;
   for (int a = 0; a < 3; ++a) {
-    extent[a] = static_cast<double>(vol.dims()[a]) * sp[a] / smin;
+    extent[a] = static_cast<double>(dims[a]) * sp[a] / smin;
     diag2 += extent[a] * extent[a];
     g.longest = std::max(g.longest, extent[a]);
   }
@@ -154,14 +161,14 @@ ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int 
   const Vec3 c0{0.5 - 0.5 * wi, 0.5 - 0.5 * hi, 0.5 - 0.5 * depth};
   for (int a = 0; a < 3; ++a) {
     const double f = g.step * smin / sp[a];
-    double o = 0.5 * static_cast<double>(vol.dims()[a]);
+    double o = 0.5 * static_cast<double>(dims[a]);
     for (int b = 0; b < 3; ++b) {
       g.grid.step[a][b] = to_fixed(tt[a][b] * f);
       o += tt[a][b] * f * c0[b];
     }
     g.grid.step[a][3] = 0;
     g.grid.origin[a] = to_fixed(o);
-    g.grid.dims[a] = static_cast<sv_i32>(vol.dims()[a]);
+    g.grid.dims[a] = static_cast<sv_i32>(dims[a]);
   }
   g.grid.origin[3] = 0;
   g.grid.dims[3] = 0;

@@ -37,12 +37,12 @@ enum class Sampling {
 /// output size. The volume fits the image as in VolPack's example: its
 /// longest side spans min(width, height), centred.
 struct ViewGeometry {
-  Mat3 rot{};             ///< T (object -> viewing), physical units
-  double step = 1.0;      ///< viewing-grid spacing in units of the smallest voxel spacing
-  double radius = 0.0;    ///< half the volume's diagonal, same units
-  double longest = 0.0;   ///< longest side, same units
+  Mat3 rot{};            ///< T (object -> viewing), physical units
+  double step = 1.0;     ///< viewing-grid spacing in units of the smallest voxel spacing
+  double radius = 0.0;   ///< half the volume's diagonal, same units
+  double longest = 0.0;  ///< longest side, same units
   int out_width = 0, out_height = 0;  ///< final image
-  sv_view grid{};         ///< fixed-point map from (i, j, k) to voxel coordinates
+  sv_view grid{};                     ///< fixed-point map from (i, j, k) to voxel coordinates
   /// The samples' direction of travel (viewing +z) in object index space,
   /// unit length in physical units; light and view vectors in object space.
   Vec3 view_dir_obj{};
@@ -70,9 +70,16 @@ struct ViewGeometry {
 /// Builds the geometry. Throws ArgumentError for non-positive sizes.
 ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int out_height,
                        Sampling sampling);
+/// The same from the volume's dims and spacing alone (no voxel data needed:
+/// the geometry depends on nothing else). Throws ArgumentError for
+/// non-positive dims or spacing.
+ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
+                       ViewAngles angles, int out_width, int out_height, Sampling sampling);
 
 /// Splits a fixed-point coordinate into floor and fraction in [0, 1).
-inline int64_t fixed_floor(int64_t x) { return x >> SV_FRAC_BITS; }
+inline int64_t fixed_floor(int64_t x) {
+  return x >> SV_FRAC_BITS;
+}
 inline float fixed_frac(int64_t x) {
   return static_cast<float>(static_cast<uint32_t>(x & (SV_ONE - 1))) * (1.0f / 4294967296.0f);
 }

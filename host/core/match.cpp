@@ -1,0 +1,315 @@
+// Serial references of the match and balance stages (see match.hpp).
+#include "simdvol/match.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "simdvol/error.hpp"
+
+namespace simdvol {
+
+double Matching::utilisation() const {
+  const int64_t mx = max_load();
+  if (mx == 0 || loads.empty()) return 1.0;
+  return static_cast<double>(total_load()) / static_cast<double>(loads.size()) /
+         static_cast<double>(mx);
+}
+
+int64_t Matching::max_load() const {
+  int64_t m = 0;
+  for (int64_t l : loads) m = std::max(m, l);
+  return m;
+}
+
+int64_t Matching::total_load() const {
+  int64_t t = 0;
+  for (int64_t l : loads) t += l;
+  return t;
+}
+
+std::array<int64_t, 3> cell_index_of(const KdSplit& split, int64_t pe) {
+  std::array<int64_t, 3> idx{0, 0, 0};
+  for (int b = split.bits - 1; b >= 0; --b) {
+    const int a = split.bit_axis[b];
+    idx[a] = idx[a] * 2 + ((pe >> b) & 1);
+  }
+  return idx;
+}
+
+int64_t pe_of_cell_index(const KdSplit& split, const std::array<int64_t, 3>& index) {
+  std::array<int, 3> remaining = split.axis_bits;
+  int64_t pe = 0;
+  for (int b = split.bits - 1; b >= 0; --b) {
+    const int a = split.bit_axis[b];
+    --remaining[a];
+    pe |= ((index[a] >> remaining[a]) & 1) << b;
+  }
+  return pe;
+}
+
+CellBox cell_box(const KdSplit& split, int64_t pe) {
+  const auto idx = cell_index_of(split, pe);
+  CellBox b;
+  for (int a = 0; a < 3; ++a) {
+    b.lo[a] = idx[a] * split.cell[a];
+    b.hi[a] = std::min(b.lo[a] + split.cell[a], split.dims[a]);
+  }
+  return b;
+}
+
+namespace {
+
+void check_split(const ViewGeometry& view, const KdSplit& split) {
+  for (int a = 0; a < 3; ++a)
+    if (split.dims[a] != view.grid.dims[a])
+      throw ArgumentError("split", "the k-d split's dims differ from the view's volume dims");
+  if (split.bits < 0 || static_cast<int>(split.bit_axis.size()) != split.bits)
+    throw ArgumentError("split", "malformed k-d split");
+}
+
+// Smallest k with base + k * d >= v (d > 0).
+int64_t first_at_least(int64_t base, int64_t d, int64_t v) {
+  int64_t k =
+      static_cast<int64_t>(std::ceil(static_cast<double>(v - base) / static_cast<double>(d)));
+  while (base + k * d < v) ++k;
+  while (base + (k - 1) * d >= v) --k;
+  return k;
+}
+
+// Smallest k with base + k * d < v (d < 0).
+int64_t first_below(int64_t base, int64_t d, int64_t v) {
+  int64_t k =
+      static_cast<int64_t>(std::floor(static_cast<double>(base - v) / static_cast<double>(-d))) + 1;
+  while (base + k * d >= v) ++k;
+  while (base + (k - 1) * d < v) --k;
+  return k;
+}
+
+}  // namespace
+
+std::array<int64_t, 2> box_ray_range(const ViewGeometry& view, const CellBox& box, int64_t i,
+                                     int64_t j) {
+  if (box.empty()) return {0, 0};
+  const int64_t depth = view.depth();
+  int64_t lo = 0, hi = depth;
+  for (int a = 0; a < 3; ++a) {
+    const int64_t base = view.fixed(a, i, j, 0);
+    const int64_t d = view.grid.step[a][2];
+    const int64_t L = box.lo[a] * SV_ONE, H = box.hi[a] * SV_ONE;
+    if (d == 0) {
+      if (base < L || base >= H) return {0, 0};
+      continue;
+    }
+    int64_t k0, k1;
+    if (d > 0) {
+      k0 = first_at_least(base, d, L);
+      k1 = first_at_least(base, d, H);
+    } else {
+      k0 = first_below(base, d, H);
+      k1 = first_below(base, d, L);
+    }
+    lo = std::max(lo, k0);
+    hi = std::min(hi, k1);
+    if (lo >= hi) return {0, 0};
+  }
+  return {lo, hi};
+}
+
+std::vector<sv_rect> match_candidates(const ViewGeometry& view, const KdSplit& split) {
+  check_split(view, split);
+  // X = o + M (i, j, k): invert M (the fixed-point map is exact, so the
+  // preimage of a box is exactly the parallelepiped spanned by the mapped
+  // vertices; double rounding is far below the 1-pixel pad).
+  Mat3 m{};
+  Vec3 o{};
+  for (int a = 0; a < 3; ++a) {
+    o[a] = std::ldexp(static_cast<double>(view.grid.origin[a]), -SV_FRAC_BITS);
+    for (int b = 0; b < 3; ++b)
+      m[a][b] = std::ldexp(static_cast<double>(view.grid.step[a][b]), -SV_FRAC_BITS);
+  }
+  const double det = determinant(m);
+  if (!(std::abs(det) > 0.0)) throw ArgumentError("view", "singular viewing map");
+  Mat3 inv{};
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      const int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
+      inv[r][c] = (m[r1][c1] * m[r2][c2] - m[r1][c2] * m[r2][c1]) / det;
+    }
+  const int64_t w = view.width(), h = view.height();
+  std::vector<sv_rect> rects(static_cast<std::size_t>(split.pes()), sv_rect{0, 0, 0, 0});
+  for (int64_t p = 0; p < split.pes(); ++p) {
+    const CellBox box = cell_box(split, p);
+    if (box.empty()) continue;
+    double lo[2] = {std::numeric_limits<double>::infinity(),
+                    std::numeric_limits<double>::infinity()};
+    double hi[2] = {-lo[0], -lo[1]};
+    for (int v = 0; v < 8; ++v) {
+      Vec3 x{};
+      for (int a = 0; a < 3; ++a)
+        x[a] = static_cast<double>(((v >> a) & 1) ? box.hi[a] : box.lo[a]) - o[a];
+      const Vec3 ijk = multiply(inv, x);
+      for (int c = 0; c < 2; ++c) {
+        lo[c] = std::min(lo[c], ijk[c]);
+        hi[c] = std::max(hi[c], ijk[c]);
+      }
+    }
+    const int64_t i0 = std::max<int64_t>(0, static_cast<int64_t>(std::floor(lo[0])) - 1);
+    const int64_t i1 = std::min<int64_t>(w - 1, static_cast<int64_t>(std::ceil(hi[0])) + 1);
+    const int64_t j0 = std::max<int64_t>(0, static_cast<int64_t>(std::floor(lo[1])) - 1);
+    const int64_t j1 = std::min<int64_t>(h - 1, static_cast<int64_t>(std::ceil(hi[1])) + 1);
+    if (i0 > i1 || j0 > j1) continue;
+    rects[p] = sv_rect{static_cast<sv_i32>(i0), static_cast<sv_i32>(j0),
+                       static_cast<sv_i32>(i1 - i0 + 1), static_cast<sv_i32>(j1 - j0 + 1)};
+  }
+  return rects;
+}
+
+Matching match_reference(const ViewGeometry& view, const KdSplit& split) {
+  const std::vector<sv_rect> cand = match_candidates(view, split);
+  const int64_t pes = split.pes();
+  Matching m;
+  m.seg_offset.assign(static_cast<std::size_t>(pes + 1), 0);
+  m.rects.assign(static_cast<std::size_t>(pes), sv_rect{0, 0, 0, 0});
+  m.loads.assign(static_cast<std::size_t>(pes), 0);
+  for (int64_t p = 0; p < pes; ++p) {
+    const CellBox box = cell_box(split, p);
+    const sv_rect& c = cand[p];
+    int64_t i0 = INT64_MAX, j0 = INT64_MAX, i1 = -1, j1 = -1, load = 0;
+    for (int64_t j = c.j0; j < c.j0 + c.h; ++j)
+      for (int64_t i = c.i0; i < c.i0 + c.w; ++i) {
+        const auto r = box_ray_range(view, box, i, j);
+        if (r[0] >= r[1]) continue;
+        m.segments.push_back(sv_segment{static_cast<sv_i32>(i), static_cast<sv_i32>(j),
+                                        static_cast<sv_i32>(r[0]), static_cast<sv_i32>(r[1])});
+        load += r[1] - r[0];
+        i0 = std::min(i0, i);
+        i1 = std::max(i1, i);
+        j0 = std::min(j0, j);
+        j1 = std::max(j1, j);
+      }
+    m.seg_offset[p + 1] = static_cast<int64_t>(m.segments.size());
+    m.loads[p] = load;
+    if (i1 >= 0)
+      m.rects[p] = sv_rect{static_cast<sv_i32>(i0), static_cast<sv_i32>(j0),
+                           static_cast<sv_i32>(i1 - i0 + 1), static_cast<sv_i32>(j1 - j0 + 1)};
+  }
+  return m;
+}
+
+std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
+                                   const KdSplit& split) {
+  check_split(view, split);
+  const int64_t pes = split.pes();
+  if (m.pes() != pes || static_cast<int64_t>(m.seg_offset.size()) != pes + 1)
+    throw ArgumentError("matching", "made for another PE count");
+  if (m.segments.size() > static_cast<std::size_t>(INT32_MAX / 4))
+    throw ArgumentError("matching", "too many segments for 32-bit links");
+  std::vector<int32_t> link(m.segments.size(), -1);
+  for (int64_t p = 0; p < pes; ++p) {
+    const auto cp = cell_index_of(split, p);
+    for (int64_t s = m.seg_offset[p]; s < m.seg_offset[p + 1]; ++s) {
+      const sv_segment& g = m.segments[s];
+      if (g.k1 >= view.depth()) continue;
+      std::array<int64_t, 3> cq{};
+      bool inside = true;
+      for (int a = 0; a < 3; ++a) {
+        const int64_t f = fixed_floor(view.fixed(a, g.i, g.j, g.k1));
+        if (f < 0 || f >= split.dims[a]) inside = false;
+        cq[a] = f / split.cell[a];
+      }
+      if (!inside) continue;
+      int axis = -1, differing = 0;
+      bool face = true;
+      for (int a = 0; a < 3; ++a) {
+        const int64_t dd = cq[a] - cp[a];
+        if (dd == 0) continue;
+        ++differing;
+        axis = a;
+        if (dd != 1 && dd != -1) face = false;
+      }
+      if (differing != 1 || !face) continue;
+      const int64_t q = pe_of_cell_index(split, cq);
+      const auto first = m.segments.begin() + m.seg_offset[q];
+      const auto last = m.segments.begin() + m.seg_offset[q + 1];
+      const auto it =
+          std::lower_bound(first, last, g, [](const sv_segment& x, const sv_segment& y) {
+            return x.j != y.j ? x.j < y.j : x.i < y.i;
+          });
+      if (it == last || it->i != g.i || it->j != g.j || it->k0 != g.k1)
+        throw ArgumentError("matching", "not the matching of this view and split");
+      link[s] = static_cast<int32_t>((it - m.segments.begin()) * 4 + axis);
+    }
+  }
+  return link;
+}
+
+Matching balance_reference(const Matching& m0, const ViewGeometry& view, const KdSplit& split,
+                           int sweeps) {
+  if (sweeps < 0) throw ArgumentError("sweeps", "must be >= 0");
+  const std::vector<int32_t> link = balance_links(m0, view, split);
+  Matching m = m0;
+  const int64_t pes = split.pes();
+  const Dims3 splits{int64_t(1) << split.axis_bits[0], int64_t(1) << split.axis_bits[1],
+                     int64_t(1) << split.axis_bits[2]};
+  std::vector<int64_t> rays;  // F's linked segments of the current pair
+  for (int sweep = 0; sweep < sweeps; ++sweep)
+    for (int a = 0; a < 3; ++a) {
+      const int64_t dir = view.grid.step[a][2];
+      if (dir == 0) continue;  // no ray crosses a face along a
+      for (int par = 0; par < 2; ++par)
+        for (int64_t p = 0; p < pes; ++p) {
+          auto cp = cell_index_of(split, p);
+          if (cp[a] % 2 != par || cp[a] + 1 >= splits[a]) continue;
+          cp[a] += 1;
+          const int64_t q = pe_of_cell_index(split, cp);
+          const int64_t F = dir > 0 ? p : q, B = dir > 0 ? q : p;
+          const int64_t diff = m.loads[F] - m.loads[B];
+          if (diff >= -1 && diff <= 1) continue;
+          const bool front_gives = diff > 0;
+          rays.clear();
+          int64_t cap = 0, maxlen = 0;
+          for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) {
+            if (link[s] < 0 || (link[s] & 3) != a) continue;
+            rays.push_back(s);
+            const sv_segment& g = front_gives ? m.segments[s] : m.segments[link[s] >> 2];
+            cap += g.k1 - g.k0;
+            maxlen = std::max<int64_t>(maxlen, g.k1 - g.k0);
+          }
+          const int64_t t = std::min(cap, (diff > 0 ? diff : -diff) / 2);
+          if (t <= 0) continue;
+          auto len = [&](int64_t s) -> int64_t {
+            const sv_segment& g = front_gives ? m.segments[s] : m.segments[link[s] >> 2];
+            return g.k1 - g.k0;
+          };
+          auto filled = [&](int64_t level) {
+            int64_t sum = 0;
+            for (int64_t s : rays) sum += std::min(level, len(s));
+            return sum;
+          };
+          int64_t lo = 1, hi = maxlen;  // smallest level with filled(level) >= t
+          while (lo < hi) {
+            const int64_t mid = (lo + hi) / 2;
+            if (filled(mid) >= t)
+              hi = mid;
+            else
+              lo = mid + 1;
+          }
+          int64_t rem = t - filled(lo - 1);
+          for (int64_t s : rays) {
+            const int64_t l = len(s);
+            int64_t give = std::min(lo - 1, l);
+            if (rem > 0 && l >= lo) ++give, --rem;
+            const int64_t shift = front_gives ? -give : give;
+            m.segments[s].k1 = static_cast<sv_i32>(m.segments[s].k1 + shift);
+            m.segments[link[s] >> 2].k0 = static_cast<sv_i32>(m.segments[link[s] >> 2].k0 + shift);
+          }
+          m.loads[F] -= front_gives ? t : -t;
+          m.loads[B] += front_gives ? t : -t;
+        }
+    }
+  return m;
+}
+
+}  // namespace simdvol
