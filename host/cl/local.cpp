@@ -1,0 +1,199 @@
+// The resample and local stages on the device (local_cl.hpp).
+#include <limits>
+#include <string>
+
+#include "simdvol/local_cl.hpp"
+#include "simdvol/resample.hpp"
+
+namespace simdvol {
+
+static_assert(sizeof(sv_segment) == 16 && sizeof(sv_rect) == 16, "plain int32 structs");
+static_assert(sizeof(sv_view) == 160, "sv_view must have the same layout in OpenCL C");
+
+namespace {
+
+// Voxel cells are planar within each PE block (stages.hpp): channel c of
+// position e of PE p is float (p * 4 + c) * stride + e.
+constexpr bool kPlanarCells = true;
+
+constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
+
+int log2_exact(int64_t p) {
+  int b = 0;
+  while ((int64_t(1) << b) < p) ++b;
+  return b;
+}
+
+// resample.cl followed by local.cl, specialised for `order`.
+cl::Kernel stage_kernel(Device& device, const std::string& name, int order) {
+  if (order < 0 || order > kMaxOrder)
+    throw ArgumentError("order", "interpolation order " + std::to_string(order) +
+                                     " is outside 0.." + std::to_string(kMaxOrder));
+  const std::string source = program_source("resample", {{"ORDER", std::to_string(order)}}) +
+                             "\n#line 1 \"local.cl\"\n" + std::string(kernel_file("local.cl"));
+  cl::Program program = device.build(source);
+  cl_int err = CL_SUCCESS;
+  cl::Kernel k(program, name.c_str(), &err);
+  if (err != CL_SUCCESS) throw CLError("clCreateKernel(" + name + ")", err);
+  return k;
+}
+
+template <class T>
+cl::Buffer upload(Device& device, const std::vector<T>& v, const std::string& what) {
+  // A zero-sized buffer is not allowed: keep one element.
+  std::vector<T> tmp;
+  const std::vector<T>* src = &v;
+  if (v.empty()) {
+    tmp.resize(1);
+    src = &tmp;
+  }
+  return device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, src->size() * sizeof(T),
+                       const_cast<T*>(src->data()), what);
+}
+
+cl::NDRange segment_range(int64_t count) {
+  return cl::NDRange(round_up(static_cast<std::size_t>(std::max<int64_t>(count, 1)), kSegmentWgs));
+}
+
+void check_tables(const LocalSegments& segs, const ResampleTables& t, const VoxelBuffer& voxels) {
+  const VoxelLayout& L = voxels.layout();
+  if (L.dims() != t.dims || L.pes() != t.pes)
+    throw ArgumentError("resample tables", "were made for another voxel layout");
+  if (segs.pes != t.pes) throw ArgumentError("segments", "PE count differs from the voxels'");
+}
+
+}  // namespace
+
+LocalSegments upload_segments(Device& device, const Matching& m) {
+  const int64_t P = m.pes();
+  if (P < 1 || (P & (P - 1)) != 0)
+    throw ArgumentError("matching", "PE count must be a power of two");
+  if (static_cast<int64_t>(m.seg_offset.size()) != P + 1 ||
+      m.seg_offset.back() != static_cast<int64_t>(m.segments.size()))
+    throw ArgumentError("matching", "segment offsets do not match the segments");
+  if (static_cast<int64_t>(m.segments.size()) > kInt32Max)
+    throw ArgumentError("matching", "more than 2^31 - 1 segments");
+  LocalSegments s;
+  s.pes = P;
+  s.count = static_cast<int64_t>(m.segments.size());
+  std::vector<cl_int> off(m.seg_offset.begin(), m.seg_offset.end());
+  s.segments = upload(device, m.segments, "segments");
+  s.seg_offset = upload(device, off, "segment offsets");
+  s.rects = upload(device, m.rects, "footprint rectangles");
+  s.host_rects = m.rects;
+  return s;
+}
+
+cl::Buffer upload_sample_offsets(Device& device, const Matching& m) {
+  const std::vector<int64_t> off = sample_offsets(m);
+  if (off.back() > kInt32Max) throw ArgumentError("matching", "more than 2^31 - 1 samples");
+  std::vector<cl_int> o(off.begin(), off.end());
+  return upload(device, o, "sample offsets");
+}
+
+std::vector<cl_int> resample_address_table(const VoxelLayout& L, cl_int* channel_stride) {
+  const int64_t block = 4 * L.stride;  // floats per PE block
+  if (L.pes() * block > kInt32Max)
+    throw ArgumentError("volume", "voxel cells exceed int32 float indexing in the resample stage");
+  const OwnerTables t = owner_tables(L.cells.split);
+  const int64_t vm = kPlanarCells ? 1 : 4;
+  const Dims3& n = L.dims();
+  const int64_t mult[3] = {vm, vm * L.cell()[0], vm * L.cell()[0] * L.cell()[1]};
+  std::vector<cl_int> table;
+  table.reserve(static_cast<std::size_t>(n[0] + n[1] + n[2]));
+  for (int a = 0; a < 3; ++a)
+    for (int64_t g = 0; g < n[a]; ++g)
+      table.push_back(static_cast<cl_int>(t.bits[a][static_cast<std::size_t>(g)] * block +
+                                          t.local[a][static_cast<std::size_t>(g)] * mult[a]));
+  if (channel_stride) *channel_stride = static_cast<cl_int>(kPlanarCells ? L.stride : 1);
+  return table;
+}
+
+ResampleTables make_resample_tables(Device& device, const VoxelLayout& L,
+                                    const ViewGeometry& view) {
+  for (int a = 0; a < 3; ++a)
+    if (view.grid.dims[a] != L.dims()[a])
+      throw ArgumentError("view", "was made for a volume of other dimensions");
+  ResampleTables t;
+  t.dims = L.dims();
+  t.pes = L.pes();
+  const std::vector<cl_int> table = resample_address_table(L, &t.channel_stride);
+  t.table = upload(device, table, "resample address table");
+  std::vector<sv_view> v{view.grid};
+  t.view = upload(device, v, "view");
+  return t;
+}
+
+DeviceFootprints make_footprints(Device& device, const std::vector<sv_rect>& rects) {
+  DeviceFootprints f;
+  f.rect_offset.assign(rects.size() + 1, 0);
+  for (std::size_t p = 0; p < rects.size(); ++p) {
+    if (rects[p].w < 0 || rects[p].h < 0) throw ArgumentError("rects", "negative footprint size");
+    f.rect_offset[p + 1] = f.rect_offset[p] + int64_t(rects[p].w) * rects[p].h;
+  }
+  if (f.size() > kInt32Max) throw ArgumentError("rects", "footprints exceed 2^31 - 1 pixels");
+  std::vector<cl_int> off(f.rect_offset.begin(), f.rect_offset.end() - 1);
+  f.offsets = upload(device, off, "footprint offsets");
+  const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(f.size(), 1));
+  f.pixels = device.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4), nullptr, "footprints");
+  return f;
+}
+
+cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp) {
+  const std::string name = "simdvol_zero4";
+  cl::Kernel k = stage_kernel(device, name, 1);
+  const cl_int n = static_cast<cl_int>(std::max<int64_t>(fp.size(), 1));
+  set_args(k, name, fp.pixels, n);
+  return device.run(k, name, cl::NDRange(round_up(static_cast<std::size_t>(n), 256)),
+                    cl::NDRange(256));
+}
+
+Footprints read_footprints(Device& device, const DeviceFootprints& fp) {
+  Footprints f;
+  f.rect_offset = fp.rect_offset;
+  f.pixels.resize(static_cast<std::size_t>(fp.size()));
+  if (!f.pixels.empty())
+    cl_check(device.queue().enqueueReadBuffer(fp.pixels, CL_TRUE, 0, f.pixels.size() * sizeof(Rgba),
+                                              f.pixels.data()),
+             "clEnqueueReadBuffer(footprints)");
+  return f;
+}
+
+cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
+                           const ResampleTables& tables, const VoxelBuffer& voxels, int order,
+                           const cl::Buffer& samples) {
+  check_tables(segs, tables, voxels);
+  const std::string name = "simdvol_resample";
+  cl::Kernel k = stage_kernel(device, name, order);
+  set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), sample_off, tables.view,
+           tables.table, voxels.buffer(), tables.channel_stride, samples);
+  return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs));
+}
+
+cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
+                        const cl::Buffer& samples, DeviceFootprints& fp) {
+  if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
+    throw ArgumentError("footprints", "PE count differs from the segments'");
+  const std::string name = "simdvol_local";
+  cl::Kernel k = stage_kernel(device, name, 1);
+  set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
+           static_cast<cl_int>(log2_exact(segs.pes)), sample_off, samples, segs.rects, fp.offsets,
+           fp.pixels);
+  return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs));
+}
+
+cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
+                                 const ResampleTables& tables, const VoxelBuffer& voxels, int order,
+                                 DeviceFootprints& fp) {
+  check_tables(segs, tables, voxels);
+  if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
+    throw ArgumentError("footprints", "PE count differs from the segments'");
+  const std::string name = "simdvol_resample_local";
+  cl::Kernel k = stage_kernel(device, name, order);
+  set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
+           static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
+           tables.channel_stride, segs.rects, fp.offsets, fp.pixels);
+  return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs));
+}
+
+}  // namespace simdvol

@@ -1,0 +1,91 @@
+// The resample and local stages on the device (kernels/resample.cl,
+// kernels/local.cl); references in local.hpp.
+//
+// Inputs: the segments of a (balanced) matching on the device (CSR, int32
+// offsets), the classified voxel cells (stages.hpp) and the view. Outputs:
+// the samples in segment order (resample; for tests and per-stage timing)
+// and the footprints of the per-segment composites (local, or the fused
+// resample + local, the frame path).
+//
+// Decomposition: one work-item per segment (the work-items of a group are
+// consecutive segments of one PE, similar rays), local size kSegmentWgs.
+// Stencil voxels are read from their owner's cell through a per-axis address
+// table (see resample.cl). Every enqueue_* validates first, enqueues without
+// waiting and returns the kernel's profiling event; buffers must outlive the
+// queue's work.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "simdvol/device.hpp"
+#include "simdvol/local.hpp"
+#include "simdvol/match.hpp"
+#include "simdvol/stages.hpp"
+#include "simdvol/view.hpp"
+
+namespace simdvol {
+
+/// Work-items per work-group of the per-segment kernels.
+inline constexpr std::size_t kSegmentWgs = 64;
+
+/// A matching's segments on the device.
+struct LocalSegments {
+  int64_t pes = 0;                  ///< P (a power of two)
+  int64_t count = 0;                ///< number of segments
+  cl::Buffer segments;              ///< sv_segment[count]
+  cl::Buffer seg_offset;            ///< cl_int[P + 1]
+  cl::Buffer rects;                 ///< sv_rect[P]
+  std::vector<sv_rect> host_rects;  ///< the same rectangles on the host (footprint sizes)
+};
+/// Uploads m's segments, offsets and rectangles (blocking). ArgumentError if
+/// P is not a power of two or the counts exceed int32.
+LocalSegments upload_segments(Device& device, const Matching& m);
+
+/// sample_offsets(m) (int32) on the device, for enqueue_resample/enqueue_local.
+cl::Buffer upload_sample_offsets(Device& device, const Matching& m);
+
+/// The view and the per-axis address table of resample.cl for one voxel
+/// layout.
+struct ResampleTables {
+  Dims3 dims{0, 0, 0};
+  int64_t pes = 0;
+  cl::Buffer view;   ///< one sv_view
+  cl::Buffer table;  ///< cl_int[nx + ny + nz]
+  cl_int channel_stride = 0;
+};
+/// ArgumentError if the voxel buffer exceeds int32 float indexing or `view`
+/// was made for other dims.
+ResampleTables make_resample_tables(Device& device, const VoxelLayout& layout,
+                                    const ViewGeometry& view);
+/// The host table (for tests): float index of channel 0 of voxel g is
+/// t[gx] + t[nx + gy] + t[nx + ny + gz]; `channel_stride` receives cs.
+std::vector<cl_int> resample_address_table(const VoxelLayout& layout, cl_int* channel_stride);
+
+/// Footprint buffers for rectangles `rects` (rect_offset = prefix of w * h).
+struct DeviceFootprints {
+  std::vector<int64_t> rect_offset;  ///< P + 1 on the host
+  cl::Buffer offsets;                ///< cl_int[P] on the device
+  cl::Buffer pixels;                 ///< cl_float4[rect_offset[P]] (at least one element)
+  int64_t size() const { return rect_offset.empty() ? 0 : rect_offset.back(); }
+};
+DeviceFootprints make_footprints(Device& device, const std::vector<sv_rect>& rects);
+/// Zero-fills the footprints.
+cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp);
+/// Reads the footprints back (blocking) as local.hpp's Footprints.
+Footprints read_footprints(Device& device, const DeviceFootprints& fp);
+
+/// Resamples every sample of `segs` into `samples` (cl_float4, at
+/// sample_offsets(m).back() elements at least), in segment order.
+cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
+                           const ResampleTables& tables, const VoxelBuffer& voxels, int order,
+                           const cl::Buffer& samples);
+/// Composites the samples of each segment into the footprints (zeroed first).
+cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
+                        const cl::Buffer& samples, DeviceFootprints& fp);
+/// Fused resample + local: the same footprints, samples never stored.
+cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
+                                 const ResampleTables& tables, const VoxelBuffer& voxels, int order,
+                                 DeviceFootprints& fp);
+
+}  // namespace simdvol

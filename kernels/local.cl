@@ -1,0 +1,86 @@
+/* local.cl — local (sub-ray) compositing on the PE array (thesis 7.3): each
+ * PE composites its samples of each segment front to back with over in
+ * premultiplied colour,
+ *   acc = over(acc, s):  C' = C'_acc + (1 - a_acc) C'_s,  a = a_acc + (1 - a_acc) a_s
+ * (host/core/composite.cpp: composite_direct), giving one (C', a) per
+ * segment, written into the PE's footprint: PE p's rectangle rects[p] =
+ * {i0, j0, w, h}, pixel (i, j) at rect_off[p] + (j - j0) * w + (i - i0). The
+ * footprints must be zeroed first (simdvol_zero4): pixels without a segment
+ * stay 0. An empty segment writes 0.
+ *
+ * One work-item per segment (1-D range over the segments, explicit local
+ * size). A segment's PE is found by a binary search of log2(P) steps in the
+ * CSR offsets seg_off[P + 1] (the same number of steps for every work-item).
+ *
+ *   simdvol_local           from the resample stage's samples (sample_off[s]
+ *                           = first sample of segment s).
+ *   simdvol_resample_local  fused with resample.cl (when it precedes this
+ *                           file in the program): samples are never stored.
+ */
+#ifndef SIMDVOL_COMMON_CL
+#include "common.cl"
+#endif
+
+#pragma OPENCL FP_CONTRACT OFF
+
+/* Largest p with seg_off[p] <= s: the PE of segment s (P = 2^log2p). */
+SV_FN int sv_pe_of_segment(__global const int* seg_off, const int log2p, const int s) {
+  int p = 0;
+  for (int b = log2p - 1; b >= 0; --b) {
+    const int c = p | (1 << b);
+    p = seg_off[c] <= s ? c : p;
+  }
+  return p;
+}
+
+SV_FN float4 sv_over(const float4 acc, const float4 s) {
+  const float t = 1.0f - acc.w;
+  return (float4)(acc.x + t * s.x, acc.y + t * s.y, acc.z + t * s.z, acc.w + t * s.w);
+}
+
+SV_FN int sv_footprint_index(__global const sv_rect* rects, __global const int* rect_off, int p,
+                             sv_segment g) {
+  const sv_rect r = rects[p];
+  return rect_off[p] + (g.j - r.j0) * r.w + (g.i - r.i0);
+}
+
+__kernel void simdvol_local(__global const sv_segment* segs, const int nseg,
+                            __global const int* seg_off, const int log2p,
+                            __global const int* sample_off, __global const float4* samples,
+                            __global const sv_rect* rects, __global const int* rect_off,
+                            __global float4* foot) {
+  const int s = (int)get_global_id(0);
+  if (s >= nseg) return;
+  const sv_segment g = segs[s];
+  const int p = sv_pe_of_segment(seg_off, log2p, s);
+  __global const float4* in = samples + sample_off[s];
+  float4 acc = (float4)(0.0f);
+  for (int k = g.k0; k < g.k1; ++k) acc = sv_over(acc, *in++);
+  foot[sv_footprint_index(rects, rect_off, p, g)] = acc;
+}
+
+#ifdef SIMDVOL_RESAMPLE_CL
+__kernel void simdvol_resample_local(__global const sv_segment* segs, const int nseg,
+                                     __global const int* seg_off, const int log2p,
+                                     __global const sv_view* view, __global const int* table,
+                                     __global const float* vox, const int cs,
+                                     __global const sv_rect* rects, __global const int* rect_off,
+                                     __global float4* foot) {
+  const int s = (int)get_global_id(0);
+  if (s >= nseg) return;
+  const sv_segment g = segs[s];
+  const int p = sv_pe_of_segment(seg_off, log2p, s);
+  const int4 dims = (int4)(view->dims[0], view->dims[1], view->dims[2], 0);
+  long X0 = sv_pos(view, 0, g.i, g.j, g.k0), X1 = sv_pos(view, 1, g.i, g.j, g.k0),
+       X2 = sv_pos(view, 2, g.i, g.j, g.k0);
+  const long s0 = view->step[0][2], s1 = view->step[1][2], s2 = view->step[2][2];
+  float4 acc = (float4)(0.0f);
+  for (int k = g.k0; k < g.k1; ++k) {
+    acc = sv_over(acc, sv_sample(X0, X1, X2, dims, table, vox, cs));
+    X0 += s0;
+    X1 += s1;
+    X2 += s2;
+  }
+  foot[sv_footprint_index(rects, rect_off, p, g)] = acc;
+}
+#endif

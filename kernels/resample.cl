@@ -1,0 +1,155 @@
+/* resample.cl — the resample stage on the PE array (thesis 5.6.3–5.6.4):
+ * every sample of every segment by Aitken/Neville interpolation of order
+ * ORDER (0..3), exactly as host/core/resample.cpp's resample_rgba: nested
+ * stencils, Neville in insertion order, x then y then z, indices clamped into
+ * the volume, the same float expressions (no contraction into FMA).
+ *
+ * Voxels are read from the classified voxel cells (stages.hpp): the stencil
+ * voxel at global g (clamped) is read from the cell of the PE that owns it,
+ * the resampling PE's own or a neighbour's (an X-Net read). The k-d split
+ * makes the owner separable per axis (owner = bits_x[gx] | bits_y[gy] |
+ * bits_z[gz], local position g - origin per axis), so the float index of
+ * channel 0 of voxel g is
+ *   addr[gx] + addr[nx + gy] + addr[nx + ny + gz]
+ * with one table of nx + ny + nz ints the host builds (owner bits times the
+ * PE block size plus the local coordinate times its stride); channel c is at
+ * + c * cs (cs = the plane stride of planar cells, 1 for interleaved float4).
+ *
+ * Denominators: Neville divides by x_k - x_i, which is +-1, +-2 or +-3 (its
+ * sign given by the stencil's direction). For +-1 and +-2 the kernel
+ * multiplies by the exact reciprocal (bit-identical to the division); for
+ * +-3 it divides.
+ *
+ * Kernels here:
+ *   simdvol_resample   one work-item per segment: its samples, in order, to
+ *                      out[sample_off[s] ...] (float4 premultiplied RGBA).
+ *   simdvol_zero4      zero-fills n float4 (footprints before the local stage).
+ * local.cl adds the local compositing kernels (and, with this file, the fused
+ * resample + local kernel).
+ */
+#ifndef SIMDVOL_COMMON_CL
+#include "common.cl"
+#endif
+#define SIMDVOL_RESAMPLE_CL
+
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifndef ORDER
+#define ORDER 1
+#endif
+#define SV_M (ORDER + 1)
+
+/* Stencil of the low side (t <= 1/2), relative to f, in insertion order; the
+ * high side is 1 - these (resample.cpp: stencil()). */
+#define SV_LOWPOS(e) ((e) == 0 ? 0 : (e) == 1 ? 1 : (e) == 2 ? -1 : 2)
+
+/* One axis of a sample: float index contribution and x - x_e per stencil
+ * position, and the stencil's side. */
+SV_FN void sv_axis(long X, int n, __global const int* table, int* addr, float* d, int* low) {
+  const int f = (int)(X >> SV_FRAC_BITS);
+  const float t = (float)(uint)(X & 0xFFFFFFFFL) * (1.0f / 4294967296.0f);
+  const int lo = t <= 0.5f;
+  *low = lo;
+#pragma unroll
+  for (int e = 0; e < SV_M; ++e) {
+    const int p = lo ? SV_LOWPOS(e) : 1 - SV_LOWPOS(e);
+    addr[e] = table[clamp(f + p, 0, n - 1)];
+    d[e] = (float)(-p) + t;
+  }
+}
+
+/* Neville in insertion order on R rows at once (resample.cpp:
+ * neville_rows): q[i * R + r] holds f_i of row r; on exit q[r] = P_{0..ORDER}. */
+SV_FN void sv_neville(float* q, const int R, const float* d, const int low) {
+#pragma unroll
+  for (int k = 1; k <= ORDER; ++k) {
+#pragma unroll
+    for (int i = k - 1; i >= 0; --i) {
+      const int c = SV_LOWPOS(k) - SV_LOWPOS(i); /* x_k - x_i on the low side */
+      const float di = d[i], dk = d[k];
+      if (c == 3 || c == -3) {
+        const float den = low ? (float)c : (float)(-c);
+#pragma unroll
+        for (int r = 0; r < R; ++r) q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) / den;
+      } else {
+        const float rc = low ? 1.0f / (float)c : -1.0f / (float)c; /* exact: c = +-1, +-2 */
+#pragma unroll
+        for (int r = 0; r < R; ++r) q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) * rc;
+      }
+    }
+  }
+}
+
+/* The sample at fixed-point position (X0, X1, X2) (inside the volume). */
+SV_FN float4 sv_sample(long X0, long X1, long X2, int4 dims, __global const int* table,
+                       __global const float* vox, int cs) {
+  int ax[SV_M], ay[SV_M], az[SV_M];
+  float dx[SV_M], dy[SV_M], dz[SV_M];
+  int lx, ly, lz;
+  sv_axis(X0, dims.x, table, ax, dx, &lx);
+  sv_axis(X1, dims.y, table + dims.x, ay, dy, &ly);
+  sv_axis(X2, dims.z, table + dims.x + dims.y, az, dz, &lz);
+  /* v[a * R + ch * M * M + c * M + b], R = 4 * M * M */
+  float v[SV_M * 4 * SV_M * SV_M];
+  const int R = 4 * SV_M * SV_M;
+#pragma unroll
+  for (int c = 0; c < SV_M; ++c)
+#pragma unroll
+    for (int b = 0; b < SV_M; ++b) {
+      const int row = ay[b] + az[c];
+#pragma unroll
+      for (int a = 0; a < SV_M; ++a) {
+        const int o = row + ax[a];
+#pragma unroll
+        for (int ch = 0; ch < 4; ++ch) v[a * R + ch * SV_M * SV_M + c * SV_M + b] = vox[o + ch * cs];
+      }
+    }
+  sv_neville(v, R, dx, lx); /* v[ch * M * M + c * M + b] along x */
+  float w[SV_M * 4 * SV_M]; /* w[b * 4M + ch * M + c] */
+#pragma unroll
+  for (int ch = 0; ch < 4; ++ch)
+#pragma unroll
+    for (int c = 0; c < SV_M; ++c)
+#pragma unroll
+      for (int b = 0; b < SV_M; ++b)
+        w[b * 4 * SV_M + ch * SV_M + c] = v[ch * SV_M * SV_M + c * SV_M + b];
+  sv_neville(w, 4 * SV_M, dy, ly); /* w[ch * M + c] along y */
+  float u[SV_M * 4];               /* u[c * 4 + ch] */
+#pragma unroll
+  for (int ch = 0; ch < 4; ++ch)
+#pragma unroll
+    for (int c = 0; c < SV_M; ++c) u[c * 4 + ch] = w[ch * SV_M + c];
+  sv_neville(u, 4, dz, lz);
+  return (float4)(u[0], u[1], u[2], u[3]);
+}
+
+/* Position of sample k of ray (i, j), per axis. */
+SV_FN long sv_pos(__global const sv_view* v, int a, int i, int j, int k) {
+  return v->origin[a] + (long)i * v->step[a][0] + (long)j * v->step[a][1] +
+         (long)k * v->step[a][2];
+}
+
+__kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
+                               __global const int* sample_off, __global const sv_view* view,
+                               __global const int* table, __global const float* vox, const int cs,
+                               __global float4* out) {
+  const int s = (int)get_global_id(0);
+  if (s >= nseg) return;
+  const sv_segment g = segs[s];
+  const int4 dims = (int4)(view->dims[0], view->dims[1], view->dims[2], 0);
+  long X0 = sv_pos(view, 0, g.i, g.j, g.k0), X1 = sv_pos(view, 1, g.i, g.j, g.k0),
+       X2 = sv_pos(view, 2, g.i, g.j, g.k0);
+  const long s0 = view->step[0][2], s1 = view->step[1][2], s2 = view->step[2][2];
+  __global float4* o = out + sample_off[s];
+  for (int k = g.k0; k < g.k1; ++k) {
+    *o++ = sv_sample(X0, X1, X2, dims, table, vox, cs);
+    X0 += s0;
+    X1 += s1;
+    X2 += s2;
+  }
+}
+
+__kernel void simdvol_zero4(__global float4* p, const int n) {
+  const int q = (int)get_global_id(0);
+  if (q < n) p[q] = (float4)(0.0f);
+}

@@ -1,0 +1,182 @@
+// The resample and local stages on the device against their references
+// (local.hpp): samples, footprints (separate and fused kernels) and the
+// depth-order composite of the footprints against the serial renderer, for
+// orders 0-3, several views, P from 1 to 8192, odd dims, balanced matchings.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "simdvol/local_cl.hpp"
+#include "simdvol/render.hpp"
+#include "stage_testing.hpp"
+
+using namespace simdvol;
+using simdvol::testing::test_device;
+
+namespace {
+
+std::vector<Rgba> random_voxels(const Dims3& d, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<Rgba> v(static_cast<std::size_t>(d[0] * d[1] * d[2]));
+  for (Rgba& x : v) {
+    x.a = u(rng) * 0.25f;
+    x.r = x.a * u(rng);
+    x.g = x.a * u(rng);
+    x.b = x.a * u(rng);
+  }
+  return v;
+}
+
+float max_diff(const std::vector<Rgba>& a, const std::vector<Rgba>& b) {
+  EXPECT_EQ(a.size(), b.size());
+  float m = 0;
+  for (std::size_t n = 0; n < std::min(a.size(), b.size()); ++n)
+    m = std::max({m, std::fabs(a[n].r - b[n].r), std::fabs(a[n].g - b[n].g),
+                  std::fabs(a[n].b - b[n].b), std::fabs(a[n].a - b[n].a)});
+  return m;
+}
+
+struct Fixture {
+  Dims3 dims;
+  Volume vol;
+  std::vector<Rgba> voxels;
+  Fixture(Dims3 d, unsigned seed)
+      : dims(d), vol(d, VoxelType::f32), voxels(random_voxels(d, seed)) {}
+};
+
+// Runs both device paths for one (view, P, order) and checks them.
+void check_case(Device& dev, const Fixture& fx, const ViewGeometry& view, int64_t pes, int order,
+                bool balanced, const Image* reference_intermediate) {
+  SCOPED_TRACE("P " + std::to_string(pes) + " order " + std::to_string(order) +
+               (balanced ? " balanced" : ""));
+  const KdSplit split = kd_split(fx.dims, pes);
+  Matching m = match_reference(view, split);
+  if (balanced) m = balance_reference(m, view, split);
+  const VoxelLayout L = make_voxel_layout(make_cell_layout(fx.dims, pes, 1));
+  VoxelBuffer vb(dev, L);
+  vb.write(dev, voxels_to_cells(fx.voxels, L));
+
+  const LocalSegments segs = upload_segments(dev, m);
+  const ResampleTables tables = make_resample_tables(dev, L, view);
+  const cl::Buffer soff = upload_sample_offsets(dev, m);
+  const int64_t nsamples = sample_offsets(m).back();
+  cl::Buffer samples =
+      dev.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(std::max<int64_t>(nsamples, 1)) * 16,
+                 nullptr, "samples");
+  DeviceFootprints fp = make_footprints(dev, m.rects);
+  DeviceFootprints fused = make_footprints(dev, m.rects);
+  enqueue_zero_footprints(dev, fp);
+  enqueue_zero_footprints(dev, fused);
+  enqueue_resample(dev, segs, soff, tables, vb, order, samples);
+  enqueue_local(dev, segs, soff, samples, fp);
+  enqueue_resample_local(dev, segs, tables, vb, order, fused);
+  dev.finish();
+
+  std::vector<Rgba> got(static_cast<std::size_t>(nsamples));
+  if (nsamples > 0)
+    cl_check(dev.queue().enqueueReadBuffer(samples, CL_TRUE, 0, got.size() * 16, got.data()),
+             "read samples");
+  const std::vector<Rgba> want = resample_reference(m, fx.voxels, fx.dims, view, order);
+  EXPECT_LE(max_diff(got, want), 1e-5f);
+
+  const Footprints ref =
+      footprints_reference(m, local_reference(m, fx.voxels, fx.dims, view, order));
+  const Footprints a = read_footprints(dev, fp), b = read_footprints(dev, fused);
+  EXPECT_EQ(a.rect_offset, ref.rect_offset);
+  EXPECT_LE(max_diff(a.pixels, ref.pixels), 1e-5f);
+  EXPECT_LE(max_diff(b.pixels, ref.pixels), 1e-5f);
+  // Pixels without a segment are 0 (the references' footprints say where).
+  for (std::size_t n = 0; n < ref.pixels.size(); ++n)
+    if (ref.pixels[n].a == 0 && ref.pixels[n].r == 0) {
+      EXPECT_EQ(b.pixels[n].a, 0.0f);
+    }
+  if (reference_intermediate) {
+    const Image im = composite_footprints(m, b, view.width(), view.height());
+    EXPECT_LE(max_abs_diff(im, *reference_intermediate), 1e-5f);
+  }
+}
+
+}  // namespace
+
+TEST(LocalCl, AddressTableMatchesTheVoxelLayout) {
+  for (const Dims3 dims : {Dims3{37, 29, 23}, Dims3{16, 16, 16}})
+    for (int64_t pes : {int64_t(1), int64_t(8), int64_t(512), int64_t(8192)}) {
+      const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, pes, 1));
+      cl_int cs = 0;
+      const std::vector<cl_int> t = resample_address_table(L, &cs);
+      ASSERT_EQ(t.size(), static_cast<std::size_t>(dims[0] + dims[1] + dims[2]));
+      EXPECT_EQ(cs, L.stride);  // planar cells
+      for (int64_t z = 0; z < dims[2]; ++z)
+        for (int64_t y = 0; y < dims[1]; ++y)
+          for (int64_t x = 0; x < dims[0]; ++x) {
+            const int64_t p = L.cells.split.owner({x, y, z});
+            const Dims3 o = L.cells.split.cell_origin(p);
+            // planar: channel 0 of position e of PE p at p * 4 * stride + e
+            const int64_t e = L.index(0, x - o[0], y - o[1], z - o[2]);
+            ASSERT_EQ(t[x] + t[dims[0] + y] + t[dims[0] + dims[1] + z], p * 4 * L.stride + e);
+          }
+    }
+}
+
+TEST(LocalCl, DeviceEqualsReferenceAcrossViewsOrdersAndPes) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  const Fixture fx({37, 29, 23}, 3);
+  struct V {
+    ViewAngles a;
+    Sampling s;
+  };
+  const V views[] = {{{0, 0, 0}, Sampling::voxel},
+                     {{0, 30, 0}, Sampling::voxel},
+                     {{45, 45, 0}, Sampling::pixel},
+                     {{-23.5, 71.25, 133.0}, Sampling::voxel}};
+  for (const V& v : views) {
+    const ViewGeometry view = make_view(fx.vol, v.a, 48, 40, v.s);
+    for (int order = 0; order <= 3; ++order) {
+      RenderOptions opt;
+      opt.view = v.a, opt.width = 48, opt.height = 40, opt.sampling = v.s, opt.order = order;
+      Image inter;
+      render_classified(fx.voxels, fx.vol, view, opt, nullptr, &inter);
+      for (int64_t pes : {int64_t(1), int64_t(8), int64_t(64), int64_t(512), int64_t(8192)})
+        check_case(*dp, fx, view, pes, order, pes >= 64, &inter);
+    }
+  }
+}
+
+TEST(LocalCl, EveryPowerOfTwoPeCount) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  const Fixture fx({21, 17, 13}, 8);
+  const ViewGeometry view = make_view(fx.vol, {30, 60, 10}, 32, 32, Sampling::voxel);
+  RenderOptions opt;
+  opt.view = {30, 60, 10}, opt.width = 32, opt.height = 32, opt.order = 1;
+  Image inter;
+  render_classified(fx.voxels, fx.vol, view, opt, nullptr, &inter);
+  for (int64_t pes = 1; pes <= 8192; pes *= 2) check_case(*dp, fx, view, pes, 1, true, &inter);
+}
+
+TEST(LocalCl, RejectsMismatchedInputs) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Fixture fx({9, 8, 7}, 1);
+  const ViewGeometry view = make_view(fx.vol, {}, 8, 8, Sampling::voxel);
+  const Matching m = match_reference(view, kd_split(fx.dims, 8));
+  const VoxelLayout L8 = make_voxel_layout(make_cell_layout(fx.dims, 8, 1));
+  const VoxelLayout L4 = make_voxel_layout(make_cell_layout(fx.dims, 4, 1));
+  VoxelBuffer v4(dev, L4);
+  const LocalSegments segs = upload_segments(dev, m);
+  const ResampleTables t8 = make_resample_tables(dev, L8, view);
+  DeviceFootprints fp = make_footprints(dev, m.rects);
+  EXPECT_THROW(enqueue_resample_local(dev, segs, t8, v4, 1, fp), ArgumentError);
+  const ResampleTables t4 = make_resample_tables(dev, L4, view);
+  EXPECT_THROW(enqueue_resample_local(dev, segs, t4, v4, 1, fp), ArgumentError);
+  VoxelBuffer v8(dev, L8);
+  EXPECT_THROW(enqueue_resample_local(dev, segs, t8, v8, 4, fp), ArgumentError);
+  const Volume other({9, 8, 6}, VoxelType::f32);
+  EXPECT_THROW(make_resample_tables(dev, L8, make_view(other, {}, 8, 8, Sampling::voxel)),
+               ArgumentError);
+  DeviceFootprints fp4 = make_footprints(dev, std::vector<sv_rect>(4));
+  EXPECT_THROW(enqueue_resample_local(dev, segs, t8, v8, 1, fp4), ArgumentError);
+}
