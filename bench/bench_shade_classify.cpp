@@ -163,10 +163,14 @@ int main(int argc, char** argv) {
     const std::size_t n = vol.voxel_count();
     cl::Buffer flat_vol = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(float),
                                      const_cast<float*>(vol.data().data()), "flat volume");
-    cl::Buffer flat_shade = dev.buffer(CL_MEM_READ_WRITE, n * 16, nullptr, "flat shading");
     cl::Buffer flat_rgba = dev.buffer(CL_MEM_READ_WRITE, n * 16, nullptr, "flat rgba");
-    // The flat kernels: simdvol_classify on a flat float4 array, and the
-    // fused flat kernel of the shade+classify program.
+    // Flat variants: with one PE the voxel cells are the flat volume (planar),
+    // so "flat classify" is the classify kernel on a 1-PE voxel buffer; the
+    // flat fused kernel reads the flat volume itself (clamped neighbours).
+    PeArray one(dev, pe_grid(1));
+    CellBuffer cells1 = one.layout(vol, 1);
+    const VoxelLayout L1 = make_voxel_layout(cells1.layout());
+    VoxelBuffer shading1(dev, L1), rgba1(dev, L1);
     const Defines defs = classify_defines(cp);
     cl::Buffer cbuf = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof cp,
                                  const_cast<sv_classify_params*>(&cp), "classify parameters");
@@ -176,16 +180,12 @@ int main(int argc, char** argv) {
                                   std::string(kernel_file("classify.cl"));
     cl::Program fused_prog = dev.build(fused_src);
     cl::Kernel k_flat_fused(fused_prog, "simdvol_shade_classify_flat");
-    cl::Kernel k_flat_cls = dev.kernel("classify", "simdvol_classify", defs);
     const cl_int4 dims{{static_cast<cl_int>(vol.nx()), static_cast<cl_int>(vol.ny()),
                         static_cast<cl_int>(vol.nz()), 0}};
     set_args(k_flat_fused, "flat fused", flat_vol, flat_rgba, dims, sbuf, cbuf);
-    set_args(k_flat_cls, "flat classify", flat_shade, flat_rgba, static_cast<cl_long>(n), cbuf);
     const std::size_t lx = std::min<std::size_t>(64, round_up(vol.nx(), 8));
     const cl::NDRange flat3(vol.nx(), vol.ny(), vol.nz()), flat3_local(lx, 256 / lx, 1);
-    // Flat shading input for the flat classify: the PE-major shading gathered.
-    enqueue_shade(dev, cells, sp, shading);
-    enqueue_gather_voxels(dev, shading, flat_shade);
+    enqueue_shade(dev, cells1, sp, shading1);
     dev.finish();
     std::printf("set-up (layout, buffers, builds): %.0f ms; layout kernel %.2f ms\n", ms_since(t0),
                 event_ns(e_layout) * 1e-6);
@@ -199,7 +199,7 @@ int main(int argc, char** argv) {
       std::function<std::vector<cl::Event>()> run;
     };
     std::vector<Variant> variants = {
-        {"shade", cells_bytes + vox_bytes,
+        {"shade (rows)", cells_bytes + vox_bytes,
          [&] { return std::vector{enqueue_shade(dev, cells, sp, shading)}; }},
         {"classify", 2 * vox_bytes,
          [&] { return std::vector{enqueue_classify(dev, shading, cp, rgba)}; }},
@@ -210,11 +210,10 @@ int main(int argc, char** argv) {
          }},
         {"shade+classify fused", cells_bytes + vox_bytes,
          [&] { return std::vector{enqueue_shade_classify(dev, cells, sp, cp, rgba)}; }},
-        {"flat classify", 2 * flat4,
-         [&] {
-           return std::vector{
-               dev.run(k_flat_cls, "flat classify", cl::NDRange(n), cl::NDRange(256))};
-         }},
+        {"flat classify (1 PE)", 2 * flat4,
+         [&] { return std::vector{enqueue_classify(dev, shading1, cp, rgba1)}; }},
+        {"flat shade (1 PE)", 4.0 * voxels + flat4,
+         [&] { return std::vector{enqueue_shade(dev, cells1, sp, shading1)}; }},
         {"flat shade+classify fused", 4.0 * voxels + flat4,
          [&] { return std::vector{dev.run(k_flat_fused, "flat fused", flat3, flat3_local)}; }},
     };
@@ -223,9 +222,10 @@ int main(int argc, char** argv) {
                             return std::vector{
                                 enqueue_shade(dev, cells, sp, shading, ShadeKernel::voxel)};
                           }});
-      variants.push_back(
-          {"shade (row loop)", cells_bytes + vox_bytes,
-           [&] { return std::vector{enqueue_shade(dev, cells, sp, shading, ShadeKernel::rows)}; }});
+      variants.push_back({"shade (3-D range)", cells_bytes + vox_bytes, [&] {
+                            return std::vector{
+                                enqueue_shade(dev, cells, sp, shading, ShadeKernel::range3d)};
+                          }});
     }
     std::vector<const char*> wgs = {"256"};
     if (sweep) wgs = {"64", "256", "1024"};
@@ -291,7 +291,7 @@ int main(int argc, char** argv) {
                     wgs[w], d, wall, voxels / (d * 1e-3) / 1e9, gbs, 100.0 * gbs / triad, ratio);
         if (std::strcmp(wgs[w], "256") == 0) {
           if (variants[i].name == "classify") pe_cls = d;
-          if (variants[i].name == "flat classify") flat_cls = d;
+          if (variants[i].name == "flat classify (1 PE)") flat_cls = d;
           if (variants[i].name == "shade+classify fused") pe_fused = d;
           if (variants[i].name == "flat shade+classify fused") flat_fused = d;
         }

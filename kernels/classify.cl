@@ -3,14 +3,17 @@
  * RGBA. The mathematics is that of host/core/classify.cpp (see its comment),
  * written again here in float.
  *
- * Input: the shade stage's voxel cells (kernels/shade.cl): float4
- * (Id, Is, |g|, v) per interior voxel, PE-major, vstride float4s per PE.
- * Output: voxel cells of the same shape, float4 premultiplied
- * (a' C_r, a' C_g, a' C_b, a') per interior voxel. Classification is
- * per voxel and the blocks are contiguous, so the kernel runs over the whole
- * buffer, pes * vstride elements, one work-item per element (a 1-D range,
- * local size WGS): the PE-major layout costs nothing here (the block tails
- * are classified too; gathers skip them).
+ * Input: the shade stage's voxel cells (kernels/shade.cl): (Id, Is, |g|, v)
+ * per interior voxel, PE-major, planar per PE block (vstride floats per
+ * plane). Output: voxel cells of the same shape holding the premultiplied
+ * (a' C_r, a' C_g, a' C_b, a') per interior voxel. Classification is per
+ * voxel and the blocks are contiguous, so the kernel runs over every
+ * position: a 2-D range (position in a plane, PE) = (vstride rounded up to
+ * the local size, pes), one work-item per position, consecutive work-items
+ * on consecutive positions of one PE (the block tails are classified too;
+ * gathers skip them). With one PE the buffer is the flat volume: the
+ * benchmark's "flat" classify is this kernel on a 1-PE buffer, which is
+ * why PE-major / flat comes out at 1.0 for classify.
  *
  * Compile-time specialisation (all optional; without them the kernel reads
  * the counts from the parameters and works for every classifier, slower):
@@ -68,19 +71,66 @@
 #define SV_NK_BLUE_OF(cp) ((cp)->blue.count)
 #endif
 
+/* Vectorisable ln and exp (kept identical in shade.cl and classify.cl; the
+ * guard lets both files form one program). PoCL 3.1's pow() and log() are
+ * calls that stop its loop vectoriser (pow() ran ~100x slower than this), and
+ * exp() vectorised only in some contexts; these are plain float arithmetic.
+ * sv_log: x = m 2^e, m in [sqrt(1/2), sqrt(2)), ln m = 2 atanh(s) with
+ * s = (m - 1)/(m + 1), |s| < 0.1716, series to s^9 (truncation < 1e-9), ln 2
+ * in two parts; for normal finite x > 0. sv_exp: x = k ln 2 + r,
+ * |r| <= ln(2)/2, Taylor series to r^7 (truncation < 1e-8 relative), times
+ * 2^k from the exponent bits; 0 below -87.3, +inf above 88. Both within a
+ * few ulp. */
+#ifndef SV_VMATH
+#define SV_VMATH
+SV_FN float sv_log(float x) {
+  const int ix = as_int(x);
+  int e = ((ix >> 23) & 0xff) - 127;
+  float m = as_float((ix & 0x007fffff) | 0x3f800000);
+  const int big = m > 1.41421356f;
+  m = big ? 0.5f * m : m;
+  e = big ? e + 1 : e;
+  const float s = (m - 1.0f) / (m + 1.0f);
+  const float s2 = s * s;
+  const float p =
+      s * (2.0f + s2 * (0.666666667f + s2 * (0.4f + s2 * (0.285714286f + s2 * 0.222222222f))));
+  const float fe = (float)e;
+  return fe * 0.693145751953125f + (fe * 1.42860682e-6f + p);
+}
+SV_FN float sv_exp(float x) {
+  const float xc = fmin(fmax(x, -87.3f), 88.0f);
+  const float kf = floor(xc * 1.44269504f + 0.5f);
+  const float r = (xc - kf * 0.693145751953125f) - kf * 1.42860682e-6f;
+  const float p =
+      1.0f +
+      r * (1.0f +
+           r * (0.5f +
+                r * (0.166666667f +
+                     r * (0.0416666667f +
+                          r * (0.00833333333f + r * (0.00138888889f + r * 0.000198412698f))))));
+  const float y = p * as_float(((int)kf + 127) << 23);
+  return x < -87.3f ? 0.0f : (x > 88.0f ? INFINITY : y);
+}
+#endif /* SV_VMATH */
+
 /* Ramp r(v) with n points: y_0 at or below x_0 (and for NaN), y_last at or
- * above x_last, else linear on the segment of the last x_k <= v. */
+ * above x_last, else linear on the segment of the last x_k <= v. The search
+ * is a fully unrolled run of compares and selects (bound SV_MAX_KNOTS, the
+ * guard k < n - 1 folds away when n is a compile-time constant). */
 SV_FN float sv_ramp_eval(__constant const sv_ramp* r, const int n, float v) {
   if (n <= 0) return 1.0f;
   const float x0 = r->x[0], y0 = r->y[0];
   if (n == 1) return y0;
   float xa = x0, ya = y0, xb = r->x[1], yb = r->y[1];
-  for (int k = 1; k < n - 1; ++k) {
-    const bool in = r->x[k] <= v;
-    xa = in ? r->x[k] : xa;
-    ya = in ? r->y[k] : ya;
-    xb = in ? r->x[k + 1] : xb;
-    yb = in ? r->y[k + 1] : yb;
+#pragma unroll
+  for (int k = 1; k < SV_MAX_KNOTS - 1; ++k) {
+    if (k < n - 1) {
+      const int in = r->x[k] <= v;
+      xa = in ? r->x[k] : xa;
+      ya = in ? r->y[k] : ya;
+      xb = in ? r->x[k + 1] : xb;
+      yb = in ? r->y[k + 1] : yb;
+    }
   }
   const float t = (v - xa) / (xb - xa);
   float y = ya + t * (yb - ya);
@@ -90,92 +140,118 @@ SV_FN float sv_ramp_eval(__constant const sv_ramp* r, const int n, float v) {
 }
 
 /* Material mixture of the (at most two) materials bracketing I; returns
- * alpha, *col = premultiplied material colour. */
+ * alpha, (*cr, *cg, *cb) = premultiplied material colour. */
 SV_FN float sv_mixture(__constant const sv_classify_params* cp, const int n, float v,
-                       float3* col) {
-  __constant const sv_material* m = cp->materials;
+                       float* cr, float* cg, float* cb) {
+  __constant const sv_materials* m = &cp->materials;
   float I = v;
   if (cp->relative) I = cp->range_scale > 0.0f ? (v - cp->range_min) * cp->range_scale : 0.0f;
-  /* i = last material with mean_i <= I, j = i + 1 (for mean_0 < I < mean_last). */
+  /* i = last material with mean_i <= I, j = i + 1 (for mean_0 < I < mean_last):
+   * unrolled compares and selects (see sv_ramp_eval). */
   const int j0 = n > 1 ? 1 : 0;
-  float mi = m[0].mean, hi = m[0].half_inv_var, li = m[0].log_sigma;
-  float ai = m[0].opacity, ri = m[0].r, gi = m[0].g, bi = m[0].b;
-  float mj = m[j0].mean, hj = m[j0].half_inv_var, lj = m[j0].log_sigma;
-  float aj = m[j0].opacity, rj = m[j0].r, gj = m[j0].g, bj = m[j0].b;
-  for (int k = 1; k < n - 1; ++k) {
-    const bool in = m[k].mean <= I;
-    mi = in ? m[k].mean : mi;
-    hi = in ? m[k].half_inv_var : hi;
-    li = in ? m[k].log_sigma : li;
-    ai = in ? m[k].opacity : ai;
-    ri = in ? m[k].r : ri;
-    gi = in ? m[k].g : gi;
-    bi = in ? m[k].b : bi;
-    mj = in ? m[k + 1].mean : mj;
-    hj = in ? m[k + 1].half_inv_var : hj;
-    lj = in ? m[k + 1].log_sigma : lj;
-    aj = in ? m[k + 1].opacity : aj;
-    rj = in ? m[k + 1].r : rj;
-    gj = in ? m[k + 1].g : gj;
-    bj = in ? m[k + 1].b : bj;
+  float mi = m->mean[0], hi = m->half_inv_var[0], li = m->log_sigma[0];
+  float ai = m->opacity[0], ri = m->r[0], gi = m->g[0], bi = m->b[0];
+  float mj = m->mean[j0], hj = m->half_inv_var[j0], lj = m->log_sigma[j0];
+  float aj = m->opacity[j0], rj = m->r[j0], gj = m->g[j0], bj = m->b[j0];
+#pragma unroll
+  for (int k = 1; k < SV_MAX_MATERIALS - 1; ++k) {
+    if (k < n - 1) {
+      const int in = m->mean[k] <= I;
+      mi = in ? m->mean[k] : mi;
+      hi = in ? m->half_inv_var[k] : hi;
+      li = in ? m->log_sigma[k] : li;
+      ai = in ? m->opacity[k] : ai;
+      ri = in ? m->r[k] : ri;
+      gi = in ? m->g[k] : gi;
+      bi = in ? m->b[k] : bi;
+      mj = in ? m->mean[k + 1] : mj;
+      hj = in ? m->half_inv_var[k + 1] : hj;
+      lj = in ? m->log_sigma[k + 1] : lj;
+      aj = in ? m->opacity[k + 1] : aj;
+      rj = in ? m->r[k + 1] : rj;
+      gj = in ? m->g[k + 1] : gj;
+      bj = in ? m->b[k + 1] : bj;
+    }
   }
   /* p_i = 1 / (1 + exp(L_j - L_i)), L_m = -(I - mean_m)^2 / (2 sigma_m^2) - ln sigma_m. */
   const float di = I - mi, dj = I - mj;
   const float dl = (di * di * hi + li) - (dj * dj * hj + lj);
-  float pi = 1.0f / (1.0f + exp(dl));
+  float pi = 1.0f / (1.0f + sv_exp(dl));
   /* Pure first / last material outside the means. */
-  const bool first = I <= m[0].mean;
-  const bool last = I >= m[n - 1].mean;
+  const int first = I <= m->mean[0];
+  const int last = I >= m->mean[n - 1];
   pi = (first || last) ? 1.0f : pi;
-  ai = first ? m[0].opacity : last ? m[n - 1].opacity : ai;
-  ri = first ? m[0].r : last ? m[n - 1].r : ri;
-  gi = first ? m[0].g : last ? m[n - 1].g : gi;
-  bi = first ? m[0].b : last ? m[n - 1].b : bi;
+  ai = first ? m->opacity[0] : last ? m->opacity[n - 1] : ai;
+  ri = first ? m->r[0] : last ? m->r[n - 1] : ri;
+  gi = first ? m->g[0] : last ? m->g[n - 1] : gi;
+  bi = first ? m->b[0] : last ? m->b[n - 1] : bi;
   const float pj = 1.0f - pi;
   const float wi = pi * ai, wj = pj * aj;
-  *col = (float3)(wi * ri + wj * rj, wi * gi + wj * gj, wi * bi + wj * bj);
+  *cr = wi * ri + wj * rj;
+  *cg = wi * gi + wj * gj;
+  *cb = wi * bi + wj * bj;
   return wi + wj;
 }
 
 /* Transfer function: alpha = density(v) * gradient(|g|), colour alpha * c(v). */
-SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float gmag,
-                        float3* col) {
+SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float gmag, float* cr,
+                        float* cg, float* cb) {
   const float a = sv_ramp_eval(&cp->density, SV_NK_DENSITY_OF(cp), v) *
                   sv_ramp_eval(&cp->gradient, SV_NK_GRADIENT_OF(cp), gmag);
-  *col = (float3)(a * sv_ramp_eval(&cp->red, SV_NK_RED_OF(cp), v),
-                  a * sv_ramp_eval(&cp->green, SV_NK_GREEN_OF(cp), v),
-                  a * sv_ramp_eval(&cp->blue, SV_NK_BLUE_OF(cp), v));
+  *cr = a * sv_ramp_eval(&cp->red, SV_NK_RED_OF(cp), v);
+  *cg = a * sv_ramp_eval(&cp->green, SV_NK_GREEN_OF(cp), v);
+  *cb = a * sv_ramp_eval(&cp->blue, SV_NK_BLUE_OF(cp), v);
   return a;
 }
 
-/* One voxel: s = (Id, Is, |g|, v) -> premultiplied RGBA. */
-SV_FN float4 sv_classify_voxel(__constant const sv_classify_params* cp, float4 s) {
-  const float v = s.w;
-  float3 col;
-  float a = SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER ? sv_transfer(cp, v, s.z, &col)
-                                                   : sv_mixture(cp, SV_NMAT_OF(cp), v, &col);
-  /* a' = 1 - (1 - a)^step, as -expm1(step * log1p(-a)) (accurate for small a). */
-  const float a1 = cp->step_is_one ? a : -expm1(cp->opacity_step * log1p(-a));
-  const float3 c = fmin((float3)(1.0f), col / a * s.x + s.y);
-  const float4 rgba = (float4)(a1 * c, a1);
-  /* a <= 0 or NaN (a NaN voxel is transparent). */
-  return (a > 0.0f && !isnan(v)) ? rgba : (float4)(0.0f);
+
+/* One voxel: (Id, Is, |g|, v) -> premultiplied RGBA in r, g, b, a. */
+SV_FN void sv_classify_voxel(__constant const sv_classify_params* cp, float id, float is,
+                             float gmag, float v, float* r, float* g, float* b, float* alpha) {
+  float cr, cg, cb;
+  const float a = SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER ? sv_transfer(cp, v, gmag, &cr, &cg, &cb)
+                                                         : sv_mixture(cp, SV_NMAT_OF(cp), v, &cr,
+                                                                      &cg, &cb);
+  /* a' = 1 - (1 - a)^step = 1 - exp(step ln(1 - a)); (1 - a) is 0 or >= 2^-24. */
+#ifdef SV_STEP_ONE
+  const float a1 = a;
+#else
+  const float om = 1.0f - a;
+  const float a1 =
+      cp->step_is_one ? a : (om < FLT_MIN ? 1.0f : 1.0f - sv_exp(cp->opacity_step * sv_log(om)));
+#endif
+  const int ok = a > 0.0f && !isnan(v); /* else transparent (0, 0, 0, 0) */
+  const float inv = 1.0f / a;
+  *r = ok ? a1 * fmin(1.0f, cr * inv * id + is) : 0.0f;
+  *g = ok ? a1 * fmin(1.0f, cg * inv * id + is) : 0.0f;
+  *b = ok ? a1 * fmin(1.0f, cb * inv * id + is) : 0.0f;
+  *alpha = ok ? a1 : 0.0f;
 }
 
-/* simdvol_classify: see the file comment. n = number of elements
- * (pes * vstride). */
-__kernel void simdvol_classify(__global const float4* restrict shading,
-                               __global float4* restrict out, long n,
+/* simdvol_classify: see the file comment. 2-D range (element of a plane,
+ * PE) = (vstride rounded up to the local size, pes). */
+__kernel void simdvol_classify(__global const float* restrict shading,
+                               __global float* restrict out, int vstride, int pes,
                                __constant const sv_classify_params* cp) {
-  const size_t gid = get_global_id(0);
-  if (gid >= (size_t)n) return;
-  out[gid] = sv_classify_voxel(cp, shading[gid]);
+  const int e = (int)get_global_id(0);
+  const int p = (int)get_global_id(1);
+  if (e >= vstride || p >= pes) return;
+  const size_t base = (size_t)p * 4 * (size_t)vstride + (size_t)e;
+  __global const float* s = shading + base;
+  __global float* o = out + base;
+  float r, g, b, a;
+  sv_classify_voxel(cp, s[0], s[vstride], s[2 * vstride], s[3 * vstride], &r, &g, &b, &a);
+  o[0] = r;
+  o[vstride] = g;
+  o[2 * vstride] = b;
+  o[3 * vstride] = a;
 }
 
 /* simdvol_gather_voxels: the in-volume voxels of voxel cells to a flat
- * array (x fastest). Same 3-D range and local size as simdvol_shade. */
-__kernel void simdvol_gather_voxels(__global const float4* restrict voxels,
-                                    __global float4* restrict flat,
+ * array of four floats per voxel (x fastest). Same 3-D range and local size
+ * as simdvol_shade. */
+__kernel void simdvol_gather_voxels(__global const float* restrict voxels,
+                                    __global float* restrict flat,
                                     __global const int4* restrict origins, int4 dims, int4 cell,
                                     int pes, int vstride) {
   const int lx = (int)get_global_id(0);
@@ -185,8 +261,13 @@ __kernel void simdvol_gather_voxels(__global const float4* restrict voxels,
   const int4 o = origins[p];
   const int x = o.x + lx, y = o.y + row % cell.y, z = o.z + row / cell.y;
   if (x >= dims.x || y >= dims.y || z >= dims.z) return;
-  flat[sv_flat_index(dims, x, y, z)] =
-      voxels[(size_t)p * (size_t)vstride + (size_t)row * (size_t)cell.x + (size_t)lx];
+  __global const float* s =
+      voxels + (size_t)p * 4 * (size_t)vstride + (size_t)row * (size_t)cell.x + (size_t)lx;
+  __global float* d = flat + 4 * sv_flat_index(dims, x, y, z);
+  d[0] = s[0];
+  d[1] = s[vstride];
+  d[2] = s[2 * vstride];
+  d[3] = s[3 * vstride];
 }
 
 #ifdef SIMDVOL_SHADE_CL
@@ -194,7 +275,7 @@ __kernel void simdvol_gather_voxels(__global const float4* restrict voxels,
  * and arguments as simdvol_shade (kernels/shade.cl), output as
  * simdvol_classify. Equals running the two stages (the same float code). */
 __kernel void simdvol_shade_classify(__global const float* restrict cells,
-                                     __global float4* restrict out,
+                                     __global float* restrict out,
                                      __global const int4* restrict origins, int4 dims, int4 cell,
                                      int4 block, int pes, int vstride,
                                      __constant const sv_shade_params* sp,
@@ -203,27 +284,34 @@ __kernel void simdvol_shade_classify(__global const float* restrict cells,
   const int row = (int)get_global_id(1);
   const int p = (int)get_global_id(2);
   const int rows = cell.y * cell.z;
-  if (p >= pes || row >= rows) return;
+  if (p >= pes) return;
   const int cvox = rows * cell.x;
-  __global float4* dst = out + (size_t)p * (size_t)vstride;
-  if (row == 0 && lx < vstride - cvox) dst[cvox + lx] = (float4)(0.0f);
-  if (lx >= cell.x) return;
+  __global float* blk = out + (size_t)p * 4 * (size_t)vstride;
+  /* The tail (< 16 per plane; the group has >= 16 work-items per PE, see
+   * cell_range in host/cl/voxel_ranges.hpp), without a loop: a loop would
+   * stop PoCL vectorising. */
+  const int t = row * (int)get_global_size(0) + lx;
+  if (t < vstride - cvox) sv_store4(blk, vstride, cvox + t, 0.0f, 0.0f, 0.0f, 0.0f);
+  if (lx >= cell.x || row >= rows) return;
   const int ly = row % cell.y;
   const int lz = row / cell.y;
   const int4 o = origins[p];
   __global const float* c =
       cells + sv_block_start(block, p) + sv_block_offset(cell, block, lx, ly, lz);
-  const float3 idx = (float3)((float)(o.x + lx), (float)(o.y + ly), (float)(o.z + lz));
-  const float4 s = sv_shade_voxel(sp, c, block.x, block.x * block.y, idx);
-  dst[(size_t)row * (size_t)cell.x + (size_t)lx] = sv_classify_voxel(cp, s);
+  float id, is, mag, r, g, b, a;
+  sv_shade_voxel(sp, c, block.x, block.x * block.y, (float)(o.x + lx), (float)(o.y + ly),
+                 (float)(o.z + lz), &id, &is, &mag);
+  sv_classify_voxel(cp, id, is, mag, c[0], &r, &g, &b, &a);
+  sv_store4(blk, vstride, row * cell.x + lx, r, g, b, a);
 }
 
 /* simdvol_shade_classify_flat: the same on the flat volume (x fastest), one
  * work-item per voxel over the 3-D range (nx, ny, nz), neighbours clamped;
- * out is flat too. Not a pipeline stage: kept to measure what the PE-major
- * layout costs (bench/bench_shade_classify.cpp). */
+ * out is flat and planar too (plane c at c * nx * ny * nz). Not a pipeline
+ * stage: kept to measure what the PE-major layout costs
+ * (bench/bench_shade_classify.cpp). */
 __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
-                                          __global float4* restrict out, int4 dims,
+                                          __global float* restrict out, int4 dims,
                                           __constant const sv_shade_params* sp,
                                           __constant const sv_classify_params* cp) {
   const int x = (int)get_global_id(0);
@@ -231,17 +319,35 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
   const int z = (int)get_global_id(2);
   if (x >= dims.x || y >= dims.y || z >= dims.z) return;
   const size_t i = sv_flat_index(dims, x, y, z);
-  const size_t sy = (size_t)dims.x, sz = (size_t)dims.x * (size_t)dims.y;
-  float3 g;
-  g.x = 0.5f * (volume[i + (x + 1 < dims.x)] - volume[i - (x > 0)]) * sp->grad_scale[0];
-  g.y = 0.5f * (volume[i + (y + 1 < dims.y ? sy : 0)] - volume[i - (y > 0 ? sy : 0)]) *
-        sp->grad_scale[1];
-  g.z = 0.5f * (volume[i + (z + 1 < dims.z ? sz : 0)] - volume[i - (z > 0 ? sz : 0)]) *
-        sp->grad_scale[2];
-  float g2 = dot(g, g);
-  if (!isfinite(g2)) g2 = 0.0f;
-  const float mag = sqrt(g2);
-  const float2 l = sv_phong(sp, g, g2, mag, (float3)((float)x, (float)y, (float)z));
-  out[i] = sv_classify_voxel(cp, (float4)(l.x, l.y, mag, volume[i]));
+  const int sy = dims.x, sz = dims.x * dims.y;
+  const float v = volume[i];
+  const float gx =
+      0.5f * (volume[i + (x + 1 < dims.x)] - volume[i - (x > 0)]) * sp->grad_scale[0];
+  const float gy = 0.5f *
+                   (volume[i + (y + 1 < dims.y ? sy : 0)] - volume[i - (y > 0 ? sy : 0)]) *
+                   sp->grad_scale[1];
+  const float gz = 0.5f *
+                   (volume[i + (z + 1 < dims.z ? sz : 0)] - volume[i - (z > 0 ? sz : 0)]) *
+                   sp->grad_scale[2];
+  float g2 = gx * gx + gy * gy + gz * gz;
+  g2 = isfinite(g2) ? g2 : 0.0f;
+  const float m = sqrt(g2);
+  const float d = sp->depth_dir[0] * x + sp->depth_dir[1] * y + sp->depth_dir[2] * z +
+                  sp->depth_offset;
+  const float cue = 1.0f / (sp->k1 + sp->k2 * d);
+  const float nl = fabs(gx * sp->light[0] + gy * sp->light[1] + gz * sp->light[2]) / m;
+  const float nh = fabs(gx * sp->halfway[0] + gy * sp->halfway[1] + gz * sp->halfway[2]) / m;
+  const int surface = g2 >= 1e-12f;
+  float id = surface ? sp->ka + cue * sp->kd * nl : sp->ka;
+  float is = surface ? cue * sp->ks * sv_pow(nh, sp->shininess) : 0.0f;
+  id = sp->enabled ? id : 1.0f;
+  is = sp->enabled ? is : 0.0f;
+  float r, g, b, a;
+  sv_classify_voxel(cp, id, is, m, v, &r, &g, &b, &a);
+  const size_t n = (size_t)dims.x * (size_t)dims.y * (size_t)dims.z;
+  out[i] = r;
+  out[n + i] = g;
+  out[2 * n + i] = b;
+  out[3 * n + i] = a;
 }
 #endif /* SIMDVOL_SHADE_CL */

@@ -109,12 +109,17 @@ typedef struct sv_shade_params {
   sv_i32 enabled;  /* 0: Id = 1, Is = 0 */
 } sv_shade_params;
 
-typedef struct sv_material {
-  float mean, sigma;
-  float half_inv_var; /* 1 / (2 sigma^2) */
-  float log_sigma;    /* ln(sigma) */
-  float r, g, b, opacity;
-} sv_material;
+/* The materials of a mixture, one array per quantity (not an array of
+ * structs: PoCL's SLP pass packs loads of adjacent struct fields into vector
+ * instructions, which then stop its vectorisation across work-items). */
+typedef struct sv_materials {
+  float mean[SV_MAX_MATERIALS];
+  float sigma[SV_MAX_MATERIALS];
+  float half_inv_var[SV_MAX_MATERIALS]; /* 1 / (2 sigma^2) */
+  float log_sigma[SV_MAX_MATERIALS];    /* ln(sigma) */
+  float r[SV_MAX_MATERIALS], g[SV_MAX_MATERIALS], b[SV_MAX_MATERIALS];
+  float opacity[SV_MAX_MATERIALS];
+} sv_materials;
 
 /* Piecewise-linear ramp: count points (x ascending); count 0 is the constant 1. */
 typedef struct sv_ramp {
@@ -133,7 +138,7 @@ typedef struct sv_classify_params {
   float range_scale; /* 1 / (max - min), or 0 when max == min (then I = 0) */
   float opacity_step;
   float pad;
-  sv_material materials[SV_MAX_MATERIALS];
+  sv_materials materials;
   sv_ramp density, gradient, red, green, blue;
 } sv_classify_params;
 

@@ -8,10 +8,9 @@
 
 namespace simdvol {
 
-static_assert(sizeof(sv_material) == 8 * 4, "sv_material must be plain floats");
+static_assert(sizeof(sv_materials) == 8 * SV_MAX_MATERIALS * 4, "sv_materials must be plain");
 static_assert(sizeof(sv_ramp) == 4 * 4 + 2 * SV_MAX_KNOTS * 4, "sv_ramp must be plain");
-static_assert(sizeof(sv_classify_params) ==
-                  8 * 4 + SV_MAX_MATERIALS * sizeof(sv_material) + 5 * sizeof(sv_ramp),
+static_assert(sizeof(sv_classify_params) == 8 * 4 + sizeof(sv_materials) + 5 * sizeof(sv_ramp),
               "sv_classify_params must be plain floats/ints");
 
 namespace {
@@ -84,20 +83,20 @@ sv_classify_params classify_params(const Classifier& c, const ValueRange& range,
                                           " materials; the OpenCL classify kernel takes at most " +
                                           std::to_string(SV_MAX_MATERIALS));
   p.material_count = static_cast<sv_i32>(m.size());
+  sv_materials& s = p.materials;
   for (std::size_t i = 0; i < m.size(); ++i) {
-    sv_material& s = p.materials[i];
-    s.mean = m[i].mean;
-    s.sigma = m[i].sigma;
+    s.mean[i] = m[i].mean;
+    s.sigma[i] = m[i].sigma;
     const double sigma = m[i].sigma;
-    s.half_inv_var = static_cast<float>(1.0 / (2.0 * sigma * sigma));
-    s.log_sigma = static_cast<float>(std::log(sigma));
-    if (!std::isfinite(s.half_inv_var))
+    s.half_inv_var[i] = static_cast<float>(1.0 / (2.0 * sigma * sigma));
+    s.log_sigma[i] = static_cast<float>(std::log(sigma));
+    if (!std::isfinite(s.half_inv_var[i]))
       throw ArgumentError("classifier.material '" + m[i].name + "'",
                           "sigma is too small for float arithmetic");
-    s.r = m[i].r;
-    s.g = m[i].g;
-    s.b = m[i].b;
-    s.opacity = m[i].opacity;
+    s.r[i] = m[i].r;
+    s.g[i] = m[i].g;
+    s.b[i] = m[i].b;
+    s.opacity[i] = m[i].opacity;
   }
   p.relative = c.mixture.relative ? 1 : 0;
   if (c.mixture.relative) {
@@ -112,6 +111,7 @@ sv_classify_params classify_params(const Classifier& c, const ValueRange& range,
 
 Defines classify_defines(const sv_classify_params& p) {
   Defines d{{"SV_KIND", std::to_string(p.kind)}};
+  if (p.step_is_one) d.emplace_back("SV_STEP_ONE", "1");
   if (p.kind == SV_CLASSIFY_MIXTURE) {
     d.emplace_back("SV_NMAT", std::to_string(p.material_count));
   } else {
@@ -132,9 +132,11 @@ cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
   cl::Buffer pbuf = params_buffer(device, &params, sizeof params, "classify parameters");
   const std::string name = "simdvol_classify";
   cl::Kernel k = device.kernel("classify", name, classify_defines(params));
-  const std::size_t n = static_cast<std::size_t>(out.layout().elements());
-  set_args(k, name, shading.buffer(), out.buffer(), static_cast<cl_long>(n), pbuf);
-  return device.run(k, name, cl::NDRange(n), cl::NDRange(detail::voxel_wgs()));
+  const VoxelLayout& V = out.layout();
+  set_args(k, name, shading.buffer(), out.buffer(), static_cast<cl_int>(V.stride),
+           static_cast<cl_int>(V.pes()), pbuf);
+  const detail::PlaneRange r = detail::plane_range(V);
+  return device.run(k, name, r.global, r.local);
 }
 
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,

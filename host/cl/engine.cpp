@@ -2,6 +2,7 @@
 #include "simdvol/engine.hpp"
 
 #include <chrono>
+#include <optional>
 
 #include "simdvol/layout.hpp"
 #include "simdvol/stages.hpp"
@@ -35,12 +36,13 @@ Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
   cl::Event e_layout, e_shade, e_classify, e_gather;
   CellBuffer cells = array.layout(vol, 1, LayoutKernel::rows, &e_layout);
   VoxelBuffer rgba(device, vl);
+  std::optional<VoxelBuffer> shading;  // alive until the gather has finished
   if (fused) {
     e_classify = enqueue_shade_classify(device, cells, sp, cp, rgba);
   } else {
-    VoxelBuffer shading(device, vl);
-    e_shade = enqueue_shade(device, cells, sp, shading);
-    e_classify = enqueue_classify(device, shading, cp, rgba);
+    shading.emplace(device, vl);
+    e_shade = enqueue_shade(device, cells, sp, *shading);
+    e_classify = enqueue_classify(device, *shading, cp, rgba);
   }
   std::vector<Rgba> voxels(vol.voxel_count());
   gather_rgba(device, rgba, voxels.data(), &e_gather);  // blocking

@@ -36,7 +36,7 @@ VoxelLayout make_voxel_layout(const CellLayout& cells) {
   VoxelLayout L;
   L.cells = cells;
   const int64_t n = cells.cell()[0] * cells.cell()[1] * cells.cell()[2];
-  L.stride = (n + 3) / 4 * 4;
+  L.stride = (n + 15) / 16 * 16;
   if (L.stride > INT_MAX) throw ArgumentError("volume", "cell too large for 32-bit kernel indices");
   if (L.stride > std::numeric_limits<int64_t>::max() / 16 / cells.pes())
     throw ArgumentError("volume", "voxel buffer size overflows");
@@ -48,15 +48,29 @@ VoxelBuffer::VoxelBuffer(Device& device, const VoxelLayout& layout) : layout_(la
                           "voxel cell buffer");
 }
 
+// Host elements are (PE, position)-ordered 4-float records; the device
+// buffer is planar per PE block.
 void VoxelBuffer::read_raw(Device& device, void* out) const {
-  cl_check(device.queue().enqueueReadBuffer(buffer_, CL_TRUE, 0,
-                                            static_cast<std::size_t>(layout_.bytes()), out),
+  std::vector<float> planar(static_cast<std::size_t>(layout_.elements()) * 4);
+  cl_check(device.queue().enqueueReadBuffer(
+               buffer_, CL_TRUE, 0, static_cast<std::size_t>(layout_.bytes()), planar.data()),
            "clEnqueueReadBuffer(voxel cells)");
+  float* o = static_cast<float*>(out);
+  const std::size_t st = static_cast<std::size_t>(layout_.stride);
+  for (std::size_t p = 0; p < static_cast<std::size_t>(layout_.pes()); ++p)
+    for (std::size_t c = 0; c < 4; ++c)
+      for (std::size_t e = 0; e < st; ++e) o[(p * st + e) * 4 + c] = planar[(p * 4 + c) * st + e];
 }
 
 void VoxelBuffer::write_raw(Device& device, const void* in) {
-  cl_check(device.queue().enqueueWriteBuffer(buffer_, CL_TRUE, 0,
-                                             static_cast<std::size_t>(layout_.bytes()), in),
+  std::vector<float> planar(static_cast<std::size_t>(layout_.elements()) * 4);
+  const float* i = static_cast<const float*>(in);
+  const std::size_t st = static_cast<std::size_t>(layout_.stride);
+  for (std::size_t p = 0; p < static_cast<std::size_t>(layout_.pes()); ++p)
+    for (std::size_t c = 0; c < 4; ++c)
+      for (std::size_t e = 0; e < st; ++e) planar[(p * 4 + c) * st + e] = i[(p * st + e) * 4 + c];
+  cl_check(device.queue().enqueueWriteBuffer(
+               buffer_, CL_TRUE, 0, static_cast<std::size_t>(layout_.bytes()), planar.data()),
            "clEnqueueWriteBuffer(voxel cells)");
 }
 

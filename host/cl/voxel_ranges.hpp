@@ -9,9 +9,10 @@
 
 namespace simdvol::detail {
 
-/// Work-items per work-group of the per-voxel kernels. 256 measured best
-/// against 64 and 1024 (PoCL 3.1, 2 cores, 256^3 at 8192 and 512 PEs; see
-/// bench/bench_shade_classify.cpp).
+/// Work-items per work-group of the per-voxel kernels. 64, 256 and 1024
+/// measured within noise of each other (PoCL 3.1, 2 cores, 256^3, 8192 PEs;
+/// bench/bench_shade_classify.cpp --sweep); 256 keeps >= 64 groups down to
+/// small volumes. SIMDVOL_VOXEL_WGS overrides it (for benchmarking).
 inline std::size_t voxel_wgs() {
   if (const char* e = std::getenv("SIMDVOL_VOXEL_WGS")) {  // benchmarking knob
     const long v = std::strtol(e, nullptr, 10);
@@ -40,9 +41,27 @@ inline CellRange cell_range(const VoxelLayout& L) {
   const std::size_t pes = static_cast<std::size_t>(L.pes());
   const std::size_t lx =
       std::min<std::size_t>(std::clamp<std::size_t>(pow2_at_least(cx), 8, 64), wg);
-  const std::size_t ly = std::max<std::size_t>(1, std::min(wg / lx, pow2_at_least(rows)));
+  // At least 16 work-items per PE (the kernels zero a plane's tail of up to
+  // 15 floats with one work-item each).
+  const std::size_t ly = std::max<std::size_t>(std::max<std::size_t>(1, 16 / lx),
+                                               std::min(wg / lx, pow2_at_least(rows)));
   const std::size_t lz = std::max<std::size_t>(1, std::min(wg / (lx * ly), pes));
   return {cl::NDRange(round_up(cx, lx), round_up(rows, ly), pes), cl::NDRange(lx, ly, lz)};
+}
+
+/// The 2-D range (position in a plane, PE) of the classify kernel: local
+/// size (L0, L1) with L0 = min(voxel_wgs(), 2^k >= stride), L1 filling the
+/// group with PEs.
+struct PlaneRange {
+  cl::NDRange global, local;
+};
+inline PlaneRange plane_range(const VoxelLayout& L) {
+  const std::size_t wg = voxel_wgs();
+  const std::size_t stride = static_cast<std::size_t>(L.stride);
+  const std::size_t pes = static_cast<std::size_t>(L.pes());
+  const std::size_t l0 = std::min(wg, pow2_at_least(stride));
+  const std::size_t l1 = std::max<std::size_t>(1, std::min(wg / l0, pes));
+  return {cl::NDRange(round_up(stride, l0), pes), cl::NDRange(l0, l1)};
 }
 
 }  // namespace simdvol::detail

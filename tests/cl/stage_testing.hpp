@@ -47,7 +47,7 @@ struct ShadeRun {
   std::vector<ShadeSample> flat;   ///< gathered, x fastest
 };
 inline ShadeRun run_shade(Device& dev, const Volume& vol, const sv_shade_params& sp, int64_t pes,
-                          ShadeKernel variant = ShadeKernel::range3d) {
+                          ShadeKernel variant = ShadeKernel::rows) {
   PeArray array(dev, pe_grid(pes));
   CellBuffer cells = array.layout(vol, 1);
   ShadeRun r{make_voxel_layout(cells.layout()), {}, {}};

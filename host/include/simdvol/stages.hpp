@@ -2,13 +2,20 @@
 // (kernels/classify.cl), their parameter conversion from the reference's
 // types, and the "voxel cells" buffers they produce.
 //
-// Voxel cells. A PE-major buffer of one 16-byte element (four floats) per
-// interior voxel of each PE's cell (no halo): PE p's block starts at element
-// p * stride; interior voxel (lx, ly, lz), 0 <= l < cell, is element
-// (lz * cy + ly) * cx + lx of the block; stride = cx * cy * cz rounded up to a
-// multiple of 4 elements (64 bytes), the tail is zero (shade) or unspecified
+// Voxel cells. A PE-major buffer of four floats per interior voxel of each
+// PE's cell (no halo), stored planar within each PE's block so that the
+// kernels access every quantity at unit stride (PoCL 3.1 vectorises across
+// work-items only code without vector types): PE p's block is the 4 * stride
+// floats from p * 4 * stride; quantity c (0..3) of interior voxel
+// (lx, ly, lz), 0 <= l < cell, is float c * stride + (lz * cy + ly) * cx + lx
+// of the block. stride = cx * cy * cz rounded up to a multiple of 16 (each
+// plane starts on a 64-byte line); the tails are zero (shade) or unspecified
 // (classify). Interior positions past the volume's far faces (padding) hold
-// the result for the edge-replicated value there; gathers skip them.
+// the result for the edge-replicated value there; gathers skip them. With
+// one PE the buffer is the flat volume, planar.
+// On the host, VoxelBuffer::read/write and voxels_to_cells/voxels_from_cells
+// use one 16-byte element per voxel position in (PE, position) order instead
+// (element index = p * stride + position), converting to and from planar.
 //   shade output:    (Id, Is, |g|, v)  diffuse, specular, gradient magnitude
 //                    (as ShadeSample) and the voxel's value
 //   classify output: (a' C_r, a' C_g, a' C_b, a')  premultiplied RGBA (as Rgba)
@@ -38,7 +45,7 @@ namespace simdvol {
 /// Geometry of a voxel-cells buffer (see the file comment).
 struct VoxelLayout {
   CellLayout cells;    ///< the cell geometry it was derived from (its halo is irrelevant here)
-  int64_t stride = 0;  ///< elements per PE block
+  int64_t stride = 0;  ///< voxel positions per PE block (floats per plane)
 
   int64_t pes() const { return cells.pes(); }
   const Dims3& dims() const { return cells.dims(); }
@@ -105,7 +112,8 @@ class VoxelBuffer {
   VoxelBuffer(Device& device, const VoxelLayout& layout);
   const VoxelLayout& layout() const { return layout_; }
   const cl::Buffer& buffer() const { return buffer_; }
-  /// Blocking copy of the whole buffer to the host.
+  /// Blocking copy of the whole buffer to the host, one element per voxel
+  /// position (PE-major; see the file comment).
   template <class T>
   std::vector<T> read(Device& device) const {
     static_assert(sizeof(T) == 16, "voxel cells hold 16-byte elements");
@@ -136,14 +144,14 @@ class VoxelBuffer {
 /// non-finite values.
 sv_shade_params shade_params(const ShadeFrame& frame, const ShadeParams& p);
 
-/// Decomposition of the shade kernel (kernels/shade.cl): range3d (the
-/// default, fastest) or the two alternatives kept for benchmarking.
+/// Decomposition of the shade kernel (kernels/shade.cl, which records the
+/// measurements): rows (the default, fastest measured) or the alternatives.
 enum class ShadeKernel { range3d, voxel, rows };
 
 /// Shades `cells` (halo >= 1, filled by the layout stage) into `out` (a voxel
 /// buffer of the same cells).
 cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_params& params,
-                        VoxelBuffer& out, ShadeKernel variant = ShadeKernel::range3d);
+                        VoxelBuffer& out, ShadeKernel variant = ShadeKernel::rows);
 
 // --------------------------------------------------------------- classify
 
