@@ -5,6 +5,9 @@
 #include <optional>
 
 #include "simdvol/layout.hpp"
+#include "simdvol/local.hpp"
+#include "simdvol/local_cl.hpp"
+#include "simdvol/match.hpp"
 #include "simdvol/stages.hpp"
 
 namespace simdvol {
@@ -12,6 +15,9 @@ namespace simdvol {
 namespace {
 double ms(const cl::Event& e) {
   return static_cast<double>(event_ns(e)) * 1e-6;
+}
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 }  // namespace
 
@@ -44,17 +50,48 @@ Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
     e_shade = enqueue_shade(device, cells, sp, *shading);
     e_classify = enqueue_classify(device, *shading, cp, rgba);
   }
-  std::vector<Rgba> voxels(vol.voxel_count());
-  gather_rgba(device, rgba, voxels.data(), &e_gather);  // blocking
+  if (opt.composite.mode != CompositeMode::direct) {
+    // Adaptive and Monte Carlo compositing: the reference finishes the frame.
+    std::vector<Rgba> voxels(vol.voxel_count());
+    gather_rgba(device, rgba, voxels.data(), &e_gather);  // blocking
+    if (times) {
+      times->layout_ms = ms(e_layout);
+      times->shade_ms = fused ? 0.0 : ms(e_shade);
+      times->classify_ms = ms(e_classify);
+      times->gather_ms = ms(e_gather);
+      times->device_wall_ms = ms_since(t0);
+    }
+    return render_classified(voxels, vol, view, opt, times ? &times->host : nullptr);
+  }
+  // Direct compositing: match, balance, resample + local on the PE array.
+  const KdSplit& split = cl_layout.split;
+  auto tm = std::chrono::steady_clock::now();
+  const Matching matched = match_reference(view, split);
+  const double match_ms = ms_since(tm);
+  tm = std::chrono::steady_clock::now();
+  const Matching m = balance_reference(matched, view, split);
+  const double balance_ms = ms_since(tm);
+  const LocalSegments segs = upload_segments(device, m);
+  const ResampleTables tables = make_resample_tables(device, vl, view);
+  DeviceFootprints fp = make_footprints(device, m.rects);
+  const cl::Event e_zero = enqueue_zero_footprints(device, fp);
+  const cl::Event e_local = enqueue_resample_local(device, segs, tables, rgba, opt.order, fp);
+  const Footprints f = read_footprints(device, fp);  // blocking
   if (times) {
     times->layout_ms = ms(e_layout);
     times->shade_ms = fused ? 0.0 : ms(e_shade);
     times->classify_ms = ms(e_classify);
-    times->gather_ms = ms(e_gather);
-    times->device_wall_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    times->gather_ms = 0.0;
+    times->match_ms = match_ms;
+    times->balance_ms = balance_ms;
+    times->resample_local_ms = ms(e_zero) + ms(e_local);
+    times->device_wall_ms = ms_since(t0);
   }
-  return render_classified(voxels, vol, view, opt, times ? &times->host : nullptr);
+  tm = std::chrono::steady_clock::now();
+  Image im = composite_footprints(m, f, view.width(), view.height());
+  Image out = view.sampling == Sampling::pixel ? std::move(im) : warp_to_output(im, view);
+  if (times) times->composite_ms = ms_since(tm);
+  return out;
 }
 
 }  // namespace simdvol

@@ -6,7 +6,9 @@
 
 #include <random>
 
+#include "simdvol/engine.hpp"
 #include "simdvol/local_cl.hpp"
+#include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 #include "stage_testing.hpp"
 
@@ -179,4 +181,51 @@ TEST(LocalCl, RejectsMismatchedInputs) {
                ArgumentError);
   DeviceFootprints fp4 = make_footprints(dev, std::vector<sv_rect>(4));
   EXPECT_THROW(enqueue_resample_local(dev, segs, t8, v8, 1, fp4), ArgumentError);
+}
+
+// render_opencl (match -> balance -> fused resample + local -> host
+// composite of the footprints -> warp) against render_reference: direct
+// compositing, orders 0-3, views axis/30/45/random, voxel and pixel
+// sampling, P from 1 to 8192. Both classify differently by up to ~1e-6 (see
+// test_classify_cl.cpp); the sub-ray composites re-associate over.
+TEST(RenderOpenClFrame, DirectEqualsReference) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  const Volume vol = shepp_logan(27, 2);  // odd dims
+  const ViewAngles views[] = {{0, 0, 0}, {0, 30, 0}, {45, 45, 0}, {-23.5, 71.25, 133.0}};
+  int n = 0;
+  for (const ViewAngles& a : views)
+    for (int order = 0; order <= 3; ++order)
+      for (Sampling smp : {Sampling::voxel, Sampling::pixel}) {
+        RenderOptions opt;
+        opt.width = 40, opt.height = 36, opt.view = a, opt.order = order, opt.sampling = smp;
+        opt.classifier = classifier_preset("ct");
+        const Image ref = render_reference(vol, opt);
+        for (int64_t pes = 1; pes <= 8192; pes *= (order == 1 ? 2 : 64)) {
+          EngineTimes t;
+          const Image img = render_opencl(*dp, vol, opt, &t, pes, true);
+          EXPECT_LE(max_abs_diff(ref, img), 1e-5f)
+              << "view " << a.theta << "," << a.phi << " order " << order << " P " << pes
+              << (smp == Sampling::pixel ? " pixel" : " voxel");
+          ++n;
+        }
+      }
+  EXPECT_EQ(n, 4 * 2 * (14 + 3 * 3));
+}
+
+TEST(RenderOpenClFrame, AdaptiveAndMonteCarloKeepTheReferencePath) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  const Volume vol = shepp_logan(20, 2);
+  for (CompositeMode mode : {CompositeMode::adaptive, CompositeMode::mc}) {
+    RenderOptions opt;
+    opt.width = opt.height = 32;
+    opt.view = {10, 30, 0};
+    opt.classifier = classifier_preset("ct");
+    opt.composite.mode = mode;
+    opt.composite.samples = 8;
+    const Image ref = render_reference(vol, opt);
+    EngineTimes t;
+    EXPECT_LE(max_abs_diff(ref, render_opencl(*dp, vol, opt, &t, 64, true)), 1e-5f);
+  }
 }

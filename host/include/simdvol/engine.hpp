@@ -1,8 +1,13 @@
 // The OpenCL render engine: the pipeline of thesis figure 1.2 on the PE
-// array. Now: layout -> shade -> classify on the device, then the classified
-// voxels are gathered back and the remaining stages (match, resample,
-// composite, warp) run in the serial reference (render_classified) until
-// their kernels exist.
+// array. Direct compositing: layout -> shade -> classify -> match -> balance
+// -> resample + local (fused) on the device; then (until the binary-swap
+// stage exists) the host composites the per-PE footprints, per pixel the
+// segments' composites in increasing k0 with over (composite_footprints), and
+// warps to the output size (warp_to_output). Match and balance run in their
+// serial references (match_reference, balance_reference) until their device
+// stages are wired in. Adaptive and Monte Carlo compositing keep the earlier
+// path: the classified voxels are gathered back and render_classified does
+// the rest.
 #pragma once
 
 #include <cstdint>
@@ -17,10 +22,14 @@ namespace simdvol {
 /// Per-stage times of one render_opencl call. Device stages: kernel time
 /// from the profiling events (0 when the queue does not profile).
 struct EngineTimes {
-  double layout_ms = 0;       ///< flat volume -> PE-major cells with halo
-  double shade_ms = 0;        ///< 0 when fused
-  double classify_ms = 0;     ///< shade + classify when fused
-  double gather_ms = 0;       ///< classified voxel cells -> flat RGBA
+  double layout_ms = 0;          ///< flat volume -> PE-major cells with halo
+  double shade_ms = 0;           ///< 0 when fused
+  double classify_ms = 0;        ///< shade + classify when fused
+  double gather_ms = 0;          ///< classified voxel cells -> flat RGBA (adaptive/mc only)
+  double match_ms = 0;           ///< matching (host reference time until on the device)
+  double balance_ms = 0;         ///< balancing (host reference time until on the device)
+  double resample_local_ms = 0;  ///< zero footprints + fused resample + local
+  double composite_ms = 0;       ///< host: footprints -> intermediate image (+ warp)
   double device_wall_ms = 0;  ///< host wall time of the device part (allocation, builds, transfers)
   RenderTimes host{};         ///< the stages still run by the reference
 };
