@@ -245,6 +245,55 @@ std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
   return link;
 }
 
+namespace {
+
+// Moves `t` samples across the face between F and B (B the face neighbour
+// along `a` that F's rays pass into): F gives when t > 0, B gives when t < 0;
+// capped by what the giver holds on the linked rays; water-filled. Returns
+// the number moved (same sign as t).
+int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a, int64_t t) {
+  if (t == 0) return 0;
+  const bool front_gives = t > 0;
+  const int64_t want = front_gives ? t : -t;
+  auto len = [&](int64_t s) -> int64_t {
+    const sv_segment& g = front_gives ? m.segments[s] : m.segments[link[s] >> 2];
+    return g.k1 - g.k0;
+  };
+  auto linked = [&](int64_t s) { return link[s] >= 0 && (link[s] & 3) == a; };
+  int64_t cap = 0, maxlen = 0;
+  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
+    if (linked(s)) cap += len(s), maxlen = std::max(maxlen, len(s));
+  const int64_t moved = std::min(cap, want);
+  if (moved == 0) return 0;
+  auto filled = [&](int64_t level) {
+    int64_t sum = 0;
+    for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
+      if (linked(s)) sum += std::min(level, len(s));
+    return sum;
+  };
+  int64_t lo = 1, hi = maxlen;  // smallest level with filled(level) >= moved
+  while (lo < hi) {
+    const int64_t mid = (lo + hi) / 2;
+    if (filled(mid) >= moved)
+      hi = mid;
+    else
+      lo = mid + 1;
+  }
+  int64_t rem = moved - filled(lo - 1);
+  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) {
+    if (!linked(s)) continue;
+    const int64_t l = len(s);
+    int64_t give = std::min(lo - 1, l);
+    if (rem > 0 && l >= lo) ++give, --rem;
+    const int64_t shift = front_gives ? -give : give;
+    m.segments[s].k1 = static_cast<sv_i32>(m.segments[s].k1 + shift);
+    m.segments[link[s] >> 2].k0 = static_cast<sv_i32>(m.segments[link[s] >> 2].k0 + shift);
+  }
+  return front_gives ? moved : -moved;
+}
+
+}  // namespace
+
 Matching balance_reference(const Matching& m0, const ViewGeometry& view, const KdSplit& split,
                            int sweeps) {
   if (sweeps < 0) throw ArgumentError("sweeps", "must be >= 0");
@@ -253,7 +302,6 @@ Matching balance_reference(const Matching& m0, const ViewGeometry& view, const K
   const int64_t pes = split.pes();
   const Dims3 splits{int64_t(1) << split.axis_bits[0], int64_t(1) << split.axis_bits[1],
                      int64_t(1) << split.axis_bits[2]};
-  std::vector<int64_t> rays;  // F's linked segments of the current pair
   for (int sweep = 0; sweep < sweeps; ++sweep)
     for (int a = 0; a < 3; ++a) {
       const int64_t dir = view.grid.step[a][2];
@@ -266,47 +314,9 @@ Matching balance_reference(const Matching& m0, const ViewGeometry& view, const K
           const int64_t q = pe_of_cell_index(split, cp);
           const int64_t F = dir > 0 ? p : q, B = dir > 0 ? q : p;
           const int64_t diff = m.loads[F] - m.loads[B];
-          if (diff >= -1 && diff <= 1) continue;
-          const bool front_gives = diff > 0;
-          rays.clear();
-          int64_t cap = 0, maxlen = 0;
-          for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) {
-            if (link[s] < 0 || (link[s] & 3) != a) continue;
-            rays.push_back(s);
-            const sv_segment& g = front_gives ? m.segments[s] : m.segments[link[s] >> 2];
-            cap += g.k1 - g.k0;
-            maxlen = std::max<int64_t>(maxlen, g.k1 - g.k0);
-          }
-          const int64_t t = std::min(cap, (diff > 0 ? diff : -diff) / 2);
-          if (t <= 0) continue;
-          auto len = [&](int64_t s) -> int64_t {
-            const sv_segment& g = front_gives ? m.segments[s] : m.segments[link[s] >> 2];
-            return g.k1 - g.k0;
-          };
-          auto filled = [&](int64_t level) {
-            int64_t sum = 0;
-            for (int64_t s : rays) sum += std::min(level, len(s));
-            return sum;
-          };
-          int64_t lo = 1, hi = maxlen;  // smallest level with filled(level) >= t
-          while (lo < hi) {
-            const int64_t mid = (lo + hi) / 2;
-            if (filled(mid) >= t)
-              hi = mid;
-            else
-              lo = mid + 1;
-          }
-          int64_t rem = t - filled(lo - 1);
-          for (int64_t s : rays) {
-            const int64_t l = len(s);
-            int64_t give = std::min(lo - 1, l);
-            if (rem > 0 && l >= lo) ++give, --rem;
-            const int64_t shift = front_gives ? -give : give;
-            m.segments[s].k1 = static_cast<sv_i32>(m.segments[s].k1 + shift);
-            m.segments[link[s] >> 2].k0 = static_cast<sv_i32>(m.segments[link[s] >> 2].k0 + shift);
-          }
-          m.loads[F] -= front_gives ? t : -t;
-          m.loads[B] += front_gives ? t : -t;
+          const int64_t moved = transfer(m, link, F, a, diff / 2);  // truncates towards 0
+          m.loads[F] -= moved;
+          m.loads[B] += moved;
         }
     }
   return m;

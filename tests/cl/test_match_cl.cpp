@@ -1,0 +1,107 @@
+// The match and balance stages on the device: equal to the serial references
+// exactly, plus the balancing invariants and the utilisation reached.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <string>
+
+#include "core/match_testing.hpp"
+#include "simdvol/match_cl.hpp"
+#include "stage_testing.hpp"
+
+using namespace simdvol;
+using namespace simdvol::testing;
+
+namespace {
+
+const ViewAngles kViews[] = {{0, 0, 0}, {0, 90, 0}, {0, 45, 0}, {30, 30, 30}};
+
+std::string name(ViewAngles v, int64_t pes) {
+  return "view (" + std::to_string(v.theta) + "," + std::to_string(v.phi) + "," +
+         std::to_string(v.varphi) + ") P=" + std::to_string(pes);
+}
+
+void expect_same(const Matching& a, const Matching& b, const std::string& what) {
+  ASSERT_EQ(a.seg_offset, b.seg_offset) << what;
+  ASSERT_EQ(a.loads, b.loads) << what;
+  ASSERT_EQ(a.segments.size(), b.segments.size()) << what;
+  for (std::size_t s = 0; s < a.segments.size(); ++s) {
+    const sv_segment &x = a.segments[s], &y = b.segments[s];
+    ASSERT_TRUE(x.i == y.i && x.j == y.j && x.k0 == y.k0 && x.k1 == y.k1)
+        << what << " segment " << s;
+  }
+  for (std::size_t p = 0; p < a.rects.size(); ++p) {
+    const sv_rect &x = a.rects[p], &y = b.rects[p];
+    ASSERT_TRUE(x.i0 == y.i0 && x.j0 == y.j0 && x.w == y.w && x.h == y.h) << what << " pe " << p;
+  }
+}
+
+// Runs match (and balance when sweeps >= 0) on the device and checks both
+// against the references.
+void check_device(Device& dev, const ViewGeometry& v, const KdSplit& split, int sweeps,
+                  const std::string& what) {
+  const Matching ref = match_reference(v, split);
+  DeviceMatching dm = enqueue_match(dev, v, split);
+  const Matching got = dm.read(dev);
+  expect_same(got, ref, what + " (match)");
+  if (sweeps < 0) return;
+  enqueue_balance(dev, dm, v, split, sweeps);
+  EXPECT_EQ(dm.read_links(dev), balance_links(ref, v, split)) << what;
+  const Matching bal = dm.read(dev);
+  expect_same(bal, balance_reference(ref, v, split, sweeps), what + " (balance)");
+}
+
+}  // namespace
+
+TEST(MatchCl, TestSplitHelperEqualsKdSplit) {
+  for (const Dims3 d : {Dims3{93, 57, 31}, Dims3{256, 256, 256}, Dims3{5, 300, 7}})
+    for (int64_t pes = 1; pes <= 8192; pes *= 2) {
+      const KdSplit a = kd_split(d, pes), b = split_of(d, pes);
+      EXPECT_EQ(a.bit_axis, b.bit_axis);
+      EXPECT_EQ(a.cell, b.cell);
+      for (int64_t p = 0; p < pes; p += 7) EXPECT_EQ(a.cell_index(p), cell_index_of(b, p));
+    }
+}
+
+TEST(MatchCl, EqualsReferenceFixedViewsAllP) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 dims{93, 57, 31};
+  for (ViewAngles va : kViews) {
+    const ViewGeometry v = geometry(dims, va, 96, 96);
+    for (int64_t pes = 1; pes <= 8192; pes *= 2)
+      check_device(dev, v, kd_split(dims, pes), pes % 8 == 1 || pes >= 256 ? 8 : -1, name(va, pes));
+  }
+}
+
+TEST(MatchCl, EqualsReferenceRandomViews) {
+  SIMDVOL_TEST_DEVICE(dev);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> ang(-360.0, 360.0);
+  const Dims3 dims{23, 17, 13};
+  for (int n = 0; n < 200; ++n) {
+    const ViewAngles va{ang(rng), ang(rng), ang(rng)};
+    const int64_t pes = int64_t(1) << (n % 14);
+    const ViewGeometry v = geometry(dims, va, 40, 32, n % 3 ? Sampling::voxel : Sampling::pixel);
+    check_device(dev, v, kd_split(dims, pes), n % 4 == 0 ? 4 : -1, name(va, pes));
+  }
+}
+
+TEST(MatchCl, BalanceInvariantsOnDevice) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 dims{61, 47, 39};
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<double> ang(-360.0, 360.0);
+  for (int n = 0; n < 8; ++n) {
+    const ViewAngles va = n < 4 ? kViews[n] : ViewAngles{ang(rng), ang(rng), ang(rng)};
+    const ViewGeometry v = geometry(dims, va, 64, 64);
+    for (int64_t pes : {64, 512, 4096}) {
+      const KdSplit split = kd_split(dims, pes);
+      DeviceMatching dm = enqueue_match(dev, v, split);
+      const Matching m = dm.read(dev);
+      enqueue_balance(dev, dm, v, split, 8);
+      const Matching b = dm.read(dev);
+      expect_balanced_invariants(m, b, v, split, name(va, pes));
+      EXPECT_LE(b.max_load(), m.max_load()) << name(va, pes);
+    }
+  }
+}
