@@ -109,9 +109,9 @@ int main(int argc, char** argv) try {
       "%d runs (median)\n\n",
       size, static_cast<long long>(pes), static_cast<long long>(L.cell()[0]),
       static_cast<long long>(L.cell()[1]), static_cast<long long>(L.cell()[2]), order, runs);
-  std::printf("%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s\n", "view",
+  std::printf("%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s\n", "view",
               "samples", "segments", "util", "match", "balance", "resample", "local", "zero",
-              "fused", "ref m+b", "ref r+l", "ref/dev", "Gld/s", "xnet rd", "xnet max");
+              "fused", "fused1", "ref m+b", "ref r+l", "ref/dev", "Gld/s", "xnet rd", "xnet max");
   for (const double phi : views) {
     const ViewAngles angles{0.0, phi, 0.0};
     const ViewGeometry view = make_view(vol, angles, size, size, Sampling::voxel);
@@ -145,14 +145,19 @@ int main(int argc, char** argv) try {
     enqueue_local(device, segs, soff, samples, fp);
     enqueue_resample_local(device, segs, tables, rgba, order, fp);
     device.finish();
-    std::vector<double> t_res, t_loc, t_zero, t_fused;
+    enqueue_resample_local(device, segs, tables, rgba, order, fp, LocalKernel::segment);
+    device.finish();
+    std::vector<double> t_res, t_loc, t_zero, t_fused, t_fused1;
     for (int r = 0; r < runs; ++r) {
       const cl::Event ez = enqueue_zero_footprints(device, fp);
       const cl::Event er = enqueue_resample(device, segs, soff, tables, rgba, order, samples);
       const cl::Event el = enqueue_local(device, segs, soff, samples, fp);
       const cl::Event ez2 = enqueue_zero_footprints(device, fp);
       const cl::Event ef = enqueue_resample_local(device, segs, tables, rgba, order, fp);
+      const cl::Event ef1 =
+          enqueue_resample_local(device, segs, tables, rgba, order, fp, LocalKernel::segment);
       device.finish();
+      t_fused1.push_back(ev_ms(ef1));
       t_zero.push_back(0.5 * (ev_ms(ez) + ev_ms(ez2)));
       t_res.push_back(ev_ms(er));
       t_loc.push_back(ev_ms(el));
@@ -169,18 +174,21 @@ int main(int argc, char** argv) try {
     const double loads = static_cast<double>(nsamples) * M * M * M * 4;
     const double fused = median(t_fused) + median(t_zero);
     std::printf(
-        "%5.0f %9lld %9lld %7.3f | %8s %8s %8.2f %8.2f %8.2f %8.2f | %9.1f %9.1f %9.1f %7.2f | "
+        "%5.0f %9lld %9lld %7.3f | %8s %8s %8.2f %8.2f %8.2f %8.2f %8.2f | %9.1f %9.1f %9.1f %7.2f "
+        "| "
         "%8.3g %8lld\n",
         phi, static_cast<long long>(nsamples), static_cast<long long>(m.segments.size()),
         m.utilisation(), "-", "-", median(t_res), median(t_loc), median(t_zero), median(t_fused),
-        ref_match + ref_balance, ref_rl, reference ? ref_rl / fused : 0.0,
+        median(t_fused1), ref_match + ref_balance, ref_rl, reference ? ref_rl / fused : 0.0,
         loads / (median(t_fused) * 1e6), static_cast<double>(x.total_reads()),
         static_cast<long long>(x.max_voxels()));
   }
   std::printf(
       "\nms from profiling events; match/balance on the device: '-' until wired in (the "
       "reference's time is in 'ref m+b'). ref r+l: serial local_reference (resample + sub-ray "
-      "composite); ref/dev: against fused + zero. Gld/s: gather loads of the fused kernel per "
+      "composite); ref/dev: against fused + zero. fused: 8 segments per work-item in float8 lanes "
+      "(the frame path); fused1: one segment per work-item. Gld/s: gather loads of the fused "
+      "kernel per "
       "second. xnet rd: remote stencil reads in all; xnet max: distinct remote voxels of the "
       "busiest PE.\n");
   return 0;

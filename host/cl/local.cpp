@@ -184,16 +184,18 @@ cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buf
 
 cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
-                                 DeviceFootprints& fp) {
+                                 DeviceFootprints& fp, LocalKernel variant) {
   check_tables(segs, tables, voxels);
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
     throw ArgumentError("footprints", "PE count differs from the segments'");
-  const std::string name = "simdvol_resample_local";
+  const bool v8 = variant == LocalKernel::vector8;
+  const std::string name = v8 ? "simdvol_resample_local_v8" : "simdvol_resample_local";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
            static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
            tables.channel_stride, segs.rects, fp.offsets, fp.pixels);
-  return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs));
+  return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
+                    cl::NDRange(kSegmentWgs));
 }
 
 }  // namespace simdvol

@@ -84,8 +84,12 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                         const cl::Buffer& samples, DeviceFootprints& fp);
 /// Fused resample + local: the same footprints, samples never stored.
+/// Kernel of the fused stage: `vector8` (the default: 8 segments per
+/// work-item in explicit float8 lanes, see local.cl) or `segment` (one
+/// segment per work-item, scalar under PoCL). Same results bit for bit.
+enum class LocalKernel { vector8, segment };
 cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
-                                 DeviceFootprints& fp);
+                                 DeviceFootprints& fp, LocalKernel variant = LocalKernel::vector8);
 
 }  // namespace simdvol
