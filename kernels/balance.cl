@@ -81,9 +81,12 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_r
   const int sa = axis == 0 ? splits.x : (axis == 1 ? splits.y : splits.z);
   int ca = axis == 0 ? c.x : (axis == 1 ? c.y : c.z);
   if ((ca & 1) != par || ca + 1 >= sa) return;
-  if (axis == 0) c.x += 1;
-  else if (axis == 1) c.y += 1;
-  else c.z += 1;
+  if (axis == 0)
+    c.x += 1;
+  else if (axis == 1)
+    c.y += 1;
+  else
+    c.z += 1;
   const int q = sv_cell_pe(pe_of, splits, c.x, c.y, c.z);
   const int F = dir > 0 ? p : q, B = dir > 0 ? q : p;
   const int diff = loads[F] - loads[B];
@@ -92,43 +95,27 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_r
   const int front_gives = t > 0;
   const int want = front_gives ? t : -t;
   const int s0 = seg_offset[F], s1 = seg_offset[F + 1];
-  int cap = 0, maxlen = 0;
+  long cap = 0;
   for (int s = s0; s < s1; ++s) {
     const int l = links[s];
     if (l < 0 || (l & 3) != axis) continue;
-    const int len = sv_give_len(segments, links, s, front_gives);
-    cap += len;
-    maxlen = max(maxlen, len);
+    cap += sv_give_len(segments, links, s, front_gives);
   }
-  const int moved = min(cap, want);
+  const long moved = min(cap, (long)want);
   if (moved == 0) return;
-  int lo = 1, hi = maxlen; /* smallest level with filled(level) >= moved */
-  while (lo < hi) {
-    const int mid = (lo + hi) / 2;
-    int sum = 0;
-    for (int s = s0; s < s1; ++s) {
-      const int l = links[s];
-      if (l < 0 || (l & 3) != axis) continue;
-      sum += min(mid, sv_give_len(segments, links, s, front_gives));
-    }
-    if (sum >= moved)
-      hi = mid;
-    else
-      lo = mid + 1;
-  }
-  int below = 0;
+  /* Proportional shares, then the remainder one by one in order. */
+  long rem = moved;
   for (int s = s0; s < s1; ++s) {
     const int l = links[s];
     if (l < 0 || (l & 3) != axis) continue;
-    below += min(lo - 1, sv_give_len(segments, links, s, front_gives));
+    rem -= moved * sv_give_len(segments, links, s, front_gives) / cap;
   }
-  int rem = moved - below;
   for (int s = s0; s < s1; ++s) {
     const int l = links[s];
     if (l < 0 || (l & 3) != axis) continue;
     const int len = sv_give_len(segments, links, s, front_gives);
-    int give = min(lo - 1, len);
-    if (rem > 0 && len >= lo) {
+    int give = (int)(moved * len / cap);
+    if (rem > 0 && give < len) {
       ++give;
       --rem;
     }
@@ -136,6 +123,6 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_r
     segments[s].k1 += shift;
     segments[l >> 2].k0 += shift;
   }
-  loads[F] -= front_gives ? moved : -moved;
-  loads[B] += front_gives ? moved : -moved;
+  loads[F] -= front_gives ? (int)moved : -(int)moved;
+  loads[B] += front_gives ? (int)moved : -(int)moved;
 }

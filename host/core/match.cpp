@@ -249,7 +249,7 @@ namespace {
 
 // Moves `t` samples across the face between F and B (B the face neighbour
 // along `a` that F's rays pass into): F gives when t > 0, B gives when t < 0;
-// capped by what the giver holds on the linked rays; water-filled. Returns
+// capped by what the giver holds on the linked rays. Returns
 // the number moved (same sign as t).
 int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a, int64_t t) {
   if (t == 0) return 0;
@@ -260,31 +260,22 @@ int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a
     return g.k1 - g.k0;
   };
   auto linked = [&](int64_t s) { return link[s] >= 0 && (link[s] & 3) == a; };
-  int64_t cap = 0, maxlen = 0;
+  int64_t cap = 0;
   for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
-    if (linked(s)) cap += len(s), maxlen = std::max(maxlen, len(s));
+    if (linked(s)) cap += len(s);
   const int64_t moved = std::min(cap, want);
   if (moved == 0) return 0;
-  auto filled = [&](int64_t level) {
-    int64_t sum = 0;
-    for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
-      if (linked(s)) sum += std::min(level, len(s));
-    return sum;
-  };
-  int64_t lo = 1, hi = maxlen;  // smallest level with filled(level) >= moved
-  while (lo < hi) {
-    const int64_t mid = (lo + hi) / 2;
-    if (filled(mid) >= moved)
-      hi = mid;
-    else
-      lo = mid + 1;
-  }
-  int64_t rem = moved - filled(lo - 1);
+  // Proportional shares floor(moved * len / cap) (each <= len, sum <= moved),
+  // then one more sample from each of the first rays (in order) that still
+  // hold one, until `moved` is reached.
+  int64_t rem = moved;
+  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
+    if (linked(s)) rem -= moved * len(s) / cap;
   for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) {
     if (!linked(s)) continue;
     const int64_t l = len(s);
-    int64_t give = std::min(lo - 1, l);
-    if (rem > 0 && l >= lo) ++give, --rem;
+    int64_t give = moved * l / cap;
+    if (rem > 0 && give < l) ++give, --rem;
     const int64_t shift = front_gives ? -give : give;
     m.segments[s].k1 = static_cast<sv_i32>(m.segments[s].k1 + shift);
     m.segments[link[s] >> 2].k0 = static_cast<sv_i32>(m.segments[link[s] >> 2].k0 + shift);

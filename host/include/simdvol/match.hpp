@@ -27,10 +27,11 @@
 // neighbours along a with cell indices (2m + par, 2m + 1 + par). A pair with
 // loads L_F, L_B and d = L_F - L_B transfers t = floor(|d| / 2) samples from
 // the heavier to the lighter PE (capped by what the giver holds on the
-// linked rays), spread by water-filling over the linked rays in F's segment
-// order: the smallest m with sum_r min(m, len_r) >= t is found, each ray gives
-// min(m - 1, len_r), and the remaining samples go one each to the first rays
-// (in order) with len_r >= m. Integer only: the device result is identical.
+// linked rays, cap = sum of len_r), spread over the linked rays in F's
+// segment order: ray r gives floor(t * len_r / cap) samples (len_r = what the
+// giver holds on it), then the remaining samples go one each to the first
+// rays (in order) that still hold one. Integer only: the device result is
+// identical.
 #pragma once
 
 #include <array>

@@ -1,0 +1,136 @@
+// simdvol-bench-match: the match and balance stages on the device (OpenCL
+// profiling events) against the serial references, for the 256^3 volume at
+// 256^2 voxel sampling, and the SIMD utilisation table (mean load / max load)
+// before and after balancing. Only the dims and the view matter, so no voxel
+// data is made.
+//
+//   simdvol-bench-match [--pes N] [--repeat R] [--sweeps S] [--no-table]
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "simdvol/match_cl.hpp"
+
+using namespace simdvol;
+
+namespace {
+
+struct NamedView {
+  const char* name;
+  ViewAngles angles;
+};
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int64_t pes = 8192;
+  int repeat = 5, sweeps = kBalanceSweeps;
+  bool table = true;
+  for (int a = 1; a < argc; ++a) {
+    if (!std::strcmp(argv[a], "--pes") && a + 1 < argc)
+      pes = std::atoll(argv[++a]);
+    else if (!std::strcmp(argv[a], "--repeat") && a + 1 < argc)
+      repeat = std::atoi(argv[++a]);
+    else if (!std::strcmp(argv[a], "--sweeps") && a + 1 < argc)
+      sweeps = std::atoi(argv[++a]);
+    else if (!std::strcmp(argv[a], "--no-table"))
+      table = false;
+    else {
+      std::fprintf(stderr, "usage: %s [--pes N] [--repeat R] [--sweeps S] [--no-table]\n", argv[0]);
+      return 2;
+    }
+  }
+  try {
+    Device dev;
+    std::printf("device: %s (%u compute units)\n", dev.info().name.c_str(),
+                dev.info().compute_units);
+    const Dims3 dims{256, 256, 256};
+    const std::array<double, 3> spacing{1, 1, 1};
+    const NamedView timed[] = {{"0", {0, 0, 0}}, {"30", {0, 30, 0}}, {"45", {0, 45, 0}}};
+    std::printf("\n256^3, 256^2 voxel sampling, %lld PEs, %d balance sweeps, median of %d\n",
+                static_cast<long long>(pes), sweeps, repeat);
+    std::printf("%-5s %9s %8s %8s %8s %9s %9s %9s %9s %8s %8s\n", "view", "segments", "count",
+                "scan", "fill", "match", "links", "rounds", "balance", "ref m", "ref b");
+    const KdSplit split = kd_split(dims, pes);
+    for (const NamedView& nv : timed) {
+      const ViewGeometry v = make_view(dims, spacing, nv.angles, 256, 256, Sampling::voxel);
+      std::vector<double> cnt, scn, fil, lnk, rnd, rm, rb;
+      int64_t segs = 0;
+      for (int r = 0; r < repeat + 1; ++r) {  // the first run builds the kernels
+        DeviceMatching dm = enqueue_match(dev, v, split);
+        enqueue_balance(dev, dm, v, split, sweeps);
+        dev.finish();
+        if (r == 0) continue;
+        cnt.push_back(event_ns(dm.match_events[0].event) * 1e-6);
+        scn.push_back(event_ns(dm.match_events[1].event) * 1e-6);
+        fil.push_back(event_ns(dm.match_events[2].event) * 1e-6);
+        lnk.push_back(event_ns(dm.balance_events[0].event) * 1e-6);
+        std::vector<StageEvent> rounds(dm.balance_events.begin() + 1, dm.balance_events.end());
+        rnd.push_back(events_ns(rounds) * 1e-6);
+        if (r == 1) segs = static_cast<int64_t>(dm.read(dev).segments.size());
+      }
+      for (int r = 0; r < std::max(1, repeat / 2); ++r) {
+        auto t0 = std::chrono::steady_clock::now();
+        const Matching m = match_reference(v, split);
+        rm.push_back(ms_since(t0));
+        t0 = std::chrono::steady_clock::now();
+        const Matching b = balance_reference(m, v, split, sweeps);
+        rb.push_back(ms_since(t0));
+      }
+      const double match = median(cnt) + median(scn) + median(fil);
+      const double bal = median(lnk) + median(rnd);
+      std::printf("%-5s %9lld %8.2f %8.3f %8.2f %9.2f %9.2f %9.2f %9.2f %8.1f %8.1f\n", nv.name,
+                  static_cast<long long>(segs), median(cnt), median(scn), median(fil), match,
+                  median(lnk), median(rnd), bal, median(rm), median(rb));
+    }
+    std::printf(
+        "(ms from profiling events; ref m / ref b: serial match_reference / "
+        "balance_reference, one thread)\n");
+    if (!table) return 0;
+
+    const NamedView views[] = {{"0", {0, 0, 0}},           {"90", {0, 90, 0}},
+                               {"45", {0, 45, 0}},         {"30", {0, 30, 0}},
+                               {"30,30,30", {30, 30, 30}}, {"random", {37.3, 112.9, -61.4}}};
+    std::printf(
+        "\nSIMD utilisation (mean load / max load), before -> after %d sweeps;\n"
+        "active = fraction of PEs with any sample (an upper bound: balancing never\n"
+        "creates segments, and the 258^2 viewing grid clips the rotated volume)\n",
+        sweeps);
+    std::printf("%-9s", "view");
+    for (int64_t p = 512; p <= 8192; p *= 2) std::printf(" %22lld", static_cast<long long>(p));
+    std::printf("\n");
+    for (const NamedView& nv : views) {
+      const ViewGeometry v = make_view(dims, spacing, nv.angles, 256, 256, Sampling::voxel);
+      std::printf("%-9s", nv.name);
+      for (int64_t p = 512; p <= 8192; p *= 2) {
+        const KdSplit s = kd_split(dims, p);
+        DeviceMatching dm = enqueue_match(dev, v, s);
+        const Matching before = dm.read(dev);
+        enqueue_balance(dev, dm, v, s, sweeps);
+        const Matching after = dm.read(dev);
+        int64_t active = 0;
+        for (int64_t l : before.loads) active += l > 0;
+        std::printf("  %.3f->%.3f (%.3f)", before.utilisation(), after.utilisation(),
+                    static_cast<double>(active) / static_cast<double>(p));
+      }
+      std::printf("\n");
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "simdvol-bench-match: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
