@@ -65,29 +65,26 @@ Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
   }
   // Direct compositing: match, balance, resample + local on the PE array.
   const KdSplit& split = cl_layout.split;
-  auto tm = std::chrono::steady_clock::now();
-  const Matching matched = match_reference(view, split);
-  const double match_ms = ms_since(tm);
-  tm = std::chrono::steady_clock::now();
-  const Matching m = balance_reference(matched, view, split);
-  const double balance_ms = ms_since(tm);
-  const LocalSegments segs = upload_segments(device, m);
+  DeviceMatching dm = enqueue_match(device, view, split);
+  enqueue_balance(device, dm, view, split);
+  const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
   const ResampleTables tables = make_resample_tables(device, vl, view);
-  DeviceFootprints fp = make_footprints(device, m.rects);
+  DeviceFootprints fp = make_footprints(device, segs.host_rects);
   const cl::Event e_zero = enqueue_zero_footprints(device, fp);
   const cl::Event e_local = enqueue_resample_local(device, segs, tables, rgba, opt.order, fp);
   const Footprints f = read_footprints(device, fp);  // blocking
+  const Matching m = dm.read(device);
   if (times) {
     times->layout_ms = ms(e_layout);
     times->shade_ms = fused ? 0.0 : ms(e_shade);
     times->classify_ms = ms(e_classify);
     times->gather_ms = 0.0;
-    times->match_ms = match_ms;
-    times->balance_ms = balance_ms;
+    times->match_ms = static_cast<double>(events_ns(dm.match_events)) * 1e-6;
+    times->balance_ms = static_cast<double>(events_ns(dm.balance_events)) * 1e-6;
     times->resample_local_ms = ms(e_zero) + ms(e_local);
     times->device_wall_ms = ms_since(t0);
   }
-  tm = std::chrono::steady_clock::now();
+  const auto tm = std::chrono::steady_clock::now();
   Image im = composite_footprints(m, f, view.width(), view.height());
   Image out = view.sampling == Sampling::pixel ? std::move(im) : warp_to_output(im, view);
   if (times) times->composite_ms = ms_since(tm);

@@ -84,6 +84,25 @@ LocalSegments upload_segments(Device& device, const Matching& m) {
   return s;
 }
 
+LocalSegments device_segments(Device& device, const DeviceMatching& m) {
+  LocalSegments s;
+  s.pes = m.pes;
+  s.segments = m.segments;
+  s.seg_offset = m.seg_offset;
+  s.rects = m.rects;
+  s.host_rects.resize(static_cast<std::size_t>(m.pes));
+  cl_int count = 0;
+  cl_check(device.queue().enqueueReadBuffer(m.seg_offset, CL_FALSE,
+                                            static_cast<std::size_t>(m.pes) * sizeof(cl_int),
+                                            sizeof(cl_int), &count),
+           "clEnqueueReadBuffer(segment count)");
+  cl_check(device.queue().enqueueReadBuffer(
+               m.rects, CL_TRUE, 0, s.host_rects.size() * sizeof(sv_rect), s.host_rects.data()),
+           "clEnqueueReadBuffer(footprint rectangles)");
+  s.count = count;
+  return s;
+}
+
 cl::Buffer upload_sample_offsets(Device& device, const Matching& m) {
   const std::vector<int64_t> off = sample_offsets(m);
   if (off.back() > kInt32Max) throw ArgumentError("matching", "more than 2^31 - 1 samples");

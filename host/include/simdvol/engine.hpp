@@ -3,9 +3,7 @@
 // -> resample + local (fused) on the device; then (until the binary-swap
 // stage exists) the host composites the per-PE footprints, per pixel the
 // segments' composites in increasing k0 with over (composite_footprints), and
-// warps to the output size (warp_to_output). Match and balance run in their
-// serial references (match_reference, balance_reference) until their device
-// stages are wired in. Adaptive and Monte Carlo compositing keep the earlier
+// warps to the output size (warp_to_output). Adaptive and Monte Carlo compositing keep the earlier
 // path: the classified voxels are gathered back and render_classified does
 // the rest.
 #pragma once

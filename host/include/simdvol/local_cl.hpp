@@ -21,6 +21,7 @@
 #include "simdvol/device.hpp"
 #include "simdvol/local.hpp"
 #include "simdvol/match.hpp"
+#include "simdvol/match_cl.hpp"
 #include "simdvol/stages.hpp"
 #include "simdvol/view.hpp"
 
@@ -41,6 +42,11 @@ struct LocalSegments {
 /// Uploads m's segments, offsets and rectangles (blocking). ArgumentError if
 /// P is not a power of two or the counts exceed int32.
 LocalSegments upload_segments(Device& device, const Matching& m);
+
+/// The segments of a device matching (enqueue_match, enqueue_balance) without
+/// copying them: reads back the segment count and the rectangles (blocking;
+/// the footprints' sizes are needed on the host to allocate them).
+LocalSegments device_segments(Device& device, const DeviceMatching& m);
 
 /// sample_offsets(m) (int32) on the device, for enqueue_resample/enqueue_local.
 cl::Buffer upload_sample_offsets(Device& device, const Matching& m);
