@@ -22,22 +22,35 @@ Rgba composite_adaptive(const RaySamples& ray, float threshold) {
 }
 
 Rgba composite_mc(const RaySamples& ray, uint32_t ray_id, const CompositeParams& p) {
+  if (p.samples <= 0) throw ArgumentError("--samples", "must be positive");
+  return composite_mc_walks(ray, ray_id, p.samples, p);
+}
+
+Rgba composite_mc_walks(const RaySamples& ray, uint32_t ray_id, int walks, const CompositeParams& p,
+                        McStats* stats) {
   // Eq 7.3 / 7.12 / 7.13: walk m visits the samples front to back and stops at
   // sample s when u(m, s) < alpha_s, picking its colour C_s = C'_s / alpha_s.
   // A walk that passes every sample picks the black background. The mean of
   // the picks estimates C' and the fraction of walks that stop estimates
   // alpha. Expectation: sum_s C'_s prod_{j<s} (1 - alpha_j), i.e. over().
-  if (p.samples <= 0) throw ArgumentError("--samples", "must be positive");
+  // kernels/mc.cl repeats this arithmetic operation for operation.
+  if (walks < 0) throw ArgumentError("walks", "must not be negative");
   const uint32_t key = p.streams == RandomStreams::shared ? SV_SHARED_RAY : ray_id;
   double r = 0, g = 0, b = 0;
   int stopped = 0;
-  for (int m = 0; m < p.samples; ++m) {
+  McStats st;
+  st.walks = walks;
+  for (int m = 0; m < walks; ++m) {
     for (std::size_t s = 0; s < ray.rgba.size(); ++s) {
       const Rgba& v = ray.rgba[s];
-      if (v.a <= 0.0f) continue;
+      if (v.a <= 0.0f && p.drop_transparent) {
+        ++st.skipped;
+        continue;
+      }
+      ++st.draws;
       const float u = sv_uniform(p.seed, key, static_cast<uint32_t>(m),
                                  static_cast<uint32_t>(ray.first_step + static_cast<int64_t>(s)));
-      if (u < v.a) {
+      if (u < v.a) {  // never for alpha <= 0 (u >= 0)
         r += v.r / v.a;
         g += v.g / v.a;
         b += v.b / v.a;
@@ -46,9 +59,27 @@ Rgba composite_mc(const RaySamples& ray, uint32_t ray_id, const CompositeParams&
       }
     }
   }
-  const double inv = 1.0 / p.samples;
-  return {static_cast<float>(r * inv), static_cast<float>(g * inv), static_cast<float>(b * inv),
-          static_cast<float>(stopped * inv)};
+  Rgba out;
+  if (!p.exact_opacity) {
+    if (walks > 0) {
+      const double inv = 1.0 / walks;
+      out = {static_cast<float>(r * inv), static_cast<float>(g * inv), static_cast<float>(b * inv),
+             static_cast<float>(stopped * inv)};
+    }
+  } else {
+    // Ch. 7.5 (a): exact opacity (over's alpha recurrence), Monte Carlo colour.
+    const Rgba direct = composite_direct(ray);
+    if (stopped > 0) {
+      const double a = direct.a;
+      out = {static_cast<float>(a * (r / stopped)), static_cast<float>(a * (g / stopped)),
+             static_cast<float>(a * (b / stopped)), direct.a};
+    } else {
+      ++st.fallbacks;
+      out = direct;
+    }
+  }
+  if (stats) *stats += st;
+  return out;
 }
 
 Rgba composite(const RaySamples& ray, uint32_t ray_id, const CompositeParams& p) {

@@ -32,6 +32,32 @@ struct CompositeParams {
   int samples = 32;         ///< Monte Carlo walks per ray
   uint64_t seed = 1;
   RandomStreams streams = RandomStreams::per_ray;
+  /// Monte Carlo, thesis ch. 7.5 (a): opacity exact (the over recurrence
+  /// a <- a + (1 - a) alpha_s, bitwise composite_direct's alpha), colour
+  /// C' = a * mean of the colours C'_s / alpha_s that the walks which stopped
+  /// picked. When no walk stops the colour is the direct composite's (exact),
+  /// which keeps the estimator unbiased.
+  bool exact_opacity = false;
+  /// Monte Carlo, ch. 7.5 (c): samples with alpha <= 0 draw no random number
+  /// (they can never stop a walk). With the generator keyed by the absolute
+  /// depth index this changes no result, only the number of draws.
+  bool drop_transparent = true;
+};
+
+/// Work counters of the Monte Carlo estimator (summed over rays / sub-rays).
+struct McStats {
+  int64_t walks = 0;      ///< walks started
+  int64_t draws = 0;      ///< random numbers drawn
+  int64_t skipped = 0;    ///< transparent samples passed without a draw
+  int64_t fallbacks = 0;  ///< exact opacity: rays (sub-rays) where no walk stopped
+  McStats& operator+=(const McStats& o) {
+    walks += o.walks;
+    draws += o.draws;
+    skipped += o.skipped;
+    fallbacks += o.fallbacks;
+    return *this;
+  }
+  bool operator==(const McStats&) const = default;
 };
 
 /// A ray's samples front to back (premultiplied) and the depth index of each
@@ -48,6 +74,13 @@ Rgba composite_adaptive(const RaySamples& ray, float threshold);
 /// alpha_s; a walk that passes every sample picks black. Colour = mean of
 /// picks, alpha = fraction of walks that stopped.
 Rgba composite_mc(const RaySamples& ray, uint32_t ray_id, const CompositeParams& p);
+/// The same estimator with `walks` walks (0 allowed: plain MC gives 0, exact
+/// opacity the direct composite) instead of p.samples, honouring
+/// p.exact_opacity and p.drop_transparent, adding its work to `stats`.
+/// Walk m draws sv_uniform(p.seed, key, m, first_step + s), key = ray_id or
+/// SV_SHARED_RAY (p.streams).
+Rgba composite_mc_walks(const RaySamples& ray, uint32_t ray_id, int walks, const CompositeParams& p,
+                        McStats* stats = nullptr);
 
 Rgba composite(const RaySamples& ray, uint32_t ray_id, const CompositeParams& p);
 
