@@ -1,0 +1,291 @@
+/* mc.cl — Monte Carlo compositing on the PE array (thesis ch. 7.2-7.5).
+ * References: host/core/mc.cpp and composite_mc_walks (host/core/composite.cpp);
+ * the walk arithmetic below repeats theirs operation for operation (colour
+ * sums in double, FP_CONTRACT off), so results agree bit for bit.
+ *
+ * Inputs: the segments (CSR per PE), the resample stage's samples in segment
+ * order (sample_off[s] = first sample of segment s) and, for whole rays and
+ * the allocation, per-pixel lists of the non-empty segments in increasing k0
+ * (ray_off[W * H + 1], ray_items[]), built by the ray_* kernels below:
+ *   simdvol_mc_ray_count  one work-item per segment: atomic count per pixel
+ *   simdvol_mc_ray_scan   one work-item: exclusive prefix sum (W * H ints)
+ *   simdvol_mc_ray_fill   one work-item per segment: atomic slot per pixel
+ *   simdvol_mc_ray_sort   one work-item per pixel: insertion sort by k0 (the
+ *                         atomic order is arbitrary; sorted it is unique)
+ *
+ *   simdvol_mc_whole      one work-item per pixel (the pixel's owner after
+ *                         the swap): the walks over the ray's samples,
+ *                         segment after segment in depth order -> image
+ *   simdvol_mc_alpha      one work-item per segment: exact opacity; walks = 0
+ *   simdvol_mc_allocate   one work-item per pixel: allocate_walks (mc.hpp)
+ *   simdvol_mc_local      one work-item per segment: its walks over its own
+ *                         samples -> the PE's footprint (as simdvol_local)
+ *
+ * Options (defines): SHARED (1: key SV_SHARED_RAY), EXACT (exact opacity),
+ * DROP (no draw for alpha <= 0), ALLOC (mc_local reads walks[s]).
+ * stats (if STATS): one int4 per work-item (walks, draws, skipped, fallback).
+ */
+#ifndef SIMDVOL_COMMON_CL
+#include "common.cl"
+#endif
+
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifndef SHARED
+#define SHARED 0
+#endif
+#ifndef EXACT
+#define EXACT 0
+#endif
+#ifndef DROP
+#define DROP 1
+#endif
+#ifndef ALLOC
+#define ALLOC 0
+#endif
+#ifndef STATS
+#define STATS 0
+#endif
+
+__kernel void simdvol_mc_ray_count(__global const sv_segment* segs, const int nseg,
+                                   const int width, const int height,
+                                   volatile __global int* counts) {
+  const int s = (int)get_global_id(0);
+  if (s >= nseg) return;
+  const sv_segment g = segs[s];
+  if (g.k1 > g.k0 && g.i >= 0 && g.j >= 0 && g.i < width && g.j < height)
+    atomic_inc(&counts[g.j * width + g.i]);
+}
+
+__kernel void simdvol_mc_ray_scan(__global int* counts, const int n, __global int* off) {
+  if (get_global_id(0) != 0) return;
+  int acc = 0;
+  for (int q = 0; q < n; ++q) {
+    off[q] = acc;
+    acc += counts[q];
+    counts[q] = 0; /* reused as the fill cursor */
+  }
+  off[n] = acc;
+}
+
+__kernel void simdvol_mc_ray_fill(__global const sv_segment* segs, const int nseg,
+                                  const int width, const int height, __global const int* off,
+                                  volatile __global int* cursor, __global int* items) {
+  const int s = (int)get_global_id(0);
+  if (s >= nseg) return;
+  const sv_segment g = segs[s];
+  if (g.k1 <= g.k0 || g.i < 0 || g.j < 0 || g.i >= width || g.j >= height) return;
+  const int q = g.j * width + g.i;
+  items[off[q] + atomic_inc(&cursor[q])] = s;
+}
+
+__kernel void simdvol_mc_ray_sort(__global const sv_segment* segs, const int npx,
+                                  __global const int* off, __global int* items) {
+  const int q = (int)get_global_id(0);
+  if (q >= npx) return;
+  const int b = off[q], e = off[q + 1];
+  for (int t = b + 1; t < e; ++t) {
+    const int v = items[t];
+    const int k = segs[v].k0;
+    int u = t - 1;
+    while (u >= b && segs[items[u]].k0 > k) {
+      items[u + 1] = items[u];
+      --u;
+    }
+    items[u + 1] = v;
+  }
+}
+
+/* The estimator over `count` segments (indices items[first + t], or
+ * first + t when items is 0) in depth order: composite_mc_walks. */
+SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int* sample_off,
+                            __global const float4* samples, __global const int* items,
+                            const int first, const int count, const uint key, const int walks,
+                            const ulong seed, int4* st) {
+  double r = 0.0, g = 0.0, b = 0.0;
+  int stopped = 0, draws = 0, skipped = 0;
+  for (int m = 0; m < walks; ++m) {
+    int done = 0;
+    for (int t = 0; t < count && !done; ++t) {
+      const int s = items ? items[first + t] : first + t;
+      const sv_segment sg = segs[s];
+      __global const float4* in = samples + sample_off[s];
+      for (int k = sg.k0; k < sg.k1; ++k) {
+        const float4 v = in[k - sg.k0];
+        if (v.w <= 0.0f && DROP) {
+          ++skipped;
+          continue;
+        }
+        ++draws;
+        const float u = sv_uniform(seed, key, (uint)m, (uint)k);
+        if (u < v.w) {
+          r += (double)(v.x / v.w);
+          g += (double)(v.y / v.w);
+          b += (double)(v.z / v.w);
+          ++stopped;
+          done = 1;
+          break;
+        }
+      }
+    }
+  }
+  float4 out = (float4)(0.0f);
+  int fallback = 0;
+#if !EXACT
+  if (walks > 0) {
+    const double inv = 1.0 / (double)walks;
+    out = (float4)((float)(r * inv), (float)(g * inv), (float)(b * inv),
+                   (float)((double)stopped * inv));
+  }
+#else
+  /* Exact opacity: over's alpha recurrence; the direct colour only when no
+   * walk stopped (the reference computes the same floats). */
+  float4 acc = (float4)(0.0f);
+  for (int t = 0; t < count; ++t) {
+    const int s = items ? items[first + t] : first + t;
+    const sv_segment sg = segs[s];
+    __global const float4* in = samples + sample_off[s];
+    for (int k = sg.k0; k < sg.k1; ++k) {
+      const float4 v = in[k - sg.k0];
+      const float tr = 1.0f - acc.w;
+      if (stopped == 0) {
+        acc.x = acc.x + tr * v.x;
+        acc.y = acc.y + tr * v.y;
+        acc.z = acc.z + tr * v.z;
+      }
+      acc.w = acc.w + tr * v.w;
+    }
+  }
+  if (stopped > 0) {
+    const double a = (double)acc.w;
+    out = (float4)((float)(a * (r / (double)stopped)), (float)(a * (g / (double)stopped)),
+                   (float)(a * (b / (double)stopped)), acc.w);
+  } else {
+    out = acc;
+    fallback = 1;
+  }
+#endif
+  *st = (int4)(walks, draws, skipped, fallback);
+  return out;
+}
+
+__kernel void simdvol_mc_whole(__global const sv_segment* segs, __global const int* sample_off,
+                               __global const float4* samples, __global const int* ray_off,
+                               __global const int* ray_items, const int width, const int npx,
+                               const int walks, const ulong seed, __global float4* image,
+                               __global int4* stats) {
+  const int q = (int)get_global_id(0);
+  if (q >= npx) return;
+  const uint key = SHARED ? SV_SHARED_RAY : (uint)q; /* q = j * width + i */
+  int4 st;
+  const int b = ray_off[q];
+  image[q] = sv_mc_estimate(segs, sample_off, samples, ray_items, b, ray_off[q + 1] - b, key,
+                            walks, seed, &st);
+#if STATS
+  stats[q] = st;
+#endif
+}
+
+__kernel void simdvol_mc_alpha(__global const sv_segment* segs, const int nseg,
+                               __global const int* sample_off, __global const float4* samples,
+                               __global float* alpha, __global int* walks) {
+  const int s = (int)get_global_id(0);
+  if (s >= nseg) return;
+  const sv_segment sg = segs[s];
+  __global const float4* in = samples + sample_off[s];
+  float acc = 0.0f;
+  for (int k = sg.k0; k < sg.k1; ++k) acc = acc + (1.0f - acc) * in[k - sg.k0].w;
+  alpha[s] = acc;
+  walks[s] = 0;
+}
+
+__kernel void simdvol_mc_allocate(__global const int* ray_off, __global const int* ray_items,
+                                  const int npx, __global const float* alpha, const int budget,
+                                  __global int* walks) {
+  const int q = (int)get_global_id(0);
+  if (q >= npx) return;
+  const int b = ray_off[q], e = ray_off[q + 1];
+  int c = 0;
+  float A = 0.0f;
+  for (int t = b; t < e; ++t) {
+    const float a = alpha[ray_items[t]];
+    if (a > 0.0f) {
+      ++c;
+      A += a;
+    }
+  }
+  if (c == 0) return; /* walks stay 0 */
+  if (budget <= c) {
+    for (int t = b; t < e; ++t) walks[ray_items[t]] = alpha[ray_items[t]] > 0.0f ? 1 : 0;
+    return;
+  }
+  const int r = budget - c;
+  /* floors first (into walks), then the back-to-front correction, then ranks */
+  long sum_f = 0;
+  for (int t = b; t < e; ++t) {
+    const float a = alpha[ray_items[t]];
+    int f = 0;
+    if (a > 0.0f) f = (int)floor((float)r * a / A);
+    walks[ray_items[t]] = f;
+    sum_f += f;
+  }
+  for (int t = e - 1; t >= b && sum_f > r; --t) {
+    const int f = walks[ray_items[t]];
+    const long d = min((long)f, sum_f - r);
+    walks[ray_items[t]] = f - (int)d;
+    sum_f -= d;
+  }
+  const long L = r - sum_f;
+  /* remainders are recomputed from q (the floors above may have been lowered
+   * only when sum_f > r, in which case L == 0 and remainders are unused) */
+  for (int t = b; t < e; ++t) {
+    const float a = alpha[ray_items[t]];
+    if (!(a > 0.0f)) continue;
+    const float qs = (float)r * a / A;
+    const float rs = qs - (float)(int)floor(qs);
+    long rank = 0;
+    for (int u = b; u < e; ++u) {
+      const float au = alpha[ray_items[u]];
+      if (!(au > 0.0f)) continue;
+      const float qu = (float)r * au / A;
+      const float ru = qu - (float)(int)floor(qu);
+      if (ru > rs || (ru == rs && u < t)) ++rank;
+    }
+    walks[ray_items[t]] = 1 + walks[ray_items[t]] + (rank < L ? 1 : 0);
+  }
+}
+
+SV_FN int sv_mc_pe_of_segment(__global const int* seg_off, const int log2p, const int s) {
+  int p = 0;
+  for (int bb = log2p - 1; bb >= 0; --bb) {
+    const int c = p | (1 << bb);
+    p = seg_off[c] <= s ? c : p;
+  }
+  return p;
+}
+
+__kernel void simdvol_mc_local(__global const sv_segment* segs, const int nseg,
+                               __global const int* seg_off, const int log2p,
+                               __global const int* sample_off, __global const float4* samples,
+                               const int width, const int walks, __global const int* alloc,
+                               const ulong seed, __global const sv_rect* rects,
+                               __global const int* rect_off, __global float4* foot,
+                               __global int4* stats) {
+  const int s = (int)get_global_id(0);
+  if (s >= nseg) return;
+  const sv_segment g = segs[s];
+  int4 st = (int4)(0);
+  float4 v = (float4)(0.0f);
+  if (g.k1 > g.k0) {
+    const uint key = SHARED ? SV_SHARED_RAY : (uint)(g.j * width + g.i);
+    const int n = ALLOC ? alloc[s] : walks;
+    v = sv_mc_estimate(segs, sample_off, samples, 0, s, 1, key, n, seed, &st);
+  }
+  const int p = sv_mc_pe_of_segment(seg_off, log2p, s);
+  const sv_rect r = rects[p];
+  foot[rect_off[p] + (g.j - r.j0) * r.w + (g.i - r.i0)] = v;
+#if STATS
+  stats[s] = st;
+#endif
+}
