@@ -11,7 +11,10 @@
 // the same volume, bytes moved per stage against the machine's triad
 // bandwidth measured here (two threads, 256 MiB per array), and flat
 // (x-fastest, non-PE-major) variants for the PE-major/flat ratio. --sweep
-// also times the work-group sizes 64/256/1024 and the shade decompositions.
+// also times the work-group sizes 64/256/1024 (16/64/256 chunks of 16 voxels
+// for the float16 kernels), the float16 kernels with non-temporal stores,
+// and the scalar kernels (shade decompositions, classify, fused, flat fused)
+// that the float16 defaults replaced.
 //
 // PoCL compiles kernels into its cache (POCL_CACHE_DIR, default
 // ~/.cache/pocl); the environment is left to the user. Timings on these
@@ -180,11 +183,19 @@ int main(int argc, char** argv) {
                                   std::string(kernel_file("classify.cl"));
     cl::Program fused_prog = dev.build(fused_src);
     cl::Kernel k_flat_fused(fused_prog, "simdvol_shade_classify_flat");
+    cl::Kernel k_flat_fused16(fused_prog, "simdvol_shade_classify_flat16");
     const cl_int4 dims{{static_cast<cl_int>(vol.nx()), static_cast<cl_int>(vol.ny()),
                         static_cast<cl_int>(vol.nz()), 0}};
     set_args(k_flat_fused, "flat fused", flat_vol, flat_rgba, dims, sbuf, cbuf);
+    set_args(k_flat_fused16, "flat fused float16", flat_vol, flat_rgba, dims, sbuf, cbuf);
     const std::size_t lx = std::min<std::size_t>(64, round_up(vol.nx(), 8));
     const cl::NDRange flat3(vol.nx(), vol.ny(), vol.nz()), flat3_local(lx, 256 / lx, 1);
+    // float16 flat kernel: 16 voxels of a row per work-item (nx % 16 == 0).
+    const bool flat16_ok = vol.nx() % 16 == 0;
+    const std::size_t l16 = std::clamp<std::size_t>(vol.nx() / 16, 1, 16), ly16 = 64 / l16;
+    const cl::NDRange flat16(round_up(std::max<std::size_t>(1, vol.nx() / 16), l16),
+                             round_up(vol.ny(), ly16), vol.nz()),
+        flat16_local(l16, ly16, 1);
     enqueue_shade(dev, cells1, sp, shading1);
     dev.finish();
     std::printf("set-up (layout, buffers, builds): %.0f ms; layout kernel %.2f ms\n", ms_since(t0),
@@ -199,7 +210,7 @@ int main(int argc, char** argv) {
       std::function<std::vector<cl::Event>()> run;
     };
     std::vector<Variant> variants = {
-        {"shade (rows)", cells_bytes + vox_bytes,
+        {"shade", cells_bytes + vox_bytes,
          [&] { return std::vector{enqueue_shade(dev, cells, sp, shading)}; }},
         {"classify", 2 * vox_bytes,
          [&] { return std::vector{enqueue_classify(dev, shading, cp, rgba)}; }},
@@ -214,10 +225,44 @@ int main(int argc, char** argv) {
          [&] { return std::vector{enqueue_classify(dev, shading1, cp, rgba1)}; }},
         {"flat shade (1 PE)", 4.0 * voxels + flat4,
          [&] { return std::vector{enqueue_shade(dev, cells1, sp, shading1)}; }},
-        {"flat shade+classify fused", 4.0 * voxels + flat4,
-         [&] { return std::vector{dev.run(k_flat_fused, "flat fused", flat3, flat3_local)}; }},
     };
+    if (flat16_ok)
+      variants.push_back({"flat shade+classify fused", 4.0 * voxels + flat4, [&] {
+                            return std::vector{dev.run(k_flat_fused16, "flat fused float16", flat16,
+                                                       flat16_local)};
+                          }});
     if (sweep) {
+      // The float16 kernels with non-temporal stores (SV_NT).
+      auto nt = [&](auto enqueue) {
+        return [enqueue] {
+          setenv("SIMDVOL_NT_STORES", "1", 1);
+          std::vector<cl::Event> e{enqueue()};
+          unsetenv("SIMDVOL_NT_STORES");
+          return e;
+        };
+      };
+      variants.push_back({"shade (NT stores)", cells_bytes + vox_bytes,
+                          nt([&] { return enqueue_shade(dev, cells, sp, shading); })});
+      variants.push_back({"classify (NT stores)", 2 * vox_bytes,
+                          nt([&] { return enqueue_classify(dev, shading, cp, rgba); })});
+      variants.push_back({"shade+classify fused (NT stores)", cells_bytes + vox_bytes,
+                          nt([&] { return enqueue_shade_classify(dev, cells, sp, cp, rgba); })});
+      // The scalar kernels (one work-item per voxel or per row), which PoCL
+      // 3.1 did not vectorise here: the comparison for the float16 defaults.
+      variants.push_back(
+          {"shade (scalar rows)", cells_bytes + vox_bytes,
+           [&] { return std::vector{enqueue_shade(dev, cells, sp, shading, ShadeKernel::rows)}; }});
+      variants.push_back({"classify (scalar)", 2 * vox_bytes, [&] {
+                            return std::vector{
+                                enqueue_classify(dev, shading, cp, rgba, ClassifyKernel::scalar)};
+                          }});
+      variants.push_back({"shade+classify fused (scalar)", cells_bytes + vox_bytes, [&] {
+                            return std::vector{enqueue_shade_classify(dev, cells, sp, cp, rgba,
+                                                                      ShadeKernel::range3d)};
+                          }});
+      variants.push_back(
+          {"flat shade+classify fused (scalar)", 4.0 * voxels + flat4,
+           [&] { return std::vector{dev.run(k_flat_fused, "flat fused", flat3, flat3_local)}; }});
       variants.push_back({"shade (1-D, divisions)", cells_bytes + vox_bytes, [&] {
                             return std::vector{
                                 enqueue_shade(dev, cells, sp, shading, ShadeKernel::voxel)};
@@ -277,9 +322,9 @@ int main(int argc, char** argv) {
           shade_ref, cls_ref, ref_ms, voxels / (ref_ms * 1e-3) / 1e6);
     }
 
-    std::printf("\n%-30s %6s %10s %10s %9s %9s %8s %9s\n", "variant", "wgs", "device ms", "wall ms",
+    std::printf("\n%-36s %6s %10s %10s %9s %9s %8s %9s\n", "variant", "wgs", "device ms", "wall ms",
                 "Gvox/s", "GB/s", "%triad", "x serial");
-    double pe_cls = 0, flat_cls = 0, pe_fused = 0, flat_fused = 0;
+    double pe_cls = 0, flat_cls = 0, pe_fused = 0, flat_fused = 0, pe_fused_s = 0, flat_fused_s = 0;
     for (std::size_t w = 0; w < wgs.size(); ++w)
       for (std::size_t i = 0; i < variants.size(); ++i) {
         const double d = median(dms[w][i]), wall = median(wms[w][i]);
@@ -287,17 +332,22 @@ int main(int argc, char** argv) {
         const bool both = variants[i].name.find("shade+classify") != std::string::npos;
         char ratio[32] = "";
         if (both && ref_ms > 0) std::snprintf(ratio, sizeof ratio, "%.1f", ref_ms / d);
-        std::printf("%-30s %6s %10.2f %10.2f %9.2f %9.1f %7.0f%% %9s\n", variants[i].name.c_str(),
+        std::printf("%-36s %6s %10.2f %10.2f %9.2f %9.1f %7.0f%% %9s\n", variants[i].name.c_str(),
                     wgs[w], d, wall, voxels / (d * 1e-3) / 1e9, gbs, 100.0 * gbs / triad, ratio);
         if (std::strcmp(wgs[w], "256") == 0) {
           if (variants[i].name == "classify") pe_cls = d;
           if (variants[i].name == "flat classify (1 PE)") flat_cls = d;
           if (variants[i].name == "shade+classify fused") pe_fused = d;
           if (variants[i].name == "flat shade+classify fused") flat_fused = d;
+          if (variants[i].name == "shade+classify fused (scalar)") pe_fused_s = d;
+          if (variants[i].name == "flat shade+classify fused (scalar)") flat_fused_s = d;
         }
       }
     std::printf("\nPE-major / flat: classify %.2f, fused shade+classify %.2f (goal <= 1.5)\n",
-                pe_cls / flat_cls, pe_fused / flat_fused);
+                pe_cls / flat_cls, flat_fused > 0 ? pe_fused / flat_fused : 0.0);
+    if (pe_fused_s > 0 && flat_fused_s > 0)
+      std::printf("PE-major / flat, scalar kernels: fused shade+classify %.2f\n",
+                  pe_fused_s / flat_fused_s);
     std::printf(
         "bytes counted: reads + writes of each kernel's buffers (cells with halo: "
         "%.0f MiB, voxel cells: %.0f MiB); write-allocate traffic not counted\n",

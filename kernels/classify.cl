@@ -34,6 +34,12 @@
 #ifndef SIMDVOL_COMMON_CL
 #include "common.cl"
 #endif
+/* float16 values passed to and returned from functions on a target without
+ * AVX-512 draw clang's -Wpsabi warning ("changes the ABI") once per call
+ * site; harmless here (everything is compiled together and inlined). */
+#ifdef __clang__
+#pragma clang diagnostic ignored "-Wpsabi"
+#endif
 
 #ifdef SV_KIND
 #define SV_KIND_OF(cp) (SV_KIND)
@@ -112,6 +118,41 @@ SV_FN float sv_exp(float x) {
   return x < -87.3f ? 0.0f : (x > 88.0f ? INFINITY : y);
 }
 #endif /* SV_VMATH */
+
+/* float16 forms of sv_log and sv_exp (the same operations lane by lane, so
+ * the same results; kept identical in shade.cl and classify.cl, the guard
+ * lets both files form one program). */
+#ifndef SV_VMATH16
+#define SV_VMATH16
+SV_FN float16 sv_log16(float16 x) {
+  const int16 ix = as_int16(x);
+  int16 e = ((ix >> 23) & 0xff) - 127;
+  float16 m = as_float16((ix & 0x007fffff) | 0x3f800000);
+  const int16 big = m > 1.41421356f;
+  m = select(m, 0.5f * m, big);
+  e = select(e, e + 1, big);
+  const float16 s = (m - 1.0f) / (m + 1.0f);
+  const float16 s2 = s * s;
+  const float16 p =
+      s * (2.0f + s2 * (0.666666667f + s2 * (0.4f + s2 * (0.285714286f + s2 * 0.222222222f))));
+  const float16 fe = convert_float16(e);
+  return fe * 0.693145751953125f + (fe * 1.42860682e-6f + p);
+}
+SV_FN float16 sv_exp16(float16 x) {
+  const float16 xc = fmin(fmax(x, -87.3f), 88.0f);
+  const float16 kf = floor(xc * 1.44269504f + 0.5f);
+  const float16 r = (xc - kf * 0.693145751953125f) - kf * 1.42860682e-6f;
+  const float16 p =
+      1.0f +
+      r * (1.0f +
+           r * (0.5f +
+                r * (0.166666667f +
+                     r * (0.0416666667f +
+                          r * (0.00833333333f + r * (0.00138888889f + r * 0.000198412698f))))));
+  const float16 y = p * as_float16((convert_int16(kf) + 127) << 23);
+  return select(select(y, (float16)(INFINITY), x > 88.0f), (float16)(0.0f), x < -87.3f);
+}
+#endif /* SV_VMATH16 */
 
 /* Ramp r(v) with n points: y_0 at or below x_0 (and for NaN), y_last at or
  * above x_last, else linear on the segment of the last x_k <= v. The search
@@ -226,6 +267,146 @@ SV_FN void sv_classify_voxel(__constant const sv_classify_params* cp, float id, 
   *g = ok ? a1 * fmin(1.0f, cg * inv * id + is) : 0.0f;
   *b = ok ? a1 * fmin(1.0f, cb * inv * id + is) : 0.0f;
   *alpha = ok ? a1 : 0.0f;
+}
+
+/* ---------------------------------------------------------------- float16
+ * The same classification on 16 voxels at once (explicit float16: PoCL's
+ * loop vectoriser did not vectorise the scalar kernel on these machines).
+ * The same float operations in the same order as the scalar functions
+ * above; selects for their branches. */
+SV_FN float16 sv_ramp_eval16(__constant const sv_ramp* r, const int n, float16 v) {
+  if (n <= 0) return (float16)(1.0f);
+  const float x0 = r->x[0], y0 = r->y[0];
+  if (n == 1) return (float16)(y0);
+  float16 xa = x0, ya = y0, xb = r->x[1], yb = r->y[1];
+#pragma unroll
+  for (int k = 1; k < SV_MAX_KNOTS - 1; ++k) {
+    if (k < n - 1) {
+      const int16 in = r->x[k] <= v;
+      xa = select(xa, (float16)(r->x[k]), in);
+      ya = select(ya, (float16)(r->y[k]), in);
+      xb = select(xb, (float16)(r->x[k + 1]), in);
+      yb = select(yb, (float16)(r->y[k + 1]), in);
+    }
+  }
+  const float16 t = (v - xa) / (xb - xa);
+  float16 y = ya + t * (yb - ya);
+  y = select(y, (float16)(r->y[n - 1]), v >= r->x[n - 1]);
+  y = select(y, (float16)(y0), isnan(v) | (v <= x0));
+  return y;
+}
+
+SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n, float16 v,
+                           float16* cr, float16* cg, float16* cb) {
+  __constant const sv_materials* m = &cp->materials;
+  float16 I = v;
+  if (cp->relative)
+    I = cp->range_scale > 0.0f ? (v - cp->range_min) * cp->range_scale : (float16)(0.0f);
+  const int j0 = n > 1 ? 1 : 0;
+  float16 mi = m->mean[0], hi = m->half_inv_var[0], li = m->log_sigma[0];
+  float16 ai = m->opacity[0], ri = m->r[0], gi = m->g[0], bi = m->b[0];
+  float16 mj = m->mean[j0], hj = m->half_inv_var[j0], lj = m->log_sigma[j0];
+  float16 aj = m->opacity[j0], rj = m->r[j0], gj = m->g[j0], bj = m->b[j0];
+#pragma unroll
+  for (int k = 1; k < SV_MAX_MATERIALS - 1; ++k) {
+    if (k < n - 1) {
+      const int16 in = m->mean[k] <= I;
+      mi = select(mi, (float16)(m->mean[k]), in);
+      hi = select(hi, (float16)(m->half_inv_var[k]), in);
+      li = select(li, (float16)(m->log_sigma[k]), in);
+      ai = select(ai, (float16)(m->opacity[k]), in);
+      ri = select(ri, (float16)(m->r[k]), in);
+      gi = select(gi, (float16)(m->g[k]), in);
+      bi = select(bi, (float16)(m->b[k]), in);
+      mj = select(mj, (float16)(m->mean[k + 1]), in);
+      hj = select(hj, (float16)(m->half_inv_var[k + 1]), in);
+      lj = select(lj, (float16)(m->log_sigma[k + 1]), in);
+      aj = select(aj, (float16)(m->opacity[k + 1]), in);
+      rj = select(rj, (float16)(m->r[k + 1]), in);
+      gj = select(gj, (float16)(m->g[k + 1]), in);
+      bj = select(bj, (float16)(m->b[k + 1]), in);
+    }
+  }
+  const float16 di = I - mi, dj = I - mj;
+  const float16 dl = (di * di * hi + li) - (dj * dj * hj + lj);
+  float16 pi = 1.0f / (1.0f + sv_exp16(dl));
+  const int16 first = I <= m->mean[0];
+  const int16 last = I >= m->mean[n - 1];
+  pi = select(pi, (float16)(1.0f), first | last);
+  ai = select(select(ai, (float16)(m->opacity[n - 1]), last), (float16)(m->opacity[0]), first);
+  ri = select(select(ri, (float16)(m->r[n - 1]), last), (float16)(m->r[0]), first);
+  gi = select(select(gi, (float16)(m->g[n - 1]), last), (float16)(m->g[0]), first);
+  bi = select(select(bi, (float16)(m->b[n - 1]), last), (float16)(m->b[0]), first);
+  const float16 pj = 1.0f - pi;
+  const float16 wi = pi * ai, wj = pj * aj;
+  *cr = wi * ri + wj * rj;
+  *cg = wi * gi + wj * gj;
+  *cb = wi * bi + wj * bj;
+  return wi + wj;
+}
+
+SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, float16 gmag,
+                            float16* cr, float16* cg, float16* cb) {
+  const float16 a = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v) *
+                    sv_ramp_eval16(&cp->gradient, SV_NK_GRADIENT_OF(cp), gmag);
+  *cr = a * sv_ramp_eval16(&cp->red, SV_NK_RED_OF(cp), v);
+  *cg = a * sv_ramp_eval16(&cp->green, SV_NK_GREEN_OF(cp), v);
+  *cb = a * sv_ramp_eval16(&cp->blue, SV_NK_BLUE_OF(cp), v);
+  return a;
+}
+
+SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, float16 is,
+                         float16 gmag, float16 v, float16* r, float16* g, float16* b,
+                         float16* alpha) {
+  float16 cr, cg, cb, a;
+  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER)
+    a = sv_transfer16(cp, v, gmag, &cr, &cg, &cb);
+  else
+    a = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+#ifdef SV_STEP_ONE
+  const float16 a1 = a;
+#else
+  const float16 om = 1.0f - a;
+  const float16 a1 =
+      cp->step_is_one
+          ? a
+          : select(1.0f - sv_exp16(cp->opacity_step * sv_log16(om)), (float16)(1.0f), om < FLT_MIN);
+#endif
+  const int16 ok = (a > 0.0f) & ~isnan(v); /* else transparent (0, 0, 0, 0) */
+  const float16 inv = 1.0f / a;
+  const float16 z = 0.0f;
+  *r = select(z, a1 * fmin(1.0f, cr * inv * id + is), ok);
+  *g = select(z, a1 * fmin(1.0f, cg * inv * id + is), ok);
+  *b = select(z, a1 * fmin(1.0f, cb * inv * id + is), ok);
+  *alpha = select(z, a1, ok);
+}
+
+#ifndef SV_VSTORE16 /* as in shade.cl */
+#if defined(SV_NT) && defined(__clang__)
+#define SV_VSTORE16(v, p) __builtin_nontemporal_store((v), (__global float16*)(p))
+#else
+#define SV_VSTORE16(v, p) vstore16((v), 0, (p))
+#endif
+#endif
+
+/* simdvol_classify16 (the default): 16 positions per work-item, 2-D range
+ * (chunk, PE) = (vstride / 16 rounded up to the local size, pes). */
+__kernel void simdvol_classify16(__global const float* restrict shading,
+                                 __global float* restrict out, int vstride, int pes,
+                                 __constant const sv_classify_params* cp) {
+  const int e0 = 16 * (int)get_global_id(0);
+  const int p = (int)get_global_id(1);
+  if (e0 >= vstride || p >= pes) return;
+  const size_t base = (size_t)p * 4 * (size_t)vstride + (size_t)e0;
+  __global const float* s = shading + base;
+  __global float* o = out + base;
+  float16 r, g, b, a;
+  sv_classify16(cp, vload16(0, s), vload16(0, s + vstride), vload16(0, s + 2 * vstride),
+                vload16(0, s + 3 * vstride), &r, &g, &b, &a);
+  SV_VSTORE16(r, o);
+  SV_VSTORE16(g, o + vstride);
+  SV_VSTORE16(b, o + 2 * vstride);
+  SV_VSTORE16(a, o + 3 * vstride);
 }
 
 /* simdvol_classify: see the file comment. 2-D range (element of a plane,
@@ -349,5 +530,64 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
   out[n + i] = g;
   out[2 * n + i] = b;
   out[3 * n + i] = a;
+}
+#endif /* SIMDVOL_SHADE_CL */
+
+#if defined(SIMDVOL_SHADE_CL) && defined(SV_RW)
+/* simdvol_shade_classify16: the fused kernel on 16-position chunks
+ * (simdvol_shade16 then simdvol_classify16 without the voxel cells in
+ * between); range and arguments as simdvol_shade16 plus cp. */
+__kernel void simdvol_shade_classify16(__global const float* restrict cells,
+                                       __global float* restrict out,
+                                       __global const int4* restrict origins, int4 dims,
+                                       int4 cell, int4 block, int pes, int vstride,
+                                       __constant const sv_shade_params* sp,
+                                       __constant const sv_classify_params* cp) {
+  const int e0 = 16 * (int)get_global_id(0);
+  const int p = (int)get_global_id(1);
+  if (p >= pes || e0 >= vstride) return;
+  float16 id, is, mag, v, r, g, b, a;
+  const int16 in = sv_shade_chunk(sp, cells, origins, cell, block, p, e0, &id, &is, &mag, &v);
+  sv_classify16(cp, id, is, mag, v, &r, &g, &b, &a);
+  const float16 z = 0.0f;
+  sv_store16(out + (size_t)p * 4 * (size_t)vstride, vstride, e0, select(z, r, in),
+             select(z, g, in), select(z, b, in), select(z, a, in));
+}
+#endif
+
+#ifdef SIMDVOL_SHADE_CL
+/* simdvol_shade_classify_flat16: simdvol_shade_classify_flat with 16
+ * consecutive voxels of a row per work-item (float16), 3-D range
+ * (nx / 16, ny, nz); needs nx a multiple of 16. Not a pipeline stage: the
+ * flat side of the PE-major / flat comparison for the float16 kernels. */
+__kernel void simdvol_shade_classify_flat16(__global const float* restrict volume,
+                                            __global float* restrict out, int4 dims,
+                                            __constant const sv_shade_params* sp,
+                                            __constant const sv_classify_params* cp) {
+  const int x0 = 16 * (int)get_global_id(0);
+  const int y = (int)get_global_id(1);
+  const int z = (int)get_global_id(2);
+  if (x0 >= dims.x || y >= dims.y || z >= dims.z) return;
+  const size_t i = sv_flat_index(dims, x0, y, z);
+  const int sy = dims.x, sz = dims.x * dims.y;
+  __global const float* c = volume + i;
+  const float16 v = vload16(0, c);
+  /* x neighbours clamped at the row's ends (lane 0 / 15 reuse themselves) */
+  const float16 xm = x0 > 0 ? vload16(0, c - 1)
+                            : (float16)(v.s0, v.s0, v.s1, v.s23, v.s4567, v.s89ab, v.scde);
+  const float16 xp = x0 + 16 < dims.x ? vload16(0, c + 1)
+                                      : (float16)(v.s1, v.s23, v.s4567, v.s89ab, v.scde, v.sf, v.sf);
+  const float16 ym = vload16(0, c - (y > 0 ? sy : 0)), yp = vload16(0, c + (y + 1 < dims.y ? sy : 0));
+  const float16 zm = vload16(0, c - (z > 0 ? sz : 0)), zp = vload16(0, c + (z + 1 < dims.z ? sz : 0));
+  const float16 iota = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  float16 id, is, mag, r, g, b, a;
+  sv_shade16(sp, xm, xp, ym, yp, zm, zp, (float)x0 + iota, (float16)((float)y),
+             (float16)((float)z), &id, &is, &mag);
+  sv_classify16(cp, id, is, mag, v, &r, &g, &b, &a);
+  const size_t n = (size_t)dims.x * (size_t)dims.y * (size_t)dims.z;
+  SV_VSTORE16(r, out + i); /* 64-byte aligned when nx is a multiple of 16 */
+  SV_VSTORE16(g, out + n + i);
+  SV_VSTORE16(b, out + 2 * n + i);
+  SV_VSTORE16(a, out + 3 * n + i);
 }
 #endif /* SIMDVOL_SHADE_CL */

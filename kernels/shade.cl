@@ -21,8 +21,20 @@
  * vectoriser (work-items as SIMD lanes) gives up on any vector-typed
  * instruction ("instruction return type cannot be vectorized").
  *
- * Three decompositions (ShadeKernel in stages.hpp):
- *   simdvol_shade_rows (the default): one work-item per (row, PE), 2-D range
+ * Four decompositions (ShadeKernel in stages.hpp):
+ *   simdvol_shade16 (the default; end of this file): explicit float16 over
+ *     chunks of 16 voxels. PoCL 3.1 on these machines (AMD EPYC, AVX2, the
+ *     "haswell" target) did NOT vectorise any of the scalar kernels below:
+ *     their .so files hold no ymm instruction, and the loop vectoriser's
+ *     remarks say "the cost-model indicates that vectorization is not
+ *     beneficial" (the guarded body, conditional uniform loads from the
+ *     parameters, would need masked loads/stores). Measured interleaved
+ *     (bench --sweep, 256^3, 8192 PEs, median of 5, heavily loaded machine):
+ *     float16 shade 148-201 ms against scalar rows 190-240 ms; float16
+ *     classify 148-173 ms against scalar 787-797 ms; fused 296-340 ms
+ *     against 1296-1428 ms. Scalar kernels are the fallback for cells whose
+ *     x extent is not 4, 8 or a multiple of 16;
+ *   simdvol_shade_rows: one work-item per (row, PE), 2-D range
  *     (cy * cz, pes), looping over the row's cx voxels (scalar code, but
  *     unit-stride streams through one cell row);
  *   simdvol_shade: 3-D range (x, row, PE) = (cx rounded up to LX,
@@ -34,12 +46,18 @@
  * sizes, one run; the machine was shared with other builds, so only the
  * ratios within a run mean much): rows 45 ms, 3-D range 83-86 ms, 1-D with
  * divisions 99-108 ms; in a second run under heavier load 92-104 / 170-176 /
- * 218-226 ms. The rows variant was the fastest in every run, so it is the
- * stage's default; the fused shade + classify kernel (classify.cl) uses the
- * 3-D range.
+ * 218-226 ms. The rows variant was the fastest of the scalar ones in every
+ * run, so it is the fallback; the scalar fused shade + classify kernel
+ * (classify.cl) uses the 3-D range.
  */
 #ifndef SIMDVOL_COMMON_CL
 #include "common.cl"
+#endif
+/* float16 values passed to and returned from functions on a target without
+ * AVX-512 draw clang's -Wpsabi warning ("changes the ABI") once per call
+ * site; harmless here (everything is compiled together and inlined). */
+#ifdef __clang__
+#pragma clang diagnostic ignored "-Wpsabi"
 #endif
 #define SIMDVOL_SHADE_CL
 
@@ -84,6 +102,41 @@ SV_FN float sv_exp(float x) {
   return x < -87.3f ? 0.0f : (x > 88.0f ? INFINITY : y);
 }
 #endif /* SV_VMATH */
+
+/* float16 forms of sv_log and sv_exp (the same operations lane by lane, so
+ * the same results; kept identical in shade.cl and classify.cl, the guard
+ * lets both files form one program). */
+#ifndef SV_VMATH16
+#define SV_VMATH16
+SV_FN float16 sv_log16(float16 x) {
+  const int16 ix = as_int16(x);
+  int16 e = ((ix >> 23) & 0xff) - 127;
+  float16 m = as_float16((ix & 0x007fffff) | 0x3f800000);
+  const int16 big = m > 1.41421356f;
+  m = select(m, 0.5f * m, big);
+  e = select(e, e + 1, big);
+  const float16 s = (m - 1.0f) / (m + 1.0f);
+  const float16 s2 = s * s;
+  const float16 p =
+      s * (2.0f + s2 * (0.666666667f + s2 * (0.4f + s2 * (0.285714286f + s2 * 0.222222222f))));
+  const float16 fe = convert_float16(e);
+  return fe * 0.693145751953125f + (fe * 1.42860682e-6f + p);
+}
+SV_FN float16 sv_exp16(float16 x) {
+  const float16 xc = fmin(fmax(x, -87.3f), 88.0f);
+  const float16 kf = floor(xc * 1.44269504f + 0.5f);
+  const float16 r = (xc - kf * 0.693145751953125f) - kf * 1.42860682e-6f;
+  const float16 p =
+      1.0f +
+      r * (1.0f +
+           r * (0.5f +
+                r * (0.166666667f +
+                     r * (0.0416666667f +
+                          r * (0.00833333333f + r * (0.00138888889f + r * 0.000198412698f))))));
+  const float16 y = p * as_float16((convert_int16(kf) + 127) << 23);
+  return select(select(y, (float16)(INFINITY), x > 88.0f), (float16)(0.0f), x < -87.3f);
+}
+#endif /* SV_VMATH16 */
 
 /* x^y for x >= 0, y >= 0 as C's pow (0^0 = 1); x below FLT_MIN counts as 0. */
 SV_FN float sv_pow(float x, float y) {
@@ -212,3 +265,142 @@ __kernel void simdvol_shade_rows(__global const float* restrict cells,
     sv_store4(blk, vstride, row * cell.x + lx, id, is, mag, c[lx]);
   }
 }
+
+/* ---------------------------------------------------------------- float16
+ * simdvol_shade16 (the default decomposition): one work-item per chunk of 16
+ * consecutive positions of a PE's voxel cell, explicit float16 arithmetic
+ * (PoCL's loop vectoriser did not vectorise the scalar kernels above on
+ * these machines; explicit vectors always become SIMD instructions). Needs
+ * the compile-time row width SV_RW: 16 when cx is a multiple of 16 (a chunk
+ * is 16 consecutive voxels of one row), else cx itself, 8 or 4 (a chunk is
+ * 16 / cx consecutive rows). Loads are vload16/vload8/vload4 of the block
+ * at offsets -1/+1 (x), -bx/+bx (y) and -bx*by/+bx*by (z) from each row's
+ * start: unaligned and contiguous. Chunk positions past the cell's voxels
+ * (the plane's tail, whole rows since cx divides 16) are written as zeros. */
+#ifndef SV_VSTORE16
+/* Store of 16 floats at p (64-byte aligned: planes and chunks start on
+ * multiples of 16 floats). With SV_NT, a non-temporal store (no
+ * read-for-ownership of the line: the output buffers are far larger than
+ * the caches). */
+#if defined(SV_NT) && defined(__clang__)
+#define SV_VSTORE16(v, p) __builtin_nontemporal_store((v), (__global float16*)(p))
+#else
+#define SV_VSTORE16(v, p) vstore16((v), 0, (p))
+#endif
+#endif
+
+SV_FN float16 sv_pow16(float16 x, float y) {
+  const float16 r = sv_exp16(y * sv_log16(x));
+  return select(r, (float16)(y == 0.0f ? 1.0f : 0.0f), x < FLT_MIN);
+}
+
+/* sv_shade_voxel on 16 lanes: neighbours x-/x+, y-/y+, z-/z+ and global
+ * voxel coordinates (ix, iy, iz). The same float operations in the same
+ * order. */
+SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 xp, float16 ym,
+                      float16 yp, float16 zm, float16 zp, float16 ix, float16 iy, float16 iz,
+                      float16* id, float16* is, float16* mag) {
+  const float16 gx = 0.5f * (xp - xm) * sp->grad_scale[0];
+  const float16 gy = 0.5f * (yp - ym) * sp->grad_scale[1];
+  const float16 gz = 0.5f * (zp - zm) * sp->grad_scale[2];
+  float16 g2 = gx * gx + gy * gy + gz * gz;
+  g2 = select((float16)(0.0f), g2, isfinite(g2)); /* a NaN/inf neighbour: no surface */
+  const float16 m = sqrt(g2);
+  *mag = m;
+  const float16 d =
+      sp->depth_dir[0] * ix + sp->depth_dir[1] * iy + sp->depth_dir[2] * iz + sp->depth_offset;
+  const float16 cue = 1.0f / (sp->k1 + sp->k2 * d);
+  const float16 nl = fabs(gx * sp->light[0] + gy * sp->light[1] + gz * sp->light[2]) / m;
+  const float16 nh = fabs(gx * sp->halfway[0] + gy * sp->halfway[1] + gz * sp->halfway[2]) / m;
+  const int16 surface = g2 >= 1e-12f; /* else N = 0: ambient only */
+  const float16 lit_d = select((float16)(sp->ka), sp->ka + cue * sp->kd * nl, surface);
+  const float16 lit_s =
+      select((float16)(0.0f), cue * sp->ks * sv_pow16(nh, sp->shininess), surface);
+  *id = sp->enabled ? lit_d : (float16)(1.0f);
+  *is = sp->enabled ? lit_s : (float16)(0.0f);
+}
+
+#ifdef SV_RW
+#if SV_RW == 16
+#define SV_NR 1
+#define SV_LD16(c, rb, off) vload16(0, (c) + (rb)[0] + (off))
+#define SV_ROWS16(a) ((float16)((a)[0]))
+#define SV_IOTA16 ((float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#elif SV_RW == 8
+#define SV_NR 2
+#define SV_LD16(c, rb, off) \
+  ((float16)(vload8(0, (c) + (rb)[0] + (off)), vload8(0, (c) + (rb)[1] + (off))))
+#define SV_ROWS16(a) ((float16)((float8)((a)[0]), (float8)((a)[1])))
+#define SV_IOTA16 ((float16)(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7))
+#elif SV_RW == 4
+#define SV_NR 4
+#define SV_LD16(c, rb, off)                                                           \
+  ((float16)(vload4(0, (c) + (rb)[0] + (off)), vload4(0, (c) + (rb)[1] + (off)), \
+             vload4(0, (c) + (rb)[2] + (off)), vload4(0, (c) + (rb)[3] + (off))))
+#define SV_ROWS16(a) \
+  ((float16)((float4)((a)[0]), (float4)((a)[1]), (float4)((a)[2]), (float4)((a)[3])))
+#define SV_IOTA16 ((float16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3))
+#else
+#error "SV_RW must be 16, 8 or 4"
+#endif
+
+/* Shades the chunk of 16 positions from e0 (a multiple of 16) of PE p's
+ * cell; returns the lanes that are voxels of the cell (-1) or the plane's
+ * tail (0; their values are those of the last row, to be discarded). */
+SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const float* cells,
+                           __global const int4* origins, int4 cell, int4 block, int p, int e0,
+                           float16* id, float16* is, float16* mag, float16* v) {
+  const int rows = cell.y * cell.z;
+  const int4 o = origins[p];
+  __global const float* c = cells + sv_block_start(block, p);
+  const int bx = block.x, bxy = block.x * block.y;
+#if SV_RW == 16
+  const int row0 = e0 / cell.x;
+  const int lx0 = e0 - row0 * cell.x;
+#else
+  const int row0 = e0 / SV_RW; /* cell.x == SV_RW */
+  const int lx0 = 0;
+#endif
+  int rb[SV_NR];
+  float fy[SV_NR], fz[SV_NR], ok[SV_NR];
+#pragma unroll
+  for (int r = 0; r < SV_NR; ++r) {
+    const int row = min(row0 + r, rows - 1);
+    const int ly = row % cell.y, lz = row / cell.y;
+    rb[r] = (int)sv_block_offset(cell, block, lx0, ly, lz);
+    fy[r] = (float)(o.y + ly);
+    fz[r] = (float)(o.z + lz);
+    ok[r] = row0 + r < rows ? 1.0f : 0.0f;
+  }
+  *v = SV_LD16(c, rb, 0);
+  sv_shade16(sp, SV_LD16(c, rb, -1), SV_LD16(c, rb, 1), SV_LD16(c, rb, -bx), SV_LD16(c, rb, bx),
+             SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), (float)(o.x + lx0) + SV_IOTA16,
+             SV_ROWS16(fy), SV_ROWS16(fz), id, is, mag);
+  return SV_ROWS16(ok) != 0.0f;
+}
+
+/* Stores 16 lanes of (a, b, c, d) at position e0 of a PE's planar block. */
+SV_FN void sv_store16(__global float* blk, int vstride, int e0, float16 a, float16 b, float16 c,
+                      float16 d) {
+  SV_VSTORE16(a, blk + e0);
+  SV_VSTORE16(b, blk + vstride + e0);
+  SV_VSTORE16(c, blk + 2 * vstride + e0);
+  SV_VSTORE16(d, blk + 3 * vstride + e0);
+}
+
+/* simdvol_shade16: 2-D range (chunk, PE) = (vstride / 16 rounded up to the
+ * local size, pes); arguments as simdvol_shade. */
+__kernel void simdvol_shade16(__global const float* restrict cells, __global float* restrict out,
+                              __global const int4* restrict origins, int4 dims, int4 cell,
+                              int4 block, int pes, int vstride,
+                              __constant const sv_shade_params* sp) {
+  const int e0 = 16 * (int)get_global_id(0);
+  const int p = (int)get_global_id(1);
+  if (p >= pes || e0 >= vstride) return;
+  float16 id, is, mag, v;
+  const int16 in = sv_shade_chunk(sp, cells, origins, cell, block, p, e0, &id, &is, &mag, &v);
+  const float16 z = 0.0f;
+  sv_store16(out + (size_t)p * 4 * (size_t)vstride, vstride, e0, select(z, id, in),
+             select(z, is, in), select(z, mag, in), select(z, v, in));
+}
+#endif /* SV_RW */

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <string>
 
+#include "chunk_ranges.hpp"
 #include "simdvol/stages.hpp"
 #include "voxel_ranges.hpp"
 
@@ -125,23 +126,27 @@ Defines classify_defines(const sv_classify_params& p) {
 }
 
 cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
-                           const sv_classify_params& params, VoxelBuffer& out) {
+                           const sv_classify_params& params, VoxelBuffer& out,
+                           ClassifyKernel variant) {
   check_same(shading.layout(), out.layout(), "classify output");
   if (shading.buffer()() == out.buffer()())
     throw ArgumentError("classify output", "must not be the shading buffer");
   cl::Buffer pbuf = params_buffer(device, &params, sizeof params, "classify parameters");
-  const std::string name = "simdvol_classify";
-  cl::Kernel k = device.kernel("classify", name, classify_defines(params));
+  const bool vec = variant == ClassifyKernel::vec16;
+  const std::string name = vec ? "simdvol_classify16" : "simdvol_classify";
+  Defines defines = classify_defines(params);
+  if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+  cl::Kernel k = device.kernel("classify", name, defines);
   const VoxelLayout& V = out.layout();
   set_args(k, name, shading.buffer(), out.buffer(), static_cast<cl_int>(V.stride),
            static_cast<cl_int>(V.pes()), pbuf);
-  const detail::PlaneRange r = detail::plane_range(V);
+  const detail::PlaneRange r = vec ? detail::chunk_range(V) : detail::plane_range(V);
   return device.run(k, name, r.global, r.local);
 }
 
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
-                                 VoxelBuffer& out) {
+                                 VoxelBuffer& out, ShadeKernel variant) {
   const CellLayout& C = cells.layout();
   const VoxelLayout& V = out.layout();
   if (C.halo < 1) throw ArgumentError("cells", "the shade stage needs a halo of at least 1");
@@ -150,11 +155,20 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                         "voxel buffer was made for a different volume or PE count");
   cl::Buffer sbuf = params_buffer(device, &shade, sizeof shade, "shade parameters");
   cl::Buffer cbuf = params_buffer(device, &classify, sizeof classify, "classify parameters");
-  const std::string name = "simdvol_shade_classify";
-  cl::Kernel k = fused_kernel(device, name, classify_defines(classify));
+  const int rw = detail::shade_row_width(V.cell()[0]);
+  const bool vec = variant == ShadeKernel::vec16 && rw != 0;
+  const std::string name = vec ? "simdvol_shade_classify16" : "simdvol_shade_classify";
+  Defines defines = classify_defines(classify);
+  if (vec) defines.emplace_back("SV_RW", std::to_string(rw));
+  if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+  cl::Kernel k = fused_kernel(device, name, defines);
   set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
            cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
            static_cast<cl_int>(V.stride), sbuf, cbuf);
+  if (vec) {
+    const detail::PlaneRange r = detail::chunk_range(V);
+    return device.run(k, name, r.global, r.local);
+  }
   const detail::CellRange r = detail::cell_range(V);
   return device.run(k, name, r.global, r.local);
 }

@@ -4,6 +4,7 @@
 #include <limits>
 #include <string>
 
+#include "chunk_ranges.hpp"
 #include "simdvol/stages.hpp"
 #include "voxel_ranges.hpp"
 
@@ -101,6 +102,19 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
   check_same_cells(C, V, "shade output");
   cl::Buffer pbuf = device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof params,
                                   const_cast<sv_shade_params*>(&params), "shade parameters");
+  const int rw = detail::shade_row_width(V.cell()[0]);
+  if (variant == ShadeKernel::vec16 && rw == 0) variant = ShadeKernel::rows;
+  if (variant == ShadeKernel::vec16) {
+    const std::string name = "simdvol_shade16";
+    Defines defines{{"SV_RW", std::to_string(rw)}};
+    if (detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+    cl::Kernel k = device.kernel("shade", name, defines);
+    set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
+             cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
+             static_cast<cl_int>(V.stride), pbuf);
+    const detail::PlaneRange r = detail::chunk_range(V);
+    return device.run(k, name, r.global, r.local);
+  }
   const char* name = variant == ShadeKernel::range3d ? "simdvol_shade"
                      : variant == ShadeKernel::voxel ? "simdvol_shade_voxel"
                                                      : "simdvol_shade_rows";

@@ -11,7 +11,9 @@
 //    reference adds the shade kernel's differences (test_shade_cl.cpp);
 //    transfer functions see |g| only through ramps of slope <= 1/15 here.
 //  - the fused kernel equals the two stages to 1e-6 (same float code,
-//    compiled in another program).
+//    compiled in another program); so do the scalar kernels (one voxel per
+//    work-item) and the float16 ones (16 voxels per work-item, the
+//    defaults), which do the same float operations lane by lane.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -100,8 +102,15 @@ void check_case(const Case& k) {
   shade_buf.write(dev, voxels_to_cells(s4, L));
   enqueue_classify(dev, shade_buf, cp, out);
   dev.finish();
-  const double d_alone = max_diff(ref, voxels_from_cells(out.read<Rgba>(dev), L));
+  const std::vector<Rgba> alone = voxels_from_cells(out.read<Rgba>(dev), L);
+  const double d_alone = max_diff(ref, alone);
   EXPECT_LE(d_alone, kTol) << "classify alone";
+  // 1b. the scalar classify kernel gives the same (same float operations).
+  VoxelBuffer scalar_out(dev, L);
+  enqueue_classify(dev, shade_buf, cp, scalar_out, ClassifyKernel::scalar);
+  dev.finish();
+  EXPECT_LE(max_diff(alone, voxels_from_cells(scalar_out.read<Rgba>(dev), L)), 1e-6)
+      << "scalar vs float16 classify";
 
   // 2. shade -> classify on the device, gathered by the device gather.
   enqueue_shade(dev, cells, sp, shade_buf);
@@ -116,6 +125,17 @@ void check_case(const Case& k) {
   dev.finish();
   const double d_fused = max_diff(staged, voxels_from_cells(fused.read<Rgba>(dev), L));
   EXPECT_LE(d_fused, 1e-6) << "fused vs staged";
+
+  // 4. the scalar fused kernel (3-D range) and the scalar stages.
+  enqueue_shade_classify(dev, cells, sp, cp, fused, ShadeKernel::range3d);
+  dev.finish();
+  EXPECT_LE(max_diff(staged, voxels_from_cells(fused.read<Rgba>(dev), L)), 1e-6)
+      << "scalar fused vs staged";
+  enqueue_shade(dev, cells, sp, shade_buf, ShadeKernel::rows);
+  enqueue_classify(dev, shade_buf, cp, out, ClassifyKernel::scalar);
+  dev.finish();
+  EXPECT_LE(max_diff(staged, voxels_from_cells(out.read<Rgba>(dev), L)), 1e-6)
+      << "scalar stages vs staged";
 }
 
 const ViewAngles kViews[] = {{0, 0, 0}, {30, 45, 10}, {-70, 120, 200}};
@@ -163,6 +183,20 @@ TEST(ClassifyKernel, BrainSmall) {
   check_case({&vol, "volpack", kViews[1], 8192, 1.0, p});
   check_case({&vol, "volpack", kViews[2], 512, 1.0, p});
   check_case({&vol, "mri", kViews[1], 8, 1.0, p});
+}
+
+// Cells whose x extent is 16k, 8 or 4 (the float16 shade kernel's row
+// widths), with plane tails (cell voxels not a multiple of 16) for 8 and 4.
+TEST(ClassifyKernel, Float16CellShapes) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume a = testing::random_volume({48, 7, 5}, -1100.0f, 1500.0f, {1, 1, 1}, 21);
+  const Volume b = testing::random_volume({16, 3, 5}, -1100.0f, 1500.0f, {1, 1.5, 1}, 22);
+  const Volume c = testing::random_volume({8, 3, 3}, -1100.0f, 1500.0f, {1, 1, 2}, 23);
+  for (const char* name : {"ct", "knots"}) {
+    check_case({&a, name, kViews[1], 1});       // 48 x 7 x 5: row width 16
+    check_case({&b, name, kViews[1], 2});       // 8 x 3 x 5, tail 8
+    check_case({&c, name, kViews[2], 2, 0.5});  // 4 x 3 x 3, tail 12
+  }
 }
 
 TEST(ClassifyKernel, NanVoxelsAreTransparent) {

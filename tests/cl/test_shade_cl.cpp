@@ -161,7 +161,7 @@ TEST(ShadeKernel, DecompositionsAgree) {
   const auto sp = shade_params(make_shade_frame(vol, view, ShadeParams{}), ShadeParams{});
   for (int64_t pes : {1, 512}) {
     const auto a = run_shade(dev, vol, sp, pes, ShadeKernel::range3d);
-    for (ShadeKernel k : {ShadeKernel::voxel, ShadeKernel::rows}) {
+    for (ShadeKernel k : {ShadeKernel::voxel, ShadeKernel::rows, ShadeKernel::vec16}) {
       const auto b = run_shade(dev, vol, sp, pes, k);
       ASSERT_EQ(a.cells.size(), b.cells.size());
       double worst = 0;
@@ -176,6 +176,52 @@ TEST(ShadeKernel, DecompositionsAgree) {
       }
       EXPECT_LE(worst, 1e-6) << "pes " << pes;
     }
+  }
+}
+
+// The float16 kernel (the default) for each row width it has: cells whose x
+// extent is a multiple of 16, 8 or 4 (with plane tails for 8 and 4), against
+// the reference and the scalar rows kernel; other cells fall back to rows.
+TEST(ShadeKernel, Float16RowWidths) {
+  SIMDVOL_TEST_DEVICE(dev);
+  struct Shape {
+    Dims3 dims;
+    int64_t pes, cx, cvox;
+  };
+  const Shape shapes[] = {{{48, 7, 5}, 1, 48, 1680}, {{64, 64, 64}, 8, 32, 32768},
+                          {{16, 3, 5}, 2, 8, 120},   {{64, 64, 64}, 512, 8, 512},
+                          {{8, 3, 3}, 2, 4, 36},     {{32, 32, 32}, 512, 4, 64},
+                          {{24, 5, 3}, 2, 12, 180}};
+  for (const Shape& sh : shapes) {
+    SCOPED_TRACE("dims " + std::to_string(sh.dims[0]) + "x" + std::to_string(sh.dims[1]) + "x" +
+                 std::to_string(sh.dims[2]) + " pes " + std::to_string(sh.pes));
+    const Volume vol = testing::random_volume(sh.dims, -1000.0f, 2000.0f, {1, 1.25, 0.8}, 9);
+    const ViewGeometry view = make_view(vol, kViews[2], 32, 32, Sampling::voxel);
+    ShadeParams p;
+    p.shininess = 24;
+    const auto sp = shade_params(make_shade_frame(vol, view, p), p);
+    const auto v = run_shade(dev, vol, sp, sh.pes, ShadeKernel::vec16);
+    ASSERT_EQ(v.layout.cell()[0], sh.cx);
+    ASSERT_EQ(v.layout.cell_voxels(), sh.cvox);
+    const Diff d = compare(vol, shade(vol, view, p), v.flat);
+    EXPECT_LE(d.id, kTolLight);
+    EXPECT_LE(d.is, kTolLight);
+    EXPECT_LE(d.grad_rel, kTolGradRel);
+    EXPECT_TRUE(d.value_exact);
+    const auto r = run_shade(dev, vol, sp, sh.pes, ShadeKernel::rows);
+    ASSERT_EQ(v.cells.size(), r.cells.size());
+    double worst = 0;
+    for (std::size_t i = 0; i < v.cells.size(); ++i) {
+      worst =
+          std::max(worst, static_cast<double>(std::fabs(v.cells[i].diffuse - r.cells[i].diffuse)));
+      worst = std::max(worst,
+                       static_cast<double>(std::fabs(v.cells[i].specular - r.cells[i].specular)));
+      worst = std::max(worst,
+                       std::fabs(static_cast<double>(v.cells[i].gradient - r.cells[i].gradient)) /
+                           std::max(1.0f, r.cells[i].gradient));
+      ASSERT_EQ(v.cells[i].pad, r.cells[i].pad) << "element " << i;  // values and zero tails
+    }
+    EXPECT_LE(worst, 1e-6);
   }
 }
 

@@ -145,13 +145,15 @@ class VoxelBuffer {
 sv_shade_params shade_params(const ShadeFrame& frame, const ShadeParams& p);
 
 /// Decomposition of the shade kernel (kernels/shade.cl, which records the
-/// measurements): rows (the default, fastest measured) or the alternatives.
-enum class ShadeKernel { range3d, voxel, rows };
+/// measurements): vec16 (the default, fastest measured: explicit float16 on
+/// chunks of 16 voxels; needs cells whose x extent is 4, 8 or a multiple of
+/// 16, and falls back to rows for other cells) or the scalar alternatives.
+enum class ShadeKernel { range3d, voxel, rows, vec16 };
 
 /// Shades `cells` (halo >= 1, filled by the layout stage) into `out` (a voxel
 /// buffer of the same cells).
 cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_params& params,
-                        VoxelBuffer& out, ShadeKernel variant = ShadeKernel::rows);
+                        VoxelBuffer& out, ShadeKernel variant = ShadeKernel::vec16);
 
 // --------------------------------------------------------------- classify
 
@@ -166,16 +168,24 @@ sv_classify_params classify_params(const Classifier& c, const ValueRange& range,
 /// (kind and counts; see kernels/classify.cl).
 Defines classify_defines(const sv_classify_params& params);
 
+/// Kernel of the classify stage (kernels/classify.cl): vec16 (the default,
+/// explicit float16 on chunks of 16 voxels) or scalar (one work-item per
+/// voxel; kept for comparison). Both give the same results.
+enum class ClassifyKernel { vec16, scalar };
+
 /// Classifies the shade stage's output `shading` into `out` (both voxel
 /// buffers of the same cells; they may not be the same buffer).
 cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
-                           const sv_classify_params& params, VoxelBuffer& out);
+                           const sv_classify_params& params, VoxelBuffer& out,
+                           ClassifyKernel variant = ClassifyKernel::vec16);
 
 /// Shade and classify fused in one launch: `out` receives what
-/// enqueue_classify would (the same float code).
+/// enqueue_classify would (the same float code). vec16 (the default) uses
+/// the float16 kernel where the cells allow it (as enqueue_shade), any other
+/// value the scalar 3-D range kernel.
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
-                                 VoxelBuffer& out);
+                                 VoxelBuffer& out, ShadeKernel variant = ShadeKernel::vec16);
 
 /// Gathers the in-volume voxels of `voxels` into `flat` (a buffer of at
 /// least dims-product 16-byte elements, x fastest).
