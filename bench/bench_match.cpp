@@ -62,24 +62,21 @@ int main(int argc, char** argv) {
     const NamedView timed[] = {{"0", {0, 0, 0}}, {"30", {0, 30, 0}}, {"45", {0, 45, 0}}};
     std::printf("\n256^3, 256^2 voxel sampling, %lld PEs, %d balance sweeps, median of %d\n",
                 static_cast<long long>(pes), sweeps, repeat);
-    std::printf("%-5s %9s %8s %8s %8s %9s %9s %9s %9s %8s %8s\n", "view", "segments", "count",
-                "scan", "fill", "match", "links", "rounds", "balance", "ref m", "ref b");
+    std::printf("%-5s %9s %8s %8s %8s %8s %9s %9s %9s %8s %8s\n", "view", "segments", "rows", "pe",
+                "scan", "fill", "match", "balance", "m+b", "ref m", "ref b");
     const KdSplit split = kd_split(dims, pes);
     for (const NamedView& nv : timed) {
       const ViewGeometry v = make_view(dims, spacing, nv.angles, 256, 256, Sampling::voxel);
-      std::vector<double> cnt, scn, fil, lnk, rnd, rm, rb;
+      std::vector<double> st[4], mt, bt, rm, rb;
       int64_t segs = 0;
       for (int r = 0; r < repeat + 1; ++r) {  // the first run builds the kernels
         DeviceMatching dm = enqueue_match(dev, v, split);
         enqueue_balance(dev, dm, v, split, sweeps);
         dev.finish();
         if (r == 0) continue;
-        cnt.push_back(event_ns(dm.match_events[0].event) * 1e-6);
-        scn.push_back(event_ns(dm.match_events[1].event) * 1e-6);
-        fil.push_back(event_ns(dm.match_events[2].event) * 1e-6);
-        lnk.push_back(event_ns(dm.balance_events[0].event) * 1e-6);
-        std::vector<StageEvent> rounds(dm.balance_events.begin() + 1, dm.balance_events.end());
-        rnd.push_back(events_ns(rounds) * 1e-6);
+        for (int k = 0; k < 4; ++k) st[k].push_back(event_ns(dm.match_events[k].event) * 1e-6);
+        mt.push_back(events_ns(dm.match_events) * 1e-6);
+        bt.push_back(events_ns(dm.balance_events) * 1e-6);
         if (r == 1) segs = static_cast<int64_t>(dm.read(dev).segments.size());
       }
       for (int r = 0; r < std::max(1, repeat / 2); ++r) {
@@ -90,11 +87,10 @@ int main(int argc, char** argv) {
         const Matching b = balance_reference(m, v, split, sweeps);
         rb.push_back(ms_since(t0));
       }
-      const double match = median(cnt) + median(scn) + median(fil);
-      const double bal = median(lnk) + median(rnd);
-      std::printf("%-5s %9lld %8.2f %8.3f %8.2f %9.2f %9.2f %9.2f %9.2f %8.1f %8.1f\n", nv.name,
-                  static_cast<long long>(segs), median(cnt), median(scn), median(fil), match,
-                  median(lnk), median(rnd), bal, median(rm), median(rb));
+      std::printf("%-5s %9lld %8.2f %8.3f %8.3f %8.2f %9.2f %9.2f %9.2f %8.1f %8.1f\n", nv.name,
+                  static_cast<long long>(segs), median(st[0]), median(st[1]), median(st[2]),
+                  median(st[3]), median(mt), median(bt), median(mt) + median(bt), median(rm),
+                  median(rb));
     }
     std::printf(
         "(ms from profiling events; ref m / ref b: serial match_reference / "

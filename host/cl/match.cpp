@@ -2,14 +2,19 @@
 #include "simdvol/match_cl.hpp"
 
 #include <algorithm>
+#include <array>
 #include <climits>
+#include <cmath>
 #include <string>
 
 namespace simdvol {
 
 namespace {
 
-constexpr std::size_t kWgs = 16;  // one work-item per PE: 8,192 PEs -> 512 groups
+// Work-items loop (scalar code under PoCL); 64 per group keeps the group
+// count (P x H / 64 for the row kernels, P / 64 for the others) in the
+// hundreds to thousands.
+constexpr std::size_t kWgs = 64;
 
 const Defines& match_defines() {
   static const Defines d{{"WGS", std::to_string(kWgs)}};
@@ -25,11 +30,6 @@ cl_int4 int4(int64_t x, int64_t y, int64_t z, int64_t w) {
   return v;
 }
 
-Dims3 splits_of(const KdSplit& split) {
-  return {int64_t(1) << split.axis_bits[0], int64_t(1) << split.axis_bits[1],
-          int64_t(1) << split.axis_bits[2]};
-}
-
 }  // namespace
 
 std::uint64_t events_ns(const std::vector<StageEvent>& events) {
@@ -38,14 +38,99 @@ std::uint64_t events_ns(const std::vector<StageEvent>& events) {
   return t;
 }
 
+namespace {
+
+// The row geometry of match.cl (sv_row_range): with (i, j, k) = M^-1 (X - o),
+// u_a = the (i, j) components of M^-1 c_a e_a (the projection of a cell edge),
+// the projection of cell cidx is the zonogon centred at
+//   ctr = g0 + sum_a cidx_a u_a,  g0 = (M^-1 (c / 2 - o))_(i,j),
+// the intersection of the strips |n_a . (p - ctr)| <= h_a, n_a a unit normal
+// of u_a, h_a = 1/2 sum_(b != a) |n_a . u_b| (+ a pad of 0.05 px, far above
+// the float rounding of the device). A strip that is degenerate or bounds j
+// only (n_a.i ~ 0) is left out: the candidate rectangle bounds the rest.
+// Layout: [0, 1] g0, [2..4] u_a.i, [5..7] u_a.j, [8..10] n_a.i,
+// [11..13] n_a.j, [14..16] h_a.
+std::array<float, 20> row_geometry(const ViewGeometry& view, const KdSplit& split) {
+  Mat3 m{};
+  Vec3 o{};
+  for (int a = 0; a < 3; ++a) {
+    o[a] = std::ldexp(static_cast<double>(view.grid.origin[a]), -SV_FRAC_BITS);
+    for (int b = 0; b < 3; ++b)
+      m[a][b] = std::ldexp(static_cast<double>(view.grid.step[a][b]), -SV_FRAC_BITS);
+  }
+  const double det = determinant(m);
+  if (!(std::abs(det) > 0.0)) throw ArgumentError("view", "singular viewing map");
+  Mat3 inv{};
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      const int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
+      inv[r][c] = (m[r1][c1] * m[r2][c2] - m[r1][c2] * m[r2][c1]) / det;
+    }
+  std::array<float, 20> g{};
+  Vec3 half{};
+  for (int a = 0; a < 3; ++a) half[a] = 0.5 * static_cast<double>(split.cell[a]) - o[a];
+  const Vec3 g0 = multiply(inv, half);
+  g[0] = static_cast<float>(g0[0]);
+  g[1] = static_cast<float>(g0[1]);
+  double u[3][2];
+  for (int a = 0; a < 3; ++a) {
+    u[a][0] = inv[0][a] * static_cast<double>(split.cell[a]);
+    u[a][1] = inv[1][a] * static_cast<double>(split.cell[a]);
+    g[2 + a] = static_cast<float>(u[a][0]);
+    g[5 + a] = static_cast<float>(u[a][1]);
+  }
+  for (int a = 0; a < 3; ++a) {
+    double ni = -u[a][1], nj = u[a][0];
+    const double len = std::hypot(ni, nj);
+    if (!(len > 1e-9)) continue;
+    ni /= len;
+    nj /= len;
+    if (std::abs(ni) < 1e-6) continue;
+    double h = 0.05;
+    for (int b = 0; b < 3; ++b)
+      if (b != a) h += 0.5 * std::abs(ni * u[b][0] + nj * u[b][1]);
+    g[8 + a] = static_cast<float>(ni);
+    g[11 + a] = static_cast<float>(nj);
+    g[14 + a] = static_cast<float>(h);
+  }
+  return g;
+}
+
+// Per axis: m = |d|, and delta = dq m + dr (0 <= dr < m), delta = -s for
+// d > 0, +s for d < 0 (s = step along i, d = step along k).
+std::array<cl_long, 9> step_constants(const ViewGeometry& view) {
+  std::array<cl_long, 9> c{};
+  for (int a = 0; a < 3; ++a) {
+    const int64_t s = view.grid.step[a][0], d = view.grid.step[a][2];
+    if (d == 0) {
+      c[3 * a] = 1;
+      continue;
+    }
+    const int64_t m = d > 0 ? d : -d;
+    const int64_t delta = d > 0 ? -s : s;
+    int64_t dq = delta / m, dr = delta % m;
+    if (dr < 0) dr += m, --dq;
+    c[3 * a] = m;
+    c[3 * a + 1] = dq;
+    c[3 * a + 2] = dr;
+  }
+  return c;
+}
+
+}  // namespace
+
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split) {
   const std::vector<sv_rect> cand = match_candidates(view, split);  // validates the split
   const int64_t pes = split.pes();
   if (pes > INT_MAX / 2) throw ArgumentError("split", "too many PEs");
-  int64_t capacity = 0;
-  for (const sv_rect& r : cand) capacity += int64_t(r.w) * r.h;
+  int64_t capacity = 0, rows = 1;
+  for (const sv_rect& r : cand) {
+    capacity += int64_t(r.w) * r.h;
+    rows = std::max<int64_t>(rows, r.h);
+  }
   if (capacity > INT_MAX / 4)
     throw ArgumentError("view", "too many candidate rays for 32-bit segment indices");
+  if (pes * rows > INT_MAX / 2) throw ArgumentError("view", "too many rows for 32-bit indices");
   for (int a = 0; a < 3; ++a)
     if (split.cell[a] > INT_MAX) throw ArgumentError("split", "cell too large");
   capacity = std::max<int64_t>(capacity, 1);
@@ -53,14 +138,17 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   DeviceMatching m;
   m.pes = pes;
   m.capacity = capacity;
+  m.rows = rows;
   std::vector<cl_int4> cidx(static_cast<std::size_t>(pes));
   std::vector<cl_int> pe_of(static_cast<std::size_t>(pes));
-  const Dims3 sp = splits_of(split);
+  const Dims3 sp = split.splits();
   for (int64_t p = 0; p < pes; ++p) {
-    const auto c = cell_index_of(split, p);
+    const Dims3 c = split.cell_index(p);
     cidx[p] = int4(c[0], c[1], c[2], 0);
     pe_of[(c[2] * sp[1] + c[1]) * sp[0] + c[0]] = static_cast<cl_int>(p);
   }
+  std::array<float, 20> geo = row_geometry(view, split);
+  std::array<cl_long, 9> steps = step_constants(view);
   const auto ro = CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR;
   m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
   m.pe_of = device.buffer(ro, pe_of.size() * sizeof(cl_int), pe_of.data(), "PE of cell");
@@ -68,31 +156,49 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
                                "candidate rectangles");
   sv_view v = view.grid;
   m.view = device.buffer(ro, sizeof(sv_view), &v, "view");
+  m.geometry = device.buffer(ro, sizeof(geo), geo.data(), "row geometry");
+  m.steps = device.buffer(ro, sizeof(steps), steps.data(), "step constants");
   const std::size_t P = static_cast<std::size_t>(pes);
-  m.counts = device.buffer(CL_MEM_READ_WRITE, P * sizeof(cl_int), nullptr, "segment counts");
-  m.seg_offset = device.buffer(CL_MEM_READ_WRITE, (P + 1) * sizeof(cl_int), nullptr, "seg_offset");
-  m.segments =
-      device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(capacity) * sizeof(sv_segment),
-                    nullptr, "segments");
-  m.rects = device.buffer(CL_MEM_READ_WRITE, P * sizeof(sv_rect), nullptr, "footprint rects");
-  m.loads = device.buffer(CL_MEM_READ_WRITE, P * sizeof(cl_int), nullptr, "loads");
+  const std::size_t R = P * static_cast<std::size_t>(rows);
+  const auto rw = CL_MEM_READ_WRITE;
+  m.rowsum = device.buffer(rw, R * sizeof(cl_int4), nullptr, "row sums");
+  m.rowlinks = device.buffer(rw, R * sizeof(cl_int4), nullptr, "row links");
+  m.rowoff = device.buffer(rw, R * sizeof(cl_int4), nullptr, "row offsets");
+  m.petot = device.buffer(rw, P * sizeof(cl_int4), nullptr, "PE totals");
+  m.counts = device.buffer(rw, P * sizeof(cl_int), nullptr, "segment counts");
+  m.seg_offset = device.buffer(rw, (P + 1) * sizeof(cl_int), nullptr, "seg_offset");
+  const std::size_t C = static_cast<std::size_t>(capacity);
+  m.segments = device.buffer(rw, C * sizeof(sv_segment), nullptr, "segments");
+  m.rects = device.buffer(rw, P * sizeof(sv_rect), nullptr, "footprint rects");
+  m.loads = device.buffer(rw, P * sizeof(cl_int), nullptr, "loads");
+  m.links = device.buffer(rw, C * sizeof(cl_int), nullptr, "balance links");
+  m.link_offset = device.buffer(rw, (P + 1) * sizeof(cl_int4), nullptr, "link offsets");
+  m.link_list = device.buffer(rw, C * sizeof(cl_int2), nullptr, "link lists");
 
   const cl_int4 cell = int4(split.cell[0], split.cell[1], split.cell[2], 0);
-  const cl_int npes = static_cast<cl_int>(pes);
+  const cl_int4 splits = int4(sp[0], sp[1], sp[2], 0);
+  const cl_int npes = static_cast<cl_int>(pes), H = static_cast<cl_int>(rows);
 
-  cl::Kernel count = device.kernel("match", "simdvol_match_count", match_defines());
-  set_args(count, "simdvol_match_count", m.view, m.candidates, m.cidx, cell, npes, m.counts);
+  cl::Kernel k_rows = device.kernel("match", "simdvol_match_rows", match_defines());
+  set_args(k_rows, "simdvol_match_rows", m.view, m.geometry, m.steps, m.candidates, m.cidx, cell,
+           splits, m.pe_of, npes, H, m.rowsum, m.rowlinks);
   m.match_events.push_back(
-      {"match_count", device.run(count, "simdvol_match_count", cl::NDRange(P), cl::NDRange(kWgs))});
-  cl::Kernel scan = device.kernel("match", "simdvol_match_scan", match_defines());
-  set_args(scan, "simdvol_match_scan", m.counts, npes, m.seg_offset);
+      {"match_rows", device.run(k_rows, "simdvol_match_rows", cl::NDRange(R), cl::NDRange(kWgs))});
+  cl::Kernel k_pe = device.kernel("match", "simdvol_match_pe", match_defines());
+  set_args(k_pe, "simdvol_match_pe", m.candidates, npes, H, m.rowsum, m.rowlinks, m.rowoff, m.petot,
+           m.counts, m.rects, m.loads);
   m.match_events.push_back(
-      {"match_scan", device.run(scan, "simdvol_match_scan", cl::NDRange(kWgs), cl::NDRange(kWgs))});
-  cl::Kernel fill = device.kernel("match", "simdvol_match_fill", match_defines());
-  set_args(fill, "simdvol_match_fill", m.view, m.candidates, m.cidx, cell, npes, m.seg_offset,
-           m.segments, m.rects, m.loads);
+      {"match_pe", device.run(k_pe, "simdvol_match_pe", cl::NDRange(P), cl::NDRange(kWgs))});
+  cl::Kernel k_scan = device.kernel("match", "simdvol_match_scan", match_defines());
+  set_args(k_scan, "simdvol_match_scan", m.petot, npes, m.seg_offset, m.link_offset);
+  m.match_events.push_back({"match_scan", device.run(k_scan, "simdvol_match_scan",
+                                                     cl::NDRange(kWgs), cl::NDRange(kWgs))});
+  cl::Kernel k_fill = device.kernel("match", "simdvol_match_fill", match_defines());
+  set_args(k_fill, "simdvol_match_fill", m.view, m.geometry, m.steps, m.candidates, m.cidx, cell,
+           splits, m.pe_of, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset, m.segments,
+           m.links, m.link_list);
   m.match_events.push_back(
-      {"match_fill", device.run(fill, "simdvol_match_fill", cl::NDRange(P), cl::NDRange(kWgs))});
+      {"match_fill", device.run(k_fill, "simdvol_match_fill", cl::NDRange(R), cl::NDRange(kWgs))});
   return m;
 }
 
@@ -101,30 +207,18 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   if (sweeps < 0) throw ArgumentError("sweeps", "must be >= 0");
   if (m.pes != split.pes()) throw ArgumentError("matching", "made for another PE count");
   const std::size_t P = static_cast<std::size_t>(m.pes);
-  if (!m.links())
-    m.links =
-        device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(m.capacity) * sizeof(cl_int),
-                      nullptr, "balance links");
-  const cl::Buffer& cidx = m.cidx;
-  const cl::Buffer& pe_of = m.pe_of;
-  const Dims3 sp = splits_of(split);
+  const Dims3 sp = split.splits();
   const cl_int4 splits = int4(sp[0], sp[1], sp[2], 0);
-  const cl_int4 cell = int4(split.cell[0], split.cell[1], split.cell[2], 0);
   const cl_int npes = static_cast<cl_int>(m.pes);
-
-  cl::Kernel links = device.kernel("balance", "simdvol_balance_links", match_defines());
-  set_args(links, "simdvol_balance_links", m.view, cidx, pe_of, cell, splits, npes, m.seg_offset,
-           m.segments, m.links);
-  m.balance_events.push_back({"balance_links", device.run(links, "simdvol_balance_links",
-                                                          cl::NDRange(P), cl::NDRange(kWgs))});
   for (int sweep = 0; sweep < sweeps; ++sweep)
     for (int a = 0; a < 3; ++a) {
       const int64_t dir = view.grid.step[a][2];
       if (dir == 0 || sp[a] < 2) continue;
       for (int par = 0; par < 2; ++par) {
         cl::Kernel round = device.kernel("balance", "simdvol_balance_round", match_defines());
-        set_args(round, "simdvol_balance_round", cidx, pe_of, splits, npes, cl_int(a), cl_int(par),
-                 cl_int(dir > 0 ? 1 : -1), m.seg_offset, m.segments, m.links, m.loads);
+        set_args(round, "simdvol_balance_round", m.cidx, m.pe_of, splits, npes, cl_int(a),
+                 cl_int(par), cl_int(dir > 0 ? 1 : -1), m.link_offset, m.link_list, m.segments,
+                 m.loads);
         m.balance_events.push_back(
             {"balance_round",
              device.run(round, "simdvol_balance_round", cl::NDRange(P), cl::NDRange(kWgs))});

@@ -29,28 +29,8 @@ int64_t Matching::total_load() const {
   return t;
 }
 
-std::array<int64_t, 3> cell_index_of(const KdSplit& split, int64_t pe) {
-  std::array<int64_t, 3> idx{0, 0, 0};
-  for (int b = split.bits - 1; b >= 0; --b) {
-    const int a = split.bit_axis[b];
-    idx[a] = idx[a] * 2 + ((pe >> b) & 1);
-  }
-  return idx;
-}
-
-int64_t pe_of_cell_index(const KdSplit& split, const std::array<int64_t, 3>& index) {
-  std::array<int, 3> remaining = split.axis_bits;
-  int64_t pe = 0;
-  for (int b = split.bits - 1; b >= 0; --b) {
-    const int a = split.bit_axis[b];
-    --remaining[a];
-    pe |= ((index[a] >> remaining[a]) & 1) << b;
-  }
-  return pe;
-}
-
 CellBox cell_box(const KdSplit& split, int64_t pe) {
-  const auto idx = cell_index_of(split, pe);
+  const Dims3 idx = split.cell_index(pe);
   CellBox b;
   for (int a = 0; a < 3; ++a) {
     b.lo[a] = idx[a] * split.cell[a];
@@ -208,11 +188,11 @@ std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
     throw ArgumentError("matching", "too many segments for 32-bit links");
   std::vector<int32_t> link(m.segments.size(), -1);
   for (int64_t p = 0; p < pes; ++p) {
-    const auto cp = cell_index_of(split, p);
+    const Dims3 cp = split.cell_index(p);
     for (int64_t s = m.seg_offset[p]; s < m.seg_offset[p + 1]; ++s) {
       const sv_segment& g = m.segments[s];
       if (g.k1 >= view.depth()) continue;
-      std::array<int64_t, 3> cq{};
+      Dims3 cq{};
       bool inside = true;
       for (int a = 0; a < 3; ++a) {
         const int64_t f = fixed_floor(view.fixed(a, g.i, g.j, g.k1));
@@ -230,7 +210,7 @@ std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
         if (dd != 1 && dd != -1) face = false;
       }
       if (differing != 1 || !face) continue;
-      const int64_t q = pe_of_cell_index(split, cq);
+      const int64_t q = split.pe_of_cell(cq);
       const auto first = m.segments.begin() + m.seg_offset[q];
       const auto last = m.segments.begin() + m.seg_offset[q + 1];
       const auto it =
@@ -265,17 +245,16 @@ int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a
     if (linked(s)) cap += len(s);
   const int64_t moved = std::min(cap, want);
   if (moved == 0) return 0;
-  // Proportional shares floor(moved * len / cap) (each <= len, sum <= moved),
-  // then one more sample from each of the first rays (in order) that still
-  // hold one, until `moved` is reached.
-  int64_t rem = moved;
-  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
-    if (linked(s)) rem -= moved * len(s) / cap;
+  // Cumulative shares: with C_r the sum of len over the linked rays up to and
+  // including r, ray r gives floor(moved * C_r / cap) - floor(moved * C_{r-1}
+  // / cap) (between 0 and len_r since moved <= cap; the gives sum to moved).
+  int64_t c = 0, prev = 0;
   for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) {
     if (!linked(s)) continue;
-    const int64_t l = len(s);
-    int64_t give = moved * l / cap;
-    if (rem > 0 && give < l) ++give, --rem;
+    c += len(s);
+    const int64_t cum = moved * c / cap;
+    const int64_t give = cum - prev;
+    prev = cum;
     const int64_t shift = front_gives ? -give : give;
     m.segments[s].k1 = static_cast<sv_i32>(m.segments[s].k1 + shift);
     m.segments[link[s] >> 2].k0 = static_cast<sv_i32>(m.segments[link[s] >> 2].k0 + shift);
@@ -291,18 +270,17 @@ Matching balance_reference(const Matching& m0, const ViewGeometry& view, const K
   const std::vector<int32_t> link = balance_links(m0, view, split);
   Matching m = m0;
   const int64_t pes = split.pes();
-  const Dims3 splits{int64_t(1) << split.axis_bits[0], int64_t(1) << split.axis_bits[1],
-                     int64_t(1) << split.axis_bits[2]};
+  const Dims3 splits = split.splits();
   for (int sweep = 0; sweep < sweeps; ++sweep)
     for (int a = 0; a < 3; ++a) {
       const int64_t dir = view.grid.step[a][2];
       if (dir == 0) continue;  // no ray crosses a face along a
       for (int par = 0; par < 2; ++par)
         for (int64_t p = 0; p < pes; ++p) {
-          auto cp = cell_index_of(split, p);
+          Dims3 cp = split.cell_index(p);
           if (cp[a] % 2 != par || cp[a] + 1 >= splits[a]) continue;
           cp[a] += 1;
-          const int64_t q = pe_of_cell_index(split, cp);
+          const int64_t q = split.pe_of_cell(cp);
           const int64_t F = dir > 0 ? p : q, B = dir > 0 ? q : p;
           const int64_t diff = m.loads[F] - m.loads[B];
           const int64_t moved = transfer(m, link, F, a, diff / 2);  // truncates towards 0

@@ -15,29 +15,6 @@
 
 namespace simdvol::testing {
 
-/// The k-d split of pe_array.hpp, rebuilt from its definition: kd_split()
-/// lives in simdvol_cl, which the core tests do not link. tests/cl checks
-/// that the two agree.
-inline KdSplit split_of(const Dims3& dims, int64_t pes) {
-  KdSplit s;
-  s.dims = dims;
-  while ((int64_t(1) << s.bits) < pes) ++s.bits;
-  s.bit_axis.assign(s.bits, 0);
-  auto cdiv = [](int64_t a, int64_t b) { return (a + b - 1) / b; };
-  for (int i = 0; i < s.bits; ++i) {
-    int best = 0;
-    int64_t best_extent = -1;
-    for (int a = 0; a < 3; ++a) {
-      const int64_t e = cdiv(dims[a], int64_t(1) << s.axis_bits[a]);
-      if (e > best_extent) best = a, best_extent = e;
-    }
-    s.bit_axis[s.bits - 1 - i] = best;
-    ++s.axis_bits[best];
-  }
-  for (int a = 0; a < 3; ++a) s.cell[a] = cdiv(dims[a], int64_t(1) << s.axis_bits[a]);
-  return s;
-}
-
 inline ViewGeometry geometry(const Dims3& dims, ViewAngles v, int w, int h,
                              Sampling s = Sampling::voxel) {
   return make_view(dims, {1.0, 1.0, 1.0}, v, w, h, s);
@@ -162,7 +139,7 @@ inline void expect_balanced_invariants(const Matching& before, const Matching& a
       ASSERT_EQ(ordered[n].k1, ordered[n + 1].k0) << what << " ray " << r;
       const bool moved = ordered[n].k1 != rb[r][n].k1;
       if (moved) {
-        auto ca = cell_index_of(split, ordered[n].pe), cb = cell_index_of(split, ordered[n + 1].pe);
+        const Dims3 ca = split.cell_index(ordered[n].pe), cb = split.cell_index(ordered[n + 1].pe);
         int64_t dist = 0;
         for (int a = 0; a < 3; ++a) dist += std::abs(ca[a] - cb[a]);
         ASSERT_EQ(dist, 1) << what << ": boundary moved between non-face neighbours";

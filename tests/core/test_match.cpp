@@ -23,11 +23,6 @@ std::string name(ViewAngles v, int64_t pes) {
 
 }  // namespace
 
-TEST(Match, CellIndexHelpersInvert) {
-  const KdSplit s = split_of({93, 57, 31}, 512);
-  for (int64_t p = 0; p < s.pes(); ++p) EXPECT_EQ(pe_of_cell_index(s, cell_index_of(s, p)), p);
-}
-
 TEST(Match, BruteForceOwnershipOnTinyVolumes) {
   // Every sample (i, j, k) inside the volume is in the segment of the PE
   // owning floor(X), and no other sample is in any segment.
@@ -38,7 +33,7 @@ TEST(Match, BruteForceOwnershipOnTinyVolumes) {
     const ViewAngles va = n < 4 ? kViews[n] : ViewAngles{ang(rng), ang(rng), ang(rng)};
     const ViewGeometry v = geometry(dims, va, 12, 9, n % 2 ? Sampling::voxel : Sampling::pixel);
     for (int64_t pes : {1, 2, 8, 64, 512}) {
-      const KdSplit split = split_of(dims, pes);
+      const KdSplit split = kd_split(dims, pes);
       const Matching m = match_reference(v, split);
       expect_well_formed(m, pes, true, name(va, pes));
       std::vector<int64_t> owner(static_cast<std::size_t>(v.width()) * v.height() * v.depth(), -1);
@@ -58,7 +53,7 @@ TEST(Match, BruteForceOwnershipOnTinyVolumes) {
             if (v.inside(i, j, k)) {
               Dims3 c{};
               for (int a = 0; a < 3; ++a) c[a] = fixed_floor(v.fixed(a, i, j, k)) / split.cell[a];
-              expect = pe_of_cell_index(split, c);
+              expect = split.pe_of_cell(c);
             }
             ASSERT_EQ(owner[(static_cast<std::size_t>(k) * v.height() + j) * v.width() + i], expect)
                 << name(va, pes) << " sample " << i << "," << j << "," << k;
@@ -72,7 +67,7 @@ TEST(Match, EveryInVolumeSampleToExactlyOnePeFixedViewsAllP) {
   for (ViewAngles va : kViews) {
     const ViewGeometry v = geometry(dims, va, 96, 96);
     for (int64_t pes = 1; pes <= 8192; pes *= 2) {
-      const Matching m = match_reference(v, split_of(dims, pes));
+      const Matching m = match_reference(v, kd_split(dims, pes));
       expect_well_formed(m, pes, true, name(va, pes));
       expect_tiles_rays(m, v, name(va, pes));
     }
@@ -87,7 +82,7 @@ TEST(Match, EveryInVolumeSampleToExactlyOnePeRandomViews) {
     const ViewAngles va{ang(rng), ang(rng), ang(rng)};
     const int64_t pes = int64_t(1) << (n % 14);
     const ViewGeometry v = geometry(dims, va, 40, 32, n % 3 ? Sampling::voxel : Sampling::pixel);
-    const Matching m = match_reference(v, split_of(dims, pes));
+    const Matching m = match_reference(v, kd_split(dims, pes));
     expect_well_formed(m, pes, true, name(va, pes));
     expect_tiles_rays(m, v, name(va, pes));
   }
@@ -96,7 +91,7 @@ TEST(Match, EveryInVolumeSampleToExactlyOnePeRandomViews) {
 TEST(Match, CandidatesContainEveryRay) {
   const Dims3 dims{31, 29, 37};
   const ViewGeometry v = geometry(dims, {17, 41, 73}, 50, 50);
-  const KdSplit split = split_of(dims, 64);
+  const KdSplit split = kd_split(dims, 64);
   const auto cand = match_candidates(v, split);
   const Matching m = match_reference(v, split);
   for (int64_t p = 0; p < 64; ++p) {
@@ -114,7 +109,7 @@ TEST(Match, AxisAlignedViewGivesEachPeItsCellVolume) {
   // its clipped cell's voxel count.
   const Dims3 dims{32, 24, 16};
   const ViewGeometry v = geometry(dims, {0, 0, 0}, 32, 32);
-  const KdSplit split = split_of(dims, 64);
+  const KdSplit split = kd_split(dims, 64);
   const Matching m = match_reference(v, split);
   for (int64_t p = 0; p < 64; ++p) {
     const CellBox b = cell_box(split, p);
@@ -125,7 +120,7 @@ TEST(Match, AxisAlignedViewGivesEachPeItsCellVolume) {
 
 TEST(Match, RejectsMismatchedSplit) {
   const ViewGeometry v = geometry({8, 8, 8}, {}, 8, 8);
-  EXPECT_THROW(match_reference(v, split_of({8, 8, 9}, 4)), ArgumentError);
+  EXPECT_THROW(match_reference(v, kd_split({8, 8, 9}, 4)), ArgumentError);
 }
 
 TEST(Balance, InvariantsHoldAndLoadsImprove) {
@@ -136,7 +131,7 @@ TEST(Balance, InvariantsHoldAndLoadsImprove) {
     const ViewAngles va = n < 4 ? kViews[n] : ViewAngles{ang(rng), ang(rng), ang(rng)};
     const ViewGeometry v = geometry(dims, va, 48, 48);
     for (int64_t pes : {2, 16, 128, 1024}) {
-      const KdSplit split = split_of(dims, pes);
+      const KdSplit split = kd_split(dims, pes);
       const Matching m = match_reference(v, split);
       const Matching b = balance_reference(m, v, split);
       expect_balanced_invariants(m, b, v, split, name(va, pes));
@@ -148,7 +143,7 @@ TEST(Balance, InvariantsHoldAndLoadsImprove) {
 TEST(Balance, ZeroSweepsIsIdentityAndRejectsNegative) {
   const Dims3 dims{20, 20, 20};
   const ViewGeometry v = geometry(dims, {10, 20, 30}, 24, 24);
-  const KdSplit split = split_of(dims, 32);
+  const KdSplit split = kd_split(dims, 32);
   const Matching m = match_reference(v, split);
   const Matching b = balance_reference(m, v, split, 0);
   EXPECT_EQ(b.loads, m.loads);

@@ -28,9 +28,10 @@
 // loads L_F, L_B and d = L_F - L_B transfers t = floor(|d| / 2) samples from
 // the heavier to the lighter PE (capped by what the giver holds on the
 // linked rays, cap = sum of len_r), spread over the linked rays in F's
-// segment order: ray r gives floor(t * len_r / cap) samples (len_r = what the
-// giver holds on it), then the remaining samples go one each to the first
-// rays (in order) that still hold one. Integer only: the device result is
+// segment order by cumulative shares: with C_r = len summed over the linked
+// rays up to and including r, ray r gives floor(t' C_r / cap) -
+// floor(t' C_{r-1} / cap) samples (t' = min(t, cap); each share lies in
+// [0, len_r] and they sum to t'). Integer only: the device result is
 // identical.
 #pragma once
 
@@ -66,14 +67,7 @@ struct CellBox {
   std::array<int64_t, 3> hi{0, 0, 0};
   bool empty() const { return lo[0] >= hi[0] || lo[1] >= hi[1] || lo[2] >= hi[2]; }
 };
-/// Uses only the fields of `split` (dims, bits, bit_axis, cell).
 CellBox cell_box(const KdSplit& split, int64_t pe);
-/// Cell index of `pe` along each axis, from the fields of `split` only
-/// (equal to KdSplit::cell_index, which lives in simdvol_cl).
-std::array<int64_t, 3> cell_index_of(const KdSplit& split, int64_t pe);
-/// Inverse of cell_index_of (equal to KdSplit::pe_of_cell).
-int64_t pe_of_cell_index(const KdSplit& split, const std::array<int64_t, 3>& index);
-
 /// Candidate rectangle of every PE (see the file comment): a superset of the
 /// rays (i, j) that have a sample in the PE's box (w = h = 0 when none can).
 std::vector<sv_rect> match_candidates(const ViewGeometry& view, const KdSplit& split);

@@ -2,27 +2,30 @@
 // kernels/balance.cl); the serial references and the definitions are in
 // match.hpp.
 //
-// enqueue_match(device, view, split) enqueues, with no host synchronisation:
-//   1. simdvol_match_count  one work-item per PE: segments in its candidate
-//                           rectangle (match_candidates, computed on the host
-//                           and uploaded: P x 8 vertex transforms)
-//   2. simdvol_match_scan   one work-item: the exclusive prefix sum of the
-//                           counts into seg_offset[P + 1] (P <= 2^20 ints: a
-//                           serial scan is a few microseconds; a host scan
-//                           would need a read-back and a clFinish)
-//   3. simdvol_match_fill   one work-item per PE: writes its segments at
-//                           seg_offset[p], its rect and its load
-// The segment buffer is allocated at the exact upper bound known on the host
-// before anything runs, the sum of the candidate rectangles' areas
-// (`capacity`); only the first seg_offset[P] entries are written (and only
-// they are ever touched, so the extra capacity costs no page faults).
+// enqueue_match(device, view, split) enqueues, with no host synchronisation
+// (kernels/match.cl; one work-item per (PE, row of its candidate rectangle),
+// H = the largest candidate height, except where noted):
+//   1. simdvol_match_rows  the exact segments of each row, counted (count,
+//                          load, first and last i; links per axis)
+//   2. simdvol_match_pe    one work-item per PE: row offsets, totals, load,
+//                          footprint rect
+//   3. simdvol_match_scan  one work-item: seg_offset[P + 1] and the link-list
+//                          offsets (a serial scan of P entries: microseconds)
+//   4. simdvol_match_fill  the segments again, written in place, with their
+//                          balance links and the per-(PE, axis) link lists
+// Each row's columns are those where the row cuts the projection of the cell
+// (a zonogon: three strips); along the row the slab bounds are stepped
+// exactly in integers (no division per column). The segment buffer is
+// allocated at an upper bound known on the host before anything runs, the
+// sum of the candidate rectangles' areas (`capacity`); only the first
+// seg_offset[P] entries are written.
 //
 // enqueue_balance(device, matching, view, split, sweeps) enqueues
-//   1. simdvol_balance_links  one work-item per PE: balance_links()
-//   2. sweeps x (axis x, y, z with a non-zero depth step) x (parity 0, 1)
-//      launches of simdvol_balance_round, one work-item per PE (the lower PE
-//      of each pair does the pair's work)
-// and updates segments (k0/k1 only) and loads in place. The result equals
+// sweeps x (axis x, y, z with a non-zero depth step and >= 2 cells) x
+// (parity 0, 1) launches of simdvol_balance_round (kernels/balance.cl), one
+// work-item per PE (the lower PE of each pair does the pair's work, walking
+// the front PE's link list along the axis), and updates segments (k0/k1
+// only) and loads in place. The result equals
 // balance_reference(read(), view, split, sweeps) exactly.
 //
 // Buffers of DeviceMatching, consumed by the resample/local stages:
@@ -32,7 +35,7 @@
 //   rects       sv_rect[P]       footprint = bbox of the PE's rays (not changed
 //               by balancing)
 //   loads       cl_int[P]        sum of k1 - k0 (updated by balancing)
-//   links       cl_int[capacity] balance_links() (valid after enqueue_balance)
+//   links       cl_int[capacity] balance_links() (written by enqueue_match)
 #pragma once
 
 #include <cstdint>
@@ -56,23 +59,33 @@ std::uint64_t events_ns(const std::vector<StageEvent>& events);
 /// The device matching (see the file comment for the buffers).
 struct DeviceMatching {
   int64_t pes = 0;
-  int64_t capacity = 0;   ///< segments allocated (>= the segment count)
-  cl::Buffer candidates;  ///< sv_rect[P], match_candidates()
-  cl::Buffer cidx;        ///< cl_int4[P] cell index of each PE (w = 0)
-  cl::Buffer pe_of;       ///< cl_int[P] PE of cell (ix, iy, iz) at (iz * sy + iy) * sx + ix
-  cl::Buffer view;        ///< sv_view
-  cl::Buffer counts;      ///< cl_int[P] segment counts
-  cl::Buffer seg_offset;  ///< cl_int[P + 1]
-  cl::Buffer segments;    ///< sv_segment[capacity]
-  cl::Buffer rects;       ///< sv_rect[P]
-  cl::Buffer loads;       ///< cl_int[P]
-  cl::Buffer links;       ///< cl_int[capacity], after enqueue_balance
-  std::vector<StageEvent> match_events;    ///< count, scan, fill
-  std::vector<StageEvent> balance_events;  ///< links, then every round
+  int64_t capacity = 0;    ///< segments allocated (>= the segment count)
+  int64_t rows = 0;        ///< H, rows per PE in the row tables (largest candidate height)
+  cl::Buffer candidates;   ///< sv_rect[P], match_candidates()
+  cl::Buffer cidx;         ///< cl_int4[P] cell index of each PE (w = 0)
+  cl::Buffer pe_of;        ///< cl_int[P] PE of cell (ix, iy, iz) at (iz * sy + iy) * sx + ix
+  cl::Buffer view;         ///< sv_view
+  cl::Buffer geometry;     ///< float[20] row geometry (zonogon strips)
+  cl::Buffer steps;        ///< cl_long[9] exact stepping constants per axis
+  cl::Buffer rowsum;       ///< cl_int4[P * H] (count, load, first i, last i) per row
+  cl::Buffer rowlinks;     ///< cl_int4[P * H] links along x, y, z per row
+  cl::Buffer rowoff;       ///< cl_int4[P * H] exclusive prefix within the PE of (count, links)
+  cl::Buffer petot;        ///< cl_int4[P] (segments, links x, y, z) per PE
+  cl::Buffer counts;       ///< cl_int[P] segment counts
+  cl::Buffer seg_offset;   ///< cl_int[P + 1]
+  cl::Buffer segments;     ///< sv_segment[capacity]
+  cl::Buffer rects;        ///< sv_rect[P]
+  cl::Buffer loads;        ///< cl_int[P]
+  cl::Buffer links;        ///< cl_int[capacity], balance_links() format
+  cl::Buffer link_offset;  ///< cl_int4[P + 1]: y, z, w = start of PE p's list along x, y, z
+  cl::Buffer link_list;    ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE)
+  std::vector<StageEvent> match_events;    ///< rows, pe, scan, fill
+  std::vector<StageEvent> balance_events;  ///< every round
 
   /// Blocking read-back as a Matching (loads as int64).
   Matching read(Device& device) const;
-  /// Blocking read-back of the links (seg_offset[P] entries).
+  /// Blocking read-back of the links (seg_offset[P] entries; written by
+  /// enqueue_match).
   std::vector<int32_t> read_links(Device& device) const;
 };
 
