@@ -22,6 +22,11 @@
 #endif
 
 #pragma OPENCL FP_CONTRACT OFF
+/* long8/float8 arguments of helper functions change the ABI without AVX-512;
+ * clang warns once per call site (-Wpsabi). Harmless inside one program. */
+#ifdef __clang__
+#pragma clang diagnostic ignored "-Wpsabi"
+#endif
 
 /* Largest p with seg_off[p] <= s: the PE of segment s (P = 2^log2p). */
 SV_FN int sv_pe_of_segment(__global const int* seg_off, const int log2p, const int s) {
