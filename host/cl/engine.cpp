@@ -9,6 +9,7 @@
 #include "simdvol/local_cl.hpp"
 #include "simdvol/match.hpp"
 #include "simdvol/stages.hpp"
+#include "simdvol/swap_cl.hpp"
 
 namespace simdvol {
 
@@ -22,7 +23,7 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }  // namespace
 
 Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt, EngineTimes* times,
-                    int64_t pes, bool fused) {
+                    int64_t pes, bool fused, SwapLayout swap_layout) {
   validate(opt);
   if (vol.voxel_count() == 0) throw ArgumentError("volume", "is empty");
   const PeGrid grid = pe_grid(pes, "pes");
@@ -72,8 +73,22 @@ Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
   DeviceFootprints fp = make_footprints(device, segs.host_rects);
   const cl::Event e_zero = enqueue_zero_footprints(device, fp);
   const cl::Event e_local = enqueue_resample_local(device, segs, tables, rgba, opt.order, fp);
-  const Footprints f = read_footprints(device, fp);  // blocking
-  const Matching m = dm.read(device);
+  // The swap plan on the host while the device resamples.
+  const auto tp = std::chrono::steady_clock::now();
+  const DeviceSwapPlan plan =
+      upload_swap_plan(device, plan_swap(segs.host_rects, split, view, grid, swap_layout));
+  const double plan_ms = ms_since(tp);
+  const DeviceSwapRun run = enqueue_swap(device, plan, fp);
+  cl::Buffer intermediate, output;
+  const cl::Event e_display = enqueue_display(device, plan, run.last, intermediate);
+  cl::Event e_warp;
+  Image out;
+  if (view.sampling == Sampling::pixel) {
+    out = read_device_image(device, intermediate, view.width(), view.height());  // blocking
+  } else {
+    e_warp = enqueue_warp(device, view, intermediate, output);
+    out = read_device_image(device, output, view.out_width, view.out_height);  // blocking
+  }
   if (times) {
     times->layout_ms = ms(e_layout);
     times->shade_ms = fused ? 0.0 : ms(e_shade);
@@ -82,12 +97,18 @@ Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
     times->match_ms = static_cast<double>(events_ns(dm.match_events)) * 1e-6;
     times->balance_ms = static_cast<double>(events_ns(dm.balance_events)) * 1e-6;
     times->resample_local_ms = ms(e_zero) + ms(e_local);
+    times->plan_ms = plan_ms;
+    times->swap_stage_ms.clear();
+    times->swap_ms = 0;
+    for (const cl::Event& e : run.stages) {
+      times->swap_stage_ms.push_back(ms(e));
+      times->swap_ms += times->swap_stage_ms.back();
+    }
+    times->display_ms = ms(e_display);
+    times->warp_ms = view.sampling == Sampling::pixel ? 0.0 : ms(e_warp);
+    times->composite_ms = times->swap_ms + times->display_ms + times->warp_ms;
     times->device_wall_ms = ms_since(t0);
   }
-  const auto tm = std::chrono::steady_clock::now();
-  Image im = composite_footprints(m, f, view.width(), view.height());
-  Image out = view.sampling == Sampling::pixel ? std::move(im) : warp_to_output(im, view);
-  if (times) times->composite_ms = ms_since(tm);
   return out;
 }
 

@@ -1,0 +1,179 @@
+// The swap, display and warp stages on the device (swap_cl.hpp).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "simdvol/swap_cl.hpp"
+
+namespace simdvol {
+
+static_assert(sizeof(SwapRect) == 32, "SwapRect must match OpenCL int8");
+static_assert(sizeof(Rgba) == 16, "Rgba must match float4");
+
+namespace {
+
+constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
+constexpr int64_t kBlock = 64;  // SV_SWAP_BLOCK in swap.cl
+
+template <class T>
+cl::Buffer upload(Device& device, const std::vector<T>& v, const std::string& what) {
+  std::vector<T> tmp;
+  const std::vector<T>* src = &v;
+  if (v.empty()) {
+    tmp.resize(1);
+    src = &tmp;
+  }
+  return device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, src->size() * sizeof(T),
+                       const_cast<T*>(src->data()), what);
+}
+
+cl::Buffer float4_buffer(Device& device, int64_t n, const std::string& what) {
+  return device.buffer(CL_MEM_READ_WRITE,
+                       static_cast<std::size_t>(std::max<int64_t>(n, 1)) * sizeof(cl_float4),
+                       nullptr, what);
+}
+
+cl::Kernel swap_kernel(Device& device, const std::string& name) {
+  return device.kernel("swap", name);
+}
+
+}  // namespace
+
+std::vector<cl_int> swap_block_table(const std::vector<int64_t>& off, cl_int* steps) {
+  if (off.size() < 2) throw ArgumentError("offsets", "need P + 1 entries");
+  const int64_t P = static_cast<int64_t>(off.size()) - 1;
+  const int64_t n = off.back();
+  const int64_t nblk = (n + kBlock - 1) / kBlock;
+  std::vector<cl_int> t(static_cast<std::size_t>(nblk + 1), 0);
+  int64_t p = 0;
+  auto pe_of = [&](int64_t idx) {  // largest p with off[p] <= idx (p < P), monotone in idx
+    while (p + 1 < P && off[static_cast<std::size_t>(p + 1)] <= idx) ++p;
+    return p;
+  };
+  for (int64_t g = 0; g < nblk; ++g)
+    t[static_cast<std::size_t>(g)] = static_cast<cl_int>(pe_of(g * kBlock));
+  if (n > 0) t[static_cast<std::size_t>(nblk)] = static_cast<cl_int>(pe_of(n - 1));
+  int64_t gap = 0;
+  for (int64_t g = 0; g < nblk; ++g)
+    gap =
+        std::max<int64_t>(gap, t[static_cast<std::size_t>(g + 1)] - t[static_cast<std::size_t>(g)]);
+  if (steps) *steps = static_cast<cl_int>(ceil_log2(gap + 1));
+  return t;
+}
+
+DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan) {
+  DeviceSwapPlan d;
+  const int N = plan.stages();
+  for (int L = 0; L <= N; ++L)
+    if (plan.level_size(L) > kInt32Max)
+      throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 pixels");
+  for (int L = 0; L <= N; ++L) {
+    d.rects.push_back(upload(device, plan.held[static_cast<std::size_t>(L)], "swap rectangles"));
+    const auto& o = plan.offset[static_cast<std::size_t>(L)];
+    std::vector<cl_int> oi(o.begin(), o.end());
+    d.offsets.push_back(upload(device, oi, "swap offsets"));
+    if (L > 0) {
+      cl_int s = 0;
+      d.blocks.push_back(upload(device, swap_block_table(o, &s), "swap block table"));
+      d.steps.push_back(s);
+    }
+  }
+  std::vector<cl_int> xp(plan.xpe.begin(), plan.xpe.end()), yp(plan.ype.begin(), plan.ype.end());
+  d.xpe = upload(device, xp, "display x table");
+  d.ype = upload(device, yp, "display y table");
+  d.plan = std::move(plan);
+  return d;
+}
+
+cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, const cl::Buffer& in,
+                             const cl::Buffer& out) {
+  if (k < 0 || k >= d.plan.stages()) throw ArgumentError("stage", "outside 0 .. N-1");
+  const std::string name = "simdvol_swap_stage";
+  cl::Kernel kern = swap_kernel(device, name);
+  const auto kk = static_cast<std::size_t>(k);
+  const cl_int n = static_cast<cl_int>(d.plan.level_size(k + 1));
+  set_args(kern, name, in, d.rects[kk], d.offsets[kk], out, d.rects[kk + 1], d.offsets[kk + 1],
+           d.blocks[kk], n, d.steps[kk], static_cast<cl_int>(k),
+           static_cast<cl_int>(d.plan.front[kk]));
+  return device.run(kern, name,
+                    cl::NDRange(round_up(static_cast<std::size_t>(std::max(n, 1)), kBlock)),
+                    cl::NDRange(kBlock));
+}
+
+DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const DeviceFootprints& fp) {
+  if (fp.rect_offset != d.plan.offset[0])
+    throw ArgumentError("footprints", "do not match the swap plan's rectangles");
+  DeviceSwapRun r;
+  const int N = d.plan.stages();
+  int64_t most = 0;
+  for (int L = 1; L <= N; ++L) most = std::max(most, d.plan.level_size(L));
+  r.last = fp.pixels;
+  if (N == 0) return r;
+  r.ping = float4_buffer(device, most, "swap level buffer");
+  r.pong = N > 1 ? float4_buffer(device, most, "swap level buffer") : r.ping;
+  cl::Buffer in = fp.pixels;
+  for (int k = 0; k < N; ++k) {
+    const cl::Buffer& out = (k % 2 == 0) ? r.ping : r.pong;
+    if (d.plan.level_size(k + 1) > 0) r.stages.push_back(enqueue_swap_stage(device, d, k, in, out));
+    in = out;
+  }
+  r.last = in;
+  return r;
+}
+
+cl::Event enqueue_display(Device& device, const DeviceSwapPlan& d, const cl::Buffer& last,
+                          cl::Buffer& image) {
+  const int w = d.plan.width, h = d.plan.height;
+  const auto N = static_cast<std::size_t>(d.plan.stages());
+  image = float4_buffer(device, int64_t(w) * h, "intermediate image");
+  const std::string name = "simdvol_display";
+  cl::Kernel k = swap_kernel(device, name);
+  set_args(k, name, last, d.rects[N], d.offsets[N], d.xpe, d.ype, static_cast<cl_int>(w),
+           static_cast<cl_int>(h), image);
+  return device.run(k, name,
+                    cl::NDRange(round_up(static_cast<std::size_t>(w), 64),
+                                round_up(static_cast<std::size_t>(h), 4)),
+                    cl::NDRange(64, 4));
+}
+
+cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
+                       cl::Buffer& out) {
+  const int ow = view.out_width, oh = view.out_height;
+  std::vector<cl_int> ix(static_cast<std::size_t>(ow)), iy(static_cast<std::size_t>(oh));
+  std::vector<cl_float> tx(ix.size()), ty(iy.size());
+  for (int x = 0; x < ow; ++x) {
+    const double fx = view.output_to_intermediate(x, 0)[0], x0 = std::floor(fx);
+    if (x0 < -2.0 || x0 > double(kInt32Max - 2)) throw ArgumentError("view", "warp out of range");
+    ix[static_cast<std::size_t>(x)] = static_cast<cl_int>(x0);
+    tx[static_cast<std::size_t>(x)] = static_cast<float>(fx - x0);
+  }
+  for (int y = 0; y < oh; ++y) {
+    const double fy = view.output_to_intermediate(0, y)[1], y0 = std::floor(fy);
+    if (y0 < -2.0 || y0 > double(kInt32Max - 2)) throw ArgumentError("view", "warp out of range");
+    iy[static_cast<std::size_t>(y)] = static_cast<cl_int>(y0);
+    ty[static_cast<std::size_t>(y)] = static_cast<float>(fy - y0);
+  }
+  cl::Buffer bix = upload(device, ix, "warp x"), btx = upload(device, tx, "warp x"),
+             biy = upload(device, iy, "warp y"), bty = upload(device, ty, "warp y");
+  out = float4_buffer(device, int64_t(ow) * oh, "output image");
+  const std::string name = "simdvol_warp";
+  cl::Kernel k = swap_kernel(device, name);
+  set_args(k, name, intermediate, static_cast<cl_int>(view.width()),
+           static_cast<cl_int>(view.height()), bix, btx, biy, bty, static_cast<cl_int>(ow),
+           static_cast<cl_int>(oh), out);
+  return device.run(k, name,
+                    cl::NDRange(round_up(static_cast<std::size_t>(ow), 64),
+                                round_up(static_cast<std::size_t>(oh), 4)),
+                    cl::NDRange(64, 4));
+}
+
+Image read_device_image(Device& device, const cl::Buffer& image, int width, int height) {
+  Image im(width, height);
+  cl_check(device.queue().enqueueReadBuffer(image, CL_TRUE, 0, im.pixels().size() * sizeof(Rgba),
+                                            im.pixels().data()),
+           "clEnqueueReadBuffer(image)");
+  return im;
+}
+
+}  // namespace simdvol

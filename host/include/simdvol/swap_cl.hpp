@@ -1,0 +1,70 @@
+// The swap, display and warp stages on the device (kernels/swap.cl); the
+// schedule and the serial references are in swap.hpp.
+//
+// The plan is computed on the host from the footprint rectangles (which the
+// host already reads to size the footprints) and uploaded once per frame:
+// per level the strided rectangles and offsets, per stage the block table of
+// the output pixels (the PE of every 64th pixel). One launch per stage (the
+// partner's rectangle is read directly: the whole level is one buffer), no
+// waits between them; level buffers ping-pong between two allocations sized
+// by the largest level. Every enqueue_* validates first and returns the
+// profiling events.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "simdvol/device.hpp"
+#include "simdvol/local_cl.hpp"
+#include "simdvol/swap.hpp"
+#include "simdvol/view.hpp"
+
+namespace simdvol {
+
+/// A SwapPlan with its tables on the device.
+struct DeviceSwapPlan {
+  SwapPlan plan;
+  std::vector<cl::Buffer> rects;    ///< per level: SwapRect[P] (int8)
+  std::vector<cl::Buffer> offsets;  ///< per level: cl_int[P + 1]
+  std::vector<cl::Buffer> blocks;   ///< per stage: cl_int[ceil(n / 64) + 1]
+  std::vector<cl_int> steps;        ///< per stage: binary-search steps
+  cl::Buffer xpe, ype;              ///< display tables (cl_int)
+};
+/// Uploads `plan` (blocking copies of small tables). ArgumentError if a
+/// level exceeds 2^31 - 1 pixels.
+DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan);
+
+/// The block table of one level (for tests): entry g < ceil(n / 64) is the
+/// PE of pixel 64 g, the last entry the PE of pixel n - 1 (0 when n = 0);
+/// `steps` receives ceil(log2(largest gap + 1)).
+std::vector<cl_int> swap_block_table(const std::vector<int64_t>& offset, cl_int* steps);
+
+/// The level buffers of a swap run.
+struct DeviceSwapRun {
+  cl::Buffer ping, pong;          ///< float4 level buffers (levels 1 .. N alternate)
+  cl::Buffer last;                ///< level N (the footprints when N = 0)
+  std::vector<cl::Event> stages;  ///< one event per launched stage (empty levels skip)
+};
+/// Enqueues all N stages from the footprints `fp` (whose offsets must be the
+/// plan's level 0).
+DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& plan, const DeviceFootprints& fp);
+/// Enqueues stage k alone: level k's buffer `in` -> level k + 1's `out`.
+cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& plan, int k,
+                             const cl::Buffer& in, const cl::Buffer& out);
+
+/// Display: level N's buffer -> the intermediate image (float4,
+/// width x height, allocated here into `image`).
+cl::Event enqueue_display(Device& device, const DeviceSwapPlan& plan, const cl::Buffer& last,
+                          cl::Buffer& image);
+
+/// warp_to_output on the device (voxel sampling): `intermediate`
+/// (view.width() x view.height() float4) -> `out` (out_width x out_height,
+/// allocated here). Source positions are computed on the host in double,
+/// exactly as warp_to_output; same float arithmetic.
+cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
+                       cl::Buffer& out);
+
+/// Reads a width x height float4 image back (blocking).
+Image read_device_image(Device& device, const cl::Buffer& image, int width, int height);
+
+}  // namespace simdvol

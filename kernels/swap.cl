@@ -1,0 +1,106 @@
+/* swap.cl — binary swap, display and the final warp on the PE array
+ * (thesis ch. 6, 3.5; host/include/simdvol/swap.hpp has the schedule).
+ *
+ * A level's buffer holds, per PE p, the pixels of its strided rectangle
+ * rect[p] = (x0, y0, nx, ny, sx, sy, lx, ly) (sx = 1 << lx, sy = 1 << ly)
+ * densely, row-major, from off[p] (off has P + 1 entries).
+ *
+ * simdvol_swap_stage: stage k, one work-item per pixel of the output level
+ * (1-D, local size 64). The work-item finds its PE by a binary search of at
+ * most `steps` steps between blk[g] and blk[g + 1] (g = pixel / 64: the PE of
+ * the first pixel of each block of 64, from the host), reads the pixel from
+ * its own level-k rectangle and its partner's (p ^ 2^k; 0 where absent: the
+ * partner's read is the X-Net transfer) and writes over(front, back), p in
+ * front when bit k of p equals `front`.
+ *
+ * simdvol_display: one work-item per intermediate pixel (x, y): the PE
+ * xpe[x] | ype[y] holds it after the swap (0 if outside its rectangle).
+ *
+ * simdvol_warp: the bilinear scale of voxel sampling (render.cpp
+ * warp_to_output), with the source positions precomputed on the host in
+ * double (ix, tx per output column; iy, ty per row): same float expressions.
+ */
+#ifndef SIMDVOL_COMMON_CL
+#include "common.cl"
+#endif
+
+#pragma OPENCL FP_CONTRACT OFF
+
+#define SV_SWAP_BLOCK 64
+#define SV_SWAP_MAX_STEPS 21
+
+SV_FN float4 sv_swap_over(const float4 f, const float4 b) {
+  const float t = 1.0f - f.w;
+  return (float4)(f.x + t * b.x, f.y + t * b.y, f.z + t * b.z, f.w + t * b.w);
+}
+
+/* Index of pixel (x, y) in rectangle r, or -1. */
+SV_FN int sv_rect_index(const int8 r, const int x, const int y) {
+  const int dx = x - r.s0, dy = y - r.s1;
+  const int a = dx >> r.s6, b = dy >> r.s7;
+  const bool in = dx >= 0 && dy >= 0 && (dx & (r.s4 - 1)) == 0 && (dy & (r.s5 - 1)) == 0 &&
+                  a < r.s2 && b < r.s3;
+  return in ? b * r.s2 + a : -1;
+}
+
+__kernel void simdvol_swap_stage(__global const float4* in, __global const int8* in_rect,
+                                 __global const int* in_off, __global float4* out,
+                                 __global const int8* out_rect, __global const int* out_off,
+                                 __global const int* blk, const int nout, const int steps,
+                                 const int k, const int front) {
+  const int idx = (int)get_global_id(0);
+  if (idx >= nout) return;
+  const int g = idx / SV_SWAP_BLOCK;
+  const int hi = blk[g + 1];
+  int p = blk[g];
+  for (int b = SV_SWAP_MAX_STEPS - 1; b >= 0; --b) {
+    if (b < steps) {
+      const int c = p + (1 << b);
+      p = (c <= hi && out_off[c] <= idx) ? c : p;
+    }
+  }
+  const int8 o = out_rect[p];
+  const int li = idx - out_off[p];
+  const int row = li / o.s2;
+  const int col = li - row * o.s2;
+  const int x = o.s0 + (col << o.s6), y = o.s1 + (row << o.s7);
+  const int q = p ^ (1 << k);
+  const int ip = sv_rect_index(in_rect[p], x, y);
+  const int iq = sv_rect_index(in_rect[q], x, y);
+  const float4 vp = ip >= 0 ? in[in_off[p] + ip] : (float4)(0.0f);
+  const float4 vq = iq >= 0 ? in[in_off[q] + iq] : (float4)(0.0f);
+  const bool p_front = ((p >> k) & 1) == front;
+  out[idx] = p_front ? sv_swap_over(vp, vq) : sv_swap_over(vq, vp);
+}
+
+__kernel void simdvol_display(__global const float4* last, __global const int8* rect,
+                              __global const int* off, __global const int* xpe,
+                              __global const int* ype, const int width, const int height,
+                              __global float4* image) {
+  const int x = (int)get_global_id(0), y = (int)get_global_id(1);
+  if (x >= width || y >= height) return;
+  const int p = xpe[x] | ype[y];
+  const int i = sv_rect_index(rect[p], x, y);
+  image[y * width + x] = i >= 0 ? last[off[p] + i] : (float4)(0.0f);
+}
+
+SV_FN float4 sv_warp_px(__global const float4* im, const int w, const int h, const int x,
+                        const int y) {
+  const bool in = x >= 0 && y >= 0 && x < w && y < h;
+  return in ? im[y * w + x] : (float4)(0.0f);
+}
+
+__kernel void simdvol_warp(__global const float4* im, const int w, const int h,
+                           __global const int* ix, __global const float* tx,
+                           __global const int* iy, __global const float* ty, const int ow,
+                           const int oh, __global float4* out) {
+  const int x = (int)get_global_id(0), y = (int)get_global_id(1);
+  if (x >= ow || y >= oh) return;
+  const int x0 = ix[x], y0 = iy[y];
+  const float fx = tx[x], fy = ty[y];
+  const float4 a = sv_warp_px(im, w, h, x0, y0), b = sv_warp_px(im, w, h, x0 + 1, y0);
+  const float4 c = sv_warp_px(im, w, h, x0, y0 + 1), d = sv_warp_px(im, w, h, x0 + 1, y0 + 1);
+  const float4 top = a + fx * (b - a);
+  const float4 bot = c + fx * (d - c);
+  out[y * ow + x] = top + fy * (bot - top);
+}

@@ -1,0 +1,244 @@
+// The swap, display and warp kernels against their references (swap.hpp,
+// render.hpp), bit for bit, and the whole OpenCL pipeline with direct
+// compositing (render_opencl) against render_reference: PSNR >= 80 dB on
+// the Shepp-Logan phantom (preset ct), the Marschner-Lobb phantom (a
+// transfer function) and brainsmall.den (preset volpack), views axis-aligned,
+// 30, 45 degrees and random, orders 0-3, P = 1 .. 8192, voxel and pixel
+// sampling, cut-and-stack and hierarchical layouts.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+
+#include "simdvol/classify.hpp"
+#include "simdvol/engine.hpp"
+#include "simdvol/io.hpp"
+#include "simdvol/match.hpp"
+#include "simdvol/phantom.hpp"
+#include "simdvol/render.hpp"
+#include "simdvol/swap_cl.hpp"
+#include "stage_testing.hpp"
+#include "testing.hpp"
+
+using namespace simdvol;
+
+namespace {
+
+std::vector<Rgba> random_composites(const Matching& m, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<Rgba> v(m.segments.size());
+  for (std::size_t n = 0; n < v.size(); ++n) {
+    Rgba& x = v[n];
+    x.a = u(rng) * 0.6f;
+    x.r = x.a * u(rng), x.g = x.a * u(rng), x.b = x.a * u(rng);
+    if (m.segments[n].k1 <= m.segments[n].k0) x = Rgba{};
+  }
+  return v;
+}
+
+std::vector<Rgba> read_rgba(Device& dev, const cl::Buffer& b, int64_t n) {
+  std::vector<Rgba> v(static_cast<std::size_t>(n));
+  if (n > 0) {
+    cl_check(dev.queue().enqueueReadBuffer(b, CL_TRUE, 0, v.size() * sizeof(Rgba), v.data()),
+             "read");
+  }
+  return v;
+}
+
+bool bitwise_equal(const std::vector<Rgba>& a, const std::vector<Rgba>& b) {
+  return a.size() == b.size() &&
+         (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Rgba)) == 0);
+}
+
+}  // namespace
+
+TEST(SwapBlockTable, PeOfEvery64thPixel) {
+  // PEs with 0, 100, 0, 0, 30, 1 pixels.
+  const std::vector<int64_t> off{0, 0, 100, 100, 100, 130, 131};
+  cl_int steps = -1;
+  const std::vector<cl_int> t = swap_block_table(off, &steps);
+  ASSERT_EQ(t.size(), 4u);  // ceil(131 / 64) + 1
+  EXPECT_EQ(t[0], 1);       // pixel 0
+  EXPECT_EQ(t[1], 1);       // pixel 64
+  EXPECT_EQ(t[2], 4);       // pixel 128
+  EXPECT_EQ(t[3], 5);       // pixel 130
+  EXPECT_EQ(steps, 2);      // largest gap 3
+  EXPECT_EQ(swap_block_table({0, 0}, &steps).size(), 1u);
+}
+
+// Every stage, display and warp equal the references bit for bit.
+TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 d{29, 23, 17};
+  int n = 0;
+  for (const ViewAngles& va : std::vector<ViewAngles>{{0, 0, 0}, {30, 45, 0}, {-23.5, 71.25, 133}})
+    for (int64_t P : {1, 2, 8, 64, 512, 8192})
+      for (SwapLayout L : {SwapLayout::cut_and_stack, SwapLayout::hierarchical}) {
+        SCOPED_TRACE("P " + std::to_string(P) + " " + swap_layout_name(L));
+        const ViewGeometry view = make_view(d, {1, 1, 1}, va, 45, 37, Sampling::voxel);
+        const KdSplit split = kd_split(d, P);
+        const Matching m = balance_reference(match_reference(view, split), view, split);
+        const Footprints f = footprints_reference(m, random_composites(m, unsigned(P)));
+        DeviceSwapPlan plan = upload_swap_plan(dev, plan_swap(m.rects, split, view, pe_grid(P), L));
+        DeviceFootprints fp = make_footprints(dev, m.rects);
+        if (!f.pixels.empty()) {
+          cl_check(dev.queue().enqueueWriteBuffer(fp.pixels, CL_TRUE, 0,
+                                                  f.pixels.size() * sizeof(Rgba), f.pixels.data()),
+                   "write");
+        }
+        // Stage by stage.
+        std::vector<Rgba> level = f.pixels;
+        cl::Buffer in = fp.pixels;
+        for (int k = 0; k < plan.plan.stages(); ++k) {
+          const int64_t size = plan.plan.level_size(k + 1);
+          cl::Buffer out =
+              dev.buffer(CL_MEM_READ_WRITE, std::max<int64_t>(size, 1) * 16, nullptr, "level");
+          if (size > 0) enqueue_swap_stage(dev, plan, k, in, out);
+          const std::vector<Rgba> want = swap_stage_reference(plan.plan, k, level);
+          ASSERT_TRUE(bitwise_equal(read_rgba(dev, out, size), want)) << "stage " << k;
+          level = want;
+          in = out;
+        }
+        // The whole run, display and warp.
+        const DeviceSwapRun run = enqueue_swap(dev, plan, fp);
+        ASSERT_TRUE(bitwise_equal(
+            read_rgba(dev, run.last, plan.plan.level_size(plan.plan.stages())), level));
+        cl::Buffer im, out;
+        enqueue_display(dev, plan, run.last, im);
+        const Image inter = read_device_image(dev, im, view.width(), view.height());
+        const Image want = display_reference(plan.plan, level);
+        EXPECT_TRUE(bitwise_equal(inter.pixels(), want.pixels()));
+        EXPECT_LE(max_abs_diff(inter, composite_footprints(m, f, view.width(), view.height())),
+                  2e-6f);
+        enqueue_warp(dev, view, im, out);
+        EXPECT_TRUE(bitwise_equal(read_device_image(dev, out, 45, 37).pixels(),
+                                  warp_to_output(want, view).pixels()));
+        ++n;
+      }
+  EXPECT_EQ(n, 3 * 6 * 2);
+}
+
+namespace {
+
+Classifier marschner_lobb_tf() {
+  Classifier c;
+  c.kind = Classifier::Kind::transfer;
+  c.transfer.density.x = {0.0f, 0.45f, 0.6f, 1.0f};
+  c.transfer.density.y = {0.0f, 0.0f, 0.7f, 0.9f};
+  c.transfer.gradient.x = {0.0f, 1.0f};
+  c.transfer.gradient.y = {1.0f, 1.0f};
+  c.transfer.red.x = c.transfer.green.x = c.transfer.blue.x = {0.0f, 1.0f};
+  c.transfer.red.y = {1.0f, 0.9f};
+  c.transfer.green.y = {0.3f, 0.8f};
+  c.transfer.blue.y = {0.1f, 1.0f};
+  return c;
+}
+
+struct Scene {
+  const char* name;
+  const Volume* vol;
+  Classifier classifier;
+};
+
+const ViewAngles kViews[] = {{0, 0, 0}, {0, 30, 0}, {45, 45, 0}, {-23.5, 71.25, 133.0}};
+
+// render_opencl against render_reference for every view, order, sampling,
+// layout; P sweeps 1 .. 8192 by `p_factor`. Returns the worst PSNR.
+double check_scene(Device& dev, const Scene& s, int w, int h, int64_t p_factor,
+                   const std::vector<int>& orders, double* worst_diff) {
+  double worst = INFINITY;
+  for (const ViewAngles& a : kViews)
+    for (int order : orders)
+      for (Sampling smp : {Sampling::voxel, Sampling::pixel}) {
+        RenderOptions opt;
+        opt.width = w, opt.height = h, opt.view = a, opt.order = order, opt.sampling = smp;
+        opt.classifier = s.classifier;
+        const Image ref = render_reference(*s.vol, opt);
+        for (int64_t pes = 1; pes <= 8192; pes *= p_factor)
+          for (SwapLayout L : {SwapLayout::cut_and_stack, SwapLayout::hierarchical}) {
+            EngineTimes t;
+            const Image img = render_opencl(dev, *s.vol, opt, &t, pes, true, L);
+            const double q = psnr(ref, img);
+            const float diff = max_abs_diff(ref, img);
+            EXPECT_GE(q, 80.0) << s.name << " view " << a.theta << "," << a.phi << " order "
+                               << order << " P " << pes << " " << swap_layout_name(L)
+                               << (smp == Sampling::pixel ? " pixel" : " voxel") << " max diff "
+                               << diff;
+            worst = std::min(worst, q);
+            *worst_diff = std::max(*worst_diff, double(diff));
+          }
+      }
+  return worst;
+}
+
+}  // namespace
+
+TEST(RenderOpenClSwap, SheppLoganEqualsReference) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(27, 2);  // odd dims
+  double diff = 0;
+  const Scene s{"shepp-logan", &vol, classifier_preset("ct")};
+  const double q1 = check_scene(dev, s, 40, 36, 2, {1}, &diff);
+  const double q = check_scene(dev, s, 40, 36, 64, {0, 2, 3}, &diff);
+  std::printf("shepp-logan 27^3 -> 40x36: worst PSNR %.1f dB, max abs diff %.3g\n", std::min(q, q1),
+              diff);
+}
+
+TEST(RenderOpenClSwap, MarschnerLobbEqualsReference) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = marschner_lobb(25);
+  double diff = 0;
+  const Scene s{"marschner-lobb", &vol, marschner_lobb_tf()};
+  const double q1 = check_scene(dev, s, 33, 31, 4, {1}, &diff);
+  const double q = check_scene(dev, s, 33, 31, 128, {0, 2, 3}, &diff);
+  std::printf("marschner-lobb 25^3 -> 33x31: worst PSNR %.1f dB, max abs diff %.3g\n",
+              std::min(q, q1), diff);
+}
+
+TEST(RenderOpenClSwap, BrainSmallEqualsReference) {
+  const auto path = simdvol::testing::data_dir() / "brainsmall.den";
+  SIMDVOL_REQUIRE_FILE(path);
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = load_den(path);
+  double worst = INFINITY, diff = 0;
+  int n = 0;
+  for (const ViewAngles& a : kViews)
+    for (int order = 0; order <= 3; ++order) {
+      RenderOptions opt;
+      opt.width = opt.height = 48;
+      opt.view = a, opt.order = order;
+      opt.sampling = order == 1 ? Sampling::voxel : Sampling::pixel;
+      opt.classifier = classifier_preset("volpack");
+      const Image ref = render_reference(vol, opt);
+      for (int64_t pes : {int64_t(1) << (order * 4), int64_t(8192)}) {
+        const SwapLayout L = n++ % 2 ? SwapLayout::hierarchical : SwapLayout::cut_and_stack;
+        const Image img = render_opencl(dev, vol, opt, nullptr, pes, true, L);
+        const double q = psnr(ref, img);
+        EXPECT_GE(q, 80.0) << "view " << a.theta << "," << a.phi << " order " << order << " P "
+                           << pes;
+        worst = std::min(worst, q);
+        diff = std::max(diff, double(max_abs_diff(ref, img)));
+      }
+    }
+  std::printf("brainsmall -> 48x48: worst PSNR %.1f dB, max abs diff %.3g\n", worst, diff);
+}
+
+// One larger case: 96^3 Shepp-Logan at 128^2, 8192 PEs, both layouts.
+TEST(RenderOpenClSwap, LargerFrame) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(96, 1);
+  RenderOptions opt;
+  opt.width = opt.height = 128;
+  opt.view = {20, 35, 10};
+  opt.classifier = classifier_preset("ct");
+  const Image ref = render_reference(vol, opt);
+  for (SwapLayout L : {SwapLayout::cut_and_stack, SwapLayout::hierarchical}) {
+    EngineTimes t;
+    const Image img = render_opencl(dev, vol, opt, &t, 8192, true, L);
+    EXPECT_GE(psnr(ref, img), 80.0);
+    EXPECT_LE(max_abs_diff(ref, img), 1e-4f);
+    EXPECT_EQ(t.swap_stage_ms.size(), 13u);
+  }
+}
