@@ -139,30 +139,55 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
                    (float)((double)stopped * inv));
   }
 #else
-  /* Exact opacity: over's alpha recurrence; the direct colour only when no
-   * walk stopped (the reference computes the same floats). */
-  float4 acc = (float4)(0.0f);
+  /* Exact opacity: over's alpha recurrence; when no walk stopped, one pick
+   * from p_s / alpha by inverting the cumulative opacity (composite.cpp). */
+  float acc = 0.0f;
+  int k_first = 0;
   for (int t = 0; t < count; ++t) {
     const int s = items ? items[first + t] : first + t;
     const sv_segment sg = segs[s];
+    if (t == 0) k_first = sg.k0;
     __global const float4* in = samples + sample_off[s];
-    for (int k = sg.k0; k < sg.k1; ++k) {
-      const float4 v = in[k - sg.k0];
-      const float tr = 1.0f - acc.w;
-      if (stopped == 0) {
-        acc.x = acc.x + tr * v.x;
-        acc.y = acc.y + tr * v.y;
-        acc.z = acc.z + tr * v.z;
-      }
-      acc.w = acc.w + tr * v.w;
-    }
+    for (int k = sg.k0; k < sg.k1; ++k) acc = acc + (1.0f - acc) * in[k - sg.k0].w;
   }
+  out.w = acc;
   if (stopped > 0) {
-    const double a = (double)acc.w;
-    out = (float4)((float)(a * (r / (double)stopped)), (float)(a * (g / (double)stopped)),
-                   (float)(a * (b / (double)stopped)), acc.w);
+    const double a = (double)acc;
+    out.x = (float)(a * (r / (double)stopped));
+    out.y = (float)(a * (g / (double)stopped));
+    out.z = (float)(a * (b / (double)stopped));
+  } else if (acc > 0.0f) {
+    fallback = 1;
+    ++draws;
+    const float u = sv_uniform(seed, key, (uint)walks, (uint)k_first);
+    const float tt = u * acc;
+    float c = 0.0f;
+    float4 pick = (float4)(0.0f);
+    int found = 0, done = 0;
+    for (int t = 0; t < count && !done; ++t) {
+      const int s = items ? items[first + t] : first + t;
+      const sv_segment sg = segs[s];
+      __global const float4* in = samples + sample_off[s];
+      for (int k = sg.k0; k < sg.k1; ++k) {
+        const float4 v = in[k - sg.k0];
+        if (v.w > 0.0f) {
+          pick = v;
+          found = 1;
+        }
+        c = c + (1.0f - c) * v.w;
+        if (c > tt && v.w > 0.0f) {
+          done = 1;
+          break;
+        }
+      }
+    }
+    if (found) {
+      const double a = (double)acc;
+      out.x = (float)(a * (double)(pick.x / pick.w));
+      out.y = (float)(a * (double)(pick.y / pick.w));
+      out.z = (float)(a * (double)(pick.z / pick.w));
+    }
   } else {
-    out = acc;
     fallback = 1;
   }
 #endif

@@ -68,14 +68,43 @@ Rgba composite_mc_walks(const RaySamples& ray, uint32_t ray_id, int walks, const
     }
   } else {
     // Ch. 7.5 (a): exact opacity (over's alpha recurrence), Monte Carlo colour.
-    const Rgba direct = composite_direct(ray);
+    float acc = 0.0f;
+    for (const Rgba& v : ray.rgba) acc = acc + (1.0f - acc) * v.a;
+    out.a = acc;
     if (stopped > 0) {
-      const double a = direct.a;
-      out = {static_cast<float>(a * (r / stopped)), static_cast<float>(a * (g / stopped)),
-             static_cast<float>(a * (b / stopped)), direct.a};
-    } else {
+      const double a = acc;
+      out.r = static_cast<float>(a * (r / stopped));
+      out.g = static_cast<float>(a * (g / stopped));
+      out.b = static_cast<float>(a * (b / stopped));
+    } else if (acc > 0.0f) {
+      // No walk stopped: one pick from the conditional distribution
+      // p_s / alpha by inversion of the cumulative opacity (the recurrence
+      // above): t = u * alpha, the first s whose cumulative opacity exceeds t
+      // (the last sample with alpha_s > 0 if rounding leaves none). Keyed as
+      // walk `walks` at the first sample's depth. E[alpha * C_pick] = C', so
+      // the estimator stays unbiased; it costs one draw and one scan.
       ++st.fallbacks;
-      out = direct;
+      ++st.draws;
+      const float u = sv_uniform(p.seed, key, static_cast<uint32_t>(walks),
+                                 static_cast<uint32_t>(ray.first_step));
+      const float t = u * acc;
+      float c = 0.0f;
+      std::size_t pick = ray.rgba.size();
+      for (std::size_t s = 0; s < ray.rgba.size(); ++s) {
+        const float a = ray.rgba[s].a;
+        if (a > 0.0f) pick = s;  // the last one with alpha > 0 so far
+        c = c + (1.0f - c) * a;
+        if (c > t && a > 0.0f) break;
+      }
+      if (pick < ray.rgba.size()) {
+        const Rgba& v = ray.rgba[pick];
+        const double a = acc;
+        out.r = static_cast<float>(a * static_cast<double>(v.r / v.a));
+        out.g = static_cast<float>(a * static_cast<double>(v.g / v.a));
+        out.b = static_cast<float>(a * static_cast<double>(v.b / v.a));
+      }
+    } else {
+      ++st.fallbacks;  // nothing to pick: the colour is 0 (alpha <= 0)
     }
   }
   if (stats) *stats += st;

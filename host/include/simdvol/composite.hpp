@@ -35,8 +35,10 @@ struct CompositeParams {
   /// Monte Carlo, thesis ch. 7.5 (a): opacity exact (the over recurrence
   /// a <- a + (1 - a) alpha_s, bitwise composite_direct's alpha), colour
   /// C' = a * mean of the colours C'_s / alpha_s that the walks which stopped
-  /// picked. When no walk stops the colour is the direct composite's (exact),
-  /// which keeps the estimator unbiased.
+  /// picked. When no walk stops (and alpha > 0) one sample is picked from the
+  /// conditional distribution p_s / alpha by inverting the cumulative opacity
+  /// (one draw, keyed as walk n at the first sample's depth; see
+  /// composite.cpp): colour alpha * C_pick. The estimator stays unbiased.
   bool exact_opacity = false;
   /// Monte Carlo, ch. 7.5 (c): samples with alpha <= 0 draw no random number
   /// (they can never stop a walk). With the generator keyed by the absolute
@@ -49,7 +51,7 @@ struct McStats {
   int64_t walks = 0;      ///< walks started
   int64_t draws = 0;      ///< random numbers drawn
   int64_t skipped = 0;    ///< transparent samples passed without a draw
-  int64_t fallbacks = 0;  ///< exact opacity: rays (sub-rays) where no walk stopped
+  int64_t fallbacks = 0;  ///< exact opacity: estimates where no walk stopped (conditional pick)
   McStats& operator+=(const McStats& o) {
     walks += o.walks;
     draws += o.draws;
@@ -75,7 +77,7 @@ Rgba composite_adaptive(const RaySamples& ray, float threshold);
 /// picks, alpha = fraction of walks that stopped.
 Rgba composite_mc(const RaySamples& ray, uint32_t ray_id, const CompositeParams& p);
 /// The same estimator with `walks` walks (0 allowed: plain MC gives 0, exact
-/// opacity the direct composite) instead of p.samples, honouring
+/// opacity its conditional pick) instead of p.samples, honouring
 /// p.exact_opacity and p.drop_transparent, adding its work to `stats`.
 /// Walk m draws sv_uniform(p.seed, key, m, first_step + s), key = ray_id or
 /// SV_SHARED_RAY (p.streams).
