@@ -1,0 +1,215 @@
+// simdvol-bench-swap: whole frames of render_opencl (direct compositing,
+// every stage on the device) against the serial reference in the same run,
+// per-stage times, and the binary swap's communication against the bound of
+// thesis ch. 6.2 (issue 5).
+//
+//   simdvol-bench-swap [--size N] [--pes P] [--order K] [--runs R]
+//                      [--layout cut-and-stack|hierarchical] [--brain PATH]
+//                      [--no-reference] [--comm-only]
+//
+// Frames: the N^3 Shepp-Logan CT phantom (shepp_logan(N, 4), default 256,
+// preset ct) to 256^2 and 512^2 (voxel sampling; 512^2 also with pixel
+// sampling), and brainsmall.den (preset volpack) to 256^2, view (0, 30, 0)
+// and (20, 35, 10). Per frame: a warm-up call, then R calls (default 5):
+// median wall time of the whole call and median device time of each stage
+// (profiling events); the serial reference (render_reference) once, its
+// time, and PSNR / max abs difference of the frames.
+// Communication (per frame): per swap stage the pixels and bytes moved
+// (float4, 16 bytes per pixel), the most one PE sends, holds before the
+// stage and composites (keeps), the X-Net distance of the partners; totals
+// against S = (a^2 + b^2 + c^2) / 2 per PE (a, b, c the cell extents in
+// viewing-grid units), times (M + N) and as printed, M x N.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "simdvol/classify.hpp"
+#include "simdvol/device.hpp"
+#include "simdvol/engine.hpp"
+#include "simdvol/io.hpp"
+#include "simdvol/match.hpp"
+#include "simdvol/phantom.hpp"
+#include "simdvol/render.hpp"
+#include "simdvol/swap.hpp"
+#include "simdvol/view.hpp"
+
+using namespace simdvol;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+struct Frame {
+  std::string name;
+  const Volume* vol;
+  Classifier cls;
+  int size;
+  Sampling sampling;
+  ViewAngles view;
+};
+
+void communication(const Frame& f, int64_t pes, SwapLayout layout) {
+  const ViewGeometry view = make_view(*f.vol, f.view, f.size, f.size, f.sampling);
+  const KdSplit split = kd_split(f.vol->dims(), pes);
+  const Matching m = balance_reference(match_reference(view, split), view, split);
+  const PeGrid grid = pe_grid(pes);
+  const SwapPlan plan = plan_swap(m.rects, split, view, grid, layout);
+  const SwapCost c = swap_cost(plan, split, view, grid);
+  std::printf("\ncommunication: %s -> %dx%d (%s sampling, intermediate %dx%d), %lld PEs, %s\n",
+              f.name.c_str(), f.size, f.size, f.sampling == Sampling::voxel ? "voxel" : "pixel",
+              view.width(), view.height(), static_cast<long long>(pes), swap_layout_name(layout));
+  std::printf("stage bit  dist  moved_px   moved_MB  max_sent  max_held  max_kept  mean_held\n");
+  for (int k = 0; k < plan.stages(); ++k) {
+    const SwapStageCost& s = c.stages[static_cast<std::size_t>(k)];
+    const PixelBit& b = plan.bits[static_cast<std::size_t>(k)];
+    std::printf("%5d  %c%-2d %5lld %9lld %10.2f %9lld %9lld %9lld %10.1f\n", k,
+                b.axis == 0 ? 'x' : 'y', b.level, static_cast<long long>(s.max_distance),
+                static_cast<long long>(s.moved), s.moved * 16.0 / 1048576.0,
+                static_cast<long long>(s.max_sent), static_cast<long long>(s.max_held),
+                static_cast<long long>(s.max_kept), double(s.held) / double(pes));
+  }
+  std::printf("total moved %lld px = %.2f MB; most sent by one PE %lld px (%lld B)\n",
+              static_cast<long long>(c.moved), c.moved * 16.0 / 1048576.0,
+              static_cast<long long>(c.max_pe_sent), static_cast<long long>(c.max_pe_sent * 16));
+  std::printf(
+      "bound (ch. 6.2): cell %lldx%lldx%lld voxels, step %.3f: S = (a^2+b^2+c^2)/2 = %.1f px; "
+      "M = %d x swaps, N = %d y swaps: (M+N) S = %.0f px, printed M x N x S = %.0f px; "
+      "measured/(M+N)S = %.3f\n",
+      static_cast<long long>(split.cell[0]), static_cast<long long>(split.cell[1]),
+      static_cast<long long>(split.cell[2]), view.step, c.cell_section, c.swaps_x, c.swaps_y,
+      c.bound_sum(), c.bound_printed(), double(c.max_pe_sent) / c.bound_sum());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int size = 256, order = 1, runs = 5;
+  int64_t pes = 8192;
+  bool reference = true, comm_only = false;
+  SwapLayout layout = SwapLayout::cut_and_stack;
+  std::string brain = std::string(SIMDVOL_BENCH_DATA_DIR) + "/brainsmall.den";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "missing value for %s\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--size")
+      size = std::stoi(next());
+    else if (a == "--pes")
+      pes = std::stoll(next());
+    else if (a == "--order")
+      order = std::stoi(next());
+    else if (a == "--runs")
+      runs = std::stoi(next());
+    else if (a == "--layout")
+      layout = parse_swap_layout(next());
+    else if (a == "--brain")
+      brain = next();
+    else if (a == "--no-reference")
+      reference = false;
+    else if (a == "--comm-only")
+      comm_only = true;
+    else {
+      std::fprintf(stderr,
+                   "usage: simdvol-bench-swap [--size N] [--pes P] [--order K] [--runs R] "
+                   "[--layout L] [--brain PATH] [--no-reference] [--comm-only]\n");
+      return 2;
+    }
+  }
+  try {
+    const auto tv = Clock::now();
+    const Volume ct = shepp_logan(size, 4);
+    std::printf("shepp_logan(%d, 4): %.0f ms\n", size, ms_since(tv));
+    Volume brainvol;
+    const bool have_brain = std::filesystem::exists(brain);
+    if (have_brain) brainvol = load_volume(brain);
+    std::vector<Frame> frames;
+    const std::string ctname = "ct-phantom-" + std::to_string(size);
+    frames.push_back({ctname, &ct, classifier_preset("ct"), 256, Sampling::voxel, {0, 30, 0}});
+    frames.push_back({ctname, &ct, classifier_preset("ct"), 512, Sampling::voxel, {0, 30, 0}});
+    frames.push_back({ctname, &ct, classifier_preset("ct"), 512, Sampling::pixel, {0, 30, 0}});
+    frames.push_back({ctname, &ct, classifier_preset("ct"), 256, Sampling::voxel, {20, 35, 10}});
+    if (have_brain)
+      frames.push_back({"brainsmall",
+                        &brainvol,
+                        classifier_preset("volpack"),
+                        256,
+                        Sampling::voxel,
+                        {0, 30, 0}});
+    for (const Frame& f : frames)
+      if (f.view.theta == 0 && !(f.size == 512 && f.sampling == Sampling::voxel))
+        communication(f, pes, layout);
+    if (comm_only) return 0;
+
+    Device dev;
+    std::printf("\ndevice: %s; %lld PEs, order %d, %s, fused shade+classify, %d runs\n",
+                dev.info().name.c_str(), static_cast<long long>(pes), order,
+                swap_layout_name(layout), runs);
+    std::printf("%-16s %4s %5s | %8s %8s | %6s %6s %6s %6s %6s %6s %6s %6s %6s | %8s %7s %9s\n",
+                "volume", "out", "samp", "wall_ms", "dev_ms", "layout", "shcls", "match", "bal",
+                "rs+loc", "plan", "swap", "disp", "warp", "ref_ms", "ratio", "PSNR/dB");
+    for (const Frame& f : frames) {
+      RenderOptions opt;
+      opt.width = opt.height = f.size;
+      opt.sampling = f.sampling;
+      opt.order = order;
+      opt.view = f.view;
+      opt.classifier = f.cls;
+      EngineTimes t;
+      Image img = render_opencl(dev, *f.vol, opt, &t, pes, true, layout);  // warm-up
+      std::vector<double> wall, devsum, lay, cls, mat, bal, rl, plan, swp, dsp, wrp;
+      std::vector<std::vector<double>> stages;
+      for (int r = 0; r < runs; ++r) {
+        const auto t0 = Clock::now();
+        img = render_opencl(dev, *f.vol, opt, &t, pes, true, layout);
+        wall.push_back(ms_since(t0));
+        lay.push_back(t.layout_ms), cls.push_back(t.classify_ms), mat.push_back(t.match_ms);
+        bal.push_back(t.balance_ms), rl.push_back(t.resample_local_ms), plan.push_back(t.plan_ms);
+        swp.push_back(t.swap_ms), dsp.push_back(t.display_ms), wrp.push_back(t.warp_ms);
+        devsum.push_back(t.layout_ms + t.classify_ms + t.match_ms + t.balance_ms +
+                         t.resample_local_ms + t.swap_ms + t.display_ms + t.warp_ms);
+        stages.resize(t.swap_stage_ms.size());
+        for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
+          stages[k].push_back(t.swap_stage_ms[k]);
+      }
+      double ref_ms = 0, q = 0, diff = 0;
+      if (reference) {
+        const auto t0 = Clock::now();
+        const Image ref = render_reference(*f.vol, opt);
+        ref_ms = ms_since(t0);
+        q = psnr(ref, img);
+        diff = max_abs_diff(ref, img);
+      }
+      std::printf(
+          "%-16s %4d %5s | %8.1f %8.1f | %6.1f %6.1f %6.1f %6.1f %6.1f %6.2f %6.2f %6.2f %6.2f | "
+          "%8.0f %7.1f %9.1f  (max diff %.2g)\n",
+          f.name.c_str(), f.size, f.sampling == Sampling::voxel ? "voxel" : "pixel", median(wall),
+          median(devsum), median(lay), median(cls), median(mat), median(bal), median(rl),
+          median(plan), median(swp), median(dsp), median(wrp), ref_ms,
+          reference ? ref_ms / median(wall) : 0.0, q, diff);
+      std::printf("    swap stages (ms):");
+      for (const auto& s : stages) std::printf(" %.2f", median(s));
+      std::printf("\n");
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
