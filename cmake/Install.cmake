@@ -19,6 +19,8 @@ include(CMakePackageConfigHelpers)
 set(SIMDVOL_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/simdvol)
 set(SIMDVOL_INSTALL_KERNELDIR ${CMAKE_INSTALL_DATADIR}/simdvol/kernels)
 
+# Consumers compile the headers as C++20.
+target_compile_features(simdvol_core PUBLIC cxx_std_20)
 set_target_properties(simdvol_core PROPERTIES EXPORT_NAME core)
 set_target_properties(simdvol_cl PROPERTIES EXPORT_NAME simdvol)
 install(TARGETS simdvol_core simdvol_cl EXPORT simdvolTargets

@@ -2,6 +2,7 @@
 #include "simdvol/layout.hpp"
 
 #include <climits>
+#include <utility>
 
 namespace simdvol {
 
@@ -29,14 +30,36 @@ std::size_t flat_count(const Dims3& d) {
 
 }  // namespace
 
-CellBuffer::CellBuffer(Device& device, const CellLayout& layout) : layout_(layout) {
+namespace {
+
+void check_cell_layout(const CellLayout& layout) {
   for (int a = 0; a < 3; ++a)
     if (layout.dims()[a] > INT_MAX / 2 || layout.block[a] > INT_MAX)
       throw ArgumentError("volume", "dimension too large for 32-bit kernel indices");
   if (layout.cell_stride > INT_MAX)
     throw ArgumentError("volume", "cell block of " + std::to_string(layout.cell_stride) +
                                       " floats is too large for 32-bit kernel indices");
-  cells_ = device.buffer(CL_MEM_READ_WRITE, layout.bytes(), nullptr, "cell buffer");
+}
+
+}  // namespace
+
+CellBuffer::CellBuffer(Device& device, const CellLayout& layout)
+    : CellBuffer(device, layout, cl::Buffer()) {}
+
+CellBuffer::CellBuffer(Device& device, const CellLayout& layout, cl::Buffer cells)
+    : layout_(layout) {
+  check_cell_layout(layout);
+  if (cells()) {
+    std::size_t size = 0;
+    cl_check(cells.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(cell buffer)");
+    if (size < layout.bytes())
+      throw ArgumentError("cell buffer", "the caller's buffer has " + std::to_string(size) +
+                                             " bytes; the layout needs " +
+                                             std::to_string(layout.bytes()));
+    cells_ = std::move(cells);
+  } else {
+    cells_ = device.buffer(CL_MEM_READ_WRITE, layout.bytes(), nullptr, "cell buffer");
+  }
   const int64_t pes = layout.pes();
   std::vector<cl_int4> origins(static_cast<std::size_t>(pes));
   std::vector<cl_int> pe_of_cell(static_cast<std::size_t>(pes));
@@ -103,23 +126,34 @@ CellBuffer PeArray::layout(const Volume& volume, int halo, LayoutKernel variant,
 
 void PeArray::layout_into(const float* data, CellBuffer& cells, LayoutKernel variant,
                           cl::Event* event) const {
-  const CellLayout& L = cells.layout();
-  if (L.pes() != pes()) throw ArgumentError("cells", "laid out for a different PE count");
   if (!data) throw ArgumentError("volume", "null data");
-  const std::size_t n = flat_count(L.dims());
+  const std::size_t n = flat_count(cells.layout().dims());
   // Zero-copy on PoCL: the kernel reads the caller's memory directly.
   cl::Buffer in = device_->buffer(CL_MEM_READ_ONLY | CL_MEM_USE_HOST_PTR, n * sizeof(float),
                                   const_cast<float*>(data), "volume (flat)");
+  cl::Event e = enqueue_layout(in, cells, variant);
+  device_->finish();
+  if (event) *event = e;
+}
+
+cl::Event PeArray::enqueue_layout(const cl::Buffer& flat, CellBuffer& cells,
+                                  LayoutKernel variant) const {
+  const CellLayout& L = cells.layout();
+  if (L.pes() != pes()) throw ArgumentError("cells", "laid out for a different PE count");
+  const std::size_t n = flat_count(L.dims());
+  std::size_t size = 0;
+  cl_check(flat.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(volume)");
+  if (size < n * sizeof(float))
+    throw ArgumentError("volume", "buffer of " + std::to_string(size) + " bytes holds fewer than " +
+                                      std::to_string(n) + " floats");
   const bool rows = variant == LayoutKernel::rows;
   const std::string name = rows ? "simdvol_layout" : "simdvol_layout_voxel";
   cl::Kernel k = device_->kernel("layout", name, layout_defines());
-  set_args(k, name, in, cells.cells(), cells.origins(), cells.dims_arg(), cells.cell_arg(),
+  set_args(k, name, flat, cells.cells(), cells.origins(), cells.dims_arg(), cells.cell_arg(),
            cells.block_arg(), static_cast<cl_int>(L.pes()));
   const std::size_t items =
       static_cast<std::size_t>(rows ? L.pes() * L.block[1] * L.block[2] : L.elements());
-  cl::Event e = device_->run(k, name, cl::NDRange(items), cl::NDRange(kWgs));
-  device_->finish();
-  if (event) *event = e;
+  return device_->run(k, name, cl::NDRange(items), cl::NDRange(kWgs));
 }
 
 void PeArray::gather(const CellBuffer& cells, float* out, LayoutKernel variant,

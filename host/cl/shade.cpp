@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 
 #include "chunk_ranges.hpp"
 #include "simdvol/stages.hpp"
@@ -47,6 +48,17 @@ VoxelLayout make_voxel_layout(const CellLayout& cells) {
 VoxelBuffer::VoxelBuffer(Device& device, const VoxelLayout& layout) : layout_(layout) {
   buffer_ = device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(layout.bytes()), nullptr,
                           "voxel cell buffer");
+}
+
+VoxelBuffer::VoxelBuffer(const VoxelLayout& layout, cl::Buffer buffer) : layout_(layout) {
+  if (!buffer()) throw ArgumentError("voxel cell buffer", "null buffer");
+  std::size_t size = 0;
+  cl_check(buffer.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(voxel cells)");
+  if (size < layout.bytes())
+    throw ArgumentError("voxel cell buffer", "the caller's buffer has " + std::to_string(size) +
+                                                 " bytes; the layout needs " +
+                                                 std::to_string(layout.bytes()));
+  buffer_ = std::move(buffer);
 }
 
 // Host elements are (PE, position)-ordered 4-float records; the device

@@ -27,6 +27,10 @@ class CellBuffer {
   /// and uploads the origins and pe_of_cell tables. Throws ArgumentError if
   /// the buffer exceeds the device's max allocation or int32 indexing.
   CellBuffer(Device& device, const CellLayout& layout);
+  /// Wraps the caller's buffer `cells` (at least layout.bytes(), retained;
+  /// ArgumentError if smaller) instead of allocating one; the small origin
+  /// and pe_of_cell tables are still made here. A null `cells` allocates.
+  CellBuffer(Device& device, const CellLayout& layout, cl::Buffer cells);
 
   const CellLayout& layout() const { return layout_; }
   /// float[layout().elements()], PE-major.
@@ -78,6 +82,12 @@ class PeArray {
   /// Scatters `data` (of cells.layout().dims()) into an existing buffer.
   void layout_into(const float* data, CellBuffer& cells, LayoutKernel variant = LayoutKernel::rows,
                    cl::Event* event = nullptr) const;
+
+  /// Scatters a flat volume already on the device (`flat`: at least the
+  /// dims-product floats, x fastest; e.g. the caller's own buffer) into
+  /// `cells`. Enqueues without waiting and returns the kernel's event.
+  cl::Event enqueue_layout(const cl::Buffer& flat, CellBuffer& cells,
+                           LayoutKernel variant = LayoutKernel::rows) const;
 
   /// Gathers the interior voxels of `cells` into `out` (dims product floats,
   /// x fastest). Blocking.

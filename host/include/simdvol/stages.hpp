@@ -110,6 +110,10 @@ class VoxelBuffer {
  public:
   /// Allocates layout.bytes() (ArgumentError if over the device's max allocation).
   VoxelBuffer(Device& device, const VoxelLayout& layout);
+  /// Wraps the caller's buffer (at least layout.bytes(), retained; e.g.
+  /// cl::Buffer(mem, true) for a cl_mem) instead of allocating one.
+  /// ArgumentError if it is null or smaller.
+  VoxelBuffer(const VoxelLayout& layout, cl::Buffer buffer);
   const VoxelLayout& layout() const { return layout_; }
   const cl::Buffer& buffer() const { return buffer_; }
   /// Blocking copy of the whole buffer to the host, one element per voxel
