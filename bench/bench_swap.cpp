@@ -5,7 +5,7 @@
 //
 //   simdvol-bench-swap [--size N] [--pes P] [--order K] [--runs R]
 //                      [--layout cut-and-stack|hierarchical] [--brain PATH]
-//                      [--no-reference] [--comm-only]
+//                      [--no-reference] [--comm-only] [--swap-only]
 //
 // Frames: the N^3 Shepp-Logan CT phantom (shepp_logan(N, 4), default 256,
 // preset ct) to 256^2 and 512^2 (voxel sampling; 512^2 also with pixel
@@ -36,6 +36,7 @@
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 #include "simdvol/swap.hpp"
+#include "simdvol/swap_cl.hpp"
 #include "simdvol/view.hpp"
 
 using namespace simdvol;
@@ -92,12 +93,58 @@ void communication(const Frame& f, int64_t pes, SwapLayout layout) {
       c.bound_sum(), c.bound_printed(), double(c.max_pe_sent) / c.bound_sum());
 }
 
+// The swap stages alone with level buffers allocated once (no first-touch
+// page faults): R runs after a warm-up, median per stage.
+void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layout, int runs) {
+  const ViewGeometry view = make_view(*f.vol, f.view, f.size, f.size, f.sampling);
+  const KdSplit split = kd_split(f.vol->dims(), pes);
+  const Matching m = balance_reference(match_reference(view, split), view, split);
+  const auto tp = Clock::now();
+  const DeviceSwapPlan plan =
+      upload_swap_plan(dev, plan_swap(m.rects, split, view, pe_grid(pes), layout));
+  const double plan_ms = ms_since(tp);
+  DeviceFootprints fp = make_footprints(dev, m.rects);
+  enqueue_zero_footprints(dev, fp);
+  const int N = plan.plan.stages();
+  int64_t most = 1;
+  for (int L = 1; L <= N; ++L) most = std::max(most, plan.plan.level_size(L));
+  cl::Buffer a = dev.buffer(CL_MEM_READ_WRITE, most * 16, nullptr, "a");
+  cl::Buffer b = dev.buffer(CL_MEM_READ_WRITE, most * 16, nullptr, "b");
+  std::vector<std::vector<double>> t(static_cast<std::size_t>(N));
+  std::vector<double> total;
+  for (int r = 0; r <= runs; ++r) {
+    std::vector<cl::Event> ev;
+    cl::Buffer in = fp.pixels;
+    for (int k = 0; k < N; ++k) {
+      const cl::Buffer& out = k % 2 ? b : a;
+      ev.push_back(enqueue_swap_stage(dev, plan, k, in, out));
+      in = out;
+    }
+    dev.finish();
+    if (r == 0) continue;
+    double sum = 0;
+    for (int k = 0; k < N; ++k) {
+      const double ms = static_cast<double>(event_ns(ev[static_cast<std::size_t>(k)])) * 1e-6;
+      t[static_cast<std::size_t>(k)].push_back(ms);
+      sum += ms;
+    }
+    total.push_back(sum);
+  }
+  std::printf(
+      "swap kernels only (buffers reused), %s -> %d %s, %s: total %.2f ms, plan %.2f ms; "
+      "stages:",
+      f.name.c_str(), f.size, f.sampling == Sampling::voxel ? "voxel" : "pixel",
+      swap_layout_name(layout), median(total), plan_ms);
+  for (const auto& v : t) std::printf(" %.2f", median(v));
+  std::printf("\n");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int size = 256, order = 1, runs = 5;
   int64_t pes = 8192;
-  bool reference = true, comm_only = false;
+  bool reference = true, comm_only = false, swap_only = false;
   SwapLayout layout = SwapLayout::cut_and_stack;
   std::string brain = std::string(SIMDVOL_BENCH_DATA_DIR) + "/brainsmall.den";
   for (int i = 1; i < argc; ++i) {
@@ -125,10 +172,12 @@ int main(int argc, char** argv) {
       reference = false;
     else if (a == "--comm-only")
       comm_only = true;
+    else if (a == "--swap-only")
+      swap_only = true;
     else {
       std::fprintf(stderr,
                    "usage: simdvol-bench-swap [--size N] [--pes P] [--order K] [--runs R] "
-                   "[--layout L] [--brain PATH] [--no-reference] [--comm-only]\n");
+                   "[--layout L] [--brain PATH] [--no-reference] [--comm-only] [--swap-only]\n");
       return 2;
     }
   }
@@ -158,6 +207,9 @@ int main(int argc, char** argv) {
     if (comm_only) return 0;
 
     Device dev;
+    for (const Frame& f : frames)
+      if (f.view.theta == 0) swap_kernels_only(dev, f, pes, layout, runs);
+    if (swap_only) return 0;
     std::printf("\ndevice: %s; %lld PEs, order %d, %s, fused shade+classify, %d runs\n",
                 dev.info().name.c_str(), static_cast<long long>(pes), order,
                 swap_layout_name(layout), runs);

@@ -6,12 +6,13 @@
  * densely, row-major, from off[p] (off has P + 1 entries).
  *
  * simdvol_swap_stage: stage k, one work-item per pixel of the output level
- * (1-D, local size 64). The work-item finds its PE by a binary search of at
- * most `steps` steps between blk[g] and blk[g + 1] (g = pixel / 64: the PE of
- * the first pixel of each block of 64, from the host), reads the pixel from
- * its own level-k rectangle and its partner's (p ^ 2^k; 0 where absent: the
- * partner's read is the X-Net transfer) and writes over(front, back), p in
- * front when bit k of p equals `front`.
+ * (1-D, local size 64), in chunks of 16 pixels of one PE: chunk c =
+ * gid / 16 is (PE, first pixel) from the host's table (each PE's pixels
+ * padded to whole chunks, so no search; lanes past the PE's count exit).
+ * The work-item reads the pixel from its own level-k rectangle and its
+ * partner's (p ^ 2^k; 0 where absent: the partner's read is the X-Net
+ * transfer) and writes over(front, back), p in front when bit k of p
+ * equals `front`.
  *
  * simdvol_display: one work-item per intermediate pixel (x, y): the PE
  * xpe[x] | ype[y] holds it after the swap (0 if outside its rectangle).
@@ -26,8 +27,7 @@
 
 #pragma OPENCL FP_CONTRACT OFF
 
-#define SV_SWAP_BLOCK 64
-#define SV_SWAP_MAX_STEPS 21
+#define SV_SWAP_CHUNK 16
 
 SV_FN float4 sv_swap_over(const float4 f, const float4 b) {
   const float t = 1.0f - f.w;
@@ -46,21 +46,16 @@ SV_FN int sv_rect_index(const int8 r, const int x, const int y) {
 __kernel void simdvol_swap_stage(__global const float4* in, __global const int8* in_rect,
                                  __global const int* in_off, __global float4* out,
                                  __global const int8* out_rect, __global const int* out_off,
-                                 __global const int* blk, const int nout, const int steps,
-                                 const int k, const int front) {
-  const int idx = (int)get_global_id(0);
-  if (idx >= nout) return;
-  const int g = idx / SV_SWAP_BLOCK;
-  const int hi = blk[g + 1];
-  int p = blk[g];
-  for (int b = SV_SWAP_MAX_STEPS - 1; b >= 0; --b) {
-    if (b < steps) {
-      const int c = p + (1 << b);
-      p = (c <= hi && out_off[c] <= idx) ? c : p;
-    }
-  }
+                                 __global const int2* chunks, const int nitems, const int k,
+                                 const int front) {
+  const int gid = (int)get_global_id(0);
+  if (gid >= nitems) return;
+  const int2 e = chunks[gid / SV_SWAP_CHUNK];
+  const int p = e.x;
+  const int li = e.y + gid % SV_SWAP_CHUNK;
+  const int base = out_off[p];
+  if (li >= out_off[p + 1] - base) return;
   const int8 o = out_rect[p];
-  const int li = idx - out_off[p];
   const int row = li / o.s2;
   const int col = li - row * o.s2;
   const int x = o.s0 + (col << o.s6), y = o.s1 + (row << o.s7);
@@ -70,7 +65,7 @@ __kernel void simdvol_swap_stage(__global const float4* in, __global const int8*
   const float4 vp = ip >= 0 ? in[in_off[p] + ip] : (float4)(0.0f);
   const float4 vq = iq >= 0 ? in[in_off[q] + iq] : (float4)(0.0f);
   const bool p_front = ((p >> k) & 1) == front;
-  out[idx] = p_front ? sv_swap_over(vp, vq) : sv_swap_over(vq, vp);
+  out[base + li] = p_front ? sv_swap_over(vp, vq) : sv_swap_over(vq, vp);
 }
 
 __kernel void simdvol_display(__global const float4* last, __global const int8* rect,

@@ -14,7 +14,7 @@ static_assert(sizeof(Rgba) == 16, "Rgba must match float4");
 namespace {
 
 constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
-constexpr int64_t kBlock = 64;  // SV_SWAP_BLOCK in swap.cl
+constexpr int64_t kBlock = 64;  // local size
 
 template <class T>
 cl::Buffer upload(Device& device, const std::vector<T>& v, const std::string& what) {
@@ -40,25 +40,16 @@ cl::Kernel swap_kernel(Device& device, const std::string& name) {
 
 }  // namespace
 
-std::vector<cl_int> swap_block_table(const std::vector<int64_t>& off, cl_int* steps) {
+std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& off) {
   if (off.size() < 2) throw ArgumentError("offsets", "need P + 1 entries");
-  const int64_t P = static_cast<int64_t>(off.size()) - 1;
-  const int64_t n = off.back();
-  const int64_t nblk = (n + kBlock - 1) / kBlock;
-  std::vector<cl_int> t(static_cast<std::size_t>(nblk + 1), 0);
-  int64_t p = 0;
-  auto pe_of = [&](int64_t idx) {  // largest p with off[p] <= idx (p < P), monotone in idx
-    while (p + 1 < P && off[static_cast<std::size_t>(p + 1)] <= idx) ++p;
-    return p;
-  };
-  for (int64_t g = 0; g < nblk; ++g)
-    t[static_cast<std::size_t>(g)] = static_cast<cl_int>(pe_of(g * kBlock));
-  if (n > 0) t[static_cast<std::size_t>(nblk)] = static_cast<cl_int>(pe_of(n - 1));
-  int64_t gap = 0;
-  for (int64_t g = 0; g < nblk; ++g)
-    gap =
-        std::max<int64_t>(gap, t[static_cast<std::size_t>(g + 1)] - t[static_cast<std::size_t>(g)]);
-  if (steps) *steps = static_cast<cl_int>(ceil_log2(gap + 1));
+  std::vector<cl_int2> t;
+  for (std::size_t p = 0; p + 1 < off.size(); ++p)
+    for (int64_t s = 0; s < off[p + 1] - off[p]; s += kSwapChunk) {
+      cl_int2 e;
+      e.s[0] = static_cast<cl_int>(p);
+      e.s[1] = static_cast<cl_int>(s);
+      t.push_back(e);
+    }
   return t;
 }
 
@@ -74,9 +65,11 @@ DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan) {
     std::vector<cl_int> oi(o.begin(), o.end());
     d.offsets.push_back(upload(device, oi, "swap offsets"));
     if (L > 0) {
-      cl_int s = 0;
-      d.blocks.push_back(upload(device, swap_block_table(o, &s), "swap block table"));
-      d.steps.push_back(s);
+      const std::vector<cl_int2> t = swap_chunk_table(o);
+      if (static_cast<int64_t>(t.size()) * kSwapChunk > kInt32Max)
+        throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 work-items");
+      d.chunks.push_back(upload(device, t, "swap chunk table"));
+      d.chunk_count.push_back(static_cast<int64_t>(t.size()));
     }
   }
   std::vector<cl_int> xp(plan.xpe.begin(), plan.xpe.end()), yp(plan.ype.begin(), plan.ype.end());
@@ -92,10 +85,9 @@ cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, con
   const std::string name = "simdvol_swap_stage";
   cl::Kernel kern = swap_kernel(device, name);
   const auto kk = static_cast<std::size_t>(k);
-  const cl_int n = static_cast<cl_int>(d.plan.level_size(k + 1));
+  const cl_int n = static_cast<cl_int>(d.chunk_count[kk] * kSwapChunk);
   set_args(kern, name, in, d.rects[kk], d.offsets[kk], out, d.rects[kk + 1], d.offsets[kk + 1],
-           d.blocks[kk], n, d.steps[kk], static_cast<cl_int>(k),
-           static_cast<cl_int>(d.plan.front[kk]));
+           d.chunks[kk], n, static_cast<cl_int>(k), static_cast<cl_int>(d.plan.front[kk]));
   return device.run(kern, name,
                     cl::NDRange(round_up(static_cast<std::size_t>(std::max(n, 1)), kBlock)),
                     cl::NDRange(kBlock));

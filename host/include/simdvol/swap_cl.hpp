@@ -3,8 +3,8 @@
 //
 // The plan is computed on the host from the footprint rectangles (which the
 // host already reads to size the footprints) and uploaded once per frame:
-// per level the strided rectangles and offsets, per stage the block table of
-// the output pixels (the PE of every 64th pixel). One launch per stage (the
+// per level the strided rectangles and offsets, per stage the chunk table of
+// the output pixels ((PE, first pixel) per 16 pixels of one PE). One launch per stage (the
 // partner's rectangle is read directly: the whole level is one buffer), no
 // waits between them; level buffers ping-pong between two allocations sized
 // by the largest level. Every enqueue_* validates first and returns the
@@ -24,20 +24,21 @@ namespace simdvol {
 /// A SwapPlan with its tables on the device.
 struct DeviceSwapPlan {
   SwapPlan plan;
-  std::vector<cl::Buffer> rects;    ///< per level: SwapRect[P] (int8)
-  std::vector<cl::Buffer> offsets;  ///< per level: cl_int[P + 1]
-  std::vector<cl::Buffer> blocks;   ///< per stage: cl_int[ceil(n / 64) + 1]
-  std::vector<cl_int> steps;        ///< per stage: binary-search steps
-  cl::Buffer xpe, ype;              ///< display tables (cl_int)
+  std::vector<cl::Buffer> rects;     ///< per level: SwapRect[P] (int8)
+  std::vector<cl::Buffer> offsets;   ///< per level: cl_int[P + 1]
+  std::vector<cl::Buffer> chunks;    ///< per stage: cl_int2 per chunk
+  std::vector<int64_t> chunk_count;  ///< per stage
+  cl::Buffer xpe, ype;               ///< display tables (cl_int)
 };
 /// Uploads `plan` (blocking copies of small tables). ArgumentError if a
 /// level exceeds 2^31 - 1 pixels.
 DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan);
 
-/// The block table of one level (for tests): entry g < ceil(n / 64) is the
-/// PE of pixel 64 g, the last entry the PE of pixel n - 1 (0 when n = 0);
-/// `steps` receives ceil(log2(largest gap + 1)).
-std::vector<cl_int> swap_block_table(const std::vector<int64_t>& offset, cl_int* steps);
+/// Pixels per chunk of the swap stage (SV_SWAP_CHUNK in swap.cl).
+inline constexpr int64_t kSwapChunk = 16;
+/// The chunk table of one level (for tests): for each PE p in order, and
+/// each s = 0, 16, ... < its pixel count, the pair (p, s).
+std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& offset);
 
 /// The level buffers of a swap run.
 struct DeviceSwapRun {
