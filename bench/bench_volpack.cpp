@@ -224,10 +224,10 @@ int main(int argc, char** argv) try {
     match->configure(m0);
     match_classify_ms = match->classify();
   }
-  std::printf(
-      "VolPack 1.0b3: vpVolumeNormals %.1f ms (once), vpClassifyVolume %.1f ms (once; %.1f ms "
-      "with minimum opacity 0)\n",
-      example.normals_ms(), classify_ms, match_classify_ms);
+  std::printf("VolPack 1.0b3: vpVolumeNormals %.1f ms (once), vpClassifyVolume %.1f ms (once",
+              example.normals_ms(), classify_ms);
+  if (matched) std::printf("; %.1f ms with minimum opacity 0", match_classify_ms);
+  std::printf(")\n");
 
   std::unique_ptr<Device> device;
   if (opencl) {
@@ -359,6 +359,16 @@ int main(int argc, char** argv) try {
           ", \"psnr_min_db\": " + (is_ref ? "null" : json_num(min_of(row->psnr))) +
           ", \"psnr_matched_db\": " +
           (row->psnr_matched.empty() ? "null" : json_num(row->psnr_matched[0])) + "}";
+    }
+    if (frames > 1) {
+      std::printf("PSNR over the %d frames, min (frame):", frames);
+      for (const Row* row : rows) {
+        if (row == &ref) continue;
+        const auto it = std::min_element(row->psnr.begin(), row->psnr.end());
+        std::printf("  %s %.2f (%d)", row->name.c_str(), *it,
+                    static_cast<int>(it - row->psnr.begin()));
+      }
+      std::printf("\n");
     }
     std::printf(
         "orientation check (frame 0): VolPack classified against the reference mirrored "
