@@ -29,6 +29,10 @@ install(TARGETS simdvol_core simdvol_cl EXPORT simdvolTargets
   RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR}
   INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 install(TARGETS simdvol RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+if(BUILD_SHARED_LIBS)
+  # The installed program finds the installed shared libraries.
+  set_target_properties(simdvol PROPERTIES INSTALL_RPATH "\$ORIGIN/../${CMAKE_INSTALL_LIBDIR}")
+endif()
 
 # The public headers; simdvol_shared.h sits beside them (they include it as
 # "simdvol_shared.h", found next to the including header).
