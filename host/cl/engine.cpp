@@ -1,13 +1,17 @@
 // The OpenCL render engine (engine.hpp).
 #include "simdvol/engine.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <climits>
 #include <optional>
+#include <string>
 
 #include "simdvol/layout.hpp"
 #include "simdvol/local.hpp"
 #include "simdvol/local_cl.hpp"
 #include "simdvol/match.hpp"
+#include "simdvol/mc_cl.hpp"
 #include "simdvol/stages.hpp"
 #include "simdvol/swap_cl.hpp"
 
@@ -15,18 +19,79 @@ namespace simdvol {
 
 namespace {
 double ms(const cl::Event& e) {
-  return static_cast<double>(event_ns(e)) * 1e-6;
+  return e() ? static_cast<double>(event_ns(e)) * 1e-6 : 0.0;
 }
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
+double stage_ms(const std::vector<StageEvent>& ev) {
+  return static_cast<double>(events_ns(ev)) * 1e-6;
+}
+
+constexpr std::size_t kWgs = 64;
+cl::NDRange range(int64_t n) {
+  return cl::NDRange(round_up(static_cast<std::size_t>(std::max<int64_t>(n, 1)), kWgs));
+}
+
+// A device buffer kept between frames, grown (never shrunk) on demand.
+struct Scratch {
+  cl::Buffer buffer;
+  std::size_t bytes = 0;
+  const cl::Buffer& at_least(Device& device, std::size_t need, const char* what) {
+    need = std::max<std::size_t>(need, 16);
+    if (need > bytes) {
+      check_allocation(need, device.info().max_alloc_bytes, what);
+      buffer = device.buffer(CL_MEM_READ_WRITE, need, nullptr, what);
+      bytes = need;
+    }
+    return buffer;
+  }
+};
 }  // namespace
 
-Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt, EngineTimes* times,
-                    int64_t pes, bool fused, SwapLayout swap_layout) {
+void validate(const EngineOptions& eo, const RenderOptions& opt) {
   validate(opt);
+  pe_grid(eo.pes, "--pe");
+  if (eo.mc_allocate && eo.mc_scope != McScope::subray)
+    throw ArgumentError("--allocate", "allocates walks to sub-rays: needs --mc-scope subray");
+  if (eo.mc_allocate && opt.composite.mode != CompositeMode::mc)
+    throw ArgumentError("--allocate", "needs --composite mc");
+}
+
+struct RenderEngine::State {
+  Device* device = nullptr;
+  EngineOptions eo;
+  std::optional<PeArray> array;
+  // Keyed by the volume's dims (and the PE count, fixed per engine).
+  std::optional<Dims3> dims;
+  std::optional<CellBuffer> cells;
+  std::optional<VoxelBuffer> rgba, shading;
+  const Volume* laid_out = nullptr;  // reuse_layout: the volume in `cells`
+  const float* laid_data = nullptr;
+  // Sized by the frame, grown on demand.
+  Scratch pe_total, total, sample_off, samples, image;
+};
+
+RenderEngine::RenderEngine(Device& device, EngineOptions options) : s_(std::make_unique<State>()) {
+  s_->device = &device;
+  s_->eo = options;
+  s_->array.emplace(device, pe_grid(options.pes, "--pe"));
+}
+RenderEngine::~RenderEngine() = default;
+RenderEngine::RenderEngine(RenderEngine&&) noexcept = default;
+RenderEngine& RenderEngine::operator=(RenderEngine&&) noexcept = default;
+
+const EngineOptions& RenderEngine::options() const {
+  return s_->eo;
+}
+
+Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTimes* times) {
+  State& S = *s_;
+  Device& device = *S.device;
+  const EngineOptions& eo = S.eo;
+  validate(eo, opt);
   if (vol.voxel_count() == 0) throw ArgumentError("volume", "is empty");
-  const PeGrid grid = pe_grid(pes, "pes");
+  const PeGrid grid = S.array->grid();
   const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
   // Parameters first: every argument error is thrown before anything runs.
   const sv_shade_params sp = shade_params(make_shade_frame(vol, view, opt.shade), opt.shade);
@@ -34,82 +99,190 @@ Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
       opt.classifier.kind == Classifier::Kind::mixture && opt.classifier.mixture.relative;
   const sv_classify_params cp =
       classify_params(opt.classifier, need_range ? vol.range() : ValueRange{}, view.step);
+  const CompositeMode mode = opt.composite.mode;
 
   const auto t0 = std::chrono::steady_clock::now();
-  PeArray array(device, grid);
-  const CellLayout cl_layout = array.cell_layout(vol.dims(), 1);
-  const VoxelLayout vl = make_voxel_layout(cl_layout);
-  check_allocation(vl.bytes(), device.info().max_alloc_bytes, "volume (voxel cells)");
-  cl::Event e_layout, e_shade, e_classify, e_gather;
-  CellBuffer cells = array.layout(vol, 1, LayoutKernel::rows, &e_layout);
-  VoxelBuffer rgba(device, vl);
-  std::optional<VoxelBuffer> shading;  // alive until the gather has finished
-  if (fused) {
-    e_classify = enqueue_shade_classify(device, cells, sp, cp, rgba);
+  // Buffers keyed by dims.
+  if (!S.dims || *S.dims != vol.dims()) {
+    S.cells.reset();
+    S.rgba.reset();
+    S.shading.reset();
+    S.laid_out = nullptr;
+    const CellLayout cl_layout = S.array->cell_layout(vol.dims(), 1);
+    const VoxelLayout vl = make_voxel_layout(cl_layout);
+    check_allocation(vl.bytes(), device.info().max_alloc_bytes, "volume (voxel cells)");
+    S.cells.emplace(device, cl_layout);
+    S.rgba.emplace(device, vl);
+    S.dims = vol.dims();
+  }
+  if (!eo.fused && !S.shading) S.shading.emplace(device, S.rgba->layout());
+  cl::Event e_layout, e_shade, e_classify;
+  const bool keep = eo.reuse_layout && S.laid_out == &vol && S.laid_data == vol.data().data();
+  if (!keep) {
+    S.laid_out = nullptr;
+    S.array->layout_into(vol.data().data(), *S.cells, LayoutKernel::rows, &e_layout);  // blocking
+    S.laid_out = &vol;
+    S.laid_data = vol.data().data();
+  }
+  if (eo.fused) {
+    e_classify = enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba);
   } else {
-    shading.emplace(device, vl);
-    e_shade = enqueue_shade(device, cells, sp, *shading);
-    e_classify = enqueue_classify(device, *shading, cp, rgba);
+    e_shade = enqueue_shade(device, *S.cells, sp, *S.shading);
+    e_classify = enqueue_classify(device, *S.shading, cp, *S.rgba);
   }
-  if (opt.composite.mode != CompositeMode::direct) {
-    // Adaptive and Monte Carlo compositing: the reference finishes the frame.
-    std::vector<Rgba> voxels(vol.voxel_count());
-    gather_rgba(device, rgba, voxels.data(), &e_gather);  // blocking
-    if (times) {
-      times->layout_ms = ms(e_layout);
-      times->shade_ms = fused ? 0.0 : ms(e_shade);
-      times->classify_ms = ms(e_classify);
-      times->gather_ms = ms(e_gather);
-      times->device_wall_ms = ms_since(t0);
-    }
-    return render_classified(voxels, vol, view, opt, times ? &times->host : nullptr);
-  }
-  // Direct compositing: match, balance, resample + local on the PE array.
-  const KdSplit& split = cl_layout.split;
+  // Match and balance on the PE array.
+  const KdSplit& split = S.cells->layout().split;
   DeviceMatching dm = enqueue_match(device, view, split);
   enqueue_balance(device, dm, view, split);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
-  const ResampleTables tables = make_resample_tables(device, vl, view);
-  DeviceFootprints fp = make_footprints(device, segs.host_rects);
-  const cl::Event e_zero = enqueue_zero_footprints(device, fp);
-  const cl::Event e_local = enqueue_resample_local(device, segs, tables, rgba, opt.order, fp);
-  // The swap plan on the host while the device resamples.
-  const auto tp = std::chrono::steady_clock::now();
-  const DeviceSwapPlan plan =
-      upload_swap_plan(device, plan_swap(segs.host_rects, split, view, grid, swap_layout));
-  const double plan_ms = ms_since(tp);
-  const DeviceSwapRun run = enqueue_swap(device, plan, fp);
-  cl::Buffer intermediate, output;
-  const cl::Event e_display = enqueue_display(device, plan, run.last, intermediate);
-  cl::Event e_warp;
-  Image out;
-  if (view.sampling == Sampling::pixel) {
-    out = read_device_image(device, intermediate, view.width(), view.height());  // blocking
+  const ResampleTables tables = make_resample_tables(device, S.rgba->layout(), view);
+  const int W = view.width(), H = view.height();
+  const int64_t npx = static_cast<int64_t>(W) * H;
+
+  cl::Event e_zero, e_local;
+  std::vector<StageEvent> offset_events, walk_events;
+  std::vector<StageEvent> ray_events;
+  std::optional<DeviceFootprints> fp;
+  bool via_swap = true;  // direct and per sub-ray mc: footprints -> swap -> display
+  if (mode == CompositeMode::direct) {
+    fp.emplace(make_footprints(device, segs.host_rects));
+    e_zero = enqueue_zero_footprints(device, *fp);
+    e_local = enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp);
   } else {
-    e_warp = enqueue_warp(device, view, intermediate, output);
-    out = read_device_image(device, output, view.out_width, view.out_height);  // blocking
+    // The samples in segment order at offsets scanned on the device.
+    const int pes = static_cast<int>(segs.pes);
+    const cl::Buffer& pe_total =
+        S.pe_total.at_least(device, static_cast<std::size_t>(pes) * 8, "sample totals");
+    const cl::Buffer& total = S.total.at_least(device, 8, "sample total");
+    const cl::Buffer& soff = S.sample_off.at_least(
+        device, static_cast<std::size_t>(segs.count + 1) * 4, "sample offsets");
+    {
+      cl::Kernel k = device.kernel("adaptive", "simdvol_sample_pe_count");
+      set_args(k, "simdvol_sample_pe_count", segs.segments, segs.seg_offset, cl_int(pes), pe_total);
+      offset_events.push_back(
+          {"pe count", device.run(k, "simdvol_sample_pe_count", range(pes), cl::NDRange(kWgs))});
+      cl::Kernel ks = device.kernel("adaptive", "simdvol_sample_pe_scan");
+      set_args(ks, "simdvol_sample_pe_scan", pe_total, cl_int(pes), total);
+      offset_events.push_back(
+          {"pe scan", device.run(ks, "simdvol_sample_pe_scan", cl::NDRange(1), cl::NDRange(1))});
+      cl::Kernel ko = device.kernel("adaptive", "simdvol_sample_offsets");
+      set_args(ko, "simdvol_sample_offsets", segs.segments, segs.seg_offset, cl_int(pes), pe_total,
+               soff);
+      offset_events.push_back(
+          {"offsets", device.run(ko, "simdvol_sample_offsets", range(pes), cl::NDRange(kWgs))});
+    }
+    cl_long nsamples = 0;
+    cl_check(device.queue().enqueueReadBuffer(total, CL_TRUE, 0, sizeof nsamples, &nsamples),
+             "clEnqueueReadBuffer(sample total)");
+    if (nsamples > INT_MAX)
+      throw ArgumentError("--size", "the frame has " + std::to_string(nsamples) +
+                                        " samples: more than 32-bit offsets can index");
+    const cl::Buffer& samples =
+        S.samples.at_least(device, static_cast<std::size_t>(nsamples) * 16, "samples");
+    e_local = enqueue_resample(device, segs, soff, tables, *S.rgba, opt.order, samples);
+    const bool subray = mode == CompositeMode::mc && eo.mc_scope == McScope::subray;
+    std::optional<DeviceRayLists> rays;
+    if (!subray || eo.mc_allocate) {
+      rays.emplace(enqueue_ray_lists(device, segs, view));
+      ray_events = rays->events;
+    }
+    if (subray) {
+      std::optional<DeviceAllocation> alloc;
+      if (eo.mc_allocate) {
+        alloc.emplace(
+            enqueue_mc_allocation(device, segs, soff, samples, *rays, opt.composite.samples));
+        walk_events = alloc->events;
+      }
+      fp.emplace(make_footprints(device, segs.host_rects));
+      e_zero = enqueue_zero_footprints(device, *fp);
+      walk_events.push_back(
+          {"mc local", enqueue_mc_local(device, segs, soff, samples, W, opt.composite,
+                                        alloc ? &*alloc : nullptr, *fp)});
+      // alloc's buffers are released here: the queue keeps them alive (the
+      // kernels hold references) until the work is done.
+    } else {
+      via_swap = false;
+      const cl::Buffer& image =
+          S.image.at_least(device, static_cast<std::size_t>(npx) * 16, "intermediate image");
+      if (mode == CompositeMode::mc) {
+        walk_events.push_back({"mc whole", enqueue_mc_whole(device, segs, soff, samples, *rays,
+                                                            opt.composite, image)});
+      } else {
+        cl::Kernel k = device.kernel("adaptive", "simdvol_adaptive_whole");
+        set_args(k, "simdvol_adaptive_whole", segs.segments, soff, samples, rays->offset,
+                 rays->items, cl_int(npx), cl_float(opt.composite.threshold), image);
+        walk_events.push_back(
+            {"adaptive", device.run(k, "simdvol_adaptive_whole", range(npx), cl::NDRange(kWgs))});
+      }
+    }
+    device.queue().finish();  // the ray lists and the allocation go out of scope
+  }
+
+  double plan_ms = 0;
+  std::vector<double> swap_stage_ms;
+  cl::Event e_display, e_warp;
+  cl::Buffer intermediate, output;
+  Image out;
+  if (via_swap) {
+    // The swap plan on the host while the device resamples.
+    const auto tp = std::chrono::steady_clock::now();
+    const DeviceSwapPlan plan =
+        upload_swap_plan(device, plan_swap(segs.host_rects, split, view, grid, eo.layout));
+    plan_ms = ms_since(tp);
+    const DeviceSwapRun run = enqueue_swap(device, plan, *fp);
+    e_display = enqueue_display(device, plan, run.last, intermediate);
+    if (view.sampling == Sampling::pixel) {
+      out = read_device_image(device, intermediate, W, H);  // blocking
+    } else {
+      e_warp = enqueue_warp(device, view, intermediate, output);
+      out = read_device_image(device, output, view.out_width, view.out_height);  // blocking
+    }
+    for (const cl::Event& e : run.stages) swap_stage_ms.push_back(ms(e));
+  } else {
+    const cl::Buffer& image = S.image.buffer;
+    if (view.sampling == Sampling::pixel) {
+      out = read_device_image(device, image, W, H);  // blocking
+    } else {
+      e_warp = enqueue_warp(device, view, image, output);
+      out = read_device_image(device, output, view.out_width, view.out_height);  // blocking
+    }
   }
   if (times) {
+    *times = EngineTimes{};
     times->layout_ms = ms(e_layout);
-    times->shade_ms = fused ? 0.0 : ms(e_shade);
+    times->shade_ms = eo.fused ? 0.0 : ms(e_shade);
     times->classify_ms = ms(e_classify);
-    times->gather_ms = 0.0;
-    times->match_ms = static_cast<double>(events_ns(dm.match_events)) * 1e-6;
-    times->balance_ms = static_cast<double>(events_ns(dm.balance_events)) * 1e-6;
-    times->resample_local_ms = ms(e_zero) + ms(e_local);
+    times->match_ms = stage_ms(dm.match_events);
+    times->balance_ms = stage_ms(dm.balance_events);
+    times->resample_local_ms = (mode == CompositeMode::direct ? ms(e_zero) : 0.0) + ms(e_local);
+    times->offsets_ms = stage_ms(offset_events);
+    times->rays_ms = stage_ms(ray_events);
+    times->walk_ms = stage_ms(walk_events) + (mode == CompositeMode::direct ? 0.0 : ms(e_zero));
     times->plan_ms = plan_ms;
-    times->swap_stage_ms.clear();
-    times->swap_ms = 0;
-    for (const cl::Event& e : run.stages) {
-      times->swap_stage_ms.push_back(ms(e));
-      times->swap_ms += times->swap_stage_ms.back();
-    }
+    times->swap_stage_ms = swap_stage_ms;
+    for (double t : swap_stage_ms) times->swap_ms += t;
     times->display_ms = ms(e_display);
-    times->warp_ms = view.sampling == Sampling::pixel ? 0.0 : ms(e_warp);
+    times->warp_ms = ms(e_warp);
     times->composite_ms = times->swap_ms + times->display_ms + times->warp_ms;
     times->device_wall_ms = ms_since(t0);
   }
   return out;
+}
+
+Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
+                    const EngineOptions& options, EngineTimes* times) {
+  validate(options, opt);
+  RenderEngine engine(device, options);
+  return engine.render(vol, opt, times);
+}
+
+Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt, EngineTimes* times,
+                    int64_t pes, bool fused, SwapLayout layout) {
+  EngineOptions eo;
+  eo.pes = pes;
+  eo.fused = fused;
+  eo.layout = layout;
+  return render_opencl(device, vol, opt, eo, times);
 }
 
 }  // namespace simdvol

@@ -5,12 +5,36 @@
 // hierarchical layout -> intermediate image) -> warp (voxel sampling), then
 // one read of the output image. The host reads only the footprint
 // rectangles (to size the buffers) and plans the swap from them while the
-// device resamples. Adaptive and Monte Carlo compositing keep the earlier
-// path: the classified voxels are gathered back and render_classified does
-// the rest.
+// device resamples.
+//
+// Adaptive and Monte Carlo compositing also run on the device. The samples
+// are resampled into a buffer in segment order (enqueue_resample) at offsets
+// scanned on the device (kernels/adaptive.cl; the host reads the total to
+// size the buffer), then:
+//   adaptive             whole-ray early termination (composite_adaptive):
+//                        per-pixel ray lists (mc_cl.hpp), one work-item per
+//                        pixel walks its ray front to back and stops at the
+//                        threshold (kernels/adaptive.cl) -> intermediate image
+//   mc, scope whole      the same ray lists, enqueue_mc_whole (the pixel's
+//                        owner walks the whole ray) -> intermediate image;
+//                        equals render_reference's mc bit for bit
+//   mc, scope subray     enqueue_mc_local (ch. 7.4: each segment's walks over
+//                        its own samples, optionally allocated by opacity,
+//                        ch. 7.5 (b)) into the footprints, then the swap and
+//                        display as direct compositing; equals mc.hpp's
+//                        mc_sub_reference composited with over
+// then the warp (voxel sampling) as direct compositing.
+//
+// RenderEngine keeps the PE array and the buffers the engine allocates
+// itself (voxel cells, shading, classified voxels, samples, offsets,
+// images) across frames, reallocated only when the volume's dims or the
+// sizes grow: fresh buffers cost page faults (POCL.md: ~3.5 ms per MiB).
+// Buffers allocated inside the stage functions (matching, footprints, swap
+// levels) are still made per frame. render_opencl is a one-shot RenderEngine.
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "simdvol/device.hpp"
@@ -27,10 +51,14 @@ struct EngineTimes {
   double layout_ms = 0;          ///< flat volume -> PE-major cells with halo
   double shade_ms = 0;           ///< 0 when fused
   double classify_ms = 0;        ///< shade + classify when fused
-  double gather_ms = 0;          ///< classified voxel cells -> flat RGBA (adaptive/mc only)
-  double match_ms = 0;           ///< matching (host reference time until on the device)
-  double balance_ms = 0;         ///< balancing (host reference time until on the device)
-  double resample_local_ms = 0;  ///< zero footprints + fused resample + local
+  double gather_ms = 0;          ///< unused (0): nothing is gathered back any more
+  double match_ms = 0;           ///< matching
+  double balance_ms = 0;         ///< balancing
+  double resample_local_ms = 0;  ///< zero footprints + fused resample + local (direct);
+                                 ///< resample into the sample buffer (adaptive, mc)
+  double offsets_ms = 0;         ///< adaptive, mc: the sample offsets' scan
+  double rays_ms = 0;            ///< adaptive, mc whole or allocated: per-pixel ray lists
+  double walk_ms = 0;  ///< adaptive / mc walks (and the opacity allocation), zeroing included
   double plan_ms = 0;  ///< host: swap plan from the rectangles + its upload (overlaps the device)
   double swap_ms = 0;  ///< all swap stages
   std::vector<double> swap_stage_ms;  ///< per launched stage
@@ -38,7 +66,51 @@ struct EngineTimes {
   double warp_ms = 0;                 ///< intermediate -> output (voxel sampling)
   double composite_ms = 0;            ///< swap + display + warp
   double device_wall_ms = 0;  ///< host wall time of the device part (allocation, builds, transfers)
-  RenderTimes host{};         ///< the stages still run by the reference
+  RenderTimes host{};         ///< unused (0): no stage runs on the host
+};
+
+/// Which rays the Monte Carlo walks run over (--mc-scope).
+enum class McScope {
+  whole,   ///< whole rays after the swap (ch. 7.3): equals render_reference
+  subray,  ///< per sub-ray in local compositing (ch. 7.4), then the swap
+};
+
+/// Engine options (beyond RenderOptions, which the reference shares).
+struct EngineOptions {
+  int64_t pes = 8192;                             ///< a power of two (8,192 as the DECmpp 12000)
+  bool fused = false;                             ///< shade + classify as one launch (same results)
+  SwapLayout layout = SwapLayout::cut_and_stack;  ///< the swap's final layout (same image)
+  McScope mc_scope = McScope::whole;
+  /// Per sub-ray Monte Carlo: the ray's composite.samples walks allocated to
+  /// its sub-rays by opacity (ch. 7.5 (b), allocate_walks) instead of
+  /// composite.samples per sub-ray. ArgumentError with McScope::whole.
+  bool mc_allocate = false;
+  /// The caller promises that a volume rendered again (the same object, the
+  /// same data pointer and dims) has not changed: its layout into PE cells
+  /// is kept (a turntable). Off: every frame lays the volume out again.
+  bool reuse_layout = false;
+};
+
+/// Checks the options against each other and `opt`; ArgumentError naming
+/// the CLI option.
+void validate(const EngineOptions& eo, const RenderOptions& opt);
+
+/// The engine with its buffers kept between frames (see the file comment).
+/// Not thread-safe; `device` must outlive it.
+class RenderEngine {
+ public:
+  explicit RenderEngine(Device& device, EngineOptions options = {});
+  ~RenderEngine();
+  RenderEngine(RenderEngine&&) noexcept;
+  RenderEngine& operator=(RenderEngine&&) noexcept;
+
+  const EngineOptions& options() const;
+  /// Renders one frame; same result as render_opencl with these options.
+  Image render(const Volume& vol, const RenderOptions& opt, EngineTimes* times = nullptr);
+
+ private:
+  struct State;
+  std::unique_ptr<State> s_;
 };
 
 /// Renders `vol` with the OpenCL stages on `pes` PEs (a power of two,
@@ -49,5 +121,8 @@ struct EngineTimes {
 Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
                     EngineTimes* times = nullptr, int64_t pes = 8192, bool fused = false,
                     SwapLayout layout = SwapLayout::cut_and_stack);
+/// The same with every engine option (a one-shot RenderEngine).
+Image render_opencl(Device& device, const Volume& vol, const RenderOptions& opt,
+                    const EngineOptions& options, EngineTimes* times = nullptr);
 
 }  // namespace simdvol
