@@ -146,12 +146,13 @@ int main(int argc, char** argv) {
   auto* render = app.add_subcommand("render", "render a volume (the built-in CT phantom if none)");
   VolumeArgs rv;
   std::string view = "0,0,0", size = "256x256", sampling = "voxel", composite = "direct",
-              streams = "per-ray", classify = "auto", engine = "reference", out = "simdvol.png";
+              streams = "per-ray", classify = "auto", engine = "opencl", out = "simdvol.png";
   int order = 1, samples = 32, frames = 1, phantom_size = 256;
   uint64_t seed = 1;
   double step = 5.0;
   float threshold = 0.95f;
-  bool no_shade = false, show_times = false;
+  bool no_shade = false, show_times = false, exact_opacity = false, allocate = false;
+  std::string swap_layout = "cut-and-stack", mc_scope = "whole";
   render->add_option("volume", rv.path, "volume file (.den, .nrrd, .nhdr, .nii, .nii.gz, .raw)");
   rv.add(render);
   render->add_option("--view", view, "THETA,PHI,VARPHI in degrees (thesis eq 5.2)")
@@ -172,6 +173,21 @@ int main(int argc, char** argv) {
                    "Hounsfield data, mri otherwise")
       ->capture_default_str();
   render->add_flag("--no-shade", no_shade, "skip lighting (colour = material colour)");
+  render->add_flag("--exact-opacity", exact_opacity,
+                   "Monte Carlo: exact opacity, Monte Carlo colour (ch. 7.5 (a))");
+  render
+      ->add_option("--mc-scope", mc_scope,
+                   "Monte Carlo: walks over whole rays (after the swap) or per sub-ray (in local "
+                   "compositing, then the swap; opencl engine)")
+      ->capture_default_str();
+  render->add_flag("--allocate", allocate,
+                   "Monte Carlo per sub-ray: the ray's --samples walks allocated to its sub-rays "
+                   "by opacity (ch. 7.5 (b))");
+  render
+      ->add_option("--layout", swap_layout,
+                   "opencl engine: the binary swap's final layout, cut-and-stack or hierarchical "
+                   "(same image)")
+      ->capture_default_str();
   render->add_option("--engine", engine, "reference (serial CPU) or opencl (the PE array)")
       ->capture_default_str();
   std::string pe_spec = "128x64";
@@ -262,11 +278,33 @@ int main(int argc, char** argv) {
       if (frames < 1 || frames > 100000)
         throw ArgumentError("--frames", std::to_string(frames) + " is outside 1..100000");
       if (!std::isfinite(step)) throw ArgumentError("--step", "must be finite");
+      opt.composite.exact_opacity = exact_opacity;
       if (engine != "reference" && engine != "opencl")
         throw ArgumentError("--engine",
                             "unknown engine '" + engine + "' (available: reference, opencl)");
       const PeGrid pes = parse_pe_grid(pe_spec, "--pe");
-      validate(opt);
+      EngineOptions eo;
+      eo.pes = pes.count();
+      eo.fused = true;
+      eo.reuse_layout = true;  // the volume does not change between frames
+      if (swap_layout == "cut-and-stack")
+        eo.layout = SwapLayout::cut_and_stack;
+      else if (swap_layout == "hierarchical")
+        eo.layout = SwapLayout::hierarchical;
+      else
+        throw ArgumentError("--layout",
+                            "expected cut-and-stack or hierarchical, not '" + swap_layout + "'");
+      if (mc_scope == "whole")
+        eo.mc_scope = McScope::whole;
+      else if (mc_scope == "subray")
+        eo.mc_scope = McScope::subray;
+      else
+        throw ArgumentError("--mc-scope", "expected whole or subray, not '" + mc_scope + "'");
+      eo.mc_allocate = allocate;
+      if (engine == "reference" && (eo.mc_scope != McScope::whole || allocate))
+        throw ArgumentError(eo.mc_scope != McScope::whole ? "--mc-scope" : "--allocate",
+                            "per sub-ray Monte Carlo needs --engine opencl");
+      validate(eo, opt);
       const fs::path outp = out;
       check_output_path(outp, "-o");
 
@@ -283,21 +321,32 @@ int main(int argc, char** argv) {
       opt.classifier = classifier_from_spec(classify);
 
       std::optional<Device> device;
-      if (engine == "opencl")
+      std::optional<RenderEngine> gpu;  // its buffers are reused from frame to frame
+      if (engine == "opencl") {
         device.emplace(device_index >= 0 ? std::optional<int>(device_index) : std::nullopt);
+        gpu.emplace(*device, eo);
+      }
       const double phi0 = opt.view.phi;
       for (int f = 0; f < frames; ++f) {
         opt.view.phi = phi0 + f * step;
         Image img;
         if (device) {
           EngineTimes t;
-          img = render_opencl(*device, vol, opt, &t, pes.count());
-          if (show_times)
-            std::cerr << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
-                      << " PEs): layout " << t.layout_ms << " ms, shade " << t.shade_ms
-                      << " ms, classify " << t.classify_ms << " ms, gather " << t.gather_ms
-                      << " ms (device), host stages: resample+composite "
-                      << t.host.resample_composite_ms << " ms, warp " << t.host.warp_ms << " ms\n";
+          img = gpu->render(vol, opt, &t);
+          if (show_times) {
+            std::ostringstream os;
+            os << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
+               << " PEs): layout " << t.layout_ms << " ms, shade " << t.shade_ms << " ms, classify "
+               << t.classify_ms << " ms, match " << t.match_ms << " ms, balance " << t.balance_ms
+               << " ms, resample+local " << t.resample_local_ms << " ms, offsets " << t.offsets_ms
+               << " ms, ray lists " << t.rays_ms << " ms, walks " << t.walk_ms << " ms, plan "
+               << t.plan_ms << " ms (host), swap " << t.swap_ms << " ms (";
+            for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
+              os << (k ? " " : "") << t.swap_stage_ms[k];
+            os << "), display " << t.display_ms << " ms, warp " << t.warp_ms << " ms; frame wall "
+               << t.device_wall_ms << " ms\n";
+            std::cerr << os.str();
+          }
         } else {
           RenderTimes t;
           img = render_reference(vol, opt, &t);
