@@ -16,23 +16,38 @@
 // the gather loads ((K+1)^3 voxels x 4 channels per sample) against the
 // ~9 G loads/s floor of POCL.md, the bytes the fused kernel must touch, and
 // the X-Net reads of the reference (remote stencil voxels).
+//
+//   simdvol-bench-frame --whole [--pes P] [--order K] [--runs R] [--brain PATH]
+//
+// Whole frames (issue 5): the 256^3 phantom (preset ct) to 256^2 and 512^2
+// and brainsmall.den (preset volpack) to 256^2, direct compositing, voxel
+// sampling, view (0, 30, 0): the serial reference (one frame), one-shot
+// render_opencl (fresh buffers each frame) and a warm RenderEngine (buffers
+// and the layout reused, as a turntable), interleaved, R frames each
+// (median), with the engine's per-stage times of the median warm frame.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
+#include "simdvol/engine.hpp"
+#include "simdvol/image.hpp"
+#include "simdvol/io.hpp"
 #include "simdvol/layout.hpp"
 #include "simdvol/local.hpp"
 #include "simdvol/local_cl.hpp"
 #include "simdvol/match.hpp"
 #include "simdvol/match_cl.hpp"
 #include "simdvol/phantom.hpp"
+#include "simdvol/render.hpp"
 #include "simdvol/shade.hpp"
 #include "simdvol/stages.hpp"
 #include "simdvol/view.hpp"
@@ -63,7 +78,112 @@ int usage(const char* msg) {
 
 }  // namespace
 
+std::string stages(const EngineTimes& t) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "layout %.2f, shade+classify %.2f, match %.2f, balance %.2f, resample+local %.2f, "
+                "plan %.2f (host), swap %.2f (%zu stages), display %.2f, warp %.2f",
+                t.layout_ms, t.shade_ms + t.classify_ms, t.match_ms, t.balance_ms,
+                t.resample_local_ms, t.plan_ms, t.swap_ms, t.swap_stage_ms.size(), t.display_ms,
+                t.warp_ms);
+  return buf;
+}
+
+int whole_frames(int64_t pes, int order, int runs, const std::string& brain) {
+  Device device;
+  std::printf(
+      "device: %s (%u compute units); whole frames, order %d, %lld PEs, direct, voxel "
+      "sampling, %d frames each (median ms)\n",
+      device.info().name.c_str(), device.info().compute_units, order, static_cast<long long>(pes),
+      runs);
+  struct Case {
+    std::string name;
+    const Volume* vol;
+    Classifier cls;
+    int size;
+  };
+  const Volume phantom = shepp_logan(256, 4);
+  std::optional<Volume> brainvol;
+  std::vector<Case> cases{{"phantom 256^3 -> 256^2", &phantom, classifier_preset("ct"), 256},
+                          {"phantom 256^3 -> 512^2", &phantom, classifier_preset("ct"), 512}};
+  if (std::filesystem::exists(brain)) {
+    brainvol = load_volume(brain);
+    cases.push_back({"brainsmall -> 256^2", &*brainvol, classifier_preset("volpack"), 256});
+  } else {
+    std::printf("(%s not found: brainsmall skipped)\n", brain.c_str());
+  }
+  for (const Case& c : cases) {
+    RenderOptions opt;
+    opt.width = opt.height = c.size;
+    opt.order = order;
+    opt.view = {0, 30, 0};
+    opt.classifier = c.cls;
+    EngineOptions eo;
+    eo.pes = pes;
+    eo.fused = true;
+    eo.reuse_layout = true;
+    auto t0 = Clock::now();
+    const Image ref = render_reference(*c.vol, opt);
+    const double ref_ms = ms_since(t0);
+    RenderEngine engine(device, eo);
+    EngineOptions oneshot_eo = eo;
+    oneshot_eo.reuse_layout = false;
+    engine.render(*c.vol, opt);                      // warm-up: builds, first launches
+    render_opencl(device, *c.vol, opt, oneshot_eo);  // warm-up
+    std::vector<double> one, warm;
+    std::vector<std::pair<double, EngineTimes>> warm_times;
+    double psnr_db = 0;
+    for (int r = 0; r < runs; ++r) {
+      opt.view.phi = 30.0 + r;  // a turntable
+      t0 = Clock::now();
+      render_opencl(device, *c.vol, opt, oneshot_eo);
+      one.push_back(ms_since(t0));
+      EngineTimes t;
+      t0 = Clock::now();
+      const Image img = engine.render(*c.vol, opt, &t);
+      warm.push_back(ms_since(t0));
+      warm_times.push_back({warm.back(), t});
+      if (r == 0) {
+        opt.view.phi = 30.0;
+        psnr_db = psnr(engine.render(*c.vol, opt), ref);
+      }
+    }
+    std::sort(warm_times.begin(), warm_times.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    const double w = median(warm), o = median(one);
+    std::printf(
+        "%s: reference %.1f ms, one-shot render_opencl %.1f ms, RenderEngine (warm) %.1f "
+        "ms; ratio reference/warm %.2f, one-shot/warm %.2f; PSNR vs reference %.1f dB\n"
+        "  warm stages (ms): %s\n",
+        c.name.c_str(), ref_ms, o, w, ref_ms / w, o / w, psnr_db,
+        stages(warm_times[warm_times.size() / 2].second).c_str());
+  }
+  return 0;
+}
+
 int main(int argc, char** argv) try {
+  for (int i = 1; i < argc; ++i)
+    if (!std::strcmp(argv[i], "--whole")) {
+      int64_t pes = 8192;
+      int order = 1, runs = 5;
+      std::string brain = "data/brainsmall.den";
+      for (int j = 1; j < argc; ++j) {
+        if (j == i) continue;
+        if (j + 1 >= argc) return usage("bad arguments");
+        if (!std::strcmp(argv[j], "--pes"))
+          pes = std::atoll(argv[++j]);
+        else if (!std::strcmp(argv[j], "--order"))
+          order = std::atoi(argv[++j]);
+        else if (!std::strcmp(argv[j], "--runs"))
+          runs = std::atoi(argv[++j]);
+        else if (!std::strcmp(argv[j], "--brain"))
+          brain = argv[++j];
+        else
+          return usage(("unknown argument " + std::string(argv[j])).c_str());
+      }
+      if (runs < 1 || order < 0 || order > 3) return usage("bad value");
+      return whole_frames(pes, order, runs, brain);
+    }
   int size = 256, runs = 5, order = 1;
   int64_t pes = 8192;
   bool reference = true;
