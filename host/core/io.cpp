@@ -19,6 +19,7 @@
 #include <fstream>
 #include <limits>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <system_error>
 #include <vector>
@@ -261,6 +262,86 @@ void nrrd_copy(const Nrrd* n, const NrrdShape& s, float* out) {
     }
 }
 
+/// Checks a "data file: <format> <min> <max> <step> [<subdim>]" line before
+/// teem parses it: teem 1.11 passes the format to sprintf after checking only
+/// that its first conversion is %d (so "%d%s" reads a missing argument), and
+/// counts the files with an int loop that never ends when max + step
+/// overflows. Only %d (with at most two width digits) and %% are accepted, and
+/// min, max and step must give 1 to 100000 files within +-2^30.
+void nrrd_check_data_file_line(const fs::path& path, const std::string& value) {
+  std::istringstream words(value);
+  std::string format;
+  words >> format;
+  int conversions = 0;
+  for (std::size_t i = 0; i < format.size(); ++i) {
+    if (format[i] != '%') continue;
+    if (i + 1 < format.size() && format[i + 1] == '%') {
+      ++i;
+      continue;
+    }
+    std::size_t j = i + 1, digits = 0;
+    while (j < format.size() && std::isdigit(static_cast<unsigned char>(format[j]))) ++j, ++digits;
+    if (j >= format.size() || format[j] != 'd' || digits > 2)
+      throw FileError(path, "data file name '" + format +
+                                "': a '%' must begin %d (width at most 2 digits) or %%");
+    ++conversions;
+    i = j;
+  }
+  if (conversions == 0) return;  // one file name (or LIST)
+  if (conversions > 1)
+    throw FileError(path, "data file format '" + format + "' has more than one %d");
+  long long mn = 0, mx = 0, step = 0;
+  if (!(words >> mn >> mx >> step))
+    throw FileError(path, "data file format '" + format + "' needs <min> <max> <step>");
+  constexpr long long lim = 1LL << 30;
+  const bool in_range = mn >= -lim && mn <= lim && mx >= -lim && mx <= lim && step != 0 &&
+                        step >= -lim && step <= lim && (mx - mn) / step >= 0 &&
+                        (mx - mn) / step < 100000;
+  if (!in_range)
+    throw FileError(path, "data file format '" + format + "': min " + std::to_string(mn) +
+                              ", max " + std::to_string(mx) + ", step " + std::to_string(step) +
+                              " do not give 1 to 100000 files");
+}
+
+/// Reads the NRRD header lines (up to the first blank line, at most 1 MiB)
+/// and checks what teem cannot be trusted with: the magic, so that teem never
+/// tries its other formats (its text reader leaks on malformed input), and
+/// the data file line (nrrd_check_data_file_line).
+void nrrd_prescan_header(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path, "cannot open file: " + errno_text(errno));
+  std::string text(std::size_t{1} << 20, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  std::size_t pos = 0;
+  auto next_line = [&](std::string& line) {
+    if (pos >= text.size()) return false;
+    std::size_t eol = text.find('\n', pos);
+    if (eol == std::string::npos) eol = text.size();
+    line.assign(text, pos, eol - pos);
+    pos = eol + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    return true;
+  };
+  std::string line;
+  next_line(line);
+  // The whole first line, as teem compares it (NRRD0001 .. NRRD0005 today).
+  if (line.size() != 8 || line.compare(0, 7, "NRRD000") != 0 || line[7] < '1' || line[7] > '9')
+    throw FileError(path, "not a NRRD file (its first line is not the magic NRRD000x)");
+  while (next_line(line)) {
+    if (line.empty()) break;  // the end of the header
+    if (line[0] == '#') continue;
+    const std::size_t colon = line.find(':');
+    if (colon == std::string::npos) continue;
+    if (colon + 1 < line.size() && line[colon + 1] == '=') continue;  // key/value pair
+    std::string key;
+    for (std::size_t i = 0; i < colon; ++i)
+      if (line[i] != ' ' && line[i] != '\t')
+        key += static_cast<char>(std::tolower(static_cast<unsigned char>(line[i])));
+    if (key == "datafile") nrrd_check_data_file_line(path, line.substr(colon + 1));
+  }
+}
+
 /// Names of the data files of a detached-header nrrd (after a header-only
 /// read), resolved relative to the header's directory.
 std::vector<fs::path> nrrd_data_files(const fs::path& path, const NrrdIoState* nio) {
@@ -273,9 +354,11 @@ std::vector<fs::path> nrrd_data_files(const fs::path& path, const NrrdIoState* n
   if (nio->dataFNFormat) {
     const int step = nio->dataFNStep;
     if (step == 0) return files;
-    for (int i = nio->dataFNMin; step > 0 ? i <= nio->dataFNMax : i >= nio->dataFNMax; i += step) {
+    // The format was checked by nrrd_check_data_file_line (one %d).
+    for (int64_t i = nio->dataFNMin; step > 0 ? i <= nio->dataFNMax : i >= nio->dataFNMax;
+         i += step) {
       char name[4096];
-      std::snprintf(name, sizeof name, nio->dataFNFormat, i);
+      std::snprintf(name, sizeof name, nio->dataFNFormat, static_cast<int>(i));
       files.push_back(resolve(name));
       if (files.size() > 100000) break;
     }
@@ -308,6 +391,55 @@ std::optional<uint64_t> nrrd_header_end(const fs::path& path) {
     pos += got;
   }
   return std::nullopt;
+}
+
+/// Decodes the gzip data of a NRRD (`data`, from byte `offset`): gzip members
+/// up to the end of the one that completes the `need` bytes the header asks
+/// for, CRC checks included. Throws FileError (naming `path`) if the stream
+/// is corrupt or ends early. teem
+/// reports both too, but leaks its gzip state when it does (teem 1.11
+/// _nrrdEncodingGzip_read returns without _nrrdGzClose), and says less.
+void nrrd_gzip_precheck(const fs::path& path, const fs::path& data, uint64_t offset,
+                        uint64_t need) {
+  std::ifstream in(data, std::ios::binary);
+  if (!in) throw FileError(path, "cannot open data file " + data.string());
+  in.seekg(static_cast<std::streamoff>(offset));
+  if (!in) throw FileError(path, "cannot seek to the gzip data");
+  z_stream z{};
+  if (inflateInit2(&z, 15 + 16) != Z_OK) throw FileError(path, "zlib: inflateInit2 failed");
+  struct Ender {
+    z_stream* z;
+    ~Ender() { inflateEnd(z); }
+  } ender{&z};
+  std::vector<unsigned char> ibuf(1 << 16), obuf(1 << 16);
+  uint64_t total = 0;
+  bool ended = false;  // the last member's end was reached
+  while (!(ended && total >= need)) {
+    if (z.avail_in == 0) {
+      in.read(reinterpret_cast<char*>(ibuf.data()), static_cast<std::streamsize>(ibuf.size()));
+      const auto got = static_cast<uInt>(in.gcount());
+      if (got == 0) break;
+      z.next_in = ibuf.data();
+      z.avail_in = got;
+    }
+    if (ended) {  // another gzip member follows (as gzip -c a b > c writes)
+      if (inflateReset(&z) != Z_OK) throw FileError(path, "zlib: inflateReset failed");
+      ended = false;
+    }
+    z.next_out = obuf.data();
+    z.avail_out = static_cast<uInt>(obuf.size());
+    const int r = inflate(&z, Z_NO_FLUSH);
+    total += obuf.size() - z.avail_out;
+    if (r == Z_STREAM_END) {
+      ended = true;
+    } else if (r != Z_OK && r != Z_BUF_ERROR) {
+      throw FileError(path, std::string("corrupt gzip data: ") + (z.msg ? z.msg : "zlib error") +
+                                " after " + std::to_string(total) + " decoded bytes");
+    }
+  }
+  if (total < need)
+    throw FileError(path, "truncated data: the gzip data decode to " + std::to_string(total) +
+                              " bytes, but the header needs " + std::to_string(need));
 }
 
 // ---------------------------------------------------------------- NIfTI
@@ -584,6 +716,7 @@ Volume load_den(const std::filesystem::path& path) {
 Volume load_nrrd(const std::filesystem::path& path) {
   const uint64_t file_size = require_regular_file(path);
   const std::string name = path.string();
+  nrrd_prescan_header(path);
 
   // Pass 1: the header only, to validate the shape and the data size
   // before teem allocates anything.
@@ -633,6 +766,17 @@ Volume load_nrrd(const std::filesystem::path& path) {
       throw FileError(path, "truncated data: " + std::to_string(available) + " bytes of " + ename +
                                 " data cannot hold the " + std::to_string(need) +
                                 " bytes the header (dims " + dims_text(shape.dims) + ") needs");
+    // Gzip data in one file with no skips: decode them once first, so that
+    // corrupt or short streams fail here (teem leaks when it finds them).
+    if (ename == "gzip" && files.size() <= 1 && nio->lineSkip == 0 && nio->byteSkip == 0 &&
+        !nio->dataFSkip) {
+      if (files.empty()) {
+        const std::optional<uint64_t> off = nrrd_header_end(path);
+        if (off) nrrd_gzip_precheck(path, path, *off, need);
+      } else {
+        nrrd_gzip_precheck(path, files[0], 0, need);
+      }
+    }
     // Raw data in one file with no skips must match the header exactly
     // (teem itself only notices data that are too short).
     if (ename == "raw" && files.size() <= 1 && nio->lineSkip == 0 && nio->byteSkip == 0 &&

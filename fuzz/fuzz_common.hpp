@@ -1,0 +1,84 @@
+// Shared by the loader fuzz targets. The loaders take paths, so each input is
+// written to a file in a per-process temporary directory (removed at exit)
+// and loaded from there. A simdvol::Error is the expected way to reject an
+// input; any other exception escapes to libFuzzer and is reported as a crash,
+// as are ASan/UBSan reports, aborts, leaks and allocations over the limit.
+#pragma once
+
+#include <unistd.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <system_error>
+
+#include "simdvol/error.hpp"
+#include "simdvol/volume.hpp"
+
+namespace simdvol_fuzz {
+
+/// The process's own scratch directory (mkdtemp under $TMPDIR or /tmp).
+inline const std::filesystem::path& scratch_dir() {
+  static const std::filesystem::path dir = [] {
+    const char* tmp = std::getenv("TMPDIR");
+    std::string tmpl = std::string(tmp && *tmp ? tmp : "/tmp") + "/simdvol-fuzz-XXXXXX";
+    if (!::mkdtemp(tmpl.data())) {
+      std::perror("mkdtemp");
+      std::abort();
+    }
+    std::filesystem::path p(tmpl);
+    static const std::filesystem::path for_atexit = p;
+    std::atexit([] {
+      std::error_code ec;
+      std::filesystem::remove_all(for_atexit, ec);
+    });
+    return p;
+  }();
+  return dir;
+}
+
+/// Writes `size` bytes to scratch_dir()/name (replacing it) and returns the path.
+inline std::filesystem::path write_input(const std::string& name, const uint8_t* data,
+                                         std::size_t size) {
+  const std::filesystem::path p = scratch_dir() / name;
+  std::FILE* f = std::fopen(p.c_str(), "wb");
+  if (!f) {
+    std::perror("fopen");
+    std::abort();
+  }
+  if (size > 0 && std::fwrite(data, 1, size, f) != size) {
+    std::perror("fwrite");
+    std::abort();
+  }
+  std::fclose(f);
+  return p;
+}
+
+/// Removes every file left in the scratch directory by the previous input.
+inline void clear_scratch() {
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(scratch_dir(), ec))
+    std::filesystem::remove_all(e.path(), ec);
+}
+
+/// Runs `load` and checks what it returns: a loaded volume must be
+/// self-consistent (dims positive, voxel count their product). A
+/// simdvol::Error is a clean rejection.
+template <typename F>
+void run_loader(F&& load) {
+  try {
+    const simdvol::Volume v = load();
+    const auto& d = v.dims();
+    if (d[0] <= 0 || d[1] <= 0 || d[2] <= 0 ||
+        v.voxel_count() != static_cast<std::size_t>(d[0] * d[1] * d[2]))
+      std::abort();
+    for (double s : v.spacing())
+      if (!(s > 0.0) || s != s || s > 1e308) std::abort();
+  } catch (const simdvol::Error&) {
+  }
+}
+
+}  // namespace simdvol_fuzz

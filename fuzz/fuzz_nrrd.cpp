@@ -1,0 +1,30 @@
+// libFuzzer target for load_nrrd. Byte 0 chooses the form:
+//   even: attached header; the rest is written as input.nrrd
+//   odd:  detached header; the rest is split after its first blank line
+//         ("\n\n"): the part up to it is input.nhdr, the remainder is written
+//         as data.raw beside it (seeds name it in "data file: data.raw";
+//         the fuzzer may name anything else).
+// Files the previous input left behind are removed first.
+#include <string_view>
+
+#include "fuzz_common.hpp"
+#include "simdvol/io.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
+  if (size < 1) return 0;
+  simdvol_fuzz::clear_scratch();
+  const uint8_t* body = data + 1;
+  const std::size_t n = size - 1;
+  std::filesystem::path path;
+  if ((data[0] & 1) == 0) {
+    path = simdvol_fuzz::write_input("input.nrrd", body, n);
+  } else {
+    const std::string_view s(reinterpret_cast<const char*>(body), n);
+    const std::size_t cut = s.find("\n\n");
+    const std::size_t hlen = cut == std::string_view::npos ? n : cut + 2;
+    path = simdvol_fuzz::write_input("input.nhdr", body, hlen);
+    simdvol_fuzz::write_input("data.raw", body + hlen, n - hlen);
+  }
+  simdvol_fuzz::run_loader([&] { return simdvol::load_nrrd(path); });
+  return 0;
+}

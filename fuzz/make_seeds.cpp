@@ -1,0 +1,273 @@
+// Writes the seed corpora of the loader fuzz targets from the real volumes
+// (data/brainsmall.den, data/ch2.nii.gz; a synthetic volume stands in for a
+// missing one): small crops written with save_nrrd, teem and niftilib, and
+// truncated and malformed variants, each framed as its fuzz target expects.
+//   make_seeds <data dir> <corpus root>   -> <root>/{raw,den,nrrd,nifti}/
+// Nothing it writes is committed: scripts/fuzz regenerates the corpora.
+#include <algorithm>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+#include "simdvol/error.hpp"
+#include "simdvol/io.hpp"
+#include "simdvol/volume.hpp"
+
+extern "C" {
+#include <nifti/nifti1_io.h>
+#include <teem/nrrd.h>
+}
+
+namespace fs = std::filesystem;
+using Bytes = std::vector<uint8_t>;
+using simdvol::Volume;
+using simdvol::VoxelType;
+
+namespace {
+
+Bytes read_bytes(const fs::path& p, std::size_t limit = SIZE_MAX) {
+  std::ifstream in(p, std::ios::binary);
+  Bytes b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (b.size() > limit) b.resize(limit);
+  return b;
+}
+
+void write_seed(const fs::path& dir, const std::string& name, const Bytes& b) {
+  std::ofstream out(dir / name, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+}
+
+Bytes framed(uint8_t mode, const Bytes& body) {
+  Bytes b{mode};
+  b.insert(b.end(), body.begin(), body.end());
+  return b;
+}
+
+/// The crop [x0, x0+nx) x [y0, y0+ny) x [z0, z0+nz) of `v` (clamped).
+Volume crop(const Volume& v, std::array<int64_t, 3> o, std::array<int64_t, 3> n, VoxelType t) {
+  Volume c(n, t, v.spacing());
+  for (int64_t z = 0; z < n[2]; ++z)
+    for (int64_t y = 0; y < n[1]; ++y)
+      for (int64_t x = 0; x < n[0]; ++x) c.at(x, y, z) = v.at_clamped(o[0] + x, o[1] + y, o[2] + z);
+  return c;
+}
+
+Volume synthetic(std::array<int64_t, 3> d) {
+  Volume v(d, VoxelType::u8);
+  for (int64_t z = 0; z < d[2]; ++z)
+    for (int64_t y = 0; y < d[1]; ++y)
+      for (int64_t x = 0; x < d[0]; ++x)
+        v.at(x, y, z) = static_cast<float>((x * 7 + y * 3 + z) % 256);
+  return v;
+}
+
+template <typename T>
+void put(Bytes& b, T v, bool big = false) {
+  uint8_t t[sizeof(T)];
+  std::memcpy(t, &v, sizeof(T));
+  if (big) std::reverse(t, t + sizeof(T));
+  b.insert(b.end(), t, t + sizeof(T));
+}
+
+/// Voxel bytes of `v` in its type (little- or big-endian).
+Bytes voxel_bytes_of(const Volume& v, bool big = false) {
+  Bytes b;
+  for (float f : v.data()) switch (v.type()) {
+      case VoxelType::u8:
+        b.push_back(static_cast<uint8_t>(f));
+        break;
+      case VoxelType::u16:
+        put(b, static_cast<uint16_t>(f), big);
+        break;
+      case VoxelType::i16:
+        put(b, static_cast<int16_t>(f), big);
+        break;
+      case VoxelType::f32:
+        put(b, f, big);
+        break;
+    }
+  return b;
+}
+
+Bytes den_file(const Volume& v, bool big) {
+  Bytes b;
+  put<int16_t>(b, 1, big);
+  for (int i = 0; i < 24; ++i) put<int16_t>(b, 0, big);
+  for (int a = 0; a < 3; ++a) put<int16_t>(b, static_cast<int16_t>(v.dims()[a]), big);
+  put<int16_t>(b, 0, big);
+  put<int32_t>(b, static_cast<int32_t>(v.voxel_count()), big);
+  const Bytes d = voxel_bytes_of(v);
+  b.insert(b.end(), d.begin(), d.end());
+  return b;
+}
+
+Bytes raw_prefix(VoxelType t, bool big, const std::array<int64_t, 3>& d, uint16_t header) {
+  Bytes b{static_cast<uint8_t>(t), static_cast<uint8_t>(big)};
+  for (int a = 0; a < 3; ++a) put<int16_t>(b, static_cast<int16_t>(d[a]));
+  put<uint16_t>(b, header);
+  for (int a = 0; a < 3; ++a) {
+    b.push_back(7);
+    b.push_back(12);  // spacing 1.0
+  }
+  return b;
+}
+
+Bytes nrrd_via_teem(const Volume& v, const char* encoding, const fs::path& tmp) {
+  Nrrd* n = nrrdNew();
+  std::vector<float> data = v.data();
+  nrrdWrap_va(n, data.data(), nrrdTypeFloat, 3, static_cast<size_t>(v.nx()),
+              static_cast<size_t>(v.ny()), static_cast<size_t>(v.nz()));
+  NrrdIoState* nio = nrrdIoStateNew();
+  nrrdIoStateEncodingSet(nio,
+                         std::string(encoding) == "gzip" ? nrrdEncodingGzip : nrrdEncodingAscii);
+  Bytes out;
+  if (nrrdSave(tmp.c_str(), n, nio) == 0) out = read_bytes(tmp);
+  nrrdIoStateNix(nio);
+  nrrdNix(n);
+  fs::remove(tmp);
+  return out;
+}
+
+Bytes nifti_via_niftilib(const Volume& v, int datatype, float slope, const fs::path& tmp) {
+  int dims[8] = {
+      3, static_cast<int>(v.nx()), static_cast<int>(v.ny()), static_cast<int>(v.nz()), 1, 1, 1, 1};
+  nifti_image* nim = nifti_make_new_nim(dims, datatype, 1);
+  if (!nim) return {};
+  for (std::size_t i = 0; i < v.voxel_count(); ++i) {
+    const float f = v.data()[i];
+    switch (datatype) {
+      case DT_UINT8:
+        static_cast<uint8_t*>(nim->data)[i] = static_cast<uint8_t>(f);
+        break;
+      case DT_INT16:
+        static_cast<int16_t*>(nim->data)[i] = static_cast<int16_t>(f);
+        break;
+      default:
+        static_cast<float*>(nim->data)[i] = f;
+        break;
+    }
+  }
+  nim->scl_slope = slope;
+  nim->scl_inter = slope != 1.0f ? 1.5f : 0.0f;
+  nifti_set_filenames(nim, tmp.c_str(), 0, 1);
+  nifti_image_write(nim);
+  nifti_image_free(nim);
+  Bytes out = read_bytes(tmp);
+  fs::remove(tmp);
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 3) {
+    std::cerr << "usage: make_seeds <data dir> <corpus root>\n";
+    return 2;
+  }
+  const fs::path data(argv[1]), root(argv[2]);
+  for (const char* t : {"raw", "den", "nrrd", "nifti"}) fs::create_directories(root / t);
+  const fs::path tmpdir = root / "tmp";
+  fs::create_directories(tmpdir);
+  nifti_set_debug_level(0);
+
+  Volume brain, ch2;
+  try {
+    brain = simdvol::load_den(data / "brainsmall.den");
+  } catch (const simdvol::Error& e) {
+    std::cerr << "make_seeds: " << e.what() << " (using a synthetic volume)\n";
+    brain = synthetic({128, 128, 84});
+  }
+  try {
+    ch2 = simdvol::load_nifti(data / "ch2.nii.gz");
+  } catch (const simdvol::Error& e) {
+    std::cerr << "make_seeds: " << e.what() << " (using a synthetic volume)\n";
+    ch2 = synthetic({181, 217, 181});
+  }
+  const Volume b8 = crop(brain, {56, 56, 40}, {16, 16, 8}, VoxelType::u8);
+  const Volume b16 = crop(brain, {56, 56, 40}, {16, 16, 8}, VoxelType::u16);
+  const Volume c8 = crop(ch2, {82, 100, 82}, {16, 16, 8}, VoxelType::u8);
+  const Volume c16 = crop(ch2, {82, 100, 82}, {16, 16, 8}, VoxelType::i16);
+  const Volume cf = crop(ch2, {82, 100, 82}, {16, 16, 8}, VoxelType::f32);
+  const Volume tiny = crop(brain, {60, 60, 40}, {3, 2, 2}, VoxelType::f32);
+
+  // .den: little- and big-endian crops, the header alone, the real file's start.
+  const fs::path den = root / "den";
+  const Bytes den_le = den_file(b8, false);
+  write_seed(den, "crop_le", den_le);
+  write_seed(den, "crop_be", den_file(b8, true));
+  write_seed(den, "header_only", Bytes(den_le.begin(), den_le.begin() + 62));
+  write_seed(den, "real_start", read_bytes(data / "brainsmall.den", 4096));
+
+  // raw: layout prefix + voxels, each type and byte order, with a header.
+  const fs::path raw = root / "raw";
+  auto raw_seed = [&](const std::string& name, const Volume& v, bool big, uint16_t header) {
+    Bytes b = raw_prefix(v.type(), big, v.dims(), header);
+    b.insert(b.end(), header, 0xAB);
+    const Bytes d = voxel_bytes_of(v, big);
+    b.insert(b.end(), d.begin(), d.end());
+    write_seed(raw, name, b);
+  };
+  raw_seed("u8", b8, false, 0);
+  raw_seed("u16_be", b16, true, 0);
+  raw_seed("i16_header", c16, false, 4);
+  raw_seed("f32_be", cf, true, 0);
+  raw_seed("f32_tiny", tiny, false, 2);
+
+  // NRRD: byte 0 even = attached, odd = detached (header, blank line, data).
+  const fs::path nrrd = root / "nrrd";
+  for (const auto& [name, v] :
+       {std::pair<std::string, const Volume*>{"u8", &b8}, {"i16", &c16}, {"f32", &cf}}) {
+    const fs::path p = tmpdir / "s.nrrd";
+    simdvol::save_nrrd(*v, p);
+    write_seed(nrrd, "attached_" + name, framed(0, read_bytes(p)));
+    fs::remove(p);
+  }
+  write_seed(nrrd, "attached_gzip", framed(0, nrrd_via_teem(cf, "gzip", tmpdir / "g.nrrd")));
+  write_seed(nrrd, "attached_ascii", framed(0, nrrd_via_teem(tiny, "ascii", tmpdir / "a.nrrd")));
+  auto detached = [&](const std::string& name, const std::string& header, const Bytes& d) {
+    Bytes b(header.begin(), header.end());
+    b.insert(b.end(), d.begin(), d.end());
+    write_seed(nrrd, name, framed(1, b));
+  };
+  const Bytes c16_le = voxel_bytes_of(c16);
+  detached("detached_i16",
+           "NRRD0004\ntype: short\ndimension: 3\nsizes: 16 16 8\nspacings: 1 1 2\n"
+           "endian: little\nencoding: raw\ndata file: data.raw\n\n",
+           c16_le);
+  detached("detached_4d",
+           "NRRD0005\ntype: uint8\ndimension: 4\nsizes: 1 16 16 8\n"
+           "space directions: none (1,0,0) (0,1,0) (0,0,1.5)\nencoding: raw\n"
+           "byte skip: 0\ndata file: data.raw\n\n",
+           voxel_bytes_of(b8));
+  detached("detached_format",
+           "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 2\nencoding: raw\n"
+           "data file: data%d.raw 1 2 1 2\n\n",
+           Bytes(32, 7));
+  detached("detached_list",
+           "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 2\nencoding: raw\n"
+           "data file: LIST\ndata.raw\n\n",
+           Bytes(32, 9));
+
+  // NIfTI: byte 0 mod 3: 0 plain .nii, 1 compressed by the target, 2 .nii.gz as is.
+  const fs::path nifti = root / "nifti";
+  const Bytes nii_u8 = nifti_via_niftilib(c8, DT_UINT8, 1.0f, tmpdir / "a.nii");
+  const Bytes nii_i16 = nifti_via_niftilib(c16, DT_INT16, 1.0f, tmpdir / "b.nii");
+  const Bytes nii_scaled = nifti_via_niftilib(cf, DT_FLOAT32, 0.5f, tmpdir / "c.nii");
+  const Bytes niigz = nifti_via_niftilib(c8, DT_UINT8, 1.0f, tmpdir / "d.nii.gz");
+  write_seed(nifti, "nii_u8", framed(0, nii_u8));
+  write_seed(nifti, "nii_i16", framed(0, nii_i16));
+  write_seed(nifti, "nii_scaled", framed(0, nii_scaled));
+  write_seed(nifti, "gz_u8", framed(1, nii_u8));
+  write_seed(nifti, "gz_i16", framed(1, nii_i16));
+  write_seed(nifti, "niigz_raw", framed(2, niigz));
+  write_seed(nifti, "real_start", framed(2, read_bytes(data / "ch2.nii.gz", 4096)));
+  fs::remove_all(tmpdir);
+  std::cout << "make_seeds: corpora written under " << root.string() << "\n";
+  return 0;
+}
