@@ -305,8 +305,9 @@ void nrrd_check_data_file_line(const fs::path& path, const std::string& value) {
 
 /// Reads the NRRD header lines (up to the first blank line, at most 1 MiB)
 /// and checks what teem cannot be trusted with: the magic, so that teem never
-/// tries its other formats (its text reader leaks on malformed input), and
-/// the data file line (nrrd_check_data_file_line).
+/// tries its other formats (its text reader leaks on malformed input), a last
+/// header line without a newline, and the data file line
+/// (nrrd_check_data_file_line).
 void nrrd_prescan_header(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw FileError(path, "cannot open file: " + errno_text(errno));
@@ -327,8 +328,16 @@ void nrrd_prescan_header(const fs::path& path) {
   next_line(line);
   // The whole first line, as teem compares it (NRRD0001 .. NRRD0005 today).
   if (line.size() != 8 || line.compare(0, 7, "NRRD000") != 0 || line[7] < '1' || line[7] > '9')
-    throw FileError(path, "not a NRRD file (its first line is not the magic NRRD000x)");
-  while (next_line(line)) {
+    throw FileError(path,
+                    "not a NRRD file (the header does not begin with the magic line NRRD000x)");
+  while (true) {
+    const std::size_t start = pos;
+    if (!next_line(line)) break;
+    // teem 1.11 over-reads its line buffer (a heap overflow found by the
+    // fuzzer, in a biff message about a LIST of data files) when the file
+    // ends inside a header line: a header must end with a newline.
+    if (text.find('\n', start) == std::string::npos && text.size() < (std::size_t{1} << 20))
+      throw FileError(path, "truncated header: the last header line has no newline");
     if (line.empty()) break;  // the end of the header
     if (line[0] == '#') continue;
     const std::size_t colon = line.find(':');

@@ -174,3 +174,16 @@ TEST_F(FuzzRegressions, NrrdMagicMustBeTheWholeFirstLine) {
       write("nan.nrrd", concat("NRRD0004nan\ntype: uint8\nsizes: 4\n\n", {1, 2, 3, 4})),
       "not a NRRD file");
 }
+
+// Fuzzer finding (nrrd, crash-59b8bf…, heap-buffer-overflow READ of 30
+// bytes in teem's biffAddf called from nrrdLoad): a detached header whose
+// LIST of data files ends in a line of tabs with no newline at the end of
+// the file. Headers must now end with a newline.
+TEST_F(FuzzRegressions, NrrdHeaderEndingWithoutNewline) {
+  const std::string header =
+      "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 2\nencoding: raw\ndata file: LIST\ndata." +
+      std::string(29, '\t');
+  expect_file_error(write("input.nhdr", concat(header, {})), "no newline");
+  // The same header with its newline is an ordinary error (no such file).
+  EXPECT_THROW(load_nrrd(write("input2.nhdr", concat(header + "\n", {}))), FileError);
+}
