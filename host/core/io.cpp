@@ -330,6 +330,7 @@ void nrrd_prescan_header(const fs::path& path) {
   if (line.size() != 8 || line.compare(0, 7, "NRRD000") != 0 || line[7] < '1' || line[7] > '9')
     throw FileError(path,
                     "not a NRRD file (the header does not begin with the magic line NRRD000x)");
+  bool have_dimension = false;
   while (true) {
     const std::size_t start = pos;
     if (!next_line(line)) break;
@@ -347,7 +348,15 @@ void nrrd_prescan_header(const fs::path& path) {
     for (std::size_t i = 0; i < colon; ++i)
       if (line[i] != ' ' && line[i] != '\t')
         key += static_cast<char>(std::tolower(static_cast<unsigned char>(line[i])));
-    if (key == "datafile") nrrd_check_data_file_line(path, line.substr(colon + 1));
+    if (key == "dimension") have_dimension = true;
+    if (key == "datafile") {
+      // teem 1.11 leaks its file-name array when it parses a data file line
+      // before knowing the dimension (fuzzer finding); the format wants the
+      // dimension first anyway.
+      if (!have_dimension)
+        throw FileError(path, "malformed header: 'data file' before 'dimension'");
+      nrrd_check_data_file_line(path, line.substr(colon + 1));
+    }
   }
 }
 

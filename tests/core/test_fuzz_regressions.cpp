@@ -187,3 +187,14 @@ TEST_F(FuzzRegressions, NrrdHeaderEndingWithoutNewline) {
   // The same header with its newline is an ordinary error (no such file).
   EXPECT_THROW(load_nrrd(write("input2.nhdr", concat(header + "\n", {}))), FileError);
 }
+
+// Fuzzer finding (nrrd, leak-28a84a…): a formatted data file line in a
+// header whose dimension line was mangled; teem rejected it but leaked its
+// file-name array (4184 bytes). A data file line before the dimension is
+// now rejected first.
+TEST_F(FuzzRegressions, NrrdDataFileBeforeDimension) {
+  expect_file_error(write("nodim.nhdr", concat("NRRD0001\n# Complet htts: 4 4 2\nencoding: raw\n"
+                                               "data file: data%d.raw 1 2 1 2\n\n",
+                                               {})),
+                    "'data file' before 'dimension'");
+}
