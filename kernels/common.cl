@@ -48,4 +48,86 @@ SV_FN size_t sv_flat_index(int4 dims, int x, int y, int z) {
   return ((size_t)z * (size_t)dims.y + (size_t)y) * (size_t)dims.x + (size_t)x;
 }
 
+/* float16 arguments change the ABI without AVX-512: clang warns per call
+ * site (-Wpsabi); harmless, everything is inlined. */
+#ifdef __clang__
+#pragma clang diagnostic ignored "-Wpsabi"
+#endif
+
+/* Vectorisable ln and exp (shared by shade.cl and
+ * classify.cl). PoCL 3.1's pow() and log() are
+ * calls that stop its loop vectoriser (pow() ran ~100x slower than this), and
+ * exp() vectorised only in some contexts; these are plain float arithmetic.
+ * sv_log: x = m 2^e, m in [sqrt(1/2), sqrt(2)), ln m = 2 atanh(s) with
+ * s = (m - 1)/(m + 1), |s| < 0.1716, series to s^9 (truncation < 1e-9), ln 2
+ * in two parts; for normal finite x > 0. sv_exp: x = k ln 2 + r,
+ * |r| <= ln(2)/2, Taylor series to r^7 (truncation < 1e-8 relative), times
+ * 2^k from the exponent bits; 0 below -87.3, +inf above 88. Both within a
+ * few ulp. */
+#ifndef SV_VMATH
+#define SV_VMATH
+SV_FN float sv_log(float x) {
+  const int ix = as_int(x);
+  int e = ((ix >> 23) & 0xff) - 127;
+  float m = as_float((ix & 0x007fffff) | 0x3f800000);
+  const int big = m > 1.41421356f;
+  m = big ? 0.5f * m : m;
+  e = big ? e + 1 : e;
+  const float s = (m - 1.0f) / (m + 1.0f);
+  const float s2 = s * s;
+  const float p =
+      s * (2.0f + s2 * (0.666666667f + s2 * (0.4f + s2 * (0.285714286f + s2 * 0.222222222f))));
+  const float fe = (float)e;
+  return fe * 0.693145751953125f + (fe * 1.42860682e-6f + p);
+}
+SV_FN float sv_exp(float x) {
+  const float xc = fmin(fmax(x, -87.3f), 88.0f);
+  const float kf = floor(xc * 1.44269504f + 0.5f);
+  const float r = (xc - kf * 0.693145751953125f) - kf * 1.42860682e-6f;
+  const float p =
+      1.0f +
+      r * (1.0f +
+           r * (0.5f +
+                r * (0.166666667f +
+                     r * (0.0416666667f +
+                          r * (0.00833333333f + r * (0.00138888889f + r * 0.000198412698f))))));
+  const float y = p * as_float(((int)kf + 127) << 23);
+  return x < -87.3f ? 0.0f : (x > 88.0f ? INFINITY : y);
+}
+#endif /* SV_VMATH */
+
+/* float16 forms of sv_log and sv_exp (the same operations lane by lane, so
+ * the same results). */
+#ifndef SV_VMATH16
+#define SV_VMATH16
+SV_FN float16 sv_log16(float16 x) {
+  const int16 ix = as_int16(x);
+  int16 e = ((ix >> 23) & 0xff) - 127;
+  float16 m = as_float16((ix & 0x007fffff) | 0x3f800000);
+  const int16 big = m > 1.41421356f;
+  m = select(m, 0.5f * m, big);
+  e = select(e, e + 1, big);
+  const float16 s = (m - 1.0f) / (m + 1.0f);
+  const float16 s2 = s * s;
+  const float16 p =
+      s * (2.0f + s2 * (0.666666667f + s2 * (0.4f + s2 * (0.285714286f + s2 * 0.222222222f))));
+  const float16 fe = convert_float16(e);
+  return fe * 0.693145751953125f + (fe * 1.42860682e-6f + p);
+}
+SV_FN float16 sv_exp16(float16 x) {
+  const float16 xc = fmin(fmax(x, -87.3f), 88.0f);
+  const float16 kf = floor(xc * 1.44269504f + 0.5f);
+  const float16 r = (xc - kf * 0.693145751953125f) - kf * 1.42860682e-6f;
+  const float16 p =
+      1.0f +
+      r * (1.0f +
+           r * (0.5f +
+                r * (0.166666667f +
+                     r * (0.0416666667f +
+                          r * (0.00833333333f + r * (0.00138888889f + r * 0.000198412698f))))));
+  const float16 y = p * as_float16((convert_int16(kf) + 127) << 23);
+  return select(select(y, (float16)(INFINITY), x > 88.0f), (float16)(0.0f), x < -87.3f);
+}
+#endif /* SV_VMATH16 */
+
 #endif /* SIMDVOL_COMMON_CL */
