@@ -51,21 +51,8 @@ namespace {
 // Layout: [0, 1] g0, [2..4] u_a.i, [5..7] u_a.j, [8..10] n_a.i,
 // [11..13] n_a.j, [14..16] h_a.
 std::array<float, 20> row_geometry(const ViewGeometry& view, const KdSplit& split) {
-  Mat3 m{};
   Vec3 o{};
-  for (int a = 0; a < 3; ++a) {
-    o[a] = std::ldexp(static_cast<double>(view.grid.origin[a]), -SV_FRAC_BITS);
-    for (int b = 0; b < 3; ++b)
-      m[a][b] = std::ldexp(static_cast<double>(view.grid.step[a][b]), -SV_FRAC_BITS);
-  }
-  const double det = determinant(m);
-  if (!(std::abs(det) > 0.0)) throw ArgumentError("view", "singular viewing map");
-  Mat3 inv{};
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) {
-      const int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
-      inv[r][c] = (m[r1][c1] * m[r2][c2] - m[r1][c2] * m[r2][c1]) / det;
-    }
+  const Mat3 inv = inverse_viewing_map(view, o);
   std::array<float, 20> g{};
   Vec3 half{};
   for (int a = 0; a < 3; ++a) half[a] = 0.5 * static_cast<double>(split.cell[a]) - o[a];

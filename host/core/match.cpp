@@ -102,21 +102,8 @@ std::vector<sv_rect> match_candidates(const ViewGeometry& view, const KdSplit& s
   // X = o + M (i, j, k): invert M (the fixed-point map is exact, so the
   // preimage of a box is exactly the parallelepiped spanned by the mapped
   // vertices; double rounding is far below the 1-pixel pad).
-  Mat3 m{};
   Vec3 o{};
-  for (int a = 0; a < 3; ++a) {
-    o[a] = std::ldexp(static_cast<double>(view.grid.origin[a]), -SV_FRAC_BITS);
-    for (int b = 0; b < 3; ++b)
-      m[a][b] = std::ldexp(static_cast<double>(view.grid.step[a][b]), -SV_FRAC_BITS);
-  }
-  const double det = determinant(m);
-  if (!(std::abs(det) > 0.0)) throw ArgumentError("view", "singular viewing map");
-  Mat3 inv{};
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) {
-      const int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
-      inv[r][c] = (m[r1][c1] * m[r2][c2] - m[r1][c2] * m[r2][c1]) / det;
-    }
+  const Mat3 inv = inverse_viewing_map(view, o);
   const int64_t w = view.width(), h = view.height();
   std::vector<sv_rect> rects(static_cast<std::size_t>(split.pes()), sv_rect{0, 0, 0, 0});
   for (int64_t p = 0; p < split.pes(); ++p) {

@@ -108,6 +108,24 @@ std::array<double, 2> ViewGeometry::output_to_intermediate(int x, int y) const {
   return {u / step + 0.5 * width() - 0.5, v / step + 0.5 * height() - 0.5};
 }
 
+Mat3 inverse_viewing_map(const ViewGeometry& view, Vec3& origin) {
+  Mat3 m{};
+  for (int a = 0; a < 3; ++a) {
+    origin[a] = std::ldexp(static_cast<double>(view.grid.origin[a]), -SV_FRAC_BITS);
+    for (int b = 0; b < 3; ++b)
+      m[a][b] = std::ldexp(static_cast<double>(view.grid.step[a][b]), -SV_FRAC_BITS);
+  }
+  const double det = determinant(m);
+  if (!(std::abs(det) > 0.0)) throw ArgumentError("view", "singular viewing map");
+  Mat3 inv{};
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      const int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
+      inv[r][c] = (m[r1][c1] * m[r2][c2] - m[r1][c2] * m[r2][c1]) / det;
+    }
+  return inv;
+}
+
 ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int out_height,
                        Sampling sampling) {
   return make_view(vol.dims(), vol.spacing(), angles, out_width, out_height, sampling);

@@ -67,6 +67,11 @@ struct ViewGeometry {
   std::array<double, 2> output_to_intermediate(int x, int y) const;
 };
 
+/// The viewing map X = o + M (i, j, k) in double (exact copies of the
+/// fixed-point values): returns M^-1 and sets `origin` to o. Throws
+/// ArgumentError("view", "singular viewing map") if M is singular.
+Mat3 inverse_viewing_map(const ViewGeometry& view, Vec3& origin);
+
 /// Builds the geometry. Throws ArgumentError for non-positive sizes.
 ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int out_height,
                        Sampling sampling);
