@@ -85,7 +85,18 @@ const EngineOptions& RenderEngine::options() const {
   return s_->eo;
 }
 
-Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTimes* times) {
+double EngineStats::utilisation() const {
+  const int64_t most = max_load();
+  if (most == 0 || loads.empty()) return 1.0;
+  return static_cast<double>(samples) / static_cast<double>(loads.size()) /
+         static_cast<double>(most);
+}
+int64_t EngineStats::max_load() const {
+  return loads.empty() ? 0 : *std::max_element(loads.begin(), loads.end());
+}
+
+Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTimes* times,
+                           EngineStats* stats) {
   State& S = *s_;
   Device& device = *S.device;
   const EngineOptions& eo = S.eo;
@@ -219,6 +230,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   }
 
   double plan_ms = 0;
+  std::optional<SwapPlan> stats_plan;  // kept for `stats` only
   std::vector<double> swap_stage_ms;
   cl::Event e_display, e_warp;
   cl::Buffer intermediate, output;
@@ -238,6 +250,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       out = read_device_image(device, output, view.out_width, view.out_height);  // blocking
     }
     for (const cl::Event& e : run.stages) swap_stage_ms.push_back(ms(e));
+    if (stats) stats_plan = plan.plan;
   } else {
     const cl::Buffer& image = S.image.buffer;
     if (view.sampling == Sampling::pixel) {
@@ -265,6 +278,18 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     times->warp_ms = ms(e_warp);
     times->composite_ms = times->swap_ms + times->display_ms + times->warp_ms;
     times->device_wall_ms = ms_since(t0);
+  }
+  if (stats) {
+    *stats = EngineStats{};
+    std::vector<cl_int> loads(static_cast<std::size_t>(dm.pes));
+    cl_check(device.queue().enqueueReadBuffer(dm.loads, CL_TRUE, 0, loads.size() * sizeof(cl_int),
+                                              loads.data()),
+             "clEnqueueReadBuffer(loads)");
+    stats->loads.assign(loads.begin(), loads.end());
+    for (int64_t l : stats->loads) stats->samples += l;
+    stats->segments = segs.count;
+    stats->swapped = stats_plan.has_value();
+    if (stats_plan) stats->swap = swap_cost(*stats_plan, split, view, grid);
   }
   return out;
 }

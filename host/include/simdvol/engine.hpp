@@ -69,6 +69,20 @@ struct EngineTimes {
   RenderTimes host{};         ///< unused (0): no stage runs on the host
 };
 
+/// What one frame did beyond its times (RenderEngine::render's `stats`, for
+/// the benchmarks; collecting them costs a read of P ints and the swap's
+/// cost on the host, outside the times above).
+struct EngineStats {
+  std::vector<int64_t> loads;  ///< samples per PE after balancing (P entries)
+  int64_t samples = 0;         ///< sum of the loads: samples resampled this frame
+  int64_t segments = 0;        ///< ray segments of the matching
+  bool swapped = false;        ///< the frame went through the binary swap (direct, mc subray)
+  SwapCost swap{};             ///< swap_cost of the frame's plan (when swapped)
+  /// SIMD utilisation after balancing: mean load / max load (1 when idle).
+  double utilisation() const;
+  int64_t max_load() const;
+};
+
 /// Which rays the Monte Carlo walks run over (--mc-scope).
 enum class McScope {
   whole,   ///< whole rays after the swap (ch. 7.3): equals render_reference
@@ -106,7 +120,9 @@ class RenderEngine {
 
   const EngineOptions& options() const;
   /// Renders one frame; same result as render_opencl with these options.
-  Image render(const Volume& vol, const RenderOptions& opt, EngineTimes* times = nullptr);
+  /// `stats`, when given, receives the frame's EngineStats.
+  Image render(const Volume& vol, const RenderOptions& opt, EngineTimes* times = nullptr,
+               EngineStats* stats = nullptr);
 
  private:
   struct State;

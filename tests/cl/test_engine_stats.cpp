@@ -1,0 +1,59 @@
+// RenderEngine::render's EngineStats (engine.hpp) against the serial
+// references on the same view: the loads after balancing equal
+// balance_reference's exactly (samples = their sum, utilisation = mean / max),
+// the segment count equals the balanced matching's, and the swap cost equals
+// swap_cost of the plan made from the reference rectangles (direct
+// compositing); a whole-ray adaptive frame has loads but no swap.
+#include <gtest/gtest.h>
+
+#include "simdvol/classify.hpp"
+#include "simdvol/engine.hpp"
+#include "simdvol/match.hpp"
+#include "simdvol/phantom.hpp"
+#include "simdvol/swap.hpp"
+#include "stage_testing.hpp"
+
+using namespace simdvol;
+
+TEST(EngineStats, LoadsAndSwapCostEqualTheReferences) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 1);
+  RenderOptions opt;
+  opt.view = {20, 35, 10};
+  opt.width = opt.height = 64;
+  opt.classifier = classifier_preset("ct");
+  EngineOptions eo;
+  eo.pes = 64;
+  eo.fused = true;
+  RenderEngine engine(dev, eo);
+  EngineStats st;
+  EngineTimes t;
+  engine.render(vol, opt, &t, &st);
+
+  const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
+  const KdSplit split = kd_split(vol.dims(), eo.pes);
+  const Matching m = balance_reference(match_reference(view, split), view, split);
+  EXPECT_EQ(st.loads, m.loads);
+  EXPECT_EQ(st.samples, m.total_load());
+  EXPECT_GT(st.samples, 0);
+  EXPECT_EQ(st.max_load(), m.max_load());
+  EXPECT_DOUBLE_EQ(st.utilisation(), m.utilisation());
+  EXPECT_EQ(st.segments, static_cast<int64_t>(m.segments.size()));
+  ASSERT_TRUE(st.swapped);
+  const PeGrid grid = pe_grid(eo.pes);
+  const SwapCost want =
+      swap_cost(plan_swap(m.rects, split, view, grid, eo.layout), split, view, grid);
+  EXPECT_EQ(st.swap.moved, want.moved);
+  EXPECT_GT(st.swap.moved, 0);
+  EXPECT_EQ(st.swap.max_pe_sent, want.max_pe_sent);
+  ASSERT_EQ(st.swap.stages.size(), want.stages.size());
+  EXPECT_EQ(st.swap.stages.size(), 6u);  // log2(64)
+
+  // Whole-ray adaptive compositing: the same loads, no swap.
+  opt.composite.mode = CompositeMode::adaptive;
+  EngineStats sa;
+  engine.render(vol, opt, nullptr, &sa);
+  EXPECT_EQ(sa.loads, m.loads);
+  EXPECT_FALSE(sa.swapped);
+  EXPECT_EQ(sa.swap.moved, 0);
+}
