@@ -1,0 +1,922 @@
+// simdvol-bench: the benchmark harness (issue 6, items 1-3). Whole frames of
+// the OpenCL engine (RenderEngine, every stage on the device) over a set of
+// cases, with the serial reference and VolPack as peers in the same run and
+// core scaling through child processes.
+//
+//   simdvol-bench [--volumes LIST] [--sizes LIST] [--orders LIST]
+//                 [--compositing LIST] [--pes LIST] [--view T,P,V]
+//                 [--sampling voxel|pixel] [--repeat R] [--turntable F]
+//                 [--no-reference] [--no-volpack] [--volpack-runs R]
+//                 [--scaling LIST] [--data DIR] [--json FILE] [--quick]
+//
+// Cases: the product volumes x sizes x orders x compositing x P. Volumes:
+// phantomN (the N^3 Shepp-Logan CT phantom, shepp_logan(N, 4), preset ct),
+// brainsmall (data/brainsmall.den, preset volpack: VolPack's example
+// classification), ch2 (data/ch2.nii.gz, preset mri). Compositing: direct,
+// adaptive (threshold 0.95), mcN (Monte Carlo, N walks per whole ray) or
+// mcNsub (per sub-ray, ch. 7.4). Per case a fresh RenderEngine renders one
+// warm-up frame (timed as "first": page faults of fresh buffers, program
+// builds not yet cached) and R timed frames; per stage the profiling-event
+// times (EngineTimes), median / min / max over the R frames; the frame's
+// samples (sum of the PE loads after balancing), the SIMD utilisation
+// (mean load / max load) and the binary swap's X-Net traffic (swap_cost:
+// 16 bytes per pixel moved) from EngineStats. The serial reference renders
+// the same frame once (cached per volume, size, order, view, compositing
+// within the run): its time, the speed-up, PSNR and max abs difference.
+// Turntable (--turntable F, default 36): F frames at 5-degree steps about
+// the vertical axis through one RenderEngine with reuse_layout, on each
+// volume at the first size, order, compositing and P; PSNR against the
+// reference at frames 0, F/4, F/2, 3F/4.
+// VolPack (when built with it, brainsmall selected, not --no-volpack): its
+// example pipeline (volpack_peer.hpp) at every size, brute-force and
+// classified modes beside the reference and the engine at every order,
+// ms per frame and ratios; PSNR of every image against the reference at
+// order 3, direct compositing, same transfer function and view; the
+// turntable in VolPack's classified mode beside ours; what cannot be
+// matched exactly is printed.
+// Scaling (--scaling 1,2): the selected cases again in child processes
+// (this executable, POCL_MAX_PTHREAD_COUNT=n, results through a temporary
+// JSON file), per stage the medians at each n and the parallel efficiency
+// t1 / (n tn).
+// Errors: a bad option value exits 2 naming the option; a missing data file
+// skips its cases with a message, or exits 1 when --volumes named it.
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "bench_common.hpp"
+#include "simdvol/classify.hpp"
+#include "simdvol/device.hpp"
+#include "simdvol/engine.hpp"
+#include "simdvol/error.hpp"
+#include "simdvol/image.hpp"
+#include "simdvol/io.hpp"
+#include "simdvol/phantom.hpp"
+#include "simdvol/render.hpp"
+#include "simdvol/swap.hpp"
+#ifdef SIMDVOL_BENCH_VOLPACK
+#include "volpack_peer.hpp"
+#endif
+
+extern char** environ;
+
+using namespace simdvol;
+using namespace simdvol::bench;
+using json = nlohmann::json;
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: simdvol-bench [--volumes LIST] [--sizes LIST] [--orders LIST] [--compositing LIST]\n"
+    "                     [--pes LIST] [--view T,P,V] [--sampling voxel|pixel] [--repeat R]\n"
+    "                     [--turntable F] [--no-reference] [--no-volpack] [--volpack-runs R]\n"
+    "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
+    "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2\n"
+    "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNsub (per sub-ray)\n";
+
+struct Options {
+  std::vector<std::string> volumes{"phantom128", "phantom256", "brainsmall", "ch2"};
+  bool volumes_explicit = false;
+  std::vector<int64_t> sizes{256, 512};
+  std::vector<int64_t> orders{1, 3};
+  std::vector<std::string> compositing{"direct", "adaptive", "mc16"};
+  std::vector<int64_t> pes{8192};
+  ViewAngles view{20, 35, 10};
+  Sampling sampling = Sampling::voxel;
+  int repeat = 5;
+  int turntable = 36;
+  bool reference = true, volpack = true;
+  int volpack_runs = 2;  // brute-force renders (slow)
+  std::vector<int64_t> scaling;
+  std::filesystem::path data = SIMDVOL_BENCH_DATA_DIR;
+  std::optional<std::filesystem::path> json;
+  bool child = false;  // a --scaling child: no peers, no triad
+};
+
+struct Comp {
+  std::string name;
+  CompositeParams params;
+  McScope scope = McScope::whole;
+};
+
+Comp parse_comp(const std::string& s) {
+  Comp c;
+  c.name = s;
+  if (s == "direct") return c;
+  if (s == "adaptive") {
+    c.params.mode = CompositeMode::adaptive;
+    return c;
+  }
+  if (s.rfind("mc", 0) == 0) {
+    std::string n = s.substr(2);
+    if (n.size() > 3 && n.compare(n.size() - 3, 3, "sub") == 0) {
+      c.scope = McScope::subray;
+      n.resize(n.size() - 3);
+    }
+    c.params.mode = CompositeMode::mc;
+    const int64_t walks = parse_int(n, "--compositing");
+    if (walks < 1 || walks > 4096)
+      throw ArgumentError("--compositing", "'" + s + "': walks must lie in 1..4096");
+    c.params.samples = static_cast<int>(walks);
+    return c;
+  }
+  throw ArgumentError("--compositing",
+                      "'" + s + "' is not direct, adaptive, mcN or mcNsub (e.g. mc16)");
+}
+
+// A volume by name, loaded once.
+struct VolumeSpec {
+  std::string name;
+  std::string classifier;
+  std::filesystem::path file;  // empty for phantoms
+  int phantom = 0;
+};
+
+VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data) {
+  if (s.rfind("phantom", 0) == 0) {
+    const int64_t n = parse_int(s.substr(7), "--volumes");
+    if (n < 8 || n > 1024) throw ArgumentError("--volumes", "'" + s + "': N must lie in 8..1024");
+    return {s, "ct", {}, static_cast<int>(n)};
+  }
+  if (s == "brainsmall") return {s, "volpack", data / "brainsmall.den", 0};
+  if (s == "ch2") return {s, "mri", data / "ch2.nii.gz", 0};
+  throw ArgumentError("--volumes", "'" + s + "' is not phantomN, brainsmall or ch2");
+}
+
+Options parse_args(int argc, char** argv) {
+  Options o;
+  bool quick = false;
+  std::optional<std::vector<std::string>> vols, comps;
+  std::optional<std::vector<int64_t>> sizes, orders;
+  std::optional<int> repeat, turntable;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) throw ArgumentError(a, "needs a value");
+      return argv[++i];
+    };
+    if (a == "--volumes") {
+      vols = split_list(next(), a);
+    } else if (a == "--sizes") {
+      sizes = parse_int_list(next(), a, 8, 4096);
+    } else if (a == "--orders") {
+      orders = parse_int_list(next(), a, 0, 3);
+    } else if (a == "--compositing") {
+      comps = split_list(next(), a);
+      for (const auto& c : *comps) parse_comp(c);
+    } else if (a == "--pes") {
+      o.pes = parse_int_list(next(), a, 1, int64_t(1) << 20);
+      for (int64_t p : o.pes) pe_grid(p, "--pes");
+    } else if (a == "--view") {
+      const std::string v = next();
+      const auto parts = split_list(v, a);
+      if (parts.size() != 3) throw ArgumentError(a, "'" + v + "' is not THETA,PHI,VARPHI");
+      o.view = {parse_double(parts[0], a), parse_double(parts[1], a), parse_double(parts[2], a)};
+    } else if (a == "--sampling") {
+      const std::string v = next();
+      if (v == "voxel")
+        o.sampling = Sampling::voxel;
+      else if (v == "pixel")
+        o.sampling = Sampling::pixel;
+      else
+        throw ArgumentError(a, "'" + v + "' is not voxel or pixel");
+    } else if (a == "--repeat") {
+      repeat = static_cast<int>(parse_int_list(next(), a, 1, 1000)[0]);
+    } else if (a == "--turntable") {
+      turntable = static_cast<int>(parse_int_list(next(), a, 0, 720)[0]);
+    } else if (a == "--no-reference") {
+      o.reference = false;
+    } else if (a == "--no-volpack") {
+      o.volpack = false;
+    } else if (a == "--volpack-runs") {
+      o.volpack_runs = static_cast<int>(parse_int_list(next(), a, 1, 100)[0]);
+    } else if (a == "--scaling") {
+      o.scaling = parse_int_list(next(), a, 1, 256);
+    } else if (a == "--data") {
+      o.data = next();
+    } else if (a == "--json") {
+      o.json = next();
+    } else if (a == "--quick") {
+      quick = true;
+    } else if (a == "--child") {
+      o.child = true;
+    } else if (a == "--help" || a == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else {
+      throw ArgumentError(a, "unknown option");
+    }
+  }
+  if (quick) {
+    o.volumes = {"phantom128", "brainsmall"};
+    o.sizes = {256};
+    o.orders = {1};
+    o.compositing = {"direct", "adaptive", "mc8"};
+    o.repeat = 3;
+    o.turntable = 36;
+    o.volpack_runs = 1;
+  }
+  if (vols) o.volumes = *vols, o.volumes_explicit = true;
+  if (sizes) o.sizes = *sizes;
+  if (orders) o.orders = *orders;
+  if (comps) o.compositing = *comps;
+  if (repeat) o.repeat = *repeat;
+  if (turntable) o.turntable = *turntable;
+  for (const auto& v : o.volumes) parse_volume(v, o.data);
+  return o;
+}
+
+// ---------------------------------------------------------------------------
+// Stages of EngineTimes, in pipeline order.
+struct StageField {
+  const char* name;
+  double EngineTimes::*field;
+};
+constexpr StageField kStages[] = {
+    {"layout", &EngineTimes::layout_ms},     {"shade", &EngineTimes::shade_ms},
+    {"classify", &EngineTimes::classify_ms}, {"match", &EngineTimes::match_ms},
+    {"balance", &EngineTimes::balance_ms},   {"resample_local", &EngineTimes::resample_local_ms},
+    {"offsets", &EngineTimes::offsets_ms},   {"rays", &EngineTimes::rays_ms},
+    {"walk", &EngineTimes::walk_ms},         {"plan", &EngineTimes::plan_ms},
+    {"swap", &EngineTimes::swap_ms},         {"display", &EngineTimes::display_ms},
+    {"warp", &EngineTimes::warp_ms},
+};
+// Device time of a frame: every profiled stage (plan is host time and
+// overlaps the device).
+double device_sum(const EngineTimes& t) {
+  double s = 0;
+  for (const auto& st : kStages)
+    if (std::string(st.name) != "plan") s += t.*st.field;
+  return s;
+}
+
+json summary_json(const Summary& s) {
+  return {{"median", s.median}, {"min", s.min}, {"max", s.max}};
+}
+
+json psnr_json(double p) {
+  return std::isfinite(p) ? json(p) : json(nullptr);
+}
+
+std::string fmt_psnr(double p) {
+  if (std::isinf(p)) return "inf";
+  if (std::isnan(p)) return "-";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.1f", p);
+  return b;
+}
+
+// The reference image of one frame, cached within the run.
+struct RefResult {
+  Image image;
+  double ms = 0;
+};
+class RefCache {
+ public:
+  const RefResult& get(const std::string& volume, const Volume& vol, const RenderOptions& opt) {
+    char key[256];
+    std::snprintf(key, sizeof key, "%s|%d|%d|%d|%.6f,%.6f,%.6f|%d|%d|%.4f|%llu|%d|%.4f,%.4f",
+                  volume.c_str(), opt.width, opt.height, opt.order, opt.view.theta, opt.view.phi,
+                  opt.view.varphi, static_cast<int>(opt.sampling),
+                  static_cast<int>(opt.composite.mode), opt.composite.threshold,
+                  static_cast<unsigned long long>(opt.composite.seed), opt.composite.samples,
+                  opt.shade.k1, opt.shade.k2);
+    auto it = cache_.find(key);
+    if (it != cache_.end()) return it->second;
+    RefResult r;
+    const auto t0 = Clock::now();
+    r.image = render_reference(vol, opt);
+    r.ms = ms_since(t0);
+    return cache_.emplace(key, std::move(r)).first->second;
+  }
+
+ private:
+  std::map<std::string, RefResult> cache_;
+};
+
+struct Loaded {
+  VolumeSpec spec;
+  std::unique_ptr<Volume> vol;
+};
+
+// ---------------------------------------------------------------------------
+
+struct Harness {
+  Options o;
+  Device* dev = nullptr;
+  RefCache refs;
+  json cases = json::array();
+  json turntables = json::array();
+
+  RenderOptions render_options(const VolumeSpec& spec, int size, int order, const Comp& c,
+                               ViewAngles view) const {
+    RenderOptions opt;
+    opt.view = view;
+    opt.width = opt.height = size;
+    opt.sampling = o.sampling;
+    opt.order = order;
+    opt.composite = c.params;
+    opt.classifier = classifier_preset(spec.classifier);
+    return opt;
+  }
+
+  static std::string case_id(const std::string& vol, int size, int order, const std::string& comp,
+                             int64_t pes) {
+    return vol + "/" + std::to_string(size) + "/o" + std::to_string(order) + "/" + comp + "/P" +
+           std::to_string(pes);
+  }
+
+  void print_case_header() const {
+    std::printf(
+        "\n%-34s %8s %8s %8s %8s %6s %8s | %6s %6s %6s %6s %6s %6s %6s %6s %6s %6s | %5s %7s | "
+        "%8s %7s %6s\n",
+        "case (volume/size/order/comp/P)", "first", "wall_ms", "min", "max", "fps", "Msmp/s",
+        "layout", "shcls", "match", "bal", "rs+loc", "ofs+ry", "walk", "plan", "swap", "dsp+wp",
+        "util", "XNet_MB", "ref_ms", "speedup", "PSNR");
+  }
+
+  void run_case(const Loaded& L, int size, int order, const Comp& c, int64_t pes) {
+    const std::string id = case_id(L.spec.name, size, order, c.name, pes);
+    const RenderOptions opt = render_options(L.spec, size, order, c, o.view);
+    EngineOptions eo;
+    eo.pes = pes;
+    eo.fused = true;
+    eo.mc_scope = c.scope;
+    json j;
+    j["id"] = id;
+    j["volume"] = L.spec.name;
+    j["dims"] = {L.vol->nx(), L.vol->ny(), L.vol->nz()};
+    j["classifier"] = L.spec.classifier;
+    j["size"] = size;
+    j["order"] = order;
+    j["compositing"] = c.name;
+    j["pes"] = pes;
+    j["sampling"] = o.sampling == Sampling::voxel ? "voxel" : "pixel";
+    j["view"] = {o.view.theta, o.view.phi, o.view.varphi};
+    try {
+      validate(eo, opt);
+      RenderEngine engine(*dev, eo);
+      EngineTimes t;
+      EngineStats st;
+      const std::size_t programs0 = dev->cached_programs();
+      auto t0 = Clock::now();
+      Image img = engine.render(*L.vol, opt, &t, &st);  // warm-up: the first frame
+      const double first = ms_since(t0);
+      const std::size_t built = dev->cached_programs() - programs0;
+      std::vector<double> wall, devsum;
+      std::map<std::string, std::vector<double>> stage;
+      std::vector<std::vector<double>> swap_stages;
+      for (int r = 0; r < o.repeat; ++r) {
+        t0 = Clock::now();
+        img = engine.render(*L.vol, opt, &t);
+        wall.push_back(ms_since(t0));
+        devsum.push_back(device_sum(t));
+        for (const auto& s : kStages) stage[s.name].push_back(t.*s.field);
+        swap_stages.resize(t.swap_stage_ms.size());
+        for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
+          swap_stages[k].push_back(t.swap_stage_ms[k]);
+      }
+      const Summary w = summarize(wall);
+      j["first_frame_ms"] = first;
+      j["programs_built_in_first_frame"] = built;
+      j["repeat"] = o.repeat;
+      j["wall_ms"] = summary_json(w);
+      j["device_ms"] = summary_json(summarize(devsum));
+      j["fps"] = 1000.0 / w.median;
+      j["samples"] = st.samples;
+      j["segments"] = st.segments;
+      j["samples_per_s"] = static_cast<double>(st.samples) / (w.median * 1e-3);
+      json js;
+      for (const auto& s : kStages) js[s.name] = summary_json(summarize(stage[s.name]));
+      j["stages_ms"] = js;
+      json sw = json::array();
+      for (const auto& v : swap_stages) sw.push_back(median(v));
+      j["swap_stage_ms"] = sw;
+      j["utilisation"] = st.utilisation();
+      j["max_load"] = st.max_load();
+      j["mean_load"] =
+          st.loads.empty() ? 0.0 : double(st.samples) / static_cast<double>(st.loads.size());
+      json x;
+      x["swapped"] = st.swapped;
+      x["swap_bytes"] = st.swap.moved * st.swap.bytes_per_pixel;
+      x["max_pe_sent_bytes"] = st.swap.max_pe_sent * st.swap.bytes_per_pixel;
+      x["swap_stages"] = st.swap.stages.size();
+      x["bound_sum_px"] = st.swap.bound_sum();
+      x["halo_bytes"] = nullptr;  // resample halo reads: not counted by the engine
+      j["xnet"] = x;
+      double ref_ms = NAN, q = NAN, diff = NAN;
+      if (o.reference) {
+        const RefResult& ref = refs.get(L.spec.name, *L.vol, opt);
+        ref_ms = ref.ms;
+        q = psnr(ref.image, img);
+        diff = max_abs_diff(ref.image, img);
+        j["reference"] = {{"ms", ref_ms},
+                          {"speedup", ref_ms / w.median},
+                          {"psnr_db", psnr_json(q)},
+                          {"identical", std::isinf(q) && diff == 0.0f},
+                          {"max_abs_diff", diff}};
+      }
+      auto med = [&](const char* n) { return median(stage[n]); };
+      std::printf(
+          "%-34s %8.1f %8.2f %8.2f %8.2f %6.2f %8.2f | %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f "
+          "%6.2f %6.2f %6.2f | %5.3f %7.2f | %8.0f %7.1f %6s\n",
+          id.c_str(), first, w.median, w.min, w.max, 1000.0 / w.median,
+          double(st.samples) / (w.median * 1e-3) * 1e-6, med("layout"),
+          med("shade") + med("classify"), med("match"), med("balance"), med("resample_local"),
+          med("offsets") + med("rays"), med("walk"), med("plan"), med("swap"),
+          med("display") + med("warp"), st.utilisation(),
+          double(st.swap.moved * st.swap.bytes_per_pixel) / 1048576.0, ref_ms, ref_ms / w.median,
+          fmt_psnr(q).c_str());
+    } catch (const std::exception& e) {
+      std::printf("%-34s skipped: %s\n", id.c_str(), e.what());
+      j["skipped"] = e.what();
+    }
+    std::fflush(stdout);
+    cases.push_back(j);
+  }
+
+  void run_turntable(const Loaded& L, int size, int order, const Comp& c, int64_t pes) {
+    const int F = o.turntable;
+    EngineOptions eo;
+    eo.pes = pes;
+    eo.fused = true;
+    eo.mc_scope = c.scope;
+    eo.reuse_layout = true;
+    json j;
+    j["volume"] = L.spec.name;
+    j["size"] = size;
+    j["order"] = order;
+    j["compositing"] = c.name;
+    j["pes"] = pes;
+    j["frames"] = F;
+    j["step_deg"] = 5.0;
+    try {
+      RenderEngine engine(*dev, eo);
+      std::vector<double> wall;
+      std::vector<double> psnrs;
+      json checked = json::array();
+      double first = 0, total = 0;
+      for (int f = 0; f < F; ++f) {
+        ViewAngles v = o.view;
+        v.phi += 5.0 * f;
+        const RenderOptions opt = render_options(L.spec, size, order, c, v);
+        const auto t0 = Clock::now();
+        const Image img = engine.render(*L.vol, opt);
+        const double ms = ms_since(t0);
+        total += ms;
+        if (f == 0)
+          first = ms;  // lays the volume out: not a turntable frame's cost
+        else
+          wall.push_back(ms);
+        if (o.reference && F >= 1 && (f % std::max(1, F / 4) == 0)) {
+          const double q = psnr(refs.get(L.spec.name, *L.vol, opt).image, img);
+          psnrs.push_back(q);
+          checked.push_back({{"frame", f}, {"psnr_db", psnr_json(q)}});
+        }
+      }
+      const Summary w = summarize(wall);
+      j["first_frame_ms"] = first;
+      j["frame_ms"] = summary_json(w);
+      j["total_ms"] = total;
+      j["fps"] = w.median > 0 ? 1000.0 / w.median : 0.0;
+      j["psnr_checked"] = checked;
+      double minq = INFINITY;
+      for (double q : psnrs) minq = std::min(minq, q);
+      std::printf(
+          "turntable %-12s %4d^2 order %d %-8s P %-5lld: %d frames at 5 deg, first %.1f ms, then "
+          "%.2f ms/frame (min %.2f, max %.2f) = %.2f fps, total %.2f s; PSNR min over %zu checked "
+          "frames %s dB\n",
+          L.spec.name.c_str(), size, order, c.name.c_str(), static_cast<long long>(pes), F, first,
+          w.median, w.min, w.max, w.median > 0 ? 1000.0 / w.median : 0.0, total * 1e-3,
+          psnrs.size(), psnrs.empty() ? "-" : fmt_psnr(minq).c_str());
+    } catch (const std::exception& e) {
+      std::printf("turntable %s skipped: %s\n", L.spec.name.c_str(), e.what());
+      j["skipped"] = e.what();
+    }
+    std::fflush(stdout);
+    turntables.push_back(j);
+  }
+
+#ifdef SIMDVOL_BENCH_VOLPACK
+  json run_volpack(const Volume& vol) {
+    namespace vp = simdvol::volpack;
+    json out;
+    vp::Renderer example(vol);
+    vp::Settings s0;
+    example.configure(s0);
+    const double classify_ms = example.classify();
+    out["version"] = "1.0b3";
+    out["normals_ms"] = example.normals_ms();
+    out["classify_ms"] = classify_ms;
+    const ViewAngles a0 = vp::angles_from_model(example.model());
+    out["view"] = {a0.theta, a0.phi, a0.varphi};
+    std::printf(
+        "\nVolPack 1.0b3 peer: brainsmall.den, its example's classification, shading and view "
+        "(T = (%.3f, %.3f, %.3f)); vpVolumeNormals %.1f ms, vpClassifyVolume %.1f ms (once)\n",
+        a0.theta, a0.phi, a0.varphi, example.normals_ms(), classify_ms);
+    json rows = json::array();
+    for (const int64_t size64 : o.sizes) {
+      const int size = static_cast<int>(size64);
+      vp::Settings s = s0;
+      s.width = s.height = size;
+      example.configure(s);
+      const RenderOptions ropt = vp::matched_options(vol, s, example.model(), 3);
+      const RefResult& ref = refs.get("brainsmall-volpack", vol, ropt);
+      struct Row {
+        std::string name;
+        Summary t;
+        double first = 0, q = NAN;
+      };
+      std::vector<Row> table;
+      auto timed = [&](const std::string& name, int runs, auto&& render) {
+        Row r;
+        r.name = name;
+        auto t0 = Clock::now();
+        Image img = render();
+        r.first = ms_since(t0);
+        std::vector<double> ms;
+        for (int k = 0; k < runs; ++k) {
+          t0 = Clock::now();
+          img = render();
+          ms.push_back(ms_since(t0));
+        }
+        r.t = summarize(ms);
+        r.q = psnr(img, ref.image);
+        table.push_back(r);
+      };
+      timed("VolPack brute force", o.volpack_runs,
+            [&] { return example.render(vp::Mode::brute_force); });
+      timed("VolPack classified", o.repeat, [&] { return example.render(vp::Mode::classified); });
+      Row refrow{"simdvol reference (order 3)", {ref.ms, ref.ms, ref.ms, 1}, ref.ms, INFINITY};
+      table.push_back(refrow);
+      for (const int64_t pes : o.pes) {
+        EngineOptions eo;
+        eo.pes = pes;
+        eo.fused = true;
+        RenderEngine engine(*dev, eo);
+        for (const int64_t order : o.orders) {
+          RenderOptions opt = ropt;
+          opt.order = static_cast<int>(order);
+          timed("simdvol OpenCL order " + std::to_string(order) + " P " + std::to_string(pes),
+                o.repeat, [&] { return engine.render(vol, opt); });
+        }
+      }
+      const double cls = table[1].t.median, bf = table[0].t.median;
+      std::printf("\n%dx%d: %-32s %9s %9s %9s %9s %9s %9s %8s\n", size, size, "renderer",
+                  "ms/frame", "min", "max", "first", "x VPclsf", "x VPbrute", "PSNR dB");
+      for (const Row& r : table) {
+        std::printf("%9s %-32s %9.2f %9.2f %9.2f %9.2f %9.2f %9.3f %8s\n", "", r.name.c_str(),
+                    r.t.median, r.t.min, r.t.max, r.first, r.t.median / cls, r.t.median / bf,
+                    fmt_psnr(r.q).c_str());
+        rows.push_back({{"size", size},
+                        {"renderer", r.name},
+                        {"ms", summary_json(r.t)},
+                        {"first_ms", r.first},
+                        {"ratio_to_volpack_classified", r.t.median / cls},
+                        {"ratio_to_volpack_brute_force", r.t.median / bf},
+                        {"psnr_db", psnr_json(r.q)}});
+      }
+    }
+    out["cases"] = rows;
+    // The example's turntable: VolPack classified against ours (order of
+    // the first --orders entry), same views.
+    if (o.turntable > 1) {
+      const int size = static_cast<int>(o.sizes[0]);
+      const int order = static_cast<int>(o.orders[0]);
+      EngineOptions eo;
+      eo.pes = o.pes[0];
+      eo.fused = true;
+      eo.reuse_layout = true;
+      RenderEngine engine(*dev, eo);
+      std::vector<double> tv, to;
+      double minq_vp = INFINITY, minq_ours = INFINITY;
+      for (int f = 0; f < o.turntable; ++f) {
+        vp::Settings s = s0;
+        s.width = s.height = size;
+        s.turntable_deg = vp::Example::turntable_step * f;
+        example.configure(s);
+        RenderOptions opt = vp::matched_options(vol, s, example.model(), order);
+        auto t0 = Clock::now();
+        const Image vimg = example.render(vp::Mode::classified);
+        tv.push_back(ms_since(t0));
+        t0 = Clock::now();
+        const Image oimg = engine.render(vol, opt);
+        to.push_back(ms_since(t0));
+        if (o.reference && f % std::max(1, o.turntable / 4) == 0) {
+          opt.order = 3;
+          const Image& r = refs.get("brainsmall-volpack", vol, opt).image;
+          minq_vp = std::min(minq_vp, psnr(vimg, r));
+          minq_ours = std::min(minq_ours, psnr(oimg, r));
+        }
+      }
+      tv.erase(tv.begin());  // frame 0: warm-up (our layout, VolPack's caches)
+      to.erase(to.begin());
+      const Summary sv = summarize(tv), so = summarize(to);
+      std::printf(
+          "\nturntable (VolPack's example, %d frames at 5 deg, %dx%d): VolPack classified %.2f "
+          "ms/frame, simdvol OpenCL order %d %.2f ms/frame (x %.2f); PSNR min over checked frames "
+          "vs reference order 3: VolPack %s dB, simdvol %s dB\n",
+          o.turntable, size, size, sv.median, order, so.median, so.median / sv.median,
+          fmt_psnr(minq_vp).c_str(), fmt_psnr(minq_ours).c_str());
+      out["turntable"] = {{"frames", o.turntable},
+                          {"size", size},
+                          {"order", order},
+                          {"volpack_classified_ms", summary_json(sv)},
+                          {"simdvol_ms", summary_json(so)},
+                          {"ratio", so.median / sv.median},
+                          {"psnr_min_volpack_db", psnr_json(minq_vp)},
+                          {"psnr_min_simdvol_db", psnr_json(minq_ours)}};
+    }
+    std::printf("\nnot matched exactly between VolPack and simdvol:\n");
+    json un = json::array();
+    for (const auto& line : vp::unmatched()) {
+      std::printf("  - %s\n", line.c_str());
+      un.push_back(line);
+    }
+    out["unmatched"] = un;
+    std::printf(
+        "(PSNR: RGB over black, peak 1, against simdvol's reference at order 3, direct "
+        "compositing, VolPack's example view, transfer function and shading; ratio = ms/frame "
+        "over VolPack's)\n");
+    return out;
+  }
+#endif
+};
+
+// ---------------------------------------------------------------------------
+// Core scaling: this executable again per thread count.
+
+std::string read_tail(const std::filesystem::path& p, std::size_t n) {
+  std::ifstream in(p);
+  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  return s.size() > n ? s.substr(s.size() - n) : s;
+}
+
+json run_child(int argc, char** argv, int threads, const std::filesystem::path& dir) {
+  const std::filesystem::path out = dir / ("scaling_" + std::to_string(threads) + ".json");
+  const std::filesystem::path log = dir / ("scaling_" + std::to_string(threads) + ".log");
+  std::vector<std::string> args{"/proc/self/exe"};
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--scaling" || a == "--json") {
+      ++i;
+      continue;
+    }
+    args.push_back(a);
+  }
+  for (const char* a : {"--no-reference", "--no-volpack", "--child"}) args.push_back(a);
+  args.push_back("--json");
+  args.push_back(out.string());
+  std::vector<char*> cargv;
+  for (auto& a : args) cargv.push_back(a.data());
+  cargv.push_back(nullptr);
+  std::vector<std::string> env;
+  for (char** e = environ; *e; ++e)
+    if (std::strncmp(*e, "POCL_MAX_PTHREAD_COUNT=", 23) != 0) env.emplace_back(*e);
+  env.push_back("POCL_MAX_PTHREAD_COUNT=" + std::to_string(threads));
+  std::vector<char*> cenv;
+  for (auto& e : env) cenv.push_back(e.data());
+  cenv.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  pid_t pid = 0;
+  const int rc = posix_spawn(&pid, "/proc/self/exe", &fa, nullptr, cargv.data(), cenv.data());
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc != 0) throw Error(std::string("posix_spawn(/proc/self/exe): ") + std::strerror(rc));
+  int status = 0;
+  waitpid(pid, &status, 0);
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    throw Error("the scaling run with POCL_MAX_PTHREAD_COUNT=" + std::to_string(threads) +
+                " failed; its output ends:\n" + read_tail(log, 2000));
+  std::ifstream in(out);
+  return json::parse(in);
+}
+
+// "t2", "eff2" (GCC 12 warns falsely on "t" + std::to_string(n)).
+std::string label(const char* prefix, int64_t n) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%s%lld", prefix, static_cast<long long>(n));
+  return b;
+}
+
+json scaling(int argc, char** argv, const Options& o) {
+  char tmpl[] = "/tmp/simdvol-bench-XXXXXX";
+  if (!mkdtemp(tmpl)) throw Error(std::string("mkdtemp: ") + std::strerror(errno));
+  const std::filesystem::path dir = tmpl;
+  std::map<int64_t, json> runs;
+  for (const int64_t n : o.scaling) {
+    std::printf("\nscaling: running the cases with POCL_MAX_PTHREAD_COUNT=%lld ...\n",
+                static_cast<long long>(n));
+    std::fflush(stdout);
+    runs[n] = run_child(argc, argv, static_cast<int>(n), dir);
+  }
+  std::filesystem::remove_all(dir);
+  const int64_t n1 = o.scaling.front();
+  json out = json::array();
+  std::printf(
+      "\ncore scaling (POCL_MAX_PTHREAD_COUNT), medians in ms; efficiency = t%lld * %lld "
+      "/ (n tn)\n",
+      static_cast<long long>(n1), static_cast<long long>(n1));
+  for (const json& c1 : runs[n1]["cases"]) {
+    if (c1.contains("skipped")) continue;
+    const std::string id = c1["id"];
+    json jc;
+    jc["id"] = id;
+    std::printf("%s\n  %-16s", id.c_str(), "stage");
+    for (const int64_t n : o.scaling) std::printf(" %9s", label("t", n).c_str());
+    for (const int64_t n : o.scaling)
+      if (n != n1) std::printf(" %9s", label("eff", n).c_str());
+    std::printf("\n");
+    std::vector<std::string> names;
+    for (const auto& s : kStages) names.push_back(s.name);
+    names.push_back("device");
+    names.push_back("wall");
+    for (const std::string& name : names) {
+      auto value = [&](const json& c) -> double {
+        if (name == "wall") return c["wall_ms"]["median"];
+        if (name == "device") return c["device_ms"]["median"];
+        return c["stages_ms"][name]["median"];
+      };
+      std::map<int64_t, double> t;
+      for (const int64_t n : o.scaling)
+        for (const json& c : runs[n]["cases"])
+          if (c["id"] == id && !c.contains("skipped")) t[n] = value(c);
+      if (t[n1] <= 0.0) continue;  // stage not run in this case
+      json js;
+      std::printf("  %-16s", name.c_str());
+      for (const int64_t n : o.scaling) {
+        std::printf(" %9.2f", t[n]);
+        js[label("t", n)] = t[n];
+      }
+      for (const int64_t n : o.scaling) {
+        if (n == n1) continue;
+        const double eff = t[n] > 0 ? t[n1] * double(n1) / (double(n) * t[n]) : NAN;
+        std::printf(" %9.2f", eff);
+        js[label("efficiency", n)] = eff;
+      }
+      std::printf("\n");
+      jc["stages"][name] = js;
+    }
+    out.push_back(jc);
+  }
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  try {
+    o = parse_args(argc, argv);
+  } catch (const ArgumentError& e) {
+    std::fprintf(stderr, "simdvol-bench: %s\n%s", e.what(), kUsage);
+    return 2;
+  }
+  try {
+    Harness h;
+    h.o = o;
+    json root;
+    // Volumes: missing files skip their cases (or fail when asked for).
+    std::vector<Loaded> vols;
+    json jv = json::array();
+    for (const auto& name : o.volumes) {
+      Loaded L;
+      L.spec = parse_volume(name, o.data);
+      const auto t0 = Clock::now();
+      if (L.spec.phantom) {
+        L.vol = std::make_unique<Volume>(shepp_logan(L.spec.phantom, 4));
+      } else {
+        if (!std::filesystem::exists(L.spec.file)) {
+          if (o.volumes_explicit) throw FileError(L.spec.file, "missing (run scripts/fetch-data)");
+          std::printf("%s: %s is missing (scripts/fetch-data): its cases are skipped\n",
+                      name.c_str(), L.spec.file.string().c_str());
+          jv.push_back({{"name", name}, {"skipped", "missing " + L.spec.file.string()}});
+          continue;
+        }
+        L.vol = std::make_unique<Volume>(load_volume(L.spec.file));
+      }
+      const double ms = ms_since(t0);
+      std::printf("volume %-12s %lldx%lldx%lld, classifier %s (%.0f ms to %s)\n", name.c_str(),
+                  static_cast<long long>(L.vol->nx()), static_cast<long long>(L.vol->ny()),
+                  static_cast<long long>(L.vol->nz()), L.spec.classifier.c_str(), ms,
+                  L.spec.phantom ? "build" : "load");
+      jv.push_back({{"name", name},
+                    {"dims", {L.vol->nx(), L.vol->ny(), L.vol->nz()}},
+                    {"classifier", L.spec.classifier},
+                    {"file", L.spec.file.string()}});
+      vols.push_back(std::move(L));
+    }
+    root["volumes"] = jv;
+
+    auto t0 = Clock::now();
+    Device dev;
+    const double open_ms = ms_since(t0);
+    h.dev = &dev;
+    const HostInfo hi = host_info(dev);
+    const DeviceInfo& di = dev.info();
+    json jd = {
+        {"name", di.name},
+        {"platform", di.platform},
+        {"platform_version", hi.platform_version},
+        {"device_version", di.version},
+        {"driver_version", di.driver_version},
+        {"compute_units", di.compute_units},
+        {"global_mem_bytes", di.global_mem_bytes},
+        {"cpu_model", hi.cpu_model},
+        {"hardware_threads", hi.hardware_threads},
+        {"pocl_max_pthread_count",
+         hi.pocl_max_pthread_count.empty() ? json(nullptr) : json(hi.pocl_max_pthread_count)},
+        {"open_ms", open_ms}};
+    std::printf("device: %s (%s; %s), %u compute units; CPU %s; POCL_MAX_PTHREAD_COUNT=%s\n",
+                di.name.c_str(), hi.platform_version.c_str(), di.driver_version.c_str(),
+                di.compute_units, hi.cpu_model.c_str(),
+                hi.pocl_max_pthread_count.empty() ? "(unset)" : hi.pocl_max_pthread_count.c_str());
+    if (!o.child) {
+      const double triad = triad_gbs(std::size_t(128) << 20);
+      jd["triad_gbs"] = triad;
+      std::printf("triad bandwidth (host, %u threads, 3 x 128 MiB): %.1f GB/s\n",
+                  std::max(1u, hi.hardware_threads), triad);
+    }
+    root["device"] = jd;
+    root["options"] = {{"repeat", o.repeat},
+                       {"turntable", o.turntable},
+                       {"view", {o.view.theta, o.view.phi, o.view.varphi}},
+                       {"reference", o.reference}};
+
+    std::vector<Comp> comps;
+    for (const auto& c : o.compositing) comps.push_back(parse_comp(c));
+    std::printf(
+        "\nframes: %d repeats after one warm-up frame ('first'); times in ms, stage "
+        "times from profiling events (median); view (%g, %g, %g), %s sampling\n",
+        o.repeat, o.view.theta, o.view.phi, o.view.varphi,
+        o.sampling == Sampling::voxel ? "voxel" : "pixel");
+    h.print_case_header();
+    for (const Loaded& L : vols)
+      for (const int64_t size : o.sizes)
+        for (const int64_t order : o.orders)
+          for (const Comp& c : comps)
+            for (const int64_t pes : o.pes)
+              h.run_case(L, static_cast<int>(size), static_cast<int>(order), c, pes);
+    std::printf(
+        "(first: the warm-up frame, with fresh buffers and any program builds; util: mean / max "
+        "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B; speedup: the "
+        "reference's ms / ours)\n");
+    root["cases"] = h.cases;
+    if (o.turntable > 0 && !o.child) {
+      std::printf("\n");
+      for (const Loaded& L : vols)
+        h.run_turntable(L, static_cast<int>(o.sizes[0]), static_cast<int>(o.orders[0]), comps[0],
+                        o.pes[0]);
+      root["turntables"] = h.turntables;
+    }
+    root["volpack"] = nullptr;
+#ifdef SIMDVOL_BENCH_VOLPACK
+    if (o.volpack && !o.child) {
+      for (const Loaded& L : vols)
+        if (L.spec.name == "brainsmall") root["volpack"] = h.run_volpack(*L.vol);
+    }
+#else
+    if (o.volpack && !o.child)
+      std::printf("\nVolPack peer: not built (libvolpack1-dev not found)\n");
+#endif
+    if (!o.scaling.empty() && !o.child) root["scaling"] = scaling(argc, argv, o);
+
+    if (o.json) {
+      const std::filesystem::path tmp = o.json->string() + ".tmp";
+      {
+        std::ofstream out(tmp);
+        if (!out) throw FileError(tmp, "cannot open for writing");
+        out << root.dump(2) << "\n";
+        if (!out) throw FileError(tmp, "write failed");
+      }
+      std::filesystem::rename(tmp, *o.json);
+      std::printf("wrote %s\n", o.json->string().c_str());
+    }
+  } catch (const ArgumentError& e) {
+    std::fprintf(stderr, "simdvol-bench: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "simdvol-bench: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
