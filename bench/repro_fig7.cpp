@@ -21,6 +21,9 @@
 // intermediate image (voxel sampling, before the 2-D warp, which would blur
 // the noise).
 //
+// Variants: plain (thesis), exact opacity (ch. 7.5 (a)), allocation by
+// opacity (ch. 7.5 (b)), and beyond the thesis stratified picks with exact
+// opacity (strat, strat-alloc; CompositeParams::stratified).
 // n is the walks per ray (whole ray), per sub-ray (plain and exact per
 // sub-ray, as the thesis's fig 7.3), or the per-ray budget (allocated); the
 // CSV also gives the walks and random draws actually spent per ray.
@@ -61,7 +64,7 @@ namespace {
 
 struct Variant {
   const char* scope;  // "whole" or "sub"
-  const char* name;   // plain, exact, alloc
+  const char* name;   // plain, exact, alloc, strat (exact + stratified), strat-alloc
   RandomStreams streams;
   Rgba colour;
 };
@@ -77,6 +80,9 @@ const Variant kVariants[] = {
     {"sub", "exact", RandomStreams::shared, {0.00f, 0.85f, 0.95f, 1}},
     {"sub", "alloc", RandomStreams::per_ray, {0.10f, 0.75f, 0.10f, 1}},
     {"sub", "alloc", RandomStreams::shared, {0.70f, 1.00f, 0.30f, 1}},
+    {"whole", "strat", RandomStreams::per_ray, {0.75f, 0.20f, 0.90f, 1}},
+    {"sub", "strat", RandomStreams::per_ray, {0.75f, 0.20f, 0.90f, 1}},
+    {"sub", "strat-alloc", RandomStreams::per_ray, {0.45f, 0.25f, 0.10f, 1}},
 };
 const char* streams_name(RandomStreams s) {
   return s == RandomStreams::shared ? "shared" : "per-ray";
@@ -289,6 +295,7 @@ int main(int argc, char** argv) try {
         p.seed = seed;
         p.streams = v.streams;
         p.exact_opacity = std::strcmp(v.name, "plain") != 0;
+        p.stratified = std::strncmp(v.name, "strat", 5) == 0;
         DeviceMcStats st;
         Image im;
         if (!std::strcmp(v.scope, "whole")) {
@@ -296,7 +303,7 @@ int main(int argc, char** argv) try {
           im = read_image(device, image, W, H);
         } else {
           std::optional<DeviceAllocation> alloc;
-          if (!std::strcmp(v.name, "alloc"))
+          if (!std::strcmp(v.name, "alloc") || !std::strcmp(v.name, "strat-alloc"))
             alloc = enqueue_mc_allocation(device, segs, soff, samples, rays, n);
           enqueue_zero_footprints(device, mcfp);
           enqueue_mc_local(device, segs, soff, samples, W, p, alloc ? &*alloc : nullptr, mcfp, &st);
@@ -353,12 +360,12 @@ int main(int argc, char** argv) try {
         << ',' << r.n << ',' << r.psnr << ',' << r.walks_per_ray << ',' << r.draws_per_ray << ','
         << r.fallbacks << '\n';
   for (const std::string& dn : names) {
-    std::printf("\n%s: PSNR (dB) vs n  [walks per ray at n = 8]\n%-6s %-6s %-8s", dn.c_str(),
+    std::printf("\n%s: PSNR (dB) vs n  [walks per ray at n = 8]\n%-6s %-11s %-8s", dn.c_str(),
                 "scope", "variant", "streams");
     for (int n : ns) std::printf(" %6d", n);
     std::printf("  w/ray@8\n");
     for (const Variant& v : kVariants) {
-      std::printf("%-6s %-6s %-8s", v.scope, v.name, streams_name(v.streams));
+      std::printf("%-6s %-11s %-8s", v.scope, v.name, streams_name(v.streams));
       double w8 = 0;
       for (const Row& r : rows)
         if (r.dataset == dn && r.v == &v) {
@@ -371,11 +378,14 @@ int main(int argc, char** argv) try {
   plot(rows, names, out / "fig7.png");
   std::printf(
       "\nn: walks per ray (whole), per sub-ray (sub plain/exact, as fig 7.3), per-ray budget "
-      "(sub alloc). w/ray: walks started per ray through the volume.\n"
+      "(sub alloc, strat-alloc). strat: exact opacity with stratified picks "
+      "(CompositeParams::stratified, beyond the thesis). w/ray: walks started per ray through the "
+      "volume.\n"
       "plot %s (rows: datasets; columns: whole ray = fig 7.2, per sub-ray = fig 7.3; x = log2 n "
       "0..7; y = 10..70 dB, grey grid every 10 dB, dashed grey line 38 dB; thick lines per-ray "
       "streams, thin shared)\nlegend: red plain, orange plain shared, blue exact opacity, cyan "
-      "exact shared, green exact + opacity allocation, light green allocation shared\n"
+      "exact shared, green exact + opacity allocation, light green allocation shared, purple "
+      "stratified, brown stratified + allocation\n"
       "csv %s\n",
       (out / "fig7.png").string().c_str(), (out / "fig7.csv").string().c_str());
   return 0;

@@ -22,7 +22,8 @@
  *                         samples -> the PE's footprint (as simdvol_local)
  *
  * Options (defines): SHARED (1: key SV_SHARED_RAY), EXACT (exact opacity),
- * DROP (no draw for alpha <= 0), ALLOC (mc_local reads walks[s]).
+ * STRAT (with EXACT: stratified picks, composite_mc_stratified), DROP (no
+ * draw for alpha <= 0), ALLOC (mc_local reads walks[s]).
  * stats (if STATS): one int4 per work-item (walks, draws, skipped, fallback).
  */
 #ifndef SIMDVOL_COMMON_CL
@@ -43,6 +44,12 @@
 #endif
 #ifndef ALLOC
 #define ALLOC 0
+#endif
+#ifndef STRAT
+#define STRAT 0
+#endif
+#if STRAT && !EXACT
+#error "STRAT (stratified picks) needs EXACT (exact opacity)"
 #endif
 #ifndef STATS
 #define STATS 0
@@ -103,6 +110,68 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
                             __global const float4* samples, __global const int* items,
                             const int first, const int count, const uint key, const int walks,
                             const ulong seed, int4* st) {
+#if STRAT
+  /* Stratified picks (composite_mc_stratified in composite.cpp): exact
+   * opacity, then one pass in which walk m picks the first sample with
+   * alpha > 0 whose cumulative opacity exceeds ((m + u_m) / n) * alpha. */
+  float acc = 0.0f;
+  int k_first = 0;
+  for (int t = 0; t < count; ++t) {
+    const int s = items ? items[first + t] : first + t;
+    const sv_segment sg = segs[s];
+    if (t == 0) k_first = sg.k0;
+    __global const float4* in = samples + sample_off[s];
+    for (int k = sg.k0; k < sg.k1; ++k) acc = acc + (1.0f - acc) * in[k - sg.k0].w;
+  }
+  float4 out = (float4)(0.0f, 0.0f, 0.0f, acc);
+  int skipped = 0, fallback = 0, draws = 0;
+  if (walks > 0 && acc > 0.0f) {
+    const float inv_n = 1.0f / (float)walks;
+    double r = 0.0, g = 0.0, b = 0.0;
+    int m = 0;
+    float tt = (((float)0 + sv_uniform(seed, key, 0u, (uint)k_first)) * inv_n) * acc;
+    float c = 0.0f;
+    float4 last = (float4)(0.0f);
+    for (int t = 0; t < count && m < walks; ++t) {
+      const int s = items ? items[first + t] : first + t;
+      const sv_segment sg = segs[s];
+      __global const float4* in = samples + sample_off[s];
+      for (int k = sg.k0; k < sg.k1 && m < walks; ++k) {
+        const float4 v = in[k - sg.k0];
+        if (v.w <= 0.0f) {
+          ++skipped;
+          continue;
+        }
+        last = v;
+        c = c + (1.0f - c) * v.w;
+        while (m < walks && c > tt) {
+          r += (double)(v.x / v.w);
+          g += (double)(v.y / v.w);
+          b += (double)(v.z / v.w);
+          ++m;
+          if (m < walks)
+            tt = (((float)m + sv_uniform(seed, key, (uint)m, (uint)k_first)) * inv_n) * acc;
+        }
+      }
+    }
+    if (m < walks) {
+      fallback = 1;
+      for (; m < walks; ++m) {
+        r += (double)(last.x / last.w);
+        g += (double)(last.y / last.w);
+        b += (double)(last.z / last.w);
+      }
+    }
+    draws = walks;
+    const double a = (double)acc;
+    const double inv = 1.0 / (double)walks;
+    out.x = (float)(a * (r * inv));
+    out.y = (float)(a * (g * inv));
+    out.z = (float)(a * (b * inv));
+  }
+  *st = (int4)(walks, draws, skipped, fallback);
+  return out;
+#else
   double r = 0.0, g = 0.0, b = 0.0;
   int stopped = 0, draws = 0, skipped = 0;
   for (int m = 0; m < walks; ++m) {
@@ -193,6 +262,7 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
 #endif
   *st = (int4)(walks, draws, skipped, fallback);
   return out;
+#endif
 }
 
 __kernel void simdvol_mc_whole(__global const sv_segment* segs, __global const int* sample_off,

@@ -19,6 +19,7 @@ cl::NDRange range(int64_t n) {
 Defines mc_defines(const CompositeParams& p, bool alloc, bool stats) {
   return {{"SHARED", p.streams == RandomStreams::shared ? "1" : "0"},
           {"EXACT", p.exact_opacity ? "1" : "0"},
+          {"STRAT", p.stratified ? "1" : "0"},
           {"DROP", p.drop_transparent ? "1" : "0"},
           {"ALLOC", alloc ? "1" : "0"},
           {"STATS", stats ? "1" : "0"}};

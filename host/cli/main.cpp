@@ -152,6 +152,7 @@ int main(int argc, char** argv) {
   double step = 5.0;
   float threshold = 0.95f;
   bool no_shade = false, show_times = false, exact_opacity = false, allocate = false;
+  bool stratified = false;
   std::string swap_layout = "cut-and-stack", mc_scope = "whole";
   render->add_option("volume", rv.path, "volume file (.den, .nrrd, .nhdr, .nii, .nii.gz, .raw)");
   rv.add(render);
@@ -175,6 +176,9 @@ int main(int argc, char** argv) {
   render->add_flag("--no-shade", no_shade, "skip lighting (colour = material colour)");
   render->add_flag("--exact-opacity", exact_opacity,
                    "Monte Carlo: exact opacity, Monte Carlo colour (ch. 7.5 (a))");
+  render->add_flag("--mc-stratified", stratified,
+                   "Monte Carlo with --exact-opacity: stratified picks (one draw per walk, "
+                   "walk m in the m-th n-th of the cumulative opacity)");
   render
       ->add_option("--mc-scope", mc_scope,
                    "Monte Carlo: walks over whole rays (after the swap) or per sub-ray (in local "
@@ -279,6 +283,7 @@ int main(int argc, char** argv) {
         throw ArgumentError("--frames", std::to_string(frames) + " is outside 1..100000");
       if (!std::isfinite(step)) throw ArgumentError("--step", "must be finite");
       opt.composite.exact_opacity = exact_opacity;
+      opt.composite.stratified = stratified;
       if (engine != "reference" && engine != "opencl")
         throw ArgumentError("--engine",
                             "unknown engine '" + engine + "' (available: reference, opencl)");

@@ -26,6 +26,69 @@ Rgba composite_mc(const RaySamples& ray, uint32_t ray_id, const CompositeParams&
   return composite_mc_walks(ray, ray_id, p.samples, p);
 }
 
+Rgba composite_mc_stratified(const RaySamples& ray, uint32_t key, int walks,
+                             const CompositeParams& p, McStats* stats) {
+  // CompositeParams::stratified. Opacity exact (over's alpha recurrence);
+  // walk m picks the first sample s with alpha_s > 0 whose cumulative
+  // opacity c_s exceeds t_m = ((m + u_m) / n) * alpha (the last sample with
+  // alpha_s > 0 if rounding leaves none). t_m grows with m and c_s with s,
+  // so one pass serves every walk. kernels/mc.cl (STRAT) repeats this
+  // operation for operation.
+  if (!p.exact_opacity)
+    throw ArgumentError("--mc-stratified", "needs exact opacity (--exact-opacity)");
+  McStats st;
+  st.walks = walks;
+  float acc = 0.0f;
+  for (const Rgba& v : ray.rgba) acc = acc + (1.0f - acc) * v.a;
+  Rgba out;
+  out.a = acc;
+  if (walks > 0 && acc > 0.0f) {
+    const uint32_t k0 = static_cast<uint32_t>(ray.first_step);
+    const float inv_n = 1.0f / static_cast<float>(walks);
+    auto target = [&](int m) {
+      const float u = sv_uniform(p.seed, key, static_cast<uint32_t>(m), k0);
+      return ((static_cast<float>(m) + u) * inv_n) * acc;
+    };
+    double r = 0, g = 0, b = 0;
+    int m = 0;
+    float t = target(0);
+    float c = 0.0f;
+    std::size_t last = ray.rgba.size();
+    for (std::size_t s = 0; s < ray.rgba.size() && m < walks; ++s) {
+      const Rgba& v = ray.rgba[s];
+      if (v.a <= 0.0f) {
+        ++st.skipped;
+        continue;  // c is unchanged by alpha = 0 and it cannot be picked
+      }
+      last = s;
+      c = c + (1.0f - c) * v.a;
+      while (m < walks && c > t) {
+        r += v.r / v.a;
+        g += v.g / v.a;
+        b += v.b / v.a;
+        if (++m < walks) t = target(m);
+      }
+    }
+    if (m < walks) {
+      ++st.fallbacks;  // rounding left t above every c: the last sample with alpha > 0
+      const Rgba& v = ray.rgba[last];
+      for (; m < walks; ++m) {
+        r += v.r / v.a;
+        g += v.g / v.a;
+        b += v.b / v.a;
+      }
+    }
+    st.draws = walks;
+    const double a = acc;
+    const double inv = 1.0 / walks;
+    out.r = static_cast<float>(a * (r * inv));
+    out.g = static_cast<float>(a * (g * inv));
+    out.b = static_cast<float>(a * (b * inv));
+  }
+  if (stats) *stats += st;
+  return out;
+}
+
 Rgba composite_mc_walks(const RaySamples& ray, uint32_t ray_id, int walks, const CompositeParams& p,
                         McStats* stats) {
   // Eq 7.3 / 7.12 / 7.13: walk m visits the samples front to back and stops at
@@ -36,6 +99,7 @@ Rgba composite_mc_walks(const RaySamples& ray, uint32_t ray_id, int walks, const
   // kernels/mc.cl repeats this arithmetic operation for operation.
   if (walks < 0) throw ArgumentError("walks", "must not be negative");
   const uint32_t key = p.streams == RandomStreams::shared ? SV_SHARED_RAY : ray_id;
+  if (p.stratified) return composite_mc_stratified(ray, key, walks, p, stats);
   double r = 0, g = 0, b = 0;
   int stopped = 0;
   McStats st;

@@ -26,6 +26,8 @@ void validate(const RenderOptions& opt) {
     throw ArgumentError("--samples", std::to_string(c.samples) + " is outside 1..1048576");
   if (c.mode == CompositeMode::adaptive && !(c.threshold > 0.0f && c.threshold <= 1.0f))
     throw ArgumentError("--threshold", "must lie in (0, 1]");
+  if (c.stratified && c.mode == CompositeMode::mc && !c.exact_opacity)
+    throw ArgumentError("--mc-stratified", "needs exact opacity (--exact-opacity)");
   for (double a : {opt.view.theta, opt.view.phi, opt.view.varphi})
     if (!std::isfinite(a)) throw ArgumentError("--view", "angles must be finite");
 }

@@ -82,11 +82,15 @@ void check_modes(Device& dev, const Volume& vol, const Classifier& cls, int size
   opt.composite.samples = 6;
   opt.composite.seed = 77;
   for (RandomStreams st : {RandomStreams::per_ray, RandomStreams::shared})
-    for (bool exact : {false, true}) {
+    for (int variant : {0, 1, 2}) {  // plain, exact opacity, exact + stratified
+      const bool exact = variant >= 1;
       SCOPED_TRACE(std::string(st == RandomStreams::shared ? "shared" : "per-ray") +
-                   (exact ? " exact" : " plain"));
+                   (variant == 2 ? " stratified"
+                    : exact      ? " exact"
+                                 : " plain"));
       opt.composite.streams = st;
       opt.composite.exact_opacity = exact;
+      opt.composite.stratified = variant == 2;
       eo.mc_scope = McScope::whole;
       eo.mc_allocate = false;
       const Image want = render_reference(vol, opt);

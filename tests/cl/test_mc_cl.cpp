@@ -86,16 +86,21 @@ void check_case(Device& dev, const Dims3& dims, const std::vector<Rgba>& voxels,
   cl::Buffer image =
       dev.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(W) * H * 16, nullptr, "image");
   for (RandomStreams st : {RandomStreams::per_ray, RandomStreams::shared})
-    for (bool exact : {false, true})
+    for (int variant : {0, 1, 2})  // plain, exact opacity, exact + stratified
       for (bool drop : {true, false}) {
+        const bool exact = variant >= 1;
         SCOPED_TRACE(std::string(st == RandomStreams::shared ? "shared" : "per-ray") +
-                     (exact ? " exact" : " plain") + (drop ? " drop" : " keep"));
+                     (variant == 2 ? " stratified"
+                      : exact      ? " exact"
+                                   : " plain") +
+                     (drop ? " drop" : " keep"));
         CompositeParams p;
         p.mode = CompositeMode::mc;
         p.samples = 5;
         p.seed = 0x1234567890ull;
         p.streams = st;
         p.exact_opacity = exact;
+        p.stratified = variant == 2;
         p.drop_transparent = drop;
         // Whole ray.
         McStats ref_stats;

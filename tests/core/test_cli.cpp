@@ -113,6 +113,7 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --mc-scope half -o " + path("x.png"), "--mc-scope"},
       {"render --layout spiral -o " + path("x.png"), "--layout"},
       {"render --composite mc --allocate -o " + path("x.png"), "--allocate"},
+      {"render --composite mc --mc-stratified -o " + path("x.png"), "--mc-stratified"},
       {"render --engine reference --composite mc --mc-scope subray -o " + path("x.png"),
        "--mc-scope"},
       {"render --phantom-size 16 -o " + path("nodir/x.png"), "nodir"},
