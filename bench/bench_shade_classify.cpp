@@ -30,6 +30,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench_common.hpp"
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/layout.hpp"
@@ -39,41 +40,9 @@
 #include "simdvol/view.hpp"
 
 using namespace simdvol;
-using Clock = std::chrono::steady_clock;
+using namespace simdvol::bench;
 
 namespace {
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-// Triad a = b + s c over three arrays of `bytes` each, two threads (the
-// machine's cores), best of 3 runs; bytes moved counted as 3 arrays (reads
-// of b and c, write of a; write-allocate traffic not counted).
-double triad_gbs(std::size_t bytes) {
-  const std::size_t n = bytes / sizeof(float);
-  std::vector<float> a(n), b(n, 1.0f), c(n, 2.0f);
-  const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
-  double best = 1e30;
-  for (int rep = 0; rep < 4; ++rep) {
-    const auto t0 = Clock::now();
-    std::vector<std::thread> pool;
-    for (unsigned t = 0; t < threads; ++t)
-      pool.emplace_back([&, t] {
-        const std::size_t lo = n * t / threads, hi = n * (t + 1) / threads;
-        for (std::size_t i = lo; i < hi; ++i) a[i] = b[i] + 3.0f * c[i];
-      });
-    for (auto& th : pool) th.join();
-    if (rep > 0) best = std::min(best, ms_since(t0));  // rep 0 touches the pages
-  }
-  if (a[n / 2] != 7.0f) std::printf("triad check failed\n");
-  return 3.0 * static_cast<double>(bytes) / (best * 1e-3) / 1e9;
-}
 
 struct Result {
   std::string name;
