@@ -66,8 +66,11 @@ struct MachineModel {
   /// operand" (ch. 3.4).
   int64_t router_32 = 5000;
   /// Clock rate: not given in the thesis. Assumed 12.5 MHz (80 ns), the
-  /// MasPar MP-1's clock (Blank, "The MasPar MP-1 architecture", IEEE
-  /// COMPCON 1990; Nickolls, same proceedings).
+  /// MasPar MP-1's clock as we recall it from Blank, "The MasPar MP-1
+  /// architecture", IEEE COMPCON 1990 (not checked against the paper here).
+  /// Consistent with the vendor's peak for 16,384 PEs of 26,000 MIPS and
+  /// 1.3 GFLOPS (DECmpp 12000 announcement): 12.5 MHz / 6 clocks per 8-bit
+  /// addition x 16,384 PEs = 34,000 MIPS.
   double clock_hz = 12.5e6;
   /// 8,192 PEs (ch. 3.3: "an array of 8,192 Processor Element(PE)s"), as
   /// the MP-1's 128 x 64 mesh.
