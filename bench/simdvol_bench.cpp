@@ -770,7 +770,8 @@ json scaling(int argc, char** argv, const Options& o) {
           if (c["id"] == id && !c.contains("skipped")) t[n] = value(c);
       if (t[n1] <= 0.0) continue;  // stage not run in this case
       json js;
-      std::printf("  %-16s", name.c_str());
+      // plan: host time (one thread, overlapping the device), not PoCL's.
+      std::printf("  %-16s", name == "plan" ? "plan (host)" : name.c_str());
       for (const int64_t n : o.scaling) {
         std::printf(" %9.2f", t[n]);
         js[label("t", n)] = t[n];
