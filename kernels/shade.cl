@@ -201,7 +201,12 @@ __kernel void simdvol_shade_rows(__global const float* restrict cells,
  * 16 / cx consecutive rows). Loads are vload16/vload8/vload4 of the block
  * at offsets -1/+1 (x), -bx/+bx (y) and -bx*by/+bx*by (z) from each row's
  * start: unaligned and contiguous. Chunk positions past the cell's voxels
- * (the plane's tail, whole rows since cx divides 16) are written as zeros. */
+ * (the plane's tail, whole rows since cx divides 16) are written as zeros.
+ * SV_RW 1 serves every other cx (e.g. 12, or 6 for non-power-of-two
+ * volumes): each lane finds its own (lx, ly, lz) by stepping from the
+ * chunk's first position (no divisions per lane) and the loads are 16
+ * scalar loads each; the arithmetic stays float16 (the scalar kernels,
+ * which PoCL leaves unvectorised, ran 3-5 times slower per voxel). */
 #ifndef SV_VSTORE16
 /* Store of 16 floats at p (64-byte aligned: planes and chunks start on
  * multiples of 16 floats). With SV_NT, a non-temporal store (no
@@ -265,8 +270,20 @@ SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 
 #define SV_ROWS16(a) \
   ((float16)((float4)((a)[0]), (float4)((a)[1]), (float4)((a)[2]), (float4)((a)[3])))
 #define SV_IOTA16 ((float16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3))
+#elif SV_RW == 1
+#define SV_NR 16
+#define SV_LD16(c, rb, off)                                                             \
+  ((float16)((c)[(rb)[0] + (off)], (c)[(rb)[1] + (off)], (c)[(rb)[2] + (off)],          \
+             (c)[(rb)[3] + (off)], (c)[(rb)[4] + (off)], (c)[(rb)[5] + (off)],          \
+             (c)[(rb)[6] + (off)], (c)[(rb)[7] + (off)], (c)[(rb)[8] + (off)],          \
+             (c)[(rb)[9] + (off)], (c)[(rb)[10] + (off)], (c)[(rb)[11] + (off)],        \
+             (c)[(rb)[12] + (off)], (c)[(rb)[13] + (off)], (c)[(rb)[14] + (off)],       \
+             (c)[(rb)[15] + (off)]))
+#define SV_ROWS16(a)                                                                      \
+  ((float16)((a)[0], (a)[1], (a)[2], (a)[3], (a)[4], (a)[5], (a)[6], (a)[7], (a)[8], (a)[9], \
+             (a)[10], (a)[11], (a)[12], (a)[13], (a)[14], (a)[15]))
 #else
-#error "SV_RW must be 16, 8 or 4"
+#error "SV_RW must be 16, 8, 4 or 1"
 #endif
 
 /* Shades the chunk of 16 positions from e0 (a multiple of 16) of PE p's
@@ -279,6 +296,39 @@ SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const 
   const int4 o = origins[p];
   __global const float* c = cells + sv_block_start(block, p);
   const int bx = block.x, bxy = block.x * block.y;
+#if SV_RW == 1
+  /* Lane l is position e0 + l: (lx, row) stepped from e0's without a
+   * division per lane; lanes past the cell's voxels repeat the last voxel
+   * and are reported as not in the cell. */
+  const int cvox = rows * cell.x;
+  int row = e0 / cell.x;
+  int lx = e0 - row * cell.x;
+  int ly = row % cell.y, lz = row / cell.y;
+  int rb[16];
+  float fx[16], fy[16], fz[16], ok[16];
+#pragma unroll
+  for (int l = 0; l < 16; ++l) {
+    const int in = e0 + l < cvox;
+    const int qx = in ? lx : cell.x - 1, qy = in ? ly : cell.y - 1, qz = in ? lz : cell.z - 1;
+    rb[l] = (int)sv_block_offset(cell, block, qx, qy, qz);
+    fx[l] = (float)(o.x + qx);
+    fy[l] = (float)(o.y + qy);
+    fz[l] = (float)(o.z + qz);
+    ok[l] = in ? 1.0f : 0.0f;
+    if (++lx == cell.x) {
+      lx = 0;
+      if (++ly == cell.y) {
+        ly = 0;
+        ++lz;
+      }
+    }
+  }
+  *v = SV_LD16(c, rb, 0);
+  sv_shade16(sp, SV_LD16(c, rb, -1), SV_LD16(c, rb, 1), SV_LD16(c, rb, -bx), SV_LD16(c, rb, bx),
+             SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), SV_ROWS16(fx), SV_ROWS16(fy),
+             SV_ROWS16(fz), id, is, mag);
+  return SV_ROWS16(ok) != 0.0f;
+#else
 #if SV_RW == 16
   const int row0 = e0 / cell.x;
   const int lx0 = e0 - row0 * cell.x;
@@ -302,6 +352,7 @@ SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const 
              SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), (float)(o.x + lx0) + SV_IOTA16,
              SV_ROWS16(fy), SV_ROWS16(fz), id, is, mag);
   return SV_ROWS16(ok) != 0.0f;
+#endif /* SV_RW == 1 */
 }
 
 /* Stores 16 lanes of (a, b, c, d) at position e0 of a PE's planar block. */

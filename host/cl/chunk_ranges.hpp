@@ -43,12 +43,13 @@ inline bool nt_stores() {
 }
 
 /// The row width SV_RW of the float16 shade kernels for cells of x extent
-/// cx: 16 when cx is a multiple of 16, cx when cx is 8 or 4, else 0 (no
-/// float16 shade kernel: the callers fall back to the scalar ones).
+/// cx: 16 when cx is a multiple of 16, cx when cx is 8 or 4 (contiguous
+/// vector loads), else 1 (per-lane positions and gathered loads, any cx;
+/// see kernels/shade.cl). Never 0 for cx >= 1.
 inline int shade_row_width(int64_t cx) {
   if (cx % 16 == 0) return 16;
   if (cx == 8 || cx == 4) return static_cast<int>(cx);
-  return 0;
+  return 1;
 }
 
 }  // namespace simdvol::detail

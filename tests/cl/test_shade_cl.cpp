@@ -188,10 +188,16 @@ TEST(ShadeKernel, Float16RowWidths) {
     Dims3 dims;
     int64_t pes, cx, cvox;
   };
-  const Shape shapes[] = {{{48, 7, 5}, 1, 48, 1680}, {{64, 64, 64}, 8, 32, 32768},
-                          {{16, 3, 5}, 2, 8, 120},   {{64, 64, 64}, 512, 8, 512},
-                          {{8, 3, 3}, 2, 4, 36},     {{32, 32, 32}, 512, 4, 64},
-                          {{24, 5, 3}, 2, 12, 180}};
+  const Shape shapes[] = {{{48, 7, 5}, 1, 48, 1680},
+                          {{64, 64, 64}, 8, 32, 32768},
+                          {{16, 3, 5}, 2, 8, 120},
+                          {{64, 64, 64}, 512, 8, 512},
+                          {{8, 3, 3}, 2, 4, 36},
+                          {{32, 32, 32}, 512, 4, 64},
+                          {{24, 5, 3}, 2, 12, 180},
+                          // SV_RW 1 (per-lane positions): chunks across rows and planes
+                          {{22, 9, 7}, 1, 22, 1386},
+                          {{5, 7, 3}, 1, 5, 105}};
   for (const Shape& sh : shapes) {
     SCOPED_TRACE("dims " + std::to_string(sh.dims[0]) + "x" + std::to_string(sh.dims[1]) + "x" +
                  std::to_string(sh.dims[2]) + " pes " + std::to_string(sh.pes));
