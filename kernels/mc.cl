@@ -104,6 +104,22 @@ __kernel void simdvol_mc_ray_sort(__global const sv_segment* segs, const int npx
   }
 }
 
+/* Exact opacity of `count` segments in depth order (over's alpha
+ * recurrence); *k_first = the first segment's k0. */
+SV_FN float sv_mc_alpha(__global const sv_segment* segs, __global const int* sample_off,
+                        __global const float4* samples, __global const int* items,
+                        const int first, const int count, int* k_first) {
+  float acc = 0.0f;
+  for (int t = 0; t < count; ++t) {
+    const int s = items ? items[first + t] : first + t;
+    const sv_segment sg = segs[s];
+    if (t == 0) *k_first = sg.k0;
+    __global const float4* in = samples + sample_off[s];
+    for (int k = sg.k0; k < sg.k1; ++k) acc = acc + (1.0f - acc) * in[k - sg.k0].w;
+  }
+  return acc;
+}
+
 /* The estimator over `count` segments (indices items[first + t], or
  * first + t when items is 0) in depth order: composite_mc_walks. */
 SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int* sample_off,
@@ -114,15 +130,8 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
   /* Stratified picks (composite_mc_stratified in composite.cpp): exact
    * opacity, then one pass in which walk m picks the first sample with
    * alpha > 0 whose cumulative opacity exceeds ((m + u_m) / n) * alpha. */
-  float acc = 0.0f;
   int k_first = 0;
-  for (int t = 0; t < count; ++t) {
-    const int s = items ? items[first + t] : first + t;
-    const sv_segment sg = segs[s];
-    if (t == 0) k_first = sg.k0;
-    __global const float4* in = samples + sample_off[s];
-    for (int k = sg.k0; k < sg.k1; ++k) acc = acc + (1.0f - acc) * in[k - sg.k0].w;
-  }
+  const float acc = sv_mc_alpha(segs, sample_off, samples, items, first, count, &k_first);
   float4 out = (float4)(0.0f, 0.0f, 0.0f, acc);
   int skipped = 0, fallback = 0, draws = 0;
   if (walks > 0 && acc > 0.0f) {
@@ -210,15 +219,8 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
 #else
   /* Exact opacity: over's alpha recurrence; when no walk stopped, one pick
    * from p_s / alpha by inverting the cumulative opacity (composite.cpp). */
-  float acc = 0.0f;
   int k_first = 0;
-  for (int t = 0; t < count; ++t) {
-    const int s = items ? items[first + t] : first + t;
-    const sv_segment sg = segs[s];
-    if (t == 0) k_first = sg.k0;
-    __global const float4* in = samples + sample_off[s];
-    for (int k = sg.k0; k < sg.k1; ++k) acc = acc + (1.0f - acc) * in[k - sg.k0].w;
-  }
+  const float acc = sv_mc_alpha(segs, sample_off, samples, items, first, count, &k_first);
   out.w = acc;
   if (stopped > 0) {
     const double a = (double)acc;

@@ -5,6 +5,15 @@
 
 namespace simdvol {
 
+namespace {
+// Over's alpha recurrence along the ray (ch. 7.5 (a): the exact opacity).
+float exact_alpha(const RaySamples& ray) {
+  float acc = 0.0f;
+  for (const Rgba& v : ray.rgba) acc = acc + (1.0f - acc) * v.a;
+  return acc;
+}
+}  // namespace
+
 Rgba composite_direct(const RaySamples& ray) {
   // Eq 7.2 in associative colour: front to back, acc = over(acc, sample).
   Rgba acc{};
@@ -38,8 +47,7 @@ Rgba composite_mc_stratified(const RaySamples& ray, uint32_t key, int walks,
     throw ArgumentError("--mc-stratified", "needs exact opacity (--exact-opacity)");
   McStats st;
   st.walks = walks;
-  float acc = 0.0f;
-  for (const Rgba& v : ray.rgba) acc = acc + (1.0f - acc) * v.a;
+  const float acc = exact_alpha(ray);
   Rgba out;
   out.a = acc;
   if (walks > 0 && acc > 0.0f) {
@@ -132,8 +140,7 @@ Rgba composite_mc_walks(const RaySamples& ray, uint32_t ray_id, int walks, const
     }
   } else {
     // Ch. 7.5 (a): exact opacity (over's alpha recurrence), Monte Carlo colour.
-    float acc = 0.0f;
-    for (const Rgba& v : ray.rgba) acc = acc + (1.0f - acc) * v.a;
+    const float acc = exact_alpha(ray);
     out.a = acc;
     if (stopped > 0) {
       const double a = acc;
