@@ -72,6 +72,7 @@
 #include "simdvol/error.hpp"
 #include "simdvol/image.hpp"
 #include "simdvol/io.hpp"
+#include "simdvol/pe_array.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 #include "simdvol/swap.hpp"
@@ -423,7 +424,15 @@ struct Harness {
       x["max_pe_sent_bytes"] = st.swap.max_pe_sent * st.swap.bytes_per_pixel;
       x["swap_stages"] = st.swap.stages.size();
       x["bound_sum_px"] = st.swap.bound_sum();
-      x["halo_bytes"] = nullptr;  // resample halo reads: not counted by the engine
+      // The halo exchange of the raw voxel cells (width 1, 4-byte voxels: what
+      // shading reads from neighbour PEs) on the PE mesh, as the SIMD machine
+      // would move it (pe_array.hpp's halo_cost). The resample stage's reads
+      // of neighbour cells are not counted here (bench-frame and
+      // simdvol-repro-tables count them).
+      const HaloCost hc = halo_cost(make_cell_layout(L.vol->dims(), pes, 1), pe_grid(pes));
+      x["halo_bytes"] = hc.bytes;
+      x["halo_max_pe_bytes"] = hc.max_pe_bytes;
+      x["halo_max_distance"] = hc.max_distance;
       j["xnet"] = x;
       double ref_ms = NAN, q = NAN, diff = NAN;
       if (o.reference) {
@@ -887,7 +896,8 @@ int main(int argc, char** argv) {
               h.run_case(L, static_cast<int>(size), static_cast<int>(order), c, pes);
     std::printf(
         "(first: the warm-up frame, with fresh buffers and any program builds; util: mean / max "
-        "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B; speedup: the "
+        "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B (the JSON adds "
+        "the halo exchange of the voxel cells); speedup: the "
         "reference's ms / ours; mcNsub is compared with the reference's whole-ray Monte Carlo, "
         "a different estimator)\n");
     root["cases"] = h.cases;
