@@ -98,4 +98,9 @@ execute_process(COMMAND ${BENCH} --volumes brainsmall --data ${OUT}.nodata
 if(NOT rc EQUAL 1 OR NOT err MATCHES "brainsmall.den: missing")
   message(FATAL_ERROR "missing requested data: exit ${rc}, stderr ${err}")
 endif()
+execute_process(COMMAND ${BENCH} --quick --json ${OUT}.nodir/x.json
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL 2 OR NOT err MATCHES "--json: directory")
+  message(FATAL_ERROR "--json into a missing directory: exit ${rc}, stderr ${err}")
+endif()
 message(STATUS "simdvol-bench harness: ${ncases} cases checked")

@@ -218,6 +218,11 @@ Options parse_args(int argc, char** argv) {
       o.data = next();
     } else if (a == "--json") {
       o.json = next();
+      // Checked now, not after minutes of frames.
+      const std::filesystem::path dir = o.json->has_parent_path() ? o.json->parent_path() : ".";
+      if (!std::filesystem::is_directory(dir))
+        throw ArgumentError(
+            a, "directory '" + dir.string() + "' of '" + o.json->string() + "' does not exist");
     } else if (a == "--quick") {
       quick = true;
     } else if (a == "--child") {
