@@ -23,6 +23,8 @@
  * Kernels here:
  *   simdvol_resample   one work-item per segment: its samples, in order, to
  *                      out[sample_off[s] ...] (float4 premultiplied RGBA).
+ *   simdvol_resample_v8  the same, 8 segments per work-item in float8 lanes
+ *                      (the default; equal bit for bit).
  *   simdvol_zero4      zero-fills n float4 (footprints before the local stage).
  * local.cl adds the local compositing kernels (and, with this file, the fused
  * resample + local kernel).
@@ -146,6 +148,170 @@ __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
     X0 += s0;
     X1 += s1;
     X2 += s2;
+  }
+}
+
+/* ---- explicit float8 lanes: simdvol_resample_v8 (and local.cl's fused
+ * simdvol_resample_local_v8) ----
+ * PoCL vectorises only loops over work-items whose bodies have no inner
+ * loops of varying trip count; a segment's samples are such a loop, so the
+ * one-segment-per-work-item kernels run scalar. Here each work-item
+ * takes 8 consecutive segments (of one PE, mostly: neighbouring rays of
+ * similar length) as the 8 lanes of float8/int8/long8 values and steps them
+ * together max(k1 - k0) times; a lane whose segment has ended keeps its
+ * composite (select) and reads clamped, harmless voxels. Element-wise vector
+ * arithmetic is the scalar IEEE arithmetic, so the results are those of
+ * simdvol_resample (simdvol_resample_local) bit for bit. Voxel gathers are
+ * 8 scalar loads each. */
+/* long8/float8 arguments of helper functions change the ABI without AVX-512;
+ * clang warns once per call site (-Wpsabi). Harmless inside one program. */
+#ifdef __clang__
+#pragma clang diagnostic ignored "-Wpsabi"
+#endif
+#define SV_G8(p, ix)                                                                  \
+  ((float8)((p)[(ix).s0], (p)[(ix).s1], (p)[(ix).s2], (p)[(ix).s3], (p)[(ix).s4],     \
+            (p)[(ix).s5], (p)[(ix).s6], (p)[(ix).s7]))
+#define SV_GI8(p, ix)                                                                 \
+  ((int8)((p)[(ix).s0], (p)[(ix).s1], (p)[(ix).s2], (p)[(ix).s3], (p)[(ix).s4],       \
+          (p)[(ix).s5], (p)[(ix).s6], (p)[(ix).s7]))
+
+SV_FN void sv_axis8(long8 X, int n, __global const int* table, int8* addr, float8* d, int8* low) {
+  const int8 f = convert_int8(X >> SV_FRAC_BITS);
+  const float8 t = convert_float8(convert_uint8(X & 0xFFFFFFFFL)) * (1.0f / 4294967296.0f);
+  const int8 lo = t <= 0.5f; /* -1 where low */
+  *low = lo;
+#pragma unroll
+  for (int e = 0; e < SV_M; ++e) {
+    const int8 p = select((int8)(1 - SV_LOWPOS(e)), (int8)(SV_LOWPOS(e)), lo);
+    const int8 g = clamp(f + p, (int8)(0), (int8)(n - 1));
+    addr[e] = SV_GI8(table, g);
+    d[e] = convert_float8(-p) + t;
+  }
+}
+
+SV_FN void sv_neville8(float8* q, const int R, const float8* d, const int8 low) {
+#pragma unroll
+  for (int k = 1; k <= ORDER; ++k) {
+#pragma unroll
+    for (int i = k - 1; i >= 0; --i) {
+      const int c = SV_LOWPOS(k) - SV_LOWPOS(i);
+      const float8 di = d[i], dk = d[k];
+      if (c == 3 || c == -3) {
+        const float8 den = select((float8)((float)(-c)), (float8)((float)c), low);
+#pragma unroll
+        for (int r = 0; r < R; ++r) q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) / den;
+      } else {
+        const float8 rc = select((float8)(-1.0f / (float)c), (float8)(1.0f / (float)c), low);
+#pragma unroll
+        for (int r = 0; r < R; ++r) q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) * rc;
+      }
+    }
+  }
+}
+
+/* The samples at the fixed-point positions X[0..2] of 8 lanes: u[ch] =
+ * channel ch of each lane's sample (sv_sample per lane). */
+SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int* table,
+                      __global const float* vox, int cs, float8* u) {
+  int8 ax[SV_M], ay[SV_M], az[SV_M];
+  float8 dx[SV_M], dy[SV_M], dz[SV_M];
+  int8 lx, ly, lz;
+  sv_axis8(X[0], nx, table, ax, dx, &lx);
+  sv_axis8(X[1], ny, table + nx, ay, dy, &ly);
+  sv_axis8(X[2], nz, table + nx + ny, az, dz, &lz);
+  const int R = 4 * SV_M * SV_M;
+  float8 v[SV_M * 4 * SV_M * SV_M];
+#pragma unroll
+  for (int c = 0; c < SV_M; ++c)
+#pragma unroll
+    for (int b = 0; b < SV_M; ++b) {
+      const int8 row = ay[b] + az[c];
+#pragma unroll
+      for (int a = 0; a < SV_M; ++a) {
+        const int8 o = row + ax[a];
+#pragma unroll
+        for (int ch = 0; ch < 4; ++ch) {
+          const int8 oc = o + ch * cs;
+          v[a * R + ch * SV_M * SV_M + c * SV_M + b] = SV_G8(vox, oc);
+        }
+      }
+    }
+  sv_neville8(v, R, dx, lx);
+  float8 w[SV_M * 4 * SV_M];
+#pragma unroll
+  for (int ch = 0; ch < 4; ++ch)
+#pragma unroll
+    for (int c = 0; c < SV_M; ++c)
+#pragma unroll
+      for (int b = 0; b < SV_M; ++b)
+        w[b * 4 * SV_M + ch * SV_M + c] = v[ch * SV_M * SV_M + c * SV_M + b];
+  sv_neville8(w, 4 * SV_M, dy, ly);
+  float8 q[SV_M * 4];
+#pragma unroll
+  for (int ch = 0; ch < 4; ++ch)
+#pragma unroll
+    for (int c = 0; c < SV_M; ++c) q[c * 4 + ch] = w[ch * SV_M + c];
+  sv_neville8(q, 4, dz, lz);
+#pragma unroll
+  for (int ch = 0; ch < 4; ++ch) u[ch] = q[ch];
+}
+
+/* Lanes of segments s0 .. s0 + 7 (those past nseg repeat the last segment
+ * with length 0): (i, j, k0) and length per lane, and X[a] = the fixed-point
+ * position of each lane's first sample; returns the longest length. */
+SV_FN int sv_lanes8(__global const sv_segment* segs, const int nseg, const int s0,
+                    __global const sv_view* view, int* li, int* lj, int* lk, int* ln, long8* X) {
+  int T = 0;
+#pragma unroll
+  for (int l = 0; l < 8; ++l) {
+    const int s = min(s0 + l, nseg - 1);
+    const sv_segment g = segs[s];
+    li[l] = g.i;
+    lj[l] = g.j;
+    lk[l] = g.k0;
+    ln[l] = s0 + l < nseg ? g.k1 - g.k0 : 0;
+    T = max(T, ln[l]);
+  }
+  const int8 I = (int8)(li[0], li[1], li[2], li[3], li[4], li[5], li[6], li[7]);
+  const int8 J = (int8)(lj[0], lj[1], lj[2], lj[3], lj[4], lj[5], lj[6], lj[7]);
+  const int8 K = (int8)(lk[0], lk[1], lk[2], lk[3], lk[4], lk[5], lk[6], lk[7]);
+#pragma unroll
+  for (int a = 0; a < 3; ++a)
+    X[a] = (long8)(view->origin[a]) + convert_long8(I) * view->step[a][0] +
+           convert_long8(J) * view->step[a][1] + convert_long8(K) * view->step[a][2];
+  return T;
+}
+
+/* simdvol_resample_v8: simdvol_resample with 8 consecutive segments per
+ * work-item as float8 lanes (range: ceil(nseg / 8) work-items); lane l
+ * stores its sample t at out[sample_off[s0 + l] + t] while t < its length. */
+__kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nseg,
+                                  __global const int* sample_off, __global const sv_view* view,
+                                  __global const int* table, __global const float* vox,
+                                  const int cs, __global float4* out) {
+  const int s0 = (int)get_global_id(0) * 8;
+  if (s0 >= nseg) return;
+  int li[8], lj[8], lk[8], ln[8], lo[8];
+  long8 X[3];
+  const int T = sv_lanes8(segs, nseg, s0, view, li, lj, lk, ln, X);
+#pragma unroll
+  for (int l = 0; l < 8; ++l) lo[l] = sample_off[min(s0 + l, nseg - 1)];
+  const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
+  const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
+  for (int t = 0; t < T; ++t) {
+    float8 u[4];
+    sv_sample8(X, nx, ny, nz, table, vox, cs, u);
+    float r[8], g[8], b[8], a[8];
+    vstore8(u[0], 0, r);
+    vstore8(u[1], 0, g);
+    vstore8(u[2], 0, b);
+    vstore8(u[3], 0, a);
+#pragma unroll
+    for (int l = 0; l < 8; ++l)
+      if (t < ln[l]) out[lo[l] + t] = (float4)(r[l], g[l], b[l], a[l]);
+    X[0] += s_0;
+    X[1] += s_1;
+    X[2] += s_2;
   }
 }
 

@@ -180,13 +180,15 @@ Footprints read_footprints(Device& device, const DeviceFootprints& fp) {
 
 cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                            const ResampleTables& tables, const VoxelBuffer& voxels, int order,
-                           const cl::Buffer& samples) {
+                           const cl::Buffer& samples, LocalKernel variant) {
   check_tables(segs, tables, voxels);
-  const std::string name = "simdvol_resample";
+  const bool v8 = variant == LocalKernel::vector8;
+  const std::string name = v8 ? "simdvol_resample_v8" : "simdvol_resample";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), sample_off, tables.view,
            tables.table, voxels.buffer(), tables.channel_stride, samples);
-  return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs));
+  return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
+                    cl::NDRange(kSegmentWgs));
 }
 
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,

@@ -73,6 +73,10 @@ void check_case(Device& dev, const Fixture& fx, const ViewGeometry& view, int64_
   enqueue_zero_footprints(dev, fused);
   enqueue_zero_footprints(dev, scalar);
   enqueue_resample_local(dev, segs, tables, vb, order, scalar, LocalKernel::segment);
+  cl::Buffer samples1 =
+      dev.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(std::max<int64_t>(nsamples, 1)) * 16,
+                 nullptr, "samples (one segment per work-item)");
+  enqueue_resample(dev, segs, soff, tables, vb, order, samples1, LocalKernel::segment);
   enqueue_resample(dev, segs, soff, tables, vb, order, samples);
   enqueue_local(dev, segs, soff, samples, fp);
   enqueue_resample_local(dev, segs, tables, vb, order, fused);
@@ -84,6 +88,11 @@ void check_case(Device& dev, const Fixture& fx, const ViewGeometry& view, int64_
              "read samples");
   const std::vector<Rgba> want = resample_reference(m, fx.voxels, fx.dims, view, order);
   EXPECT_LE(max_diff(got, want), 1e-5f);
+  std::vector<Rgba> got1(got.size());
+  if (nsamples > 0)
+    cl_check(dev.queue().enqueueReadBuffer(samples1, CL_TRUE, 0, got1.size() * 16, got1.data()),
+             "read samples");
+  EXPECT_EQ(max_diff(got, got1), 0.0f);  // float8 lanes: the same arithmetic
 
   const Footprints ref =
       footprints_reference(m, local_reference(m, fx.voxels, fx.dims, view, order));

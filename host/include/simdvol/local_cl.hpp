@@ -81,19 +81,20 @@ cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp);
 /// Reads the footprints back (blocking) as local.hpp's Footprints.
 Footprints read_footprints(Device& device, const DeviceFootprints& fp);
 
+/// Kernel of the resample stages: `vector8` (the default: 8 segments per
+/// work-item in explicit float8 lanes, see resample.cl) or `segment` (one
+/// segment per work-item, scalar under PoCL). Same results bit for bit.
+enum class LocalKernel { vector8, segment };
 /// Resamples every sample of `segs` into `samples` (cl_float4, at
 /// sample_offsets(m).back() elements at least), in segment order.
 cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                            const ResampleTables& tables, const VoxelBuffer& voxels, int order,
-                           const cl::Buffer& samples);
+                           const cl::Buffer& samples, LocalKernel variant = LocalKernel::vector8);
 /// Composites the samples of each segment into the footprints (zeroed first).
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                         const cl::Buffer& samples, DeviceFootprints& fp);
-/// Fused resample + local: the same footprints, samples never stored.
-/// Kernel of the fused stage: `vector8` (the default: 8 segments per
-/// work-item in explicit float8 lanes, see local.cl) or `segment` (one
-/// segment per work-item, scalar under PoCL). Same results bit for bit.
-enum class LocalKernel { vector8, segment };
+/// Fused resample + local: the same footprints, samples never stored
+/// (`variant` as for enqueue_resample).
 cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
                                  DeviceFootprints& fp, LocalKernel variant = LocalKernel::vector8);
