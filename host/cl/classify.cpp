@@ -156,7 +156,7 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
   cl::Buffer sbuf = params_buffer(device, &shade, sizeof shade, "shade parameters");
   cl::Buffer cbuf = params_buffer(device, &classify, sizeof classify, "classify parameters");
   const int rw = detail::shade_row_width(V.cell()[0]);
-  const bool vec = variant == ShadeKernel::vec16 && rw != 0;
+  const bool vec = variant == ShadeKernel::vec16;  // every cx has a float16 form
   const std::string name = vec ? "simdvol_shade_classify16" : "simdvol_shade_classify";
   Defines defines = classify_defines(classify);
   if (vec) defines.emplace_back("SV_RW", std::to_string(rw));

@@ -114,8 +114,7 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
   check_same_cells(C, V, "shade output");
   cl::Buffer pbuf = device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof params,
                                   const_cast<sv_shade_params*>(&params), "shade parameters");
-  const int rw = detail::shade_row_width(V.cell()[0]);
-  if (variant == ShadeKernel::vec16 && rw == 0) variant = ShadeKernel::rows;
+  const int rw = detail::shade_row_width(V.cell()[0]);  // every cx has a float16 form
   if (variant == ShadeKernel::vec16) {
     const std::string name = "simdvol_shade16";
     Defines defines{{"SV_RW", std::to_string(rw)}};
