@@ -230,9 +230,10 @@ int main(int argc, char** argv) try {
       "%d runs (median)\n\n",
       size, static_cast<long long>(pes), static_cast<long long>(L.cell()[0]),
       static_cast<long long>(L.cell()[1]), static_cast<long long>(L.cell()[2]), order, runs);
-  std::printf("%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s\n", "view",
-              "samples", "segments", "util", "match", "balance", "resample", "local", "zero",
-              "fused", "fused1", "ref m+b", "ref r+l", "ref/dev", "Gld/s", "xnet rd", "xnet max");
+  std::printf("%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s\n",
+              "view", "samples", "segments", "util", "match", "balance", "resample", "local",
+              "zero", "fused", "fused1", "occ", "skip", "ref m+b", "ref r+l", "ref/dev", "Gld/s",
+              "xnet rd", "xnet max");
   for (const double phi : views) {
     const ViewAngles angles{0.0, phi, 0.0};
     const ViewGeometry view = make_view(vol, angles, size, size, Sampling::voxel);
@@ -283,7 +284,19 @@ int main(int argc, char** argv) try {
     device.finish();
     enqueue_resample_local(device, segs, tables, rgba, order, fp, LocalKernel::segment);
     device.finish();
-    std::vector<double> t_res, t_loc, t_zero, t_fused, t_fused1;
+    // Empty-space skipping must give the same footprints, bit for bit.
+    const Footprints plain = read_footprints(device, fp);
+    {
+      const DeviceOccupancy occ = enqueue_occupancy(device, rgba, order);
+      enqueue_zero_footprints(device, fp);
+      enqueue_resample_local(device, segs, tables, rgba, order, fp, LocalKernel::vector8, &occ);
+      const Footprints skipped = read_footprints(device, fp);
+      if (skipped.pixels.size() != plain.pixels.size() ||
+          std::memcmp(skipped.pixels.data(), plain.pixels.data(),
+                      plain.pixels.size() * sizeof(Rgba)) != 0)
+        throw Error("empty-space skipping changed the footprints");
+    }
+    std::vector<double> t_res, t_loc, t_zero, t_fused, t_fused1, t_occ, t_skip;
     for (int r = 0; r < runs; ++r) {
       const cl::Event ez = enqueue_zero_footprints(device, fp);
       const cl::Event er = enqueue_resample(device, segs, soff, tables, rgba, order, samples);
@@ -292,7 +305,14 @@ int main(int argc, char** argv) try {
       const cl::Event ef = enqueue_resample_local(device, segs, tables, rgba, order, fp);
       const cl::Event ef1 =
           enqueue_resample_local(device, segs, tables, rgba, order, fp, LocalKernel::segment);
+      const DeviceOccupancy occ = enqueue_occupancy(device, rgba, order);
+      const cl::Event es =
+          enqueue_resample_local(device, segs, tables, rgba, order, fp, LocalKernel::vector8, &occ);
       device.finish();
+      double occ_ms = 0;
+      for (const cl::Event& e : occ.events) occ_ms += ev_ms(e);
+      t_occ.push_back(occ_ms);
+      t_skip.push_back(ev_ms(es));
       t_fused1.push_back(ev_ms(ef1));
       t_zero.push_back(0.5 * (ev_ms(ez) + ev_ms(ez2)));
       t_res.push_back(ev_ms(er));
@@ -310,22 +330,26 @@ int main(int argc, char** argv) try {
     const double loads = static_cast<double>(nsamples) * M * M * M * 4;
     const double fused = median(t_fused) + median(t_zero);
     std::printf(
-        "%5.0f %9lld %9lld %7.3f | %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f | %9.1f %9.1f %9.1f "
+        "%5.0f %9lld %9lld %7.3f | %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f | %9.1f "
+        "%9.1f %9.1f "
         "%7.2f "
         "| "
         "%8.3g %8lld\n",
         phi, static_cast<long long>(nsamples), static_cast<long long>(m.segments.size()),
         m.utilisation(), median(t_match), median(t_bal), median(t_res), median(t_loc),
-        median(t_zero), median(t_fused), median(t_fused1), ref_match + ref_balance, ref_rl,
-        reference ? ref_rl / fused : 0.0, loads / (median(t_fused) * 1e6),
-        static_cast<double>(x.total_reads()), static_cast<long long>(x.max_voxels()));
+        median(t_zero), median(t_fused), median(t_fused1), median(t_occ), median(t_skip),
+        ref_match + ref_balance, ref_rl, reference ? ref_rl / fused : 0.0,
+        loads / (median(t_fused) * 1e6), static_cast<double>(x.total_reads()),
+        static_cast<long long>(x.max_voxels()));
   }
   std::printf(
       "\nms from profiling events; match/balance: device stages (enqueue_match, enqueue_balance, "
       "all their kernels); ref m+b: "
       "match_reference + balance_reference. ref r+l: serial local_reference (resample + sub-ray "
       "composite); ref/dev: against fused + zero. fused: 8 segments per work-item in float8 lanes "
-      "(the frame path); fused1: one segment per work-item. Gld/s: gather loads of the fused "
+      "without skipping; fused1: one segment per work-item; occ: the brick occupancy; skip: fused "
+      "skipping samples of empty bricks (the frame path; the same footprints, checked). Gld/s: "
+      "gather loads of the fused "
       "kernel per "
       "second. xnet rd: remote stencil reads in all; xnet max: distinct remote voxels of the "
       "busiest PE.\n");

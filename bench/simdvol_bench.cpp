@@ -399,6 +399,7 @@ struct Harness {
         wall.push_back(ms_since(t0));
         devsum.push_back(device_sum(t));
         for (const auto& s : kStages) stage[s.name].push_back(t.*s.field);
+        stage["occupancy"].push_back(t.occupancy_ms);  // inside resample_local
         swap_stages.resize(t.swap_stage_ms.size());
         for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
           swap_stages[k].push_back(t.swap_stage_ms[k]);
@@ -416,6 +417,8 @@ struct Harness {
       json js;
       for (const auto& s : kStages) js[s.name] = summary_json(summarize(stage[s.name]));
       j["stages_ms"] = js;
+      // Empty-space skipping's brick occupancy: part of resample_local.
+      j["occupancy_ms"] = summary_json(summarize(stage["occupancy"]));
       json sw = json::array();
       for (const auto& v : swap_stages) sw.push_back(median(v));
       j["swap_stage_ms"] = sw;

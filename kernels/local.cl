@@ -94,20 +94,29 @@ __kernel void simdvol_resample_local_v8(__global const sv_segment* segs, const i
                                         __global const sv_view* view, __global const int* table,
                                         __global const float* vox, const int cs,
                                         __global const sv_rect* rects,
-                                        __global const int* rect_off, __global float4* foot) {
+                                        __global const int* rect_off, __global float4* foot,
+                                        __global const uchar* reach, const int nbx, const int nby,
+                                        const int skip) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8];
   long8 X[3];
-  const int T = sv_lanes8(segs, nseg, s0, view, li, lj, lk, ln, X);
-  const int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
+  int T = sv_lanes8(segs, nseg, s0, view, li, lj, lk, ln, X);
+  int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
   const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
+  if (skip) T = sv_trim8(X, &N, T, s_0, s_1, s_2, nx, ny, nz, nbx, nby, reach);
   float8 ar = (float8)(0.0f), ag = ar, ab = ar, aa = ar;
   for (int t = 0; t < T; ++t) {
+    const int8 on = (int8)(t) < N;
+    if (skip && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, on))) {
+      X[0] += s_0; /* every stepping lane's sample is +-0: over keeps the composite */
+      X[1] += s_1;
+      X[2] += s_2;
+      continue;
+    }
     float8 u[4];
     sv_sample8(X, nx, ny, nz, table, vox, cs, u);
-    const int8 on = (int8)(t) < N;
     const float8 tr = 1.0f - aa;
     ar = select(ar, ar + tr * u[0], on);
     ag = select(ag, ag + tr * u[1], on);

@@ -174,6 +174,9 @@ __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
 #define SV_GI8(p, ix)                                                                 \
   ((int8)((p)[(ix).s0], (p)[(ix).s1], (p)[(ix).s2], (p)[(ix).s3], (p)[(ix).s4],       \
           (p)[(ix).s5], (p)[(ix).s6], (p)[(ix).s7]))
+/* (AVX2 gathers, __builtin_ia32_gatherd_ps256 in place of these, gave the
+ * same times on the 2-core EPYC (simdvol-bench-frame), so the portable form
+ * stays.) */
 
 SV_FN void sv_axis8(long8 X, int n, __global const int* table, int8* addr, float8* d, int8* low) {
   const int8 f = convert_int8(X >> SV_FRAC_BITS);
@@ -280,6 +283,116 @@ SV_FN int sv_lanes8(__global const sv_segment* segs, const int nseg, const int s
     X[a] = (long8)(view->origin[a]) + convert_long8(I) * view->step[a][0] +
            convert_long8(J) * view->step[a][1] + convert_long8(K) * view->step[a][2];
   return T;
+}
+
+/* ---- empty-space skipping (the fused kernel's `reach` argument) ----
+ * Bricks: the volume cut into SV_BRICK^3 voxel bricks, nb = ceil(n / SV_BRICK)
+ * per axis, brick (bx, by, bz) at index bx + nbx * (by + nby * bz).
+ *   simdvol_occupancy        occ[b] = 1 if some channel of some voxel of
+ *                            brick b is not +-0 (NaN and inf count), else 0.
+ *   simdvol_occupancy_reach  reach[b] = OR of occ over bricks b - lo .. b + hi
+ *                            per axis (clipped to the grid).
+ * A sample at fixed-point position X with floor f (clamped into the volume)
+ * lies in brick f >> SV_BRICK_LOG2; its stencil reads voxels f + p, p in
+ * 0..1 (orders 0, 1) or -1..2 (orders 2, 3), clamped into the volume, all
+ * within bricks b - lo .. b + 1 (lo = ORDER >= 2, SV_BRICK >= 2). If
+ * reach[b] = 0 every stencil value is +-0, so Neville gives +-0 in every
+ * channel and over leaves the composite as it was, bit for bit (the
+ * composite starts at +0 and never becomes -0: x + y = -0 needs x = y = -0).
+ * The fused kernel first trims each lane to its first .. last sample in a
+ * brick with reach (sv_trim8), then skips a step when no lane still
+ * stepping is in one: the same bits as without skipping (tested). */
+#define SV_BRICK_LOG2 2
+#define SV_BRICK (1 << SV_BRICK_LOG2)
+
+/* One work-item per (PE p, plane lz of its cell): 2-D range (cz, P). Scans
+ * the plane's voxels inside the volume (padding is never read by a stencil)
+ * in the PE's block: voxel (lx, ly, lz) channel c at
+ * p * 4 * stride + c * stride + (lz * cy + ly) * cx + lx; sets occ[b] |= 1
+ * (atomically: bricks straddle cells) for each brick b holding a voxel with
+ * a channel that is not +-0. occ must be zero before. */
+__kernel void simdvol_occupancy(__global const float* vox, const int stride, const int4 cell,
+                                __global const int4* origins, const int4 dims, const int nbx,
+                                const int nby, __global volatile uint* occ) {
+  const int lz = (int)get_global_id(0), p = (int)get_global_id(1);
+  if (lz >= cell.z) return;
+  const int4 o = origins[p];
+  const int gz = o.z + lz;
+  if (gz >= dims.z) return;
+  const int cx = min(cell.x, dims.x - o.x), cy = min(cell.y, dims.y - o.y);
+  __global const float* v = vox + (size_t)p * 4 * stride + (size_t)lz * cell.y * cell.x;
+  const int bz = (gz >> SV_BRICK_LOG2) * nby;
+  for (int ly = 0; ly < cy; ++ly) {
+    const int row = ly * cell.x;
+    const int by = (bz + ((o.y + ly) >> SV_BRICK_LOG2)) * nbx;
+    int b = o.x >> SV_BRICK_LOG2;
+    uint any = 0;
+    for (int lx = 0; lx < cx; ++lx) {
+      const int bx = (o.x + lx) >> SV_BRICK_LOG2;
+      if (bx != b) {
+        if (any & 0x7fffffffu) atomic_or(&occ[by + b], 1u);
+        b = bx;
+        any = 0;
+      }
+      const int e = row + lx;
+      any |= as_uint(v[e]) | as_uint(v[stride + e]) | as_uint(v[2 * stride + e]) |
+             as_uint(v[3 * stride + e]);
+    }
+    if (any & 0x7fffffffu) atomic_or(&occ[by + b], 1u);
+  }
+}
+
+/* One work-item per brick: reach[b] from occ (lo, hi as above). */
+__kernel void simdvol_occupancy_reach(__global const uint* occ, const int nbx, const int nby,
+                                      const int nbz, const int lo, const int hi,
+                                      __global uchar* reach) {
+  const int b = (int)get_global_id(0);
+  if (b >= nbx * nby * nbz) return;
+  const int bx = b % nbx, by = (b / nbx) % nby, bz = b / (nbx * nby);
+  uchar r = 0;
+  for (int z = max(bz - lo, 0); z <= min(bz + hi, nbz - 1); ++z)
+    for (int y = max(by - lo, 0); y <= min(by + hi, nby - 1); ++y)
+      for (int x = max(bx - lo, 0); x <= min(bx + hi, nbx - 1); ++x)
+        r |= occ[x + nbx * (y + nby * z)];
+  reach[b] = r;
+}
+
+/* -1 in the lanes with on[l] whose sample at X is in a brick with reach 1. */
+SV_FN int8 sv_reach8(const long8* X, int nx, int ny, int nz, int nbx, int nby,
+                     __global const uchar* reach, const int8 on) {
+  const int8 fx = clamp(convert_int8(X[0] >> SV_FRAC_BITS), (int8)(0), (int8)(nx - 1));
+  const int8 fy = clamp(convert_int8(X[1] >> SV_FRAC_BITS), (int8)(0), (int8)(ny - 1));
+  const int8 fz = clamp(convert_int8(X[2] >> SV_FRAC_BITS), (int8)(0), (int8)(nz - 1));
+  const int8 b = (fx >> SV_BRICK_LOG2) +
+                 nbx * ((fy >> SV_BRICK_LOG2) + nby * (fz >> SV_BRICK_LOG2));
+  return (SV_GI8(reach, b) != 0) & on;
+}
+
+/* Trims each lane to its first .. last sample in a brick with reach 1 (the
+ * samples before and after are +-0: skipping them changes no composite):
+ * advances X to each lane's first such sample and sets N to the trimmed
+ * lengths (0 if none); returns the longest. */
+SV_FN int sv_trim8(long8* X, int8* N, const int T, const long s0, const long s1, const long s2,
+                   int nx, int ny, int nz, int nbx, int nby, __global const uchar* reach) {
+  long8 Y[3] = {X[0], X[1], X[2]};
+  int8 first = *N, last = (int8)(-1);
+  for (int t = 0; t < T; ++t) {
+    const int8 r = sv_reach8(Y, nx, ny, nz, nbx, nby, reach, (int8)(t) < *N);
+    first = select(first, min(first, (int8)(t)), r);
+    last = select(last, (int8)(t), r);
+    Y[0] += s0;
+    Y[1] += s1;
+    Y[2] += s2;
+  }
+  const int8 n = max(last - first + 1, (int8)(0));
+  const long8 k = convert_long8(select((int8)(0), first, n > 0));
+  X[0] += k * s0;
+  X[1] += k * s1;
+  X[2] += k * s2;
+  *N = n;
+  const int4 m4 = max(n.lo, n.hi);
+  const int2 m2 = max(m4.lo, m4.hi);
+  return max(m2.x, m2.y);
 }
 
 /* simdvol_resample_v8: simdvol_resample with 8 consecutive segments per

@@ -154,11 +154,14 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   std::vector<StageEvent> offset_events, walk_events;
   std::vector<StageEvent> ray_events;
   std::optional<DeviceFootprints> fp;
+  std::optional<DeviceOccupancy> occupancy;
   bool via_swap = true;  // direct and per sub-ray mc: footprints -> swap -> display
   if (mode == CompositeMode::direct) {
     fp.emplace(make_footprints(device, segs.host_rects));
     e_zero = enqueue_zero_footprints(device, *fp);
-    e_local = enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp);
+    if (eo.skip_empty) occupancy.emplace(enqueue_occupancy(device, *S.rgba, opt.order));
+    e_local = enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp,
+                                     LocalKernel::vector8, occupancy ? &*occupancy : nullptr);
   } else {
     // The samples in segment order at offsets scanned on the device.
     const int pes = static_cast<int>(segs.pes);
@@ -267,7 +270,10 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     times->classify_ms = ms(e_classify);
     times->match_ms = stage_ms(dm.match_events);
     times->balance_ms = stage_ms(dm.balance_events);
-    times->resample_local_ms = (mode == CompositeMode::direct ? ms(e_zero) : 0.0) + ms(e_local);
+    if (occupancy)
+      for (const cl::Event& e : occupancy->events) times->occupancy_ms += ms(e);
+    times->resample_local_ms =
+        (mode == CompositeMode::direct ? ms(e_zero) : 0.0) + times->occupancy_ms + ms(e_local);
     times->offsets_ms = stage_ms(offset_events);
     times->rays_ms = stage_ms(ray_events);
     times->walk_ms = stage_ms(walk_events) + (mode == CompositeMode::direct ? 0.0 : ms(e_zero));

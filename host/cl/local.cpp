@@ -203,18 +203,77 @@ cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buf
   return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs));
 }
 
+DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int order) {
+  const VoxelLayout& L = voxels.layout();
+  if (L.elements() * 4 > kInt32Max)
+    throw ArgumentError("volume", "voxel cells exceed int32 float indexing in the resample stage");
+  DeviceOccupancy o;
+  o.dims = L.dims();
+  o.order = order;
+  for (int a = 0; a < 3; ++a) o.bricks[a] = static_cast<cl_int>((o.dims[a] + kBrick - 1) / kBrick);
+  const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(o.count(), 1));
+  o.occupied = device.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_uint), nullptr, "brick occupancy");
+  o.reach = device.buffer(CL_MEM_READ_WRITE, n, nullptr, "brick reach");
+  const int64_t P = L.pes();
+  std::vector<cl_int4> origins(static_cast<std::size_t>(P));
+  for (int64_t p = 0; p < P; ++p) {
+    const Dims3 c = L.cells.split.cell_origin(p);
+    origins[static_cast<std::size_t>(p)] = {
+        {static_cast<cl_int>(c[0]), static_cast<cl_int>(c[1]), static_cast<cl_int>(c[2]), 0}};
+  }
+  const cl::Buffer org = upload(device, origins, "cell origins");
+  cl::Event fill;
+  cl_check(device.queue().enqueueFillBuffer(o.occupied, cl_uint(0), 0, n * sizeof(cl_uint), nullptr,
+                                            &fill),
+           "clEnqueueFillBuffer(brick occupancy)");
+  o.events.push_back(fill);
+  const cl_int4 dims = {{static_cast<cl_int>(o.dims[0]), static_cast<cl_int>(o.dims[1]),
+                         static_cast<cl_int>(o.dims[2]), 0}};
+  const cl_int4 cell = {{static_cast<cl_int>(L.cell()[0]), static_cast<cl_int>(L.cell()[1]),
+                         static_cast<cl_int>(L.cell()[2]), 0}};
+  std::string name = "simdvol_occupancy";
+  cl::Kernel k = stage_kernel(device, name, order);  // checks the order
+  set_args(k, name, voxels.buffer(), static_cast<cl_int>(L.stride), cell, org, dims, o.bricks[0],
+           o.bricks[1], o.occupied);
+  const std::size_t wz = std::min<std::size_t>(8, static_cast<std::size_t>(L.cell()[2]));
+  o.events.push_back(device.run(
+      k, name,
+      cl::NDRange(round_up(static_cast<std::size_t>(L.cell()[2]), wz), static_cast<std::size_t>(P)),
+      cl::NDRange(wz, 1)));
+  name = "simdvol_occupancy_reach";
+  cl::Kernel r = stage_kernel(device, name, order);
+  // Stencil voxels f + p: p in 0..1 for orders 0 and 1, -1..2 for 2 and 3.
+  set_args(r, name, o.occupied, o.bricks[0], o.bricks[1], o.bricks[2], cl_int(order >= 2 ? 1 : 0),
+           cl_int(1), o.reach);
+  o.events.push_back(
+      device.run(r, name, cl::NDRange(round_up(n, kSegmentWgs)), cl::NDRange(kSegmentWgs)));
+  return o;
+}
+
 cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
-                                 DeviceFootprints& fp, LocalKernel variant) {
+                                 DeviceFootprints& fp, LocalKernel variant,
+                                 const DeviceOccupancy* skip) {
   check_tables(segs, tables, voxels);
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
     throw ArgumentError("footprints", "PE count differs from the segments'");
+  if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
+    throw ArgumentError("occupancy", "was made for other voxels or another interpolation order");
   const bool v8 = variant == LocalKernel::vector8;
   const std::string name = v8 ? "simdvol_resample_local_v8" : "simdvol_resample_local";
   cl::Kernel k = stage_kernel(device, name, order);
-  set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
-           static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
-           tables.channel_stride, segs.rects, fp.offsets, fp.pixels);
+  if (v8) {
+    // Without skipping the reach argument is never read: any buffer will do.
+    set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
+             static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
+             tables.channel_stride, segs.rects, fp.offsets, fp.pixels,
+             skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
+             skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0));
+  } else {
+    set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
+             static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
+             tables.channel_stride, segs.rects, fp.offsets, fp.pixels);
+  }
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }

@@ -151,7 +151,8 @@ int main(int argc, char** argv) {
   uint64_t seed = 1;
   double step = 5.0;
   float threshold = 0.95f;
-  bool no_shade = false, show_times = false, exact_opacity = false, allocate = false;
+  bool no_shade = false, no_skip_empty = false, show_times = false, exact_opacity = false,
+       allocate = false;
   bool stratified = false;
   std::string swap_layout = "cut-and-stack", mc_scope = "whole";
   render->add_option("volume", rv.path, "volume file (.den, .nrrd, .nhdr, .nii, .nii.gz, .raw)");
@@ -174,6 +175,9 @@ int main(int argc, char** argv) {
                    "Hounsfield data, mri otherwise")
       ->capture_default_str();
   render->add_flag("--no-shade", no_shade, "skip lighting (colour = material colour)");
+  render->add_flag("--no-skip-empty", no_skip_empty,
+                   "opencl, direct: resample every sample, also those whose stencil reads only "
+                   "transparent voxels (the same image; for timing comparisons)");
   render->add_flag("--exact-opacity", exact_opacity,
                    "Monte Carlo: exact opacity, Monte Carlo colour (ch. 7.5 (a))");
   render->add_flag("--mc-stratified", stratified,
@@ -292,6 +296,7 @@ int main(int argc, char** argv) {
       eo.pes = pes.count();
       eo.fused = true;
       eo.reuse_layout = true;  // the volume does not change between frames
+      eo.skip_empty = !no_skip_empty;
       if (swap_layout == "cut-and-stack")
         eo.layout = SwapLayout::cut_and_stack;
       else if (swap_layout == "hierarchical")
@@ -343,9 +348,10 @@ int main(int argc, char** argv) {
             os << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
                << " PEs): layout " << t.layout_ms << " ms, shade " << t.shade_ms << " ms, classify "
                << t.classify_ms << " ms, match " << t.match_ms << " ms, balance " << t.balance_ms
-               << " ms, resample+local " << t.resample_local_ms << " ms, offsets " << t.offsets_ms
-               << " ms, ray lists " << t.rays_ms << " ms, walks " << t.walk_ms << " ms, plan "
-               << t.plan_ms << " ms (host), swap " << t.swap_ms << " ms (";
+               << " ms, resample+local " << t.resample_local_ms << " ms (brick occupancy "
+               << t.occupancy_ms << " ms), offsets " << t.offsets_ms << " ms, ray lists "
+               << t.rays_ms << " ms, walks " << t.walk_ms << " ms, plan " << t.plan_ms
+               << " ms (host), swap " << t.swap_ms << " ms (";
             for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
               os << (k ? " " : "") << t.swap_stage_ms[k];
             os << "), display " << t.display_ms << " ms, warp " << t.warp_ms << " ms; frame wall "

@@ -4,6 +4,9 @@
 // orders 0-3, several views, P from 1 to 8192, odd dims, balanced matchings.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstring>
+#include <limits>
 #include <random>
 
 #include "simdvol/engine.hpp"
@@ -242,4 +245,204 @@ TEST(RenderOpenClFrame, AdaptiveAndMonteCarloKeepTheReferencePath) {
     EngineTimes t;
     EXPECT_LE(max_abs_diff(ref, render_opencl(*dp, vol, opt, &t, 64, true)), 1e-5f);
   }
+}
+
+// ---- empty-space skipping (enqueue_occupancy, the fused kernel's reach) ----
+
+namespace {
+
+// Mostly zero voxels: random boxes of colour, and single voxels holding the
+// values a bit test can get wrong (-0 is empty; a denormal, NaN and inf in
+// one channel are not).
+std::vector<Rgba> sparse_voxels(const Dims3& d, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<Rgba> v(static_cast<std::size_t>(d[0] * d[1] * d[2]));
+  auto at = [&](int64_t x, int64_t y, int64_t z) -> Rgba& {
+    return v[static_cast<std::size_t>((z * d[1] + y) * d[0] + x)];
+  };
+  auto pick = [&](int64_t n) { return static_cast<int64_t>(u(rng) * static_cast<float>(n)) % n; };
+  for (int box = 0; box < 6; ++box) {
+    const int64_t x0 = pick(d[0]), y0 = pick(d[1]), z0 = pick(d[2]);
+    for (int64_t z = z0; z < std::min(z0 + 3, d[2]); ++z)
+      for (int64_t y = y0; y < std::min(y0 + 2, d[1]); ++y)
+        for (int64_t x = x0; x < std::min(x0 + 4, d[0]); ++x) {
+          Rgba& c = at(x, y, z);
+          c.a = 0.2f + 0.3f * u(rng);
+          c.r = c.a * u(rng), c.g = c.a * u(rng), c.b = c.a * u(rng);
+        }
+  }
+  for (int k = 0; k < 20; ++k) at(pick(d[0]), pick(d[1]), pick(d[2])) = {-0.0f, -0.0f, 0.0f, -0.0f};
+  at(pick(d[0]), pick(d[1]), pick(d[2])).g = 1e-40f;  // denormal, colour only
+  return v;
+}
+
+// The occupancy and reach by brute force over the flat volume (kBrick^3
+// bricks, a voxel counts unless all four channels are +-0).
+void host_occupancy(const std::vector<Rgba>& v, const Dims3& d, int order,
+                    std::vector<cl_uint>& occ, std::vector<cl_uchar>& reach) {
+  const int64_t nb[3] = {(d[0] + kBrick - 1) / kBrick, (d[1] + kBrick - 1) / kBrick,
+                         (d[2] + kBrick - 1) / kBrick};
+  occ.assign(static_cast<std::size_t>(nb[0] * nb[1] * nb[2]), 0);
+  for (int64_t z = 0; z < d[2]; ++z)
+    for (int64_t y = 0; y < d[1]; ++y)
+      for (int64_t x = 0; x < d[0]; ++x) {
+        const Rgba& c = v[static_cast<std::size_t>((z * d[1] + y) * d[0] + x)];
+        const bool zero = c.r == 0 && c.g == 0 && c.b == 0 && c.a == 0;  // NaN compares unequal
+        if (!zero)
+          occ[static_cast<std::size_t>((z / kBrick * nb[1] + y / kBrick) * nb[0] + x / kBrick)] = 1;
+      }
+  const int64_t lo = order >= 2 ? 1 : 0, hi = 1;
+  reach.assign(occ.size(), 0);
+  for (int64_t z = 0; z < nb[2]; ++z)
+    for (int64_t y = 0; y < nb[1]; ++y)
+      for (int64_t x = 0; x < nb[0]; ++x)
+        for (int64_t k = std::max<int64_t>(z - lo, 0); k <= std::min(z + hi, nb[2] - 1); ++k)
+          for (int64_t j = std::max<int64_t>(y - lo, 0); j <= std::min(y + hi, nb[1] - 1); ++j)
+            for (int64_t i = std::max<int64_t>(x - lo, 0); i <= std::min(x + hi, nb[0] - 1); ++i)
+              if (occ[static_cast<std::size_t>((k * nb[1] + j) * nb[0] + i)])
+                reach[static_cast<std::size_t>((z * nb[1] + y) * nb[0] + x)] = 1;
+}
+
+template <class T>
+std::vector<T> read_all(Device& dev, const cl::Buffer& b, std::size_t n) {
+  std::vector<T> out(n);
+  cl_check(dev.queue().enqueueReadBuffer(b, CL_TRUE, 0, n * sizeof(T), out.data()), "read");
+  return out;
+}
+
+bool same_bits(const Footprints& a, const Footprints& b) {
+  return a.rect_offset == b.rect_offset && a.pixels.size() == b.pixels.size() &&
+         std::memcmp(a.pixels.data(), b.pixels.data(), a.pixels.size() * sizeof(Rgba)) == 0;
+}
+
+}  // namespace
+
+TEST(LocalCl, OccupancyEqualsBruteForce) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  for (const Dims3 dims : {Dims3{37, 29, 23}, Dims3{16, 16, 16}, Dims3{5, 9, 3}})
+    for (int64_t pes : {int64_t(1), int64_t(8), int64_t(512), int64_t(8192)}) {
+      std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes + dims[0]));
+      v[v.size() / 3].b = std::numeric_limits<float>::quiet_NaN();
+      v[v.size() / 2].a = std::numeric_limits<float>::infinity();
+      const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, pes, 1));
+      VoxelBuffer vb(dev, L);
+      vb.write(dev, voxels_to_cells(v, L));
+      for (int order = 0; order <= 3; ++order) {
+        SCOPED_TRACE("dims " + std::to_string(dims[0]) + " P " + std::to_string(pes) + " order " +
+                     std::to_string(order));
+        const DeviceOccupancy o = enqueue_occupancy(dev, vb, order);
+        std::vector<cl_uint> occ;
+        std::vector<cl_uchar> reach;
+        host_occupancy(v, dims, order, occ, reach);
+        ASSERT_EQ(static_cast<std::size_t>(o.count()), occ.size());
+        EXPECT_EQ(read_all<cl_uint>(dev, o.occupied, occ.size()), occ);
+        EXPECT_EQ(read_all<cl_uchar>(dev, o.reach, reach.size()), reach);
+        if (dims[0] >= 32) {
+          EXPECT_GT(std::count(reach.begin(), reach.end(), 0), 0);  // something to skip
+        }
+        EXPECT_GT(std::count(occ.begin(), occ.end(), 1u), 0);  // and something not
+      }
+    }
+  const VoxelLayout L = make_voxel_layout(make_cell_layout({8, 8, 8}, 8, 1));
+  VoxelBuffer vb(dev, L);
+  EXPECT_THROW(enqueue_occupancy(dev, vb, 4), ArgumentError);
+  EXPECT_THROW(enqueue_occupancy(dev, vb, -1), ArgumentError);
+}
+
+// Skipping samples of bricks without reach gives the footprints of the plain
+// fused kernel bit for bit (NaN and inf voxels included), and a wrong reach
+// (all zero) is caught by the same comparison.
+TEST(LocalCl, SkippingEmptyBricksKeepsEveryBit) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Dims3 dims{41, 35, 29};
+  const Volume vol(dims, VoxelType::f32);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> ang(-180.0, 180.0);
+  std::vector<ViewAngles> views = {{0, 0, 0}, {0, 30, 0}, {45, 45, 0}};
+  for (int k = 0; k < 2; ++k) views.push_back({ang(rng), ang(rng), ang(rng)});
+  int skipped_cases = 0;
+  for (int64_t pes : {int64_t(1), int64_t(64), int64_t(8192)}) {
+    std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes));
+    if (pes == 64) v[v.size() / 3].b = std::numeric_limits<float>::quiet_NaN();
+    if (pes == 8192) v[v.size() / 2].a = std::numeric_limits<float>::infinity();
+    const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, pes, 1));
+    VoxelBuffer vb(dev, L);
+    vb.write(dev, voxels_to_cells(v, L));
+    const KdSplit split = kd_split(dims, pes);
+    for (const ViewAngles& a : views)
+      for (int order = 0; order <= 3; ++order) {
+        SCOPED_TRACE("P " + std::to_string(pes) + " order " + std::to_string(order) + " view " +
+                     std::to_string(a.theta) + "," + std::to_string(a.phi) + "," +
+                     std::to_string(a.varphi));
+        const ViewGeometry view = make_view(vol, a, 48, 40, Sampling::voxel);
+        const Matching m = balance_reference(match_reference(view, split), view, split);
+        const LocalSegments segs = upload_segments(dev, m);
+        const ResampleTables tables = make_resample_tables(dev, L, view);
+        const DeviceOccupancy occ = enqueue_occupancy(dev, vb, order);
+        DeviceFootprints plain = make_footprints(dev, m.rects);
+        DeviceFootprints skip = make_footprints(dev, m.rects);
+        enqueue_zero_footprints(dev, plain);
+        enqueue_zero_footprints(dev, skip);
+        enqueue_resample_local(dev, segs, tables, vb, order, plain);
+        enqueue_resample_local(dev, segs, tables, vb, order, skip, LocalKernel::vector8, &occ);
+        const Footprints p = read_footprints(dev, plain), s = read_footprints(dev, skip);
+        EXPECT_TRUE(same_bits(p, s));
+        // The test can fail: with no brick in reach every footprint is 0.
+        DeviceOccupancy none = occ;
+        none.reach = dev.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(occ.count()), nullptr,
+                                "no reach");
+        cl_check(dev.queue().enqueueFillBuffer(none.reach, cl_uchar(0), 0,
+                                               static_cast<std::size_t>(occ.count())),
+                 "fill");
+        enqueue_zero_footprints(dev, skip);
+        enqueue_resample_local(dev, segs, tables, vb, order, skip, LocalKernel::vector8, &none);
+        const Footprints z = read_footprints(dev, skip);
+        const bool any_colour =
+            std::any_of(p.pixels.begin(), p.pixels.end(), [](const Rgba& c) { return c.a != 0; });
+        if (any_colour) {
+          EXPECT_FALSE(same_bits(p, z));
+          ++skipped_cases;
+        }
+      }
+  }
+  EXPECT_GT(skipped_cases, 30);
+  const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, 8, 1));
+  VoxelBuffer vb(dev, L);
+  const ViewGeometry view = make_view(vol, {}, 16, 16, Sampling::voxel);
+  const Matching m = match_reference(view, kd_split(dims, 8));
+  const LocalSegments segs = upload_segments(dev, m);
+  const ResampleTables tables = make_resample_tables(dev, L, view);
+  DeviceFootprints fp = make_footprints(dev, m.rects);
+  const DeviceOccupancy o1 = enqueue_occupancy(dev, vb, 1);
+  EXPECT_THROW(enqueue_resample_local(dev, segs, tables, vb, 3, fp, LocalKernel::vector8, &o1),
+               ArgumentError);  // made for another order
+}
+
+// The engine with and without skip_empty: the same image, bit for bit.
+TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  const Volume vol = shepp_logan(45, 2);
+  for (int order : {1, 3})
+    for (const ViewAngles a : {ViewAngles{0, 0, 0}, ViewAngles{20, 35, 10}}) {
+      RenderOptions opt;
+      opt.width = opt.height = 48, opt.view = a, opt.order = order;
+      opt.classifier = classifier_preset("ct");
+      EngineOptions on, off;
+      on.pes = off.pes = 512;
+      off.skip_empty = false;
+      RenderEngine e_on(*dp, on), e_off(*dp, off);
+      EngineTimes t;
+      const Image a_on = e_on.render(vol, opt, &t), a_off = e_off.render(vol, opt);
+      EXPECT_GT(t.occupancy_ms, 0.0);
+      ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
+      EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
+                            a_on.pixels().size() * sizeof(Rgba)),
+                0);
+    }
 }

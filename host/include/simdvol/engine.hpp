@@ -58,8 +58,11 @@ struct EngineTimes {
   double gather_ms = 0;          ///< unused (0): nothing is gathered back any more
   double match_ms = 0;           ///< matching
   double balance_ms = 0;         ///< balancing
-  double resample_local_ms = 0;  ///< zero footprints + fused resample + local (direct);
-                                 ///< resample into the sample buffer (adaptive, mc)
+  double resample_local_ms = 0;  ///< zero footprints + brick occupancy + fused resample +
+                                 ///< local (direct); resample into the sample buffer
+                                 ///< (adaptive, mc)
+  double occupancy_ms = 0;       ///< direct with skip_empty: the brick occupancy (included
+                                 ///< in resample_local_ms)
   double offsets_ms = 0;         ///< adaptive, mc: the sample offsets' scan
   double rays_ms = 0;            ///< adaptive, mc whole or allocated: per-pixel ray lists
   double walk_ms = 0;  ///< adaptive / mc walks (and the opacity allocation), zeroing included
@@ -107,6 +110,10 @@ struct EngineOptions {
   /// same data pointer and dims) has not changed: its layout into PE cells
   /// is kept (a turntable). Off: every frame lays the volume out again.
   bool reuse_layout = false;
+  /// Direct compositing: skip samples whose stencil reads only zero voxels
+  /// (enqueue_occupancy; the same image bit for bit). Off: every sample is
+  /// resampled (for comparison).
+  bool skip_empty = true;
 };
 
 /// Checks the options against each other and `opt`; ArgumentError naming

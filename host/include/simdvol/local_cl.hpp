@@ -15,6 +15,7 @@
 // queue's work.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -93,10 +94,32 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
 /// Composites the samples of each segment into the footprints (zeroed first).
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                         const cl::Buffer& samples, DeviceFootprints& fp);
+/// Empty-space skipping (resample.cl: simdvol_occupancy): the classified
+/// voxels cut into kBrick^3 bricks; `reach` marks the bricks from which a
+/// sample of interpolation order `order` may read a voxel that is not zero
+/// in every channel. The fused kernel skips samples in the other bricks,
+/// which cannot change a composite: the footprints are the same bits.
+inline constexpr int kBrick = 4;
+struct DeviceOccupancy {
+  Dims3 dims{0, 0, 0};                    ///< the voxels' volume dims
+  int order = -1;                         ///< the interpolation order `reach` is for
+  std::array<cl_int, 3> bricks{0, 0, 0};  ///< bricks per axis: ceil(dims / kBrick)
+  cl::Buffer occupied;                    ///< cl_uint per brick: some voxel is not zero
+  cl::Buffer reach;                       ///< cl_uchar per brick (see above)
+  std::vector<cl::Event> events;          ///< zero fill, occupancy, reach
+  int64_t count() const { return int64_t(bricks[0]) * bricks[1] * bricks[2]; }
+};
+/// Enqueues the kernels for `voxels` (classified, RGBA) and `order`
+/// (ArgumentError outside 0..3).
+DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int order);
+
 /// Fused resample + local: the same footprints, samples never stored
-/// (`variant` as for enqueue_resample).
+/// (`variant` as for enqueue_resample). With `skip` (made for these voxels
+/// and `order`) the vector8 kernel steps over samples whose every stencil
+/// voxel is zero; the scalar `segment` kernel ignores it.
 cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
-                                 DeviceFootprints& fp, LocalKernel variant = LocalKernel::vector8);
+                                 DeviceFootprints& fp, LocalKernel variant = LocalKernel::vector8,
+                                 const DeviceOccupancy* skip = nullptr);
 
 }  // namespace simdvol
