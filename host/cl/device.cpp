@@ -376,13 +376,80 @@ std::size_t Device::cached_programs() const {
   return cache_->programs.size();
 }
 
+struct Device::Pool {
+  struct Entry {
+    cl::Buffer buffer;
+    cl_mem_flags flags = 0;
+    std::size_t bytes = 0;
+    bool busy = false;  // handed out in the open scope, or still held by someone
+    int idle = 0;       // closed scopes since it was last handed out
+  };
+  std::mutex mutex;
+  int depth = 0;  // open scopes
+  std::vector<Entry> entries;
+};
+
 cl::Buffer Device::buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr,
                           const std::string& what) {
   check_allocation(bytes, info_.max_alloc_bytes, what);
+  const bool pooled = pool_ && host_ptr == nullptr && bytes > 0;
+  std::unique_lock<std::mutex> lock;
+  if (pooled) {
+    lock = std::unique_lock<std::mutex>(pool_->mutex);
+    if (pool_->depth > 0) {
+      Pool::Entry* best = nullptr;
+      for (Pool::Entry& e : pool_->entries)
+        if (!e.busy && e.flags == flags && e.bytes >= bytes && e.bytes <= 2 * bytes + 65536 &&
+            (!best || e.bytes < best->bytes))
+          best = &e;
+      if (best) {
+        best->busy = true;
+        best->idle = 0;
+        return best->buffer;
+      }
+    }
+  }
   cl_int err = CL_SUCCESS;
   cl::Buffer b(context_, flags, bytes, host_ptr, &err);
   if (err != CL_SUCCESS) throw CLError("clCreateBuffer(" + what + ")", err);
+  if (pooled && pool_->depth > 0) pool_->entries.push_back({b, flags, bytes, true, 0});
   return b;
+}
+
+Device::ReuseScope::ReuseScope(Device& device) : device_(&device) {
+  if (!device_->pool_) device_->pool_ = std::make_unique<Pool>();
+  std::lock_guard<std::mutex> lock(device_->pool_->mutex);
+  ++device_->pool_->depth;
+}
+
+Device::ReuseScope::~ReuseScope() {
+  Pool& pool = *device_->pool_;
+  std::lock_guard<std::mutex> lock(pool.mutex);
+  if (--pool.depth > 0) return;
+  // Every command that used the scope's buffers must have completed before
+  // one is handed out again (a conforming implementation keeps a buffer
+  // alive for its pending commands, but need not show that in the count).
+  if (device_->queue_.finish() != CL_SUCCESS) {
+    pool.entries.clear();  // unknown state: keep nothing
+    return;
+  }
+  std::vector<Pool::Entry> kept;
+  for (Pool::Entry& e : pool.entries) {
+    cl_uint refs = 0;
+    if (e.buffer.getInfo(CL_MEM_REFERENCE_COUNT, &refs) != CL_SUCCESS) continue;  // drop it
+    e.busy = refs > 1;
+    if (!e.busy && ++e.idle > 2) continue;  // not used lately: release it
+    kept.push_back(std::move(e));
+  }
+  pool.entries = std::move(kept);
+}
+
+std::size_t Device::pooled_bytes() const {
+  if (!pool_) return 0;
+  std::lock_guard<std::mutex> lock(pool_->mutex);
+  std::size_t n = 0;
+  for (const Pool::Entry& e : pool_->entries) n += e.bytes;
+  return n;
 }
 
 cl::Event Device::run(const cl::Kernel& kernel, const std::string& what, const cl::NDRange& global,

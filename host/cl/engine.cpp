@@ -113,6 +113,9 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   const CompositeMode mode = opt.composite.mode;
 
   const auto t0 = std::chrono::steady_clock::now();
+  // The frame's scratch buffers (matching, footprints, swap levels, ...) come
+  // from the buffers the previous frames released, without page faults.
+  Device::ReuseScope reuse(device);
   // Buffers keyed by dims.
   if (!S.dims || *S.dims != vol.dims()) {
     S.cells.reset();

@@ -312,5 +312,58 @@ TEST(DeviceTest, MovedDeviceKeepsWorking) {
   EXPECT_EQ(v[9], 28);
 }
 
+// Device::ReuseScope: buffers released in one scope are handed out in the
+// next (same flags, a size within the rule), never while someone holds them,
+// never outside a scope or with a host pointer, and released after two idle
+// scopes.
+TEST(DeviceTest, ReuseScopeRecyclesOnlyReleasedBuffers) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  const auto rw = CL_MEM_READ_WRITE;
+  cl_mem first = nullptr;
+  cl::Buffer held;
+  {
+    Device::ReuseScope scope(d);
+    cl::Buffer a = d.buffer(rw, 1 << 20, nullptr, "a");
+    held = d.buffer(rw, 1 << 20, nullptr, "held");
+    first = a();
+    // Not within the same scope, even once released.
+    a = cl::Buffer();
+    EXPECT_NE(d.buffer(rw, 1 << 20, nullptr, "b")(), first);
+  }
+  EXPECT_EQ(d.pooled_bytes(), 3u << 20);
+  {
+    Device::ReuseScope scope(d);
+    cl::Buffer x = d.buffer(rw, (1 << 20) - 100, nullptr, "x");  // smaller: fits
+    cl::Buffer y = d.buffer(rw, 1 << 20, nullptr, "y");
+    cl::Buffer z = d.buffer(rw, 1 << 20, nullptr, "z");  // both free ones taken: a fresh one
+    EXPECT_TRUE(x() == first || y() == first);
+    for (const cl::Buffer* b : {&x, &y, &z}) EXPECT_NE((*b)(), held());  // still held
+    EXPECT_NE(d.buffer(CL_MEM_READ_ONLY, 1 << 20, nullptr, "other flags")(), held());
+    // More than twice the request plus 64 KiB: not handed out.
+    EXPECT_EQ(d.pooled_bytes(), (4u << 20) + (1u << 20));
+  }
+  {
+    Device::ReuseScope scope(d);
+    cl::Buffer small = d.buffer(rw, 1000, nullptr, "small");  // 1 MiB > 2 * 1000 + 64 KiB
+    EXPECT_NE(small(), first);
+    std::vector<int> host(16);
+    cl::Buffer own = d.buffer(rw | CL_MEM_USE_HOST_PTR, 64, host.data(), "host memory");
+    EXPECT_NE(own(), first);
+  }
+  cl::Buffer outside = d.buffer(rw, 1 << 20, nullptr, "outside a scope");
+  EXPECT_NE(outside(), first);
+  // Released after two more scopes without use; the held one stays.
+  { Device::ReuseScope s1(d); }
+  { Device::ReuseScope s2(d); }
+  { Device::ReuseScope s3(d); }
+  EXPECT_EQ(d.pooled_bytes(), 1u << 20);
+  held = cl::Buffer();
+  { Device::ReuseScope s4(d); }
+  { Device::ReuseScope s5(d); }
+  { Device::ReuseScope s6(d); }
+  EXPECT_EQ(d.pooled_bytes(), 0u);
+}
+
 }  // namespace
 }  // namespace simdvol

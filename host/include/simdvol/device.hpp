@@ -190,8 +190,35 @@ class Device {
   std::size_t cached_programs() const;
 
   /// Allocates a buffer, checking the size against the device's max
-  /// allocation first (ArgumentError naming `what`).
+  /// allocation first (ArgumentError naming `what`). While a ReuseScope is
+  /// open, a request without a host pointer may get a buffer released in an
+  /// earlier scope (of the same flags, bytes <= size <= 2 * bytes + 64 KiB,
+  /// contents unspecified, as for a fresh buffer).
   cl::Buffer buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr, const std::string& what);
+
+  /// Reuse of scratch buffers from frame to frame. A frame allocates tens of
+  /// MB of buffers that live only for that frame; on PoCL each is fresh host
+  /// memory, and touching it costs a page fault per 4 KiB inside the
+  /// kernels (about 33,000 per 256^3 frame). While a scope is open, buffer()
+  /// records what it hands out; when the outermost scope closes it waits for
+  /// the queue and keeps the buffers that nobody else holds any more (their
+  /// reference count is 1: only the pool's), for the next scope. A kept
+  /// buffer not handed out again in the next two scopes is released. Buffers
+  /// still held by the caller (a RenderEngine's persistent cells, say) are
+  /// never handed out twice. For one thread's frames (RenderEngine::render
+  /// opens one per frame).
+  class ReuseScope {
+   public:
+    explicit ReuseScope(Device& device);
+    ~ReuseScope();
+    ReuseScope(const ReuseScope&) = delete;
+    ReuseScope& operator=(const ReuseScope&) = delete;
+
+   private:
+    Device* device_;
+  };
+  /// Bytes of buffers the pool holds (handed out or free), for tests.
+  std::size_t pooled_bytes() const;
 
   /// Enqueues a 1-D, 2-D or 3-D range; each global size is rounded up to a
   /// multiple of the local size. Returns the event (profiling info available
@@ -214,6 +241,8 @@ class Device {
     std::map<std::pair<std::string, std::string>, cl::Program> programs;
   };
   std::unique_ptr<Cache> cache_;
+  struct Pool;
+  std::unique_ptr<Pool> pool_;
 };
 
 /// Sets every argument of `kernel`, throwing CLError naming the kernel and
