@@ -221,12 +221,44 @@ SV_FN float16 sv_ramp_eval16(__constant const sv_ramp* r, const int n, float16 v
   return y;
 }
 
+/* With AVX2 (PoCL compiles for the host CPU and defines __AVX2__) and a
+ * compile-time material count of 3..8, sv_mixture16 picks the bracketing
+ * materials' parameters with vpermps (__builtin_ia32_permvarsf256) instead
+ * of a chain of selects per parameter, which kept 28 vectors live and
+ * spilled; OpenCL's shuffle() with a variable mask became per-element
+ * extracts and inserts under PoCL 3.1. The values picked are the same.
+ * SV_NO_PERMUTE keeps the select chain (for comparison). */
+#if defined(__clang__) && defined(__AVX2__) && !defined(SV_NO_PERMUTE) && defined(SV_NMAT) && \
+    SV_NMAT >= 3 && SV_NMAT <= 8
+#define SV_MIX_PERMUTE 1
+#define SV_PERM16(t, i)                                               \
+  ((float16)(__builtin_ia32_permvarsf256((t), (i).lo), __builtin_ia32_permvarsf256((t), (i).hi)))
+#endif
+
 SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n, float16 v,
                            float16* cr, float16* cg, float16* cb) {
   __constant const sv_materials* m = &cp->materials;
   float16 I = v;
   if (cp->relative)
     I = cp->range_scale > 0.0f ? (v - cp->range_min) * cp->range_scale : (float16)(0.0f);
+#ifdef SV_MIX_PERMUTE
+  /* i = the number of means mean_1 .. mean_{n-2} <= I (the means ascend, so
+   * the last k of the select chain below), j = i + 1; each parameter is
+   * picked from its 8-entry table by vpermps. */
+  int16 ix = (int16)(0);
+#pragma unroll
+  for (int k = 1; k < SV_NMAT - 1; ++k) ix -= (int16)(m->mean[k] <= I); /* true is -1 */
+  const int16 jx = ix + 1;
+  const float8 tm = vload8(0, m->mean), th = vload8(0, m->half_inv_var);
+  const float8 tl = vload8(0, m->log_sigma), ta = vload8(0, m->opacity);
+  const float8 tr = vload8(0, m->r), tg = vload8(0, m->g), tb = vload8(0, m->b);
+  float16 mi = SV_PERM16(tm, ix), hi = SV_PERM16(th, ix), li = SV_PERM16(tl, ix);
+  float16 ai = SV_PERM16(ta, ix), ri = SV_PERM16(tr, ix), gi = SV_PERM16(tg, ix);
+  float16 bi = SV_PERM16(tb, ix);
+  const float16 mj = SV_PERM16(tm, jx), hj = SV_PERM16(th, jx), lj = SV_PERM16(tl, jx);
+  const float16 aj = SV_PERM16(ta, jx), rj = SV_PERM16(tr, jx), gj = SV_PERM16(tg, jx);
+  const float16 bj = SV_PERM16(tb, jx);
+#else
   const int j0 = n > 1 ? 1 : 0;
   float16 mi = m->mean[0], hi = m->half_inv_var[0], li = m->log_sigma[0];
   float16 ai = m->opacity[0], ri = m->r[0], gi = m->g[0], bi = m->b[0];
@@ -252,6 +284,7 @@ SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n,
       bj = select(bj, (float16)(m->b[k + 1]), in);
     }
   }
+#endif
   const float16 di = I - mi, dj = I - mj;
   const float16 dl = (di * di * hi + li) - (dj * dj * hj + lj);
   float16 pi = 1.0f / (1.0f + sv_exp16(dl));

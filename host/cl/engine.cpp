@@ -242,7 +242,9 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   cl::Buffer intermediate, output;
   Image out;
   if (via_swap) {
-    // The swap plan on the host while the device resamples.
+    // The swap plan on the host while the device resamples (flushed first:
+    // PoCL starts enqueued commands on a flush).
+    cl_check(device.queue().flush(), "clFlush");
     const auto tp = std::chrono::steady_clock::now();
     const DeviceSwapPlan plan =
         upload_swap_plan(device, plan_swap(segs.host_rects, split, view, grid, eo.layout));

@@ -60,7 +60,24 @@ Classifier many_knots() {
   return c;
 }
 
+// A mixture of n materials spread over -1000 .. 2000 with varied colours:
+// n = 2 and n > 8 take the select chain of sv_mixture16, 3 <= n <= 8 its
+// vpermps path (8: the last index 7 of the table).
+Classifier mixture_of(int n) {
+  Classifier c;
+  c.kind = Classifier::Kind::mixture;
+  c.mixture.materials.clear();
+  for (int i = 0; i < n; ++i) {
+    const float f = static_cast<float>(i) / static_cast<float>(n - 1);
+    c.mixture.materials.push_back({"m" + std::to_string(i), -1000.0f + 3000.0f * f,
+                                   60.0f + 40.0f * static_cast<float>(i % 3), f, 1.0f - f,
+                                   0.3f + 0.5f * static_cast<float>(i % 2), 0.05f + 0.9f * f});
+  }
+  return c;
+}
+
 Classifier by_name(const std::string& name) {
+  if (name.rfind("mix", 0) == 0) return mixture_of(std::stoi(name.substr(3)));
   return name == "knots" ? many_knots() : classifier_preset(name);
 }
 
@@ -160,6 +177,7 @@ TEST(ClassifyKernel, OddVolumeAndOpacitySteps) {
   const Volume vol = testing::random_volume({37, 29, 23}, -1100.0f, 2000.0f, {1.0, 0.8, 2.5}, 7);
   for (const char* name : {"ct", "ct-bone", "mri", "knots"})
     for (int64_t pes : {1, 8, 512, 8192}) check_case({&vol, name, kViews[2], pes});
+  for (const char* name : {"mix2", "mix8", "mix9"}) check_case({&vol, name, kViews[1], 512});
   for (double step : {0.37, 1.7, 3.0}) {
     check_case({&vol, "ct", kViews[1], 512, step});
     check_case({&vol, "knots", kViews[1], 8, step});
