@@ -85,7 +85,7 @@ cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, con
   const std::string name = "simdvol_swap_stage";
   cl::Kernel kern = swap_kernel(device, name);
   const auto kk = static_cast<std::size_t>(k);
-  const cl_int n = static_cast<cl_int>(d.chunk_count[kk] * kSwapChunk);
+  const cl_int n = static_cast<cl_int>(d.chunk_count[kk]);
   set_args(kern, name, in, d.rects[kk], d.offsets[kk], out, d.rects[kk + 1], d.offsets[kk + 1],
            d.chunks[kk], n, static_cast<cl_int>(k), static_cast<cl_int>(d.plan.front[kk]));
   return device.run(kern, name,
