@@ -131,11 +131,14 @@ __kernel void simdvol_resample_local_v8(__global const sv_segment* segs, const i
   vstore8(ag, 0, gg);
   vstore8(ab, 0, bb);
   vstore8(aa, 0, al);
+  /* The lanes' PEs: one binary search, then forward (the 8 segments are
+   * consecutive, so their PEs ascend). */
+  int p = sv_pe_of_segment(seg_off, log2p, s0);
 #pragma unroll
   for (int l = 0; l < 8; ++l) {
     const int s = s0 + l;
     if (s < nseg) {
-      const int p = sv_pe_of_segment(seg_off, log2p, s);
+      while (seg_off[p + 1] <= s) ++p;
       const sv_segment g = {li[l], lj[l], lk[l], lk[l] + ln[l]};
       foot[sv_footprint_index(rects, rect_off, p, g)] = (float4)(rr[l], gg[l], bb[l], al[l]);
     }
