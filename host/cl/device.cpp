@@ -280,7 +280,21 @@ void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const 
                                   "volume or fewer PEs/less halo");
 }
 
-Device::Device(std::optional<int> index) : cache_(std::make_unique<Cache>()) {
+struct Device::Pool {
+  struct Entry {
+    cl::Buffer buffer;
+    cl_mem_flags flags = 0;
+    std::size_t bytes = 0;
+    bool busy = false;  // handed out in the open scope, or still held by someone
+    int idle = 0;       // closed scopes since it was last handed out
+  };
+  std::mutex mutex;
+  int depth = 0;  // open scopes
+  std::vector<Entry> entries;
+};
+
+Device::Device(std::optional<int> index)
+    : cache_(std::make_unique<Cache>()), pool_(std::make_unique<Pool>()) {
   auto found = all_devices();
   std::vector<DeviceInfo> infos;
   for (std::size_t i = 0; i < found.size(); ++i) {
@@ -299,7 +313,8 @@ Device::Device(std::optional<int> index) : cache_(std::make_unique<Cache>()) {
   describe_self(chosen, found[chosen].platform_index, found[chosen].platform);
 }
 
-Device::Device(cl_context context, cl_command_queue queue) : cache_(std::make_unique<Cache>()) {
+Device::Device(cl_context context, cl_command_queue queue)
+    : cache_(std::make_unique<Cache>()), pool_(std::make_unique<Pool>()) {
   if (!context || !queue) throw ArgumentError("Device", "null cl_context or cl_command_queue");
   context_ = cl::Context(context, /*retainObject=*/true);
   queue_ = cl::CommandQueue(queue, /*retainObject=*/true);
@@ -376,19 +391,6 @@ std::size_t Device::cached_programs() const {
   return cache_->programs.size();
 }
 
-struct Device::Pool {
-  struct Entry {
-    cl::Buffer buffer;
-    cl_mem_flags flags = 0;
-    std::size_t bytes = 0;
-    bool busy = false;  // handed out in the open scope, or still held by someone
-    int idle = 0;       // closed scopes since it was last handed out
-  };
-  std::mutex mutex;
-  int depth = 0;  // open scopes
-  std::vector<Entry> entries;
-};
-
 cl::Buffer Device::buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr,
                           const std::string& what) {
   check_allocation(bytes, info_.max_alloc_bytes, what);
@@ -417,7 +419,7 @@ cl::Buffer Device::buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr,
 }
 
 Device::ReuseScope::ReuseScope(Device& device) : device_(&device) {
-  if (!device_->pool_) device_->pool_ = std::make_unique<Pool>();
+  if (!device_->pool_) throw ArgumentError("device", "was moved from");
   std::lock_guard<std::mutex> lock(device_->pool_->mutex);
   ++device_->pool_->depth;
 }
