@@ -313,14 +313,12 @@ SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, 
   return a;
 }
 
-SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, float16 is,
-                         float16 gmag, float16 v, float16* r, float16* g, float16* b,
-                         float16* alpha) {
-  float16 cr, cg, cb, a;
-  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER)
-    a = sv_transfer16(cp, v, gmag, &cr, &cg, &cb);
-  else
-    a = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+/* The lit premultiplied RGBA of 16 voxels from the classifier's alpha `a`
+ * and premultiplied material colour (cr, cg, cb) (sv_classify16's second
+ * half). */
+SV_FN void sv_classify16_lit(__constant const sv_classify_params* cp, float16 a, float16 cr,
+                             float16 cg, float16 cb, float16 id, float16 is, float16 v,
+                             float16* r, float16* g, float16* b, float16* alpha) {
 #ifdef SV_STEP_ONE
   const float16 a1 = a;
 #else
@@ -337,6 +335,17 @@ SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, fl
   *g = select(z, a1 * fmin(1.0f, cg * inv * id + is), ok);
   *b = select(z, a1 * fmin(1.0f, cb * inv * id + is), ok);
   *alpha = select(z, a1, ok);
+}
+
+SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, float16 is,
+                         float16 gmag, float16 v, float16* r, float16* g, float16* b,
+                         float16* alpha) {
+  float16 cr, cg, cb, a;
+  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER)
+    a = sv_transfer16(cp, v, gmag, &cr, &cg, &cb);
+  else
+    a = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+  sv_classify16_lit(cp, a, cr, cg, cb, id, is, v, r, g, b, alpha);
 }
 
 #ifndef SV_VSTORE16 /* as in shade.cl */
@@ -504,12 +513,40 @@ __kernel void simdvol_shade_classify16(__global const float* restrict cells,
   const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (p >= pes || e0 >= vstride) return;
-  float16 id, is, mag, v, r, g, b, a;
-  const int16 in = sv_shade_chunk(sp, cells, origins, cell, block, p, e0, &id, &is, &mag, &v);
-  sv_classify16(cp, id, is, mag, v, &r, &g, &b, &a);
+  int rb[SV_NR];
+  float fx[SV_NR], fy[SV_NR], fz[SV_NR], ok[SV_NR];
+  sv_chunk_rows(origins, cell, block, p, e0, rb, fx, fy, fz, ok);
+  __global const float* c = cells + sv_block_start(block, p);
+  __global float* dst = out + (size_t)p * 4 * (size_t)vstride;
+  const int16 in = SV_ROWS16(ok) != 0.0f;
+  const float16 v = SV_LD16(c, rb, 0);
   const float16 z = 0.0f;
-  sv_store16(out + (size_t)p * 4 * (size_t)vstride, vstride, e0, select(z, r, in),
-             select(z, g, in), select(z, b, in), select(z, a, in));
+  float16 id, is, mag, r, g, b, a;
+  /* Empty space: a voxel is (0, 0, 0, 0) unless its alpha before lighting is
+   * > 0 and its value not NaN (sv_classify16_lit), whatever the shading; a
+   * chunk with no such voxel is stored as zeros without being shaded (the
+   * same bits). The mixture's alpha needs only v; the transfer function's is
+   * density(v) * gradient(|g|), 0 where density(v) is. */
+  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
+    const float16 d = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v);
+    if (!any((d != 0.0f) & ~isnan(v) & in)) {
+      sv_store16(dst, vstride, e0, z, z, z, z);
+      return;
+    }
+    sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
+    sv_classify16(cp, id, is, mag, v, &r, &g, &b, &a);
+  } else {
+    float16 cr, cg, cb;
+    const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+    if (!any((a0 > 0.0f) & ~isnan(v) & in)) {
+      sv_store16(dst, vstride, e0, z, z, z, z);
+      return;
+    }
+    sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
+    sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
+  }
+  sv_store16(dst, vstride, e0, select(z, r, in), select(z, g, in), select(z, b, in),
+             select(z, a, in));
 }
 #endif
 

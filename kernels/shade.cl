@@ -286,16 +286,16 @@ SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 
 #error "SV_RW must be 16, 8, 4 or 1"
 #endif
 
-/* Shades the chunk of 16 positions from e0 (a multiple of 16) of PE p's
- * cell; returns the lanes that are voxels of the cell (-1) or the plane's
- * tail (0; their values are those of the last row, to be discarded). */
-SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const float* cells,
-                           __global const int4* origins, int4 cell, int4 block, int p, int e0,
-                           float16* id, float16* is, float16* mag, float16* v) {
+/* The chunk of 16 positions from e0 (a multiple of 16) of PE p's cell, in
+ * SV_NR rows: rb = block offsets (of each row's first lane; of each lane
+ * for SV_RW 1), fx, fy, fz = volume coordinates (fx per lane for SV_RW 1,
+ * else fx[0] = x of lane 0 of every row), ok = 1 for rows (lanes) that are
+ * voxels of the cell, 0 for the plane's tail (their values are those of
+ * the last row, to be discarded). */
+SV_FN void sv_chunk_rows(__global const int4* origins, int4 cell, int4 block, int p, int e0,
+                         int* rb, float* fx, float* fy, float* fz, float* ok) {
   const int rows = cell.y * cell.z;
   const int4 o = origins[p];
-  __global const float* c = cells + sv_block_start(block, p);
-  const int bx = block.x, bxy = block.x * block.y;
 #if SV_RW == 1
   /* Lane l is position e0 + l: (lx, row) stepped from e0's without a
    * division per lane; lanes past the cell's voxels repeat the last voxel
@@ -304,8 +304,6 @@ SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const 
   int row = e0 / cell.x;
   int lx = e0 - row * cell.x;
   int ly = row % cell.y, lz = row / cell.y;
-  int rb[16];
-  float fx[16], fy[16], fz[16], ok[16];
 #pragma unroll
   for (int l = 0; l < 16; ++l) {
     const int in = e0 + l < cvox;
@@ -323,11 +321,6 @@ SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const 
       }
     }
   }
-  *v = SV_LD16(c, rb, 0);
-  sv_shade16(sp, SV_LD16(c, rb, -1), SV_LD16(c, rb, 1), SV_LD16(c, rb, -bx), SV_LD16(c, rb, bx),
-             SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), SV_ROWS16(fx), SV_ROWS16(fy),
-             SV_ROWS16(fz), id, is, mag);
-  return SV_ROWS16(ok) != 0.0f;
 #else
 #if SV_RW == 16
   const int row0 = e0 / cell.x;
@@ -336,23 +329,47 @@ SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const 
   const int row0 = e0 / SV_RW; /* cell.x == SV_RW */
   const int lx0 = 0;
 #endif
-  int rb[SV_NR];
-  float fy[SV_NR], fz[SV_NR], ok[SV_NR];
 #pragma unroll
   for (int r = 0; r < SV_NR; ++r) {
     const int row = min(row0 + r, rows - 1);
     const int ly = row % cell.y, lz = row / cell.y;
     rb[r] = (int)sv_block_offset(cell, block, lx0, ly, lz);
+    fx[r] = (float)(o.x + lx0);
     fy[r] = (float)(o.y + ly);
     fz[r] = (float)(o.z + lz);
     ok[r] = row0 + r < rows ? 1.0f : 0.0f;
   }
-  *v = SV_LD16(c, rb, 0);
-  sv_shade16(sp, SV_LD16(c, rb, -1), SV_LD16(c, rb, 1), SV_LD16(c, rb, -bx), SV_LD16(c, rb, bx),
-             SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), (float)(o.x + lx0) + SV_IOTA16,
-             SV_ROWS16(fy), SV_ROWS16(fz), id, is, mag);
-  return SV_ROWS16(ok) != 0.0f;
 #endif /* SV_RW == 1 */
+}
+
+/* Shades the chunk given by sv_chunk_rows; c = the start of the PE's block. */
+SV_FN void sv_shade_rows(__constant const sv_shade_params* sp, __global const float* c, int4 block,
+                         const int* rb, const float* fx, const float* fy, const float* fz,
+                         float16* id, float16* is, float16* mag) {
+  const int bx = block.x, bxy = block.x * block.y;
+#if SV_RW == 1
+  const float16 x = SV_ROWS16(fx);
+#else
+  const float16 x = fx[0] + SV_IOTA16;
+#endif
+  sv_shade16(sp, SV_LD16(c, rb, -1), SV_LD16(c, rb, 1), SV_LD16(c, rb, -bx), SV_LD16(c, rb, bx),
+             SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), x, SV_ROWS16(fy), SV_ROWS16(fz), id, is,
+             mag);
+}
+
+/* Shades the chunk of 16 positions from e0 of PE p's cell (sv_chunk_rows);
+ * returns the lanes that are voxels of the cell (-1) or the plane's tail
+ * (0). */
+SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const float* cells,
+                           __global const int4* origins, int4 cell, int4 block, int p, int e0,
+                           float16* id, float16* is, float16* mag, float16* v) {
+  int rb[SV_NR];
+  float fx[SV_NR], fy[SV_NR], fz[SV_NR], ok[SV_NR];
+  sv_chunk_rows(origins, cell, block, p, e0, rb, fx, fy, fz, ok);
+  __global const float* c = cells + sv_block_start(block, p);
+  *v = SV_LD16(c, rb, 0);
+  sv_shade_rows(sp, c, block, rb, fx, fy, fz, id, is, mag);
+  return SV_ROWS16(ok) != 0.0f;
 }
 
 /* Stores 16 lanes of (a, b, c, d) at position e0 of a PE's planar block. */
