@@ -126,7 +126,7 @@ void check_case(const Case& k) {
   VoxelBuffer scalar_out(dev, L);
   enqueue_classify(dev, shade_buf, cp, scalar_out, ClassifyKernel::scalar);
   dev.finish();
-  EXPECT_LE(max_diff(alone, voxels_from_cells(scalar_out.read<Rgba>(dev), L)), 1e-6)
+  EXPECT_EQ(max_diff(alone, voxels_from_cells(scalar_out.read<Rgba>(dev), L)), 0.0)
       << "scalar vs float16 classify";
 
   // 2. shade -> classify on the device, gathered by the device gather.
