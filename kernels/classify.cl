@@ -509,7 +509,9 @@ __kernel void simdvol_shade_classify16(__global const float* restrict cells,
                                        __global const int4* restrict origins, int4 dims,
                                        int4 cell, int4 block, int pes, int vstride,
                                        __constant const sv_shade_params* sp,
-                                       __constant const sv_classify_params* cp) {
+                                       __constant const sv_classify_params* cp,
+                                       __global volatile uint* occ, const int nbx, const int nby,
+                                       const int mark) {
   const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (p >= pes || e0 >= vstride) return;
@@ -547,6 +549,35 @@ __kernel void simdvol_shade_classify16(__global const float* restrict cells,
   }
   sv_store16(dst, vstride, e0, select(z, r, in), select(z, g, in), select(z, b, in),
              select(z, a, in));
+  /* The brick occupancy of resample.cl's simdvol_occupancy, marked here
+   * from the values just stored (so no pass reads them again): each voxel
+   * of the cell inside the volume with a channel that is not +-0 sets its
+   * brick (atomically: bricks straddle chunks and cells). occ must be zero
+   * before; chunks stored as zeros above mark nothing. */
+  if (mark) {
+#if SV_RW == 1
+    const float16 xf = SV_ROWS16(fx);
+#else
+    const float16 xf = fx[0] + SV_IOTA16;
+#endif
+    const int16 X = convert_int16(xf), Y = convert_int16(SV_ROWS16(fy));
+    const int16 Z = convert_int16(SV_ROWS16(fz));
+    const int16 nz = ((as_int16(r) | as_int16(g) | as_int16(b) | as_int16(a)) & 0x7fffffff) != 0;
+    const int16 set = nz & in & (X < dims.x) & (Y < dims.y) & (Z < dims.z);
+    if (any(set)) {
+      int bi[16], on[16];
+      vstore16((X >> SV_BRICK_LOG2) +
+                   nbx * ((Y >> SV_BRICK_LOG2) + nby * (Z >> SV_BRICK_LOG2)),
+               0, bi);
+      vstore16(set, 0, on);
+      int last = -1;
+      for (int l = 0; l < 16; ++l)
+        if (on[l] && bi[l] != last) {
+          atomic_or(&occ[bi[l]], 1u);
+          last = bi[l];
+        }
+    }
+  }
 }
 #endif
 

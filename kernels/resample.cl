@@ -302,8 +302,7 @@ SV_FN int sv_lanes8(__global const sv_segment* segs, const int nseg, const int s
  * The fused kernel first trims each lane to its first .. last sample in a
  * brick with reach (sv_trim8), then skips a step when no lane still
  * stepping is in one: the same bits as without skipping (tested). */
-#define SV_BRICK_LOG2 2
-#define SV_BRICK (1 << SV_BRICK_LOG2)
+#define SV_BRICK (1 << SV_BRICK_LOG2) /* SV_BRICK_LOG2: simdvol_shared.h */
 
 /* One work-item per (PE p, plane lz of its cell): 2-D range (cz, P). Scans
  * the plane's voxels inside the volume (padding is never read by a stencil)

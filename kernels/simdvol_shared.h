@@ -93,6 +93,9 @@ SV_FN float sv_uniform(sv_u64 seed, sv_u32 ray, sv_u32 sample, sv_u32 step) {
  * from ShadeParams/ShadeFrame and Classifier (host/cl/shade.cpp,
  * host/cl/classify.cpp); the kernels read them from a __constant buffer. */
 #define SV_MAX_MATERIALS 16
+/* Empty-space skipping: bricks of 2^SV_BRICK_LOG2 voxels per axis
+ * (resample.cl, classify.cl; the host's kBrick). */
+#define SV_BRICK_LOG2 2
 #define SV_MAX_KNOTS 32
 #define SV_CLASSIFY_MIXTURE 0
 #define SV_CLASSIFY_TRANSFER 1

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "chunk_ranges.hpp"
+#include "simdvol/local_cl.hpp"
 #include "simdvol/stages.hpp"
 #include "voxel_ranges.hpp"
 
@@ -146,7 +147,7 @@ cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
 
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
-                                 VoxelBuffer& out, ShadeKernel variant) {
+                                 VoxelBuffer& out, ShadeKernel variant, DeviceOccupancy* mark) {
   const CellLayout& C = cells.layout();
   const VoxelLayout& V = out.layout();
   if (C.halo < 1) throw ArgumentError("cells", "the shade stage needs a halo of at least 1");
@@ -161,11 +162,17 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
   Defines defines = classify_defines(classify);
   if (vec) defines.emplace_back("SV_RW", std::to_string(rw));
   if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+  if (mark && !vec) throw ArgumentError("occupancy", "only the float16 fused kernel marks it");
+  if (mark && mark->dims != V.dims())
+    throw ArgumentError("occupancy", "was made for a volume of other dimensions");
   cl::Kernel k = fused_kernel(device, name, defines);
   set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
            cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
            static_cast<cl_int>(V.stride), sbuf, cbuf);
   if (vec) {
+    // Without marking the occupancy argument is never read: any buffer will do.
+    set_args_from(k, name, 10, mark ? mark->occupied : cbuf, mark ? mark->bricks[0] : cl_int(0),
+                  mark ? mark->bricks[1] : cl_int(0), cl_int(mark ? 1 : 0));
     const detail::PlaneRange r = detail::chunk_range(V);
     return device.run(k, name, r.global, r.local);
   }

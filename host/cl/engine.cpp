@@ -138,8 +138,14 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.laid_out = &vol;
     S.laid_data = vol.data().data();
   }
+  // Empty-space skipping (direct compositing): the fused kernel marks the
+  // brick occupancy as it writes the voxels; otherwise a scan makes it.
+  std::optional<DeviceOccupancy> occupancy;
+  const bool skip = eo.skip_empty && mode == CompositeMode::direct;
   if (eo.fused) {
-    e_classify = enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba);
+    if (skip) occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));
+    e_classify = enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba, ShadeKernel::vec16,
+                                        occupancy ? &*occupancy : nullptr);
   } else {
     e_shade = enqueue_shade(device, *S.cells, sp, *S.shading);
     e_classify = enqueue_classify(device, *S.shading, cp, *S.rgba);
@@ -157,12 +163,14 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   std::vector<StageEvent> offset_events, walk_events;
   std::vector<StageEvent> ray_events;
   std::optional<DeviceFootprints> fp;
-  std::optional<DeviceOccupancy> occupancy;
   bool via_swap = true;  // direct and per sub-ray mc: footprints -> swap -> display
   if (mode == CompositeMode::direct) {
     fp.emplace(make_footprints(device, segs.host_rects));
     e_zero = enqueue_zero_footprints(device, *fp);
-    if (eo.skip_empty) occupancy.emplace(enqueue_occupancy(device, *S.rgba, opt.order));
+    if (occupancy)
+      enqueue_occupancy_reach(device, *occupancy);
+    else if (skip)
+      occupancy.emplace(enqueue_occupancy(device, *S.rgba, opt.order));
     e_local = enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp,
                                      LocalKernel::vector8, occupancy ? &*occupancy : nullptr);
   } else {

@@ -203,10 +203,10 @@ cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buf
   return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs));
 }
 
-DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int order) {
-  const VoxelLayout& L = voxels.layout();
-  if (L.elements() * 4 > kInt32Max)
-    throw ArgumentError("volume", "voxel cells exceed int32 float indexing in the resample stage");
+DeviceOccupancy make_occupancy(Device& device, const VoxelLayout& L, int order) {
+  if (order < 0 || order > kMaxOrder)
+    throw ArgumentError("order", "interpolation order " + std::to_string(order) +
+                                     " is outside 0.." + std::to_string(kMaxOrder));
   DeviceOccupancy o;
   o.dims = L.dims();
   o.order = order;
@@ -214,6 +214,30 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
   const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(o.count(), 1));
   o.occupied = device.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_uint), nullptr, "brick occupancy");
   o.reach = device.buffer(CL_MEM_READ_WRITE, n, nullptr, "brick reach");
+  cl::Event fill;
+  cl_check(device.queue().enqueueFillBuffer(o.occupied, cl_uint(0), 0, n * sizeof(cl_uint), nullptr,
+                                            &fill),
+           "clEnqueueFillBuffer(brick occupancy)");
+  o.events.push_back(fill);
+  return o;
+}
+
+void enqueue_occupancy_reach(Device& device, DeviceOccupancy& o) {
+  const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(o.count(), 1));
+  const std::string name = "simdvol_occupancy_reach";
+  cl::Kernel r = stage_kernel(device, name, o.order);
+  // Stencil voxels f + p: p in 0..1 for orders 0 and 1, -1..2 for 2 and 3.
+  set_args(r, name, o.occupied, o.bricks[0], o.bricks[1], o.bricks[2], cl_int(o.order >= 2 ? 1 : 0),
+           cl_int(1), o.reach);
+  o.events.push_back(
+      device.run(r, name, cl::NDRange(round_up(n, kSegmentWgs)), cl::NDRange(kSegmentWgs)));
+}
+
+DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int order) {
+  const VoxelLayout& L = voxels.layout();
+  if (L.elements() * 4 > kInt32Max)
+    throw ArgumentError("volume", "voxel cells exceed int32 float indexing in the resample stage");
+  DeviceOccupancy o = make_occupancy(device, L, order);
   const int64_t P = L.pes();
   std::vector<cl_int4> origins(static_cast<std::size_t>(P));
   for (int64_t p = 0; p < P; ++p) {
@@ -222,17 +246,12 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
         {static_cast<cl_int>(c[0]), static_cast<cl_int>(c[1]), static_cast<cl_int>(c[2]), 0}};
   }
   const cl::Buffer org = upload(device, origins, "cell origins");
-  cl::Event fill;
-  cl_check(device.queue().enqueueFillBuffer(o.occupied, cl_uint(0), 0, n * sizeof(cl_uint), nullptr,
-                                            &fill),
-           "clEnqueueFillBuffer(brick occupancy)");
-  o.events.push_back(fill);
   const cl_int4 dims = {{static_cast<cl_int>(o.dims[0]), static_cast<cl_int>(o.dims[1]),
                          static_cast<cl_int>(o.dims[2]), 0}};
   const cl_int4 cell = {{static_cast<cl_int>(L.cell()[0]), static_cast<cl_int>(L.cell()[1]),
                          static_cast<cl_int>(L.cell()[2]), 0}};
-  std::string name = "simdvol_occupancy";
-  cl::Kernel k = stage_kernel(device, name, order);  // checks the order
+  const std::string name = "simdvol_occupancy";
+  cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, voxels.buffer(), static_cast<cl_int>(L.stride), cell, org, dims, o.bricks[0],
            o.bricks[1], o.occupied);
   const std::size_t wz = std::min<std::size_t>(8, static_cast<std::size_t>(L.cell()[2]));
@@ -240,13 +259,7 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
       k, name,
       cl::NDRange(round_up(static_cast<std::size_t>(L.cell()[2]), wz), static_cast<std::size_t>(P)),
       cl::NDRange(wz, 1)));
-  name = "simdvol_occupancy_reach";
-  cl::Kernel r = stage_kernel(device, name, order);
-  // Stencil voxels f + p: p in 0..1 for orders 0 and 1, -1..2 for 2 and 3.
-  set_args(r, name, o.occupied, o.bricks[0], o.bricks[1], o.bricks[2], cl_int(order >= 2 ? 1 : 0),
-           cl_int(1), o.reach);
-  o.events.push_back(
-      device.run(r, name, cl::NDRange(round_up(n, kSegmentWgs)), cl::NDRange(kSegmentWgs)));
+  enqueue_occupancy_reach(device, o);
   return o;
 }
 

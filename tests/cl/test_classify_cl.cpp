@@ -21,6 +21,7 @@
 
 #include "simdvol/engine.hpp"
 #include "simdvol/io.hpp"
+#include "simdvol/local_cl.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 #include "simdvol/stages.hpp"
@@ -137,9 +138,21 @@ void check_case(const Case& k) {
   const double d_staged = max_diff(ref, staged);
   EXPECT_LE(d_staged, kTol) << "shade + classify";
 
-  // 3. fused.
-  enqueue_shade_classify(dev, cells, sp, cp, fused);
+  // 3. fused, marking the brick occupancy of what it writes: the same as
+  // the scan of the written voxels (enqueue_occupancy), exactly.
+  DeviceOccupancy marked = make_occupancy(dev, L, 1);
+  enqueue_shade_classify(dev, cells, sp, cp, fused, ShadeKernel::vec16, &marked);
+  const DeviceOccupancy scanned = enqueue_occupancy(dev, fused, 1);
   dev.finish();
+  {
+    const auto n = static_cast<std::size_t>(marked.count());
+    std::vector<cl_uint> a(n), b(n);
+    cl_check(dev.queue().enqueueReadBuffer(marked.occupied, CL_TRUE, 0, n * 4, a.data()), "read");
+    cl_check(dev.queue().enqueueReadBuffer(scanned.occupied, CL_TRUE, 0, n * 4, b.data()), "read");
+    EXPECT_EQ(a, b) << "marked vs scanned brick occupancy";
+  }
+  EXPECT_THROW(enqueue_shade_classify(dev, cells, sp, cp, fused, ShadeKernel::range3d, &marked),
+               ArgumentError);
   const double d_fused = max_diff(staged, voxels_from_cells(fused.read<Rgba>(dev), L));
   EXPECT_EQ(d_fused, 0.0) << "fused vs staged";
 

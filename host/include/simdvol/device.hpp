@@ -259,6 +259,20 @@ void set_args(cl::Kernel& kernel, const std::string& what, const Args&... args) 
   (one(args), ...);
 }
 
+/// Sets arguments `first`, `first` + 1, ... of `kernel` (as set_args).
+template <typename... Args>
+void set_args_from(cl::Kernel& kernel, const std::string& what, cl_uint first,
+                   const Args&... args) {
+  cl_uint index = first;
+  auto one = [&](const auto& arg) {
+    cl_int err = kernel.setArg(index, arg);
+    if (err != CL_SUCCESS)
+      throw CLError("clSetKernelArg(" + what + ", " + std::to_string(index) + ")", err);
+    ++index;
+  };
+  (one(args), ...);
+}
+
 /// Duration of a profiled event in nanoseconds (end - start); 0 if the
 /// information is not available.
 std::uint64_t event_ns(const cl::Event& event);

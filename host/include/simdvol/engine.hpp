@@ -61,8 +61,9 @@ struct EngineTimes {
   double resample_local_ms = 0;  ///< zero footprints + brick occupancy + fused resample +
                                  ///< local (direct); resample into the sample buffer
                                  ///< (adaptive, mc)
-  double occupancy_ms = 0;       ///< direct with skip_empty: the brick occupancy (included
-                                 ///< in resample_local_ms)
+  double occupancy_ms = 0;       ///< direct with skip_empty: the brick occupancy's zeroing,
+                                 ///< scan (not fused: fused marks it inside classify_ms) and
+                                 ///< reach (included in resample_local_ms)
   double offsets_ms = 0;         ///< adaptive, mc: the sample offsets' scan
   double rays_ms = 0;            ///< adaptive, mc whole or allocated: per-pixel ray lists
   double walk_ms = 0;  ///< adaptive / mc walks (and the opacity allocation), zeroing included

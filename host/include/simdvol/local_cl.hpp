@@ -99,7 +99,7 @@ cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buf
 /// sample of interpolation order `order` may read a voxel that is not zero
 /// in every channel. The fused kernel skips samples in the other bricks,
 /// which cannot change a composite: the footprints are the same bits.
-inline constexpr int kBrick = 4;
+inline constexpr int kBrick = 1 << SV_BRICK_LOG2;  // simdvol_shared.h
 struct DeviceOccupancy {
   Dims3 dims{0, 0, 0};                    ///< the voxels' volume dims
   int order = -1;                         ///< the interpolation order `reach` is for
@@ -110,8 +110,15 @@ struct DeviceOccupancy {
   int64_t count() const { return int64_t(bricks[0]) * bricks[1] * bricks[2]; }
 };
 /// Enqueues the kernels for `voxels` (classified, RGBA) and `order`
-/// (ArgumentError outside 0..3).
+/// (ArgumentError outside 0..3): make_occupancy, the scan of the voxels
+/// (simdvol_occupancy), enqueue_occupancy_reach.
 DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int order);
+/// The buffers for voxels of layout `L` and `order`, `occupied` zeroed
+/// (enqueued): for a kernel that marks it while it writes the voxels
+/// (enqueue_shade_classify's `mark`), then enqueue_occupancy_reach.
+DeviceOccupancy make_occupancy(Device& device, const VoxelLayout& L, int order);
+/// `reach` from `occupied` (simdvol_occupancy_reach); appends its event.
+void enqueue_occupancy_reach(Device& device, DeviceOccupancy& o);
 
 /// Fused resample + local: the same footprints, samples never stored
 /// (`variant` as for enqueue_resample). With `skip` (made for these voxels

@@ -183,13 +183,18 @@ cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
                            const sv_classify_params& params, VoxelBuffer& out,
                            ClassifyKernel variant = ClassifyKernel::vec16);
 
+struct DeviceOccupancy;  // local_cl.hpp
+
 /// Shade and classify fused in one launch: `out` receives what
 /// enqueue_classify would (the same float code). vec16 (the default) uses
 /// the float16 kernel where the cells allow it (as enqueue_shade), any other
-/// value the scalar 3-D range kernel.
+/// value the scalar 3-D range kernel. With `mark` (from make_occupancy for
+/// out's layout; vec16 only, else ArgumentError) the kernel also sets the
+/// brick occupancy of what it writes, as enqueue_occupancy's scan would.
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
-                                 VoxelBuffer& out, ShadeKernel variant = ShadeKernel::vec16);
+                                 VoxelBuffer& out, ShadeKernel variant = ShadeKernel::vec16,
+                                 DeviceOccupancy* mark = nullptr);
 
 /// Gathers the in-volume voxels of `voxels` into `flat` (a buffer of at
 /// least dims-product 16-byte elements, x fastest).
