@@ -245,21 +245,8 @@ class Device {
   std::unique_ptr<Pool> pool_;
 };
 
-/// Sets every argument of `kernel`, throwing CLError naming the kernel and
-/// the argument index if one fails.
-template <typename... Args>
-void set_args(cl::Kernel& kernel, const std::string& what, const Args&... args) {
-  cl_uint index = 0;
-  auto one = [&](const auto& arg) {
-    cl_int err = kernel.setArg(index, arg);
-    if (err != CL_SUCCESS)
-      throw CLError("clSetKernelArg(" + what + ", " + std::to_string(index) + ")", err);
-    ++index;
-  };
-  (one(args), ...);
-}
-
-/// Sets arguments `first`, `first` + 1, ... of `kernel` (as set_args).
+/// Sets arguments `first`, `first` + 1, ... of `kernel`, throwing CLError
+/// naming the kernel and the argument index if one fails.
 template <typename... Args>
 void set_args_from(cl::Kernel& kernel, const std::string& what, cl_uint first,
                    const Args&... args) {
@@ -271,6 +258,12 @@ void set_args_from(cl::Kernel& kernel, const std::string& what, cl_uint first,
     ++index;
   };
   (one(args), ...);
+}
+
+/// Sets every argument of `kernel` (set_args_from argument 0).
+template <typename... Args>
+void set_args(cl::Kernel& kernel, const std::string& what, const Args&... args) {
+  set_args_from(kernel, what, 0, args...);
 }
 
 /// Duration of a profiled event in nanoseconds (end - start); 0 if the
