@@ -303,14 +303,20 @@ SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n,
   return wi + wj;
 }
 
-SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, float16 gmag,
-                            float16* cr, float16* cg, float16* cb) {
-  const float16 a = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v) *
-                    sv_ramp_eval16(&cp->gradient, SV_NK_GRADIENT_OF(cp), gmag);
+/* sv_transfer16 given d = density(v) (the fused kernel has it already). */
+SV_FN float16 sv_transfer16_d(__constant const sv_classify_params* cp, float16 d, float16 v,
+                              float16 gmag, float16* cr, float16* cg, float16* cb) {
+  const float16 a = d * sv_ramp_eval16(&cp->gradient, SV_NK_GRADIENT_OF(cp), gmag);
   *cr = a * sv_ramp_eval16(&cp->red, SV_NK_RED_OF(cp), v);
   *cg = a * sv_ramp_eval16(&cp->green, SV_NK_GREEN_OF(cp), v);
   *cb = a * sv_ramp_eval16(&cp->blue, SV_NK_BLUE_OF(cp), v);
   return a;
+}
+
+SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, float16 gmag,
+                            float16* cr, float16* cg, float16* cb) {
+  return sv_transfer16_d(cp, sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v), v, gmag, cr,
+                         cg, cb);
 }
 
 /* The lit premultiplied RGBA of 16 voxels from the classifier's alpha `a`
@@ -536,7 +542,9 @@ __kernel void simdvol_shade_classify16(__global const float* restrict cells,
       return;
     }
     sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
-    sv_classify16(cp, id, is, mag, v, &r, &g, &b, &a);
+    float16 cr, cg, cb;
+    const float16 a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
+    sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
   } else {
     float16 cr, cg, cb;
     const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);

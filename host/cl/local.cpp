@@ -275,18 +275,15 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   const bool v8 = variant == LocalKernel::vector8;
   const std::string name = v8 ? "simdvol_resample_local_v8" : "simdvol_resample_local";
   cl::Kernel k = stage_kernel(device, name, order);
-  if (v8) {
-    // Without skipping the reach argument is never read: any buffer will do.
-    set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
-             static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
-             tables.channel_stride, segs.rects, fp.offsets, fp.pixels,
-             skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
-             skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0));
-  } else {
-    set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
-             static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
-             tables.channel_stride, segs.rects, fp.offsets, fp.pixels);
-  }
+  set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
+           static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
+           tables.channel_stride, segs.rects, fp.offsets, fp.pixels);
+  // The float8 kernel's skipping arguments; without skipping the reach
+  // argument is never read: any buffer will do.
+  if (v8)
+    set_args_from(k, name, 11, skip ? skip->reach : tables.table,
+                  skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
+                  cl_int(skip ? 1 : 0));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }
