@@ -10,6 +10,13 @@
  * axis twice (cap, then cumulative shares); the share's floor division uses
  * a double estimate corrected exactly.
  *
+ * The rounds read and move the segments' bounds (k0, k1) in `kk`, 4 (or 8)
+ * bytes per segment, not the 16-byte segments: a round touches segments all
+ * over the buffer, and its time is mostly that of streaming their cache
+ * lines (16-bit bounds of 2 M segments, 8 MB, stay in a 32 MB L3).
+ * simdvol_balance_pack copies the bounds out of the segments before the
+ * first round, simdvol_balance_unpack writes them back after the last.
+ *
  * Tables: cidx (int4[P], cell index of each PE), pe_of (int[P], the PE of
  * cell (ix, iy, iz) at (iz * sy + iy) * sx + ix), splits (int4, cells per
  * axis).
@@ -19,6 +26,19 @@
 #endif
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
+
+/* The bounds' type: 16-bit when every k fits (BOUNDS16 = 1: the host's
+ * balance_bounds16, grid depth <= 32767), else 32-bit. */
+#ifndef BOUNDS16
+#define BOUNDS16 0
+#endif
+#if BOUNDS16
+typedef short2 sv_bounds;
+typedef short sv_bound;
+#else
+typedef int2 sv_bounds;
+typedef int sv_bound;
+#endif
 
 /* floor(a / b) for 0 <= a, 0 < b, given inv ~ 1 / b. */
 SV_FN long sv_floor_div(long a, long b, double inv) {
@@ -43,7 +63,7 @@ SV_FN int sv_list_start(int4 o, int axis) {
  * dir = sign of the depth step along the axis (non-zero). */
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_round(
     global const int4* cidx, global const int* pe_of, int4 splits, int pes, int axis, int par,
-    int dir, global const int4* lofs, global const int2* llist, global sv_segment* segments,
+    int dir, global const int4* lofs, global const int2* llist, global sv_bounds* kk,
     global int* loads) {
   const int p = (int)get_global_id(0);
   if (p >= pes) return;
@@ -68,8 +88,8 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_r
   long cap = 0;
   for (int e = e0; e < e1; ++e) {
     const int2 st = llist[e];
-    const sv_segment g = segments[front_gives ? st.x : st.y];
-    cap += g.k1 - g.k0;
+    const sv_bounds g = kk[front_gives ? st.x : st.y];
+    cap += g.y - g.x;
   }
   const long moved = min(cap, (long)want);
   if (moved == 0) return;
@@ -78,16 +98,38 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_r
   long cum = 0, prev = 0;
   for (int e = e0; e < e1; ++e) {
     const int2 st = llist[e];
-    const sv_segment g = segments[front_gives ? st.x : st.y];
-    cum += g.k1 - g.k0;
+    const sv_bounds g = kk[front_gives ? st.x : st.y];
+    cum += g.y - g.x;
     const long f = sv_floor_div(moved * cum, cap, inv);
     const int give = (int)(f - prev);
     prev = f;
     if (give == 0) continue;
     const int shift = front_gives ? -give : give;
-    segments[st.x].k1 += shift;
-    segments[st.y].k0 += shift;
+    kk[st.x].y = (sv_bound)(kk[st.x].y + shift);
+    kk[st.y].x = (sv_bound)(kk[st.y].x + shift);
   }
   loads[F] -= front_gives ? (int)moved : -(int)moved;
   loads[B] += front_gives ? (int)moved : -(int)moved;
+}
+
+/* Before the first round: the bounds out of the segments (one work-item per
+ * segment slot; slots past seg_offset[pes] hold nothing). */
+__kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_pack(
+    global const int* seg_offset, int pes, global const sv_segment* segments,
+    global sv_bounds* kk) {
+  const int s = (int)get_global_id(0);
+  if (s >= seg_offset[pes]) return;
+  const sv_segment g = segments[s];
+  kk[s] = (sv_bounds)((sv_bound)g.k0, (sv_bound)g.k1);
+}
+
+/* After the last round: the bounds back into the segments. */
+__kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_unpack(
+    global const int* seg_offset, int pes, global const sv_bounds* kk,
+    global sv_segment* segments) {
+  const int s = (int)get_global_id(0);
+  if (s >= seg_offset[pes]) return;
+  const sv_bounds g = kk[s];
+  segments[s].k0 = g.x;
+  segments[s].k1 = g.y;
 }

@@ -189,28 +189,56 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   return m;
 }
 
+bool balance_bounds16(int64_t depth) {
+  return depth <= 32767;
+}
+
 void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view,
-                     const KdSplit& split, int sweeps) {
+                     const KdSplit& split, int sweeps, BalanceBounds bounds) {
   if (sweeps < 0) throw ArgumentError("sweeps", "must be >= 0");
   if (m.pes != split.pes()) throw ArgumentError("matching", "made for another PE count");
   const std::size_t P = static_cast<std::size_t>(m.pes);
   const Dims3 sp = split.splits();
   const cl_int4 splits = int4(sp[0], sp[1], sp[2], 0);
   const cl_int npes = static_cast<cl_int>(m.pes);
+  const int64_t depth = view.grid.grid[2];
+  bool narrow = bounds == BalanceBounds::narrow;
+  if (bounds == BalanceBounds::automatic) narrow = balance_bounds16(depth);
+  if (narrow && !balance_bounds16(depth))
+    throw ArgumentError(
+        "bounds", "16-bit balance bounds cannot hold a grid depth of " + std::to_string(depth));
+  struct Round {
+    int axis, par, dir;
+  };
+  std::vector<Round> rounds;
   for (int sweep = 0; sweep < sweeps; ++sweep)
     for (int a = 0; a < 3; ++a) {
       const int64_t dir = view.grid.step[a][2];
       if (dir == 0 || sp[a] < 2) continue;
-      for (int par = 0; par < 2; ++par) {
-        cl::Kernel round = device.kernel("balance", "simdvol_balance_round", match_defines());
-        set_args(round, "simdvol_balance_round", m.cidx, m.pe_of, splits, npes, cl_int(a),
-                 cl_int(par), cl_int(dir > 0 ? 1 : -1), m.link_offset, m.link_list, m.segments,
-                 m.loads);
-        m.balance_events.push_back(
-            {"balance_round",
-             device.run(round, "simdvol_balance_round", cl::NDRange(P), cl::NDRange(kWgs))});
-      }
+      for (int par = 0; par < 2; ++par) rounds.push_back({a, par, dir > 0 ? 1 : -1});
     }
+  if (rounds.empty()) return;
+  // The rounds move the bounds (k0, k1) in a compact copy (balance.cl).
+  const Defines defs{{"WGS", std::to_string(kWgs)}, {"BOUNDS16", narrow ? "1" : "0"}};
+  const std::size_t slots = round_up(static_cast<std::size_t>(m.capacity), kWgs);
+  const cl::Buffer kk =
+      device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(m.capacity) * (narrow ? 4 : 8),
+                    nullptr, "balance bounds");
+  cl::Kernel pack = device.kernel("balance", "simdvol_balance_pack", defs);
+  set_args(pack, "simdvol_balance_pack", m.seg_offset, npes, m.segments, kk);
+  m.balance_events.push_back({"balance_pack", device.run(pack, "simdvol_balance_pack",
+                                                         cl::NDRange(slots), cl::NDRange(kWgs))});
+  for (const Round& r : rounds) {
+    cl::Kernel round = device.kernel("balance", "simdvol_balance_round", defs);
+    set_args(round, "simdvol_balance_round", m.cidx, m.pe_of, splits, npes, cl_int(r.axis),
+             cl_int(r.par), cl_int(r.dir), m.link_offset, m.link_list, kk, m.loads);
+    m.balance_events.push_back({"balance_round", device.run(round, "simdvol_balance_round",
+                                                            cl::NDRange(P), cl::NDRange(kWgs))});
+  }
+  cl::Kernel unpack = device.kernel("balance", "simdvol_balance_unpack", defs);
+  set_args(unpack, "simdvol_balance_unpack", m.seg_offset, npes, kk, m.segments);
+  m.balance_events.push_back({"balance_unpack", device.run(unpack, "simdvol_balance_unpack",
+                                                           cl::NDRange(slots), cl::NDRange(kWgs))});
 }
 
 Matching DeviceMatching::read(Device& device) const {

@@ -51,13 +51,13 @@ int64_t rows_with_holes(const Matching& m) {
 }
 
 void check_device(Device& dev, const ViewGeometry& v, const KdSplit& split, int sweeps,
-                  const std::string& what) {
+                  const std::string& what, BalanceBounds bounds = BalanceBounds::automatic) {
   const Matching ref = match_reference(v, split);
   DeviceMatching dm = enqueue_match(dev, v, split);
   const Matching got = dm.read(dev);
   expect_same(got, ref, what + " (match)");
   if (sweeps < 0) return;
-  enqueue_balance(dev, dm, v, split, sweeps);
+  enqueue_balance(dev, dm, v, split, sweeps, bounds);
   EXPECT_EQ(dm.read_links(dev), balance_links(ref, v, split)) << what;
   const Matching bal = dm.read(dev);
   expect_same(bal, balance_reference(ref, v, split, sweeps), what + " (balance)");
@@ -73,6 +73,27 @@ TEST(MatchCl, EqualsReferenceFixedViewsAllP) {
     for (int64_t pes = 1; pes <= 8192; pes *= 2)
       check_device(dev, v, kd_split(dims, pes), pes % 8 == 1 || pes >= 256 ? 8 : -1, name(va, pes));
   }
+}
+
+TEST(MatchCl, BalanceBoundsWidths) {
+  // The rounds move 16-bit bounds where the grid depth allows and 32-bit ones
+  // otherwise: both give the reference's balance exactly.
+  EXPECT_TRUE(balance_bounds16(32767));
+  EXPECT_FALSE(balance_bounds16(32768));
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 dims{93, 57, 31};
+  for (ViewAngles va : {kViews[2], kViews[3]}) {
+    const ViewGeometry v = geometry(dims, va, 96, 96);
+    for (int64_t pes : {8, 512})
+      for (BalanceBounds b : {BalanceBounds::narrow, BalanceBounds::wide})
+        check_device(dev, v, kd_split(dims, pes), 8, name(va, pes), b);
+  }
+  // 16-bit bounds are refused for a grid deeper than they hold.
+  ViewGeometry deep = geometry(dims, kViews[2], 96, 96);
+  const KdSplit split = kd_split(dims, 8);
+  DeviceMatching dm = enqueue_match(dev, deep, split);
+  deep.grid.grid[2] = 40000;
+  EXPECT_THROW(enqueue_balance(dev, dm, deep, split, 1, BalanceBounds::narrow), ArgumentError);
 }
 
 TEST(MatchCl, EqualsReferenceRandomViews) {

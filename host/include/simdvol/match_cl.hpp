@@ -24,9 +24,16 @@
 // sweeps x (axis x, y, z with a non-zero depth step and >= 2 cells) x
 // (parity 0, 1) launches of simdvol_balance_round (kernels/balance.cl), one
 // work-item per PE (the lower PE of each pair does the pair's work, walking
-// the front PE's link list along the axis), and updates segments (k0/k1
-// only) and loads in place. The result equals
-// balance_reference(read(), view, split, sweeps) exactly.
+// the front PE's link list along the axis), between simdvol_balance_pack and
+// simdvol_balance_unpack. The rounds move the bounds (k0, k1) of the
+// segments in a compact copy, 16-bit when the grid depth allows
+// (balance_bounds16) and 32-bit otherwise, and update loads in place; the
+// unpack writes the bounds back into segments. The rounds are bound by
+// streaming the segments they touch: 4-byte bounds instead of 16-byte
+// segments keep 2 M segments' bounds in the L3 (simdvol-bench-match,
+// 256^3 at 45 deg, 8192 PEs: balance 112-132 -> 64-76 ms). The result
+// equals balance_reference(read(), view, split, sweeps) exactly, for either
+// width.
 //
 // Buffers of DeviceMatching, consumed by the resample/local stages:
 //   seg_offset  cl_int[P + 1]    CSR offsets (int32: at most INT_MAX segments)
@@ -80,7 +87,7 @@ struct DeviceMatching {
   cl::Buffer link_offset;  ///< cl_int4[P + 1]: y, z, w = start of PE p's list along x, y, z
   cl::Buffer link_list;    ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE)
   std::vector<StageEvent> match_events;    ///< rows, pe, scan, fill
-  std::vector<StageEvent> balance_events;  ///< every round
+  std::vector<StageEvent> balance_events;  ///< pack, every round, unpack
 
   /// Blocking read-back as a Matching (loads as int64).
   Matching read(Device& device) const;
@@ -93,9 +100,17 @@ struct DeviceMatching {
 /// view or the sizes exceed 32-bit indexing.
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split);
 
+/// The width of the bounds the balance rounds move: 16-bit where every k of
+/// the grid fits (automatic: balance_bounds16), or as asked.
+enum class BalanceBounds { automatic, narrow, wide };
+/// Whether 16-bit bounds hold every k of a grid `depth` samples deep.
+bool balance_bounds16(int64_t depth);
+
 /// Enqueues `sweeps` sweeps of balancing on `m` (made by enqueue_match with
-/// the same view and split). Throws ArgumentError for sweeps < 0.
+/// the same view and split). Throws ArgumentError for sweeps < 0, or for
+/// BalanceBounds::narrow where the grid is too deep for it.
 void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view,
-                     const KdSplit& split, int sweeps = kBalanceSweeps);
+                     const KdSplit& split, int sweeps = kBalanceSweeps,
+                     BalanceBounds bounds = BalanceBounds::automatic);
 
 }  // namespace simdvol
