@@ -220,7 +220,7 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   if (rounds.empty()) return;
   // The rounds move the bounds (k0, k1) in a compact copy (balance.cl).
   const Defines defs{{"WGS", std::to_string(kWgs)}, {"BOUNDS16", narrow ? "1" : "0"}};
-  const std::size_t slots = round_up(static_cast<std::size_t>(m.capacity), kWgs);
+  const std::size_t slots = static_cast<std::size_t>(m.capacity);  // Device::run rounds up
   const cl::Buffer kk =
       device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(m.capacity) * (narrow ? 4 : 8),
                     nullptr, "balance bounds");
