@@ -1,10 +1,11 @@
 /* match.cl — which PE resamples which viewing sample (see
  * host/include/simdvol/match.hpp and match_cl.hpp).
  *
- * Work decomposition: one work-item per (PE p, row r) of p's candidate
- * rectangle (global id = p * H + r, H = the largest candidate height), so
- * rows are independent and the segments of one row are contiguous in p's
- * (j, i)-sorted list.
+ * Work decomposition: rows (PE p, row r) of p's candidate rectangle at
+ * g = p * H + r, H = the largest candidate height rounded up to a multiple
+ * of 8, so rows are independent and the segments of one row are contiguous
+ * in p's (j, i)-sorted list. The row kernels take 8 rows of one PE per
+ * work-item (see "8 rows per work-item" below).
  *
  *   simdvol_match_rows   per (PE, row): the exact segments of the row,
  *                        counted: rowsum = (count, load, first i, last i),
@@ -174,102 +175,6 @@ SV_FN void sv_row_init(__constant sv_view* view, __constant long* stepc, const l
   }
 }
 
-/* The exact [k0, k1) of the current column (k0 >= k1 when empty) and the
- * number of axes whose bound is k1 (exit axes) with the last such axis. */
-SV_FN void sv_row_eval(const sv_row_state* st, int D, int* k0, int* k1, int* nexit, int* exit_axis) {
-  long lo = 0, hi = D;
-  for (int a = 0; a < 3; ++a) {
-    if (st->d[a] == 0) {
-      if (st->base[a] < st->L[a] || st->base[a] >= st->H[a]) hi = 0;
-      continue;
-    }
-    lo = max(lo, st->qlo[a]);
-    hi = min(hi, st->qhi[a]);
-  }
-  *k0 = (int)clamp(lo, (long)0, (long)D);
-  *k1 = (int)clamp(hi, (long)0, (long)D);
-  int n = 0, e = -1;
-  for (int a = 0; a < 3; ++a)
-    if (st->d[a] != 0 && st->qhi[a] == hi) {
-      ++n;
-      e = a;
-    }
-  *nexit = n;
-  *exit_axis = e;
-}
-
-SV_FN void sv_row_step(sv_row_state* st) {
-  for (int a = 0; a < 3; ++a) {
-    st->base[a] += st->s[a];
-    if (st->d[a] == 0) continue;
-    long r = st->rlo[a] - st->dr[a];
-    long c = r < 0;
-    st->qlo[a] += st->dq[a] + c;
-    st->rlo[a] = r + (c ? st->m[a] : 0);
-    r = st->rhi[a] - st->dr[a];
-    c = r < 0;
-    st->qhi[a] += st->dq[a] + c;
-    st->rhi[a] = r + (c ? st->m[a] : 0);
-  }
-}
-
-/* The face neighbour along the exit axis that owns sample k1 of the column,
- * or -1 (sample outside the volume, or past the neighbour cell). */
-SV_FN int sv_link_pe(const sv_row_state* st, int a, int k1, int4 ci, int4 cell, int4 splits,
-                     __constant sv_view* view, global const int* pe_of) {
-  const long x = st->base[a] + (long)k1 * st->d[a];
-  const long f = x >> SV_FRAC_BITS;
-  const int c = a == 0 ? cell.x : (a == 1 ? cell.y : cell.z);
-  int idx[3] = {ci.x, ci.y, ci.z};
-  if (st->d[a] > 0) {
-    if (f >= view->dims[a] || f >= (st->H[a] >> SV_FRAC_BITS) + c) return -1;
-    idx[a] += 1;
-  } else {
-    if (f < 0 || f < (st->L[a] >> SV_FRAC_BITS) - c) return -1;
-    idx[a] -= 1;
-  }
-  return pe_of[(idx[2] * splits.y + idx[1]) * splits.x + idx[0]];
-}
-
-__kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_rows(
-    __constant sv_view* view, __constant float* geo, __constant long* stepc,
-    global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,
-    global const int* pe_of, int pes, int H, global int4* rowsum, global int4* rowlk) {
-  const int g = (int)get_global_id(0);
-  const int p = g / H, row = g - p * H;
-  if (p >= pes) return;
-  const sv_rect r = cand[p];
-  int4 sum = (int4)(0, 0, 0, -1);
-  int lk[3] = {0, 0, 0};
-  long lo[3], hi[3];
-  const int4 ci = cidx[p];
-  if (row < r.h && sv_pe_box(view, ci, cell, lo, hi)) {
-    const int j = r.j0 + row;
-    int ia, ib;
-    sv_row_range(geo, ci, r, j, &ia, &ib);
-    if (ia <= ib) {
-      const int D = view->grid[2];
-      sv_row_state st;
-      sv_row_init(view, stepc, lo, hi, ia, j, &st);
-      for (int i = ia; i <= ib; ++i) {
-        int k0, k1, ne, ea;
-        sv_row_eval(&st, D, &k0, &k1, &ne, &ea);
-        if (k0 < k1) {
-          if (sum.x == 0) sum.z = i;
-          sum.x += 1;
-          sum.y += k1 - k0;
-          sum.w = i;
-          if (k1 < D && ne == 1 && sv_link_pe(&st, ea, k1, ci, cell, splits, view, pe_of) >= 0)
-            lk[ea] += 1;
-        }
-        sv_row_step(&st);
-      }
-    }
-  }
-  rowsum[g] = sum;
-  rowlk[g] = (int4)(lk[0], lk[1], lk[2], 0);
-}
-
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_pe(
     global const sv_rect* cand, int pes, int H, global const int4* rowsum,
     global const int4* rowlk, global int4* rowoff, global int4* petot, global int* counts,
@@ -326,25 +231,162 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_sca
   lofs[pes] = at;
 }
 
-/* Index of the segment of ray (i, j) in PE q (which has one). */
-SV_FN int sv_segment_index(__constant sv_view* view, global const sv_rect* cand,
-                           global const int4* cidx, int4 cell, int H,
-                           global const int4* rowsum, global const int4* rowoff,
-                           global const int* seg_offset, int q, int i, int j) {
-  const int g = q * H + (j - cand[q].j0);
-  const int4 s = rowsum[g];
-  int n = 0;
-  if (s.x == s.w - s.z + 1) {
-    n = i - s.z;
-  } else { /* the row has holes: count its segments left of i */
-    long lo[3], hi[3];
-    sv_pe_box(view, cidx[q], cell, lo, hi);
-    for (int c = s.z; c < i; ++c) {
-      const int2 k = sv_box_ray(view, lo, hi, c, j);
-      n += k.x < k.y;
+/* ---- 8 rows per work-item: simdvol_match_rows and simdvol_match_fill ----
+ * Work-item w takes the rows g = 8 w ... 8 w + 7 (H a multiple of 8, so the
+ * 8 rows belong to one PE) as the lanes of int8/long8 values. PoCL ran the
+ * earlier one-row-per-work-item kernels as scalar code (a column loop of
+ * varying trip count per work-item); here the lanes step their columns
+ * together. Every lane starts its exact stepping at the group's first
+ * column i0 (the recurrence holds from any column) and counts only the
+ * columns of its own range. Integer arithmetic: the results equal
+ * match_reference's exactly (tests/cl/test_match_cl.cpp).
+ * simdvol-bench-match, 256^3, 8192 PEs, 30 / 45 deg: rows 43-47 -> 17-20
+ * ms, fill 45-56 -> 34-49 ms (against the one-row kernels, alternated). */
+#ifdef __clang__
+#pragma clang diagnostic ignored "-Wpsabi"
+#endif
+
+typedef struct sv_row8 {
+  long8 qlo[3], rlo[3], qhi[3], rhi[3], base[3];
+} sv_row8;
+
+/* Lanes with on[l] start at column i0 of row j[l]; the others hold zeros. */
+SV_FN void sv_row8_init(__constant sv_view* view, __constant long* stepc, const long* lo,
+                        const long* hi, int i0, const int* j, const int* on, sv_row8* st) {
+  long v[5][3][8];
+  for (int l = 0; l < 8; ++l) {
+    sv_row_state t;
+    if (on[l]) sv_row_init(view, stepc, lo, hi, i0, j[l], &t);
+    for (int a = 0; a < 3; ++a) {
+      v[0][a][l] = on[l] ? t.qlo[a] : 0;
+      v[1][a][l] = on[l] ? t.rlo[a] : 0;
+      v[2][a][l] = on[l] ? t.qhi[a] : 0;
+      v[3][a][l] = on[l] ? t.rhi[a] : 0;
+      v[4][a][l] = on[l] ? t.base[a] : 0;
     }
   }
-  return seg_offset[q] + rowoff[g].x + n;
+  for (int a = 0; a < 3; ++a) {
+    st->qlo[a] = vload8(0, v[0][a]);
+    st->rlo[a] = vload8(0, v[1][a]);
+    st->qhi[a] = vload8(0, v[2][a]);
+    st->rhi[a] = vload8(0, v[3][a]);
+    st->base[a] = vload8(0, v[4][a]);
+  }
+}
+
+/* One column of the 8 lanes (sv_row_eval): k0, k1; act = lanes with a
+ * segment inside [ia, ib]; lnk = those whose segment has a balance link
+ * (one exit axis, k1 < D, the neighbour cell inside the volume), exit axis
+ * in ea. */
+SV_FN void sv_row8_eval(const sv_row8* st, __constant sv_view* view, const long* L,
+                        const long* Hb, int4 cell, int i, int8 ia, int8 ib, int8* k0, int8* k1,
+                        int8* act, int8* lnk, int8* ea) {
+  const int D = view->grid[2];
+  long8 lo = (long8)(0), hi = (long8)(D);
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    if (view->step[a][2] == 0) {
+      hi = select(hi, (long8)(0), (st->base[a] < L[a]) | (st->base[a] >= Hb[a]));
+      continue;
+    }
+    lo = max(lo, st->qlo[a]);
+    hi = min(hi, st->qhi[a]);
+  }
+  *k0 = convert_int8(clamp(lo, (long8)(0), (long8)(D)));
+  *k1 = convert_int8(clamp(hi, (long8)(0), (long8)(D)));
+  *act = (ia <= (int8)(i)) & (ib >= (int8)(i)) & (*k0 < *k1);
+  long8 n = (long8)(0), ok = (long8)(0);
+  int8 e = (int8)(-1);
+  const long8 K1 = convert_long8(*k1);
+  const int c[3] = {cell.x, cell.y, cell.z};
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    const long d = view->step[a][2];
+    if (d == 0) continue;
+    const long8 ex = st->qhi[a] == hi;
+    n -= ex;
+    e = select(e, (int8)(a), convert_int8(ex));
+    /* sv_link_pe's test: the sample k1 lies in the next cell along a. */
+    const long8 f = (st->base[a] + K1 * d) >> SV_FRAC_BITS;
+    const long8 in = d > 0 ? (f < (long8)(view->dims[a])) & (f < (long8)((Hb[a] >> SV_FRAC_BITS) + c[a]))
+                           : (f >= (long8)(0)) & (f >= (long8)((L[a] >> SV_FRAC_BITS) - c[a]));
+    ok = select(ok, in, ex);
+  }
+  *lnk = *act & (*k1 < (int8)(D)) & convert_int8((n == (long8)(1)) & ok);
+  *ea = e;
+}
+
+SV_FN void sv_row8_step(sv_row8* st, __constant sv_view* view, __constant long* stepc) {
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    st->base[a] += view->step[a][0];
+    if (view->step[a][2] == 0) continue;
+    const long m = stepc[3 * a], dq = stepc[3 * a + 1], dr = stepc[3 * a + 2];
+    long8 r = st->rlo[a] - dr;
+    long8 c = r < (long8)(0); /* -1 where r < 0 */
+    st->qlo[a] += dq - c;
+    st->rlo[a] = r + (c & (long8)(m));
+    r = st->rhi[a] - dr;
+    c = r < (long8)(0);
+    st->qhi[a] += dq - c;
+    st->rhi[a] = r + (c & (long8)(m));
+  }
+}
+
+__kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_rows(
+    __constant sv_view* view, __constant float* geo, __constant long* stepc,
+    global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,
+    global const int* pe_of, int pes, int H, global int4* rowsum, global int4* rowlk) {
+  const int g0 = (int)get_global_id(0) * 8;
+  const int p = g0 / H, row0 = g0 - p * H;
+  if (p >= pes) return;
+  const sv_rect r = cand[p];
+  const int4 ci = cidx[p];
+  long lo[3], hi[3];
+  const int box = sv_pe_box(view, ci, cell, lo, hi);
+  int ia[8], ib[8], jj[8], on[8];
+  int i0 = INT_MAX, i1 = INT_MIN;
+  for (int l = 0; l < 8; ++l) {
+    jj[l] = r.j0 + row0 + l;
+    ia[l] = 1;
+    ib[l] = 0;
+    if (box && row0 + l < r.h) sv_row_range(geo, ci, r, jj[l], &ia[l], &ib[l]);
+    on[l] = ia[l] <= ib[l];
+    if (on[l]) {
+      i0 = min(i0, ia[l]);
+      i1 = max(i1, ib[l]);
+    }
+  }
+  int8 cnt = (int8)(0), load = (int8)(0), first = (int8)(0), last = (int8)(-1);
+  int8 lk[3] = {(int8)(0), (int8)(0), (int8)(0)};
+  if (i0 <= i1) {
+    sv_row8 st;
+    sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
+    const int8 IA = vload8(0, ia), IB = vload8(0, ib);
+    for (int i = i0; i <= i1; ++i) {
+      int8 k0, k1, act, lnk, ea;
+      sv_row8_eval(&st, view, lo, hi, cell, i, IA, IB, &k0, &k1, &act, &lnk, &ea);
+      first = select(first, (int8)(i), act & (cnt == (int8)(0)));
+      cnt -= act;
+      load += select((int8)(0), k1 - k0, act);
+      last = select(last, (int8)(i), act);
+#pragma unroll
+      for (int a = 0; a < 3; ++a) lk[a] -= lnk & (ea == (int8)(a));
+      sv_row8_step(&st, view, stepc);
+    }
+  }
+  int c[8], s[8], f[8], w[8], x[8], y[8], z[8];
+  vstore8(cnt, 0, c);
+  vstore8(load, 0, s);
+  vstore8(first, 0, f);
+  vstore8(last, 0, w);
+  vstore8(lk[0], 0, x);
+  vstore8(lk[1], 0, y);
+  vstore8(lk[2], 0, z);
+  for (int l = 0; l < 8; ++l) {
+    rowsum[g0 + l] = (int4)(c[l], s[l], f[l], w[l]);
+    rowlk[g0 + l] = (int4)(x[l], y[l], z[l], 0);
+  }
 }
 
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fill(
@@ -353,46 +395,108 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
     global const int* pe_of, int pes, int H, global const int4* rowsum,
     global const int4* rowoff, global const int* seg_offset, global const int4* lofs,
     global sv_segment* segments, global int* links, global int2* llist) {
-  const int g = (int)get_global_id(0);
-  const int p = g / H, row = g - p * H;
+  const int g0 = (int)get_global_id(0) * 8;
+  const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
-  const int4 sum = rowsum[g];
-  if (sum.x == 0) return;
   const sv_rect r = cand[p];
-  long lo[3], hi[3];
   const int4 ci = cidx[p];
+  long lo[3], hi[3];
   sv_pe_box(view, ci, cell, lo, hi);
-  const int j = r.j0 + row;
-  const int4 ro = rowoff[g];
-  int at = seg_offset[p] + ro.x;
   const int4 lb = lofs[p];
-  int la[3] = {lb.y + ro.y, lb.z + ro.z, lb.w + ro.w};
-  const int D = view->grid[2];
-  sv_row_state st;
-  sv_row_init(view, stepc, lo, hi, sum.z, j, &st);
-  for (int i = sum.z; i <= sum.w; ++i) {
-    int k0, k1, ne, ea;
-    sv_row_eval(&st, D, &k0, &k1, &ne, &ea);
-    if (k0 < k1) {
-      sv_segment sg;
-      sg.i = i;
-      sg.j = j;
-      sg.k0 = k0;
-      sg.k1 = k1;
-      segments[at] = sg;
-      int link = -1;
-      if (k1 < D && ne == 1) {
-        const int q = sv_link_pe(&st, ea, k1, ci, cell, splits, view, pe_of);
-        if (q >= 0) {
-          const int t =
-              sv_segment_index(view, cand, cidx, cell, H, rowsum, rowoff, seg_offset, q, i, j);
-          link = t * 4 + ea;
-          llist[la[ea]++] = (int2)(at, t);
-        }
-      }
-      links[at] = link;
-      ++at;
+  const int base = seg_offset[p];
+  int ia[8], ib[8], jj[8], on[8], at[8], la[3][8];
+  int i0 = INT_MAX, i1 = INT_MIN;
+  for (int l = 0; l < 8; ++l) {
+    const int4 sum = rowsum[g0 + l];
+    const int4 ro = rowoff[g0 + l];
+    jj[l] = r.j0 + row0 + l;
+    on[l] = sum.x > 0;
+    ia[l] = on[l] ? sum.z : 1;
+    ib[l] = on[l] ? sum.w : 0;
+    at[l] = base + ro.x;
+    la[0][l] = lb.y + ro.y;
+    la[1][l] = lb.z + ro.z;
+    la[2][l] = lb.w + ro.w;
+    if (on[l]) {
+      i0 = min(i0, ia[l]);
+      i1 = max(i1, ib[l]);
     }
-    sv_row_step(&st);
   }
+  if (i0 > i1) return;
+  /* A link along axis e goes to the face neighbour nq[e] (one per axis for
+   * the whole work-item), into the same row j. Per (axis, lane), set at its
+   * first link: t0 = the index its row's segment at column 0 would have, or
+   * SV_HOLES if the row has holes; then hb = the index of the row's first
+   * segment, and a cursor (hc, hn): hn segments in columns before hc,
+   * advanced with sv_box_ray as the lane's columns grow (sv_segment_index
+   * counts from the row's start at every link). SV_UNSET before. */
+#define SV_UNSET INT_MAX
+#define SV_HOLES INT_MIN
+  int nq[3], t0[3][8], hb[3][8], hc[3][8], hn[3][8];
+  for (int e = 0; e < 3; ++e) {
+    int idx[3] = {ci.x, ci.y, ci.z};
+    const int sa = e == 0 ? splits.x : (e == 1 ? splits.y : splits.z);
+    idx[e] += view->step[e][2] > 0 ? 1 : -1;
+    nq[e] = idx[e] >= 0 && idx[e] < sa ? pe_of[(idx[2] * splits.y + idx[1]) * splits.x + idx[0]] : -1;
+    for (int l = 0; l < 8; ++l) t0[e][l] = SV_UNSET;
+  }
+  sv_row8 st;
+  sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
+  const int8 IA = vload8(0, ia), IB = vload8(0, ib);
+  for (int i = i0; i <= i1; ++i) {
+    int8 k0, k1, act, lnk, ea;
+    sv_row8_eval(&st, view, lo, hi, cell, i, IA, IB, &k0, &k1, &act, &lnk, &ea);
+    if (any(act)) {
+      int K0[8], K1[8], A[8], LK[8], E[8];
+      vstore8(k0, 0, K0);
+      vstore8(k1, 0, K1);
+      vstore8(act, 0, A);
+      vstore8(lnk, 0, LK);
+      vstore8(ea, 0, E);
+      for (int l = 0; l < 8; ++l) {
+        if (!A[l]) continue;
+        sv_segment sg;
+        sg.i = i;
+        sg.j = jj[l];
+        sg.k0 = K0[l];
+        sg.k1 = K1[l];
+        segments[at[l]] = sg;
+        int link = -1;
+        if (LK[l]) {
+          const int e = E[l], q = nq[e];
+          if (t0[e][l] == SV_UNSET) {
+            const int gq = q * H + (jj[l] - cand[q].j0);
+            const int4 s = rowsum[gq];
+            const int b = seg_offset[q] + rowoff[gq].x;
+            t0[e][l] = s.x == s.w - s.z + 1 ? b - s.z : SV_HOLES;
+            hb[e][l] = b;
+            hc[e][l] = s.z;
+            hn[e][l] = 0;
+          }
+          int t;
+          if (t0[e][l] != SV_HOLES) {
+            t = t0[e][l] + i;
+          } else {
+            long qlo[3], qhi[3];
+            sv_pe_box(view, cidx[q], cell, qlo, qhi);
+            int c = hc[e][l], n = hn[e][l];
+            for (; c < i; ++c) {
+              const int2 k = sv_box_ray(view, qlo, qhi, c, jj[l]);
+              n += k.x < k.y;
+            }
+            hc[e][l] = c;
+            hn[e][l] = n;
+            t = hb[e][l] + n;
+          }
+          link = t * 4 + e;
+          llist[la[e][l]++] = (int2)(at[l], t);
+        }
+        links[at[l]] = link;
+        ++at[l];
+      }
+    }
+    sv_row8_step(&st, view, stepc);
+  }
+#undef SV_UNSET
+#undef SV_HOLES
 }

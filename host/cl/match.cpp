@@ -117,6 +117,7 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   }
   if (capacity > INT_MAX / 4)
     throw ArgumentError("view", "too many candidate rays for 32-bit segment indices");
+  rows = (rows + 7) / 8 * 8;  // the row kernels take 8 rows of one PE per work-item
   if (pes * rows > INT_MAX / 2) throw ArgumentError("view", "too many rows for 32-bit indices");
   for (int a = 0; a < 3; ++a)
     if (split.cell[a] > INT_MAX) throw ArgumentError("split", "cell too large");
@@ -169,8 +170,8 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   cl::Kernel k_rows = device.kernel("match", "simdvol_match_rows", match_defines());
   set_args(k_rows, "simdvol_match_rows", m.view, m.geometry, m.steps, m.candidates, m.cidx, cell,
            splits, m.pe_of, npes, H, m.rowsum, m.rowlinks);
-  m.match_events.push_back(
-      {"match_rows", device.run(k_rows, "simdvol_match_rows", cl::NDRange(R), cl::NDRange(kWgs))});
+  m.match_events.push_back({"match_rows", device.run(k_rows, "simdvol_match_rows",
+                                                     cl::NDRange(R / 8), cl::NDRange(kWgs))});
   cl::Kernel k_pe = device.kernel("match", "simdvol_match_pe", match_defines());
   set_args(k_pe, "simdvol_match_pe", m.candidates, npes, H, m.rowsum, m.rowlinks, m.rowoff, m.petot,
            m.counts, m.rects, m.loads);
@@ -184,8 +185,8 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   set_args(k_fill, "simdvol_match_fill", m.view, m.geometry, m.steps, m.candidates, m.cidx, cell,
            splits, m.pe_of, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset, m.segments,
            m.links, m.link_list);
-  m.match_events.push_back(
-      {"match_fill", device.run(k_fill, "simdvol_match_fill", cl::NDRange(R), cl::NDRange(kWgs))});
+  m.match_events.push_back({"match_fill", device.run(k_fill, "simdvol_match_fill",
+                                                     cl::NDRange(R / 8), cl::NDRange(kWgs))});
   return m;
 }
 

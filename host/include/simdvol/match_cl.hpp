@@ -3,8 +3,9 @@
 // match.hpp.
 //
 // enqueue_match(device, view, split) enqueues, with no host synchronisation
-// (kernels/match.cl; one work-item per (PE, row of its candidate rectangle),
-// H = the largest candidate height, except where noted):
+// (kernels/match.cl; one work-item per 8 rows of a PE's candidate rectangle,
+// H = the largest candidate height rounded up to a multiple of 8, except
+// where noted):
 //   1. simdvol_match_rows  the exact segments of each row, counted (count,
 //                          load, first and last i; links per axis)
 //   2. simdvol_match_pe    one work-item per PE: row offsets, totals, load,
@@ -66,8 +67,9 @@ std::uint64_t events_ns(const std::vector<StageEvent>& events);
 /// The device matching (see the file comment for the buffers).
 struct DeviceMatching {
   int64_t pes = 0;
-  int64_t capacity = 0;    ///< segments allocated (>= the segment count)
-  int64_t rows = 0;        ///< H, rows per PE in the row tables (largest candidate height)
+  int64_t capacity = 0;  ///< segments allocated (>= the segment count)
+  int64_t rows =
+      0;  ///< H, rows per PE in the row tables (largest candidate height, rounded up to 8)
   cl::Buffer candidates;   ///< sv_rect[P], match_candidates()
   cl::Buffer cidx;         ///< cl_int4[P] cell index of each PE (w = 0)
   cl::Buffer pe_of;        ///< cl_int[P] PE of cell (ix, iy, iz) at (iz * sy + iy) * sx + ix
