@@ -230,10 +230,11 @@ int main(int argc, char** argv) try {
       "%d runs (median)\n\n",
       size, static_cast<long long>(pes), static_cast<long long>(L.cell()[0]),
       static_cast<long long>(L.cell()[1]), static_cast<long long>(L.cell()[2]), order, runs);
-  std::printf("%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s\n",
-              "view", "samples", "segments", "util", "match", "balance", "resample", "local",
-              "zero", "fused", "fused1", "occ", "skip", "ref m+b", "ref r+l", "ref/dev", "Gld/s",
-              "xnet rd", "xnet max");
+  std::printf(
+      "%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s\n",
+      "view", "samples", "segments", "util", "match", "balance", "resample", "local", "zero",
+      "fused", "fused1", "occ", "skip", "ordered", "ref m+b", "ref r+l", "ref/dev", "Gld/s",
+      "xnet rd", "xnet max");
   for (const double phi : views) {
     const ViewAngles angles{0.0, phi, 0.0};
     const ViewGeometry view = make_view(vol, angles, size, size, Sampling::voxel);
@@ -296,7 +297,20 @@ int main(int argc, char** argv) try {
                       plain.pixels.size() * sizeof(Rgba)) != 0)
         throw Error("empty-space skipping changed the footprints");
     }
-    std::vector<double> t_res, t_loc, t_zero, t_fused, t_fused1, t_occ, t_skip;
+    // The lane order must give the same footprints too.
+    {
+      const DeviceOccupancy occ = enqueue_occupancy(device, rgba, order);
+      const SegmentOrder lanes = enqueue_segment_order(device, segs);
+      enqueue_zero_footprints(device, fp);
+      enqueue_resample_local(device, segs, tables, rgba, order, fp, LocalKernel::vector8, &occ,
+                             &lanes);
+      const Footprints ordered = read_footprints(device, fp);
+      if (ordered.pixels.size() != plain.pixels.size() ||
+          std::memcmp(ordered.pixels.data(), plain.pixels.data(),
+                      plain.pixels.size() * sizeof(Rgba)) != 0)
+        throw Error("the lane order changed the footprints");
+    }
+    std::vector<double> t_res, t_loc, t_zero, t_fused, t_fused1, t_occ, t_skip, t_ord;
     for (int r = 0; r < runs; ++r) {
       const cl::Event ez = enqueue_zero_footprints(device, fp);
       const cl::Event er = enqueue_resample(device, segs, soff, tables, rgba, order, samples);
@@ -308,7 +322,11 @@ int main(int argc, char** argv) try {
       const DeviceOccupancy occ = enqueue_occupancy(device, rgba, order);
       const cl::Event es =
           enqueue_resample_local(device, segs, tables, rgba, order, fp, LocalKernel::vector8, &occ);
+      const SegmentOrder lanes = enqueue_segment_order(device, segs);
+      const cl::Event eo = enqueue_resample_local(device, segs, tables, rgba, order, fp,
+                                                  LocalKernel::vector8, &occ, &lanes);
       device.finish();
+      t_ord.push_back(ev_ms(lanes.event) + ev_ms(eo));
       double occ_ms = 0;
       for (const cl::Event& e : occ.events) occ_ms += ev_ms(e);
       t_occ.push_back(occ_ms);
@@ -330,7 +348,8 @@ int main(int argc, char** argv) try {
     const double loads = static_cast<double>(nsamples) * M * M * M * 4;
     const double fused = median(t_fused) + median(t_zero);
     std::printf(
-        "%5.0f %9lld %9lld %7.3f | %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f | %9.1f "
+        "%5.0f %9lld %9lld %7.3f | %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f | "
+        "%9.1f "
         "%9.1f %9.1f "
         "%7.2f "
         "| "
@@ -338,7 +357,7 @@ int main(int argc, char** argv) try {
         phi, static_cast<long long>(nsamples), static_cast<long long>(m.segments.size()),
         m.utilisation(), median(t_match), median(t_bal), median(t_res), median(t_loc),
         median(t_zero), median(t_fused), median(t_fused1), median(t_occ), median(t_skip),
-        ref_match + ref_balance, ref_rl, reference ? ref_rl / fused : 0.0,
+        median(t_ord), ref_match + ref_balance, ref_rl, reference ? ref_rl / fused : 0.0,
         loads / (median(t_fused) * 1e6), static_cast<double>(x.total_reads()),
         static_cast<long long>(x.max_voxels()));
   }
@@ -348,7 +367,8 @@ int main(int argc, char** argv) try {
       "match_reference + balance_reference. ref r+l: serial local_reference (resample + sub-ray "
       "composite); ref/dev: against fused + zero. fused: 8 segments per work-item in float8 lanes "
       "without skipping; fused1: one segment per work-item; occ: the brick occupancy; skip: fused "
-      "skipping samples of empty bricks (the frame path; the same footprints, checked). Gld/s: "
+      "skipping samples of empty bricks; ordered: skip with the lanes' segment order (the frame "
+      "path: simdvol_segment_order + the fused kernel; the same footprints, checked). Gld/s: "
       "gather loads of the fused "
       "kernel per "
       "second. xnet rd: remote stencil reads in all; xnet max: distinct remote voxels of the "

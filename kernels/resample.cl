@@ -259,15 +259,19 @@ SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int
   for (int ch = 0; ch < 4; ++ch) u[ch] = q[ch];
 }
 
-/* Lanes of segments s0 .. s0 + 7 (those past nseg repeat the last segment
- * with length 0): (i, j, k0) and length per lane, and X[a] = the fixed-point
- * position of each lane's first sample; returns the longest length. */
-SV_FN int sv_lanes8(__global const sv_segment* segs, const int nseg, const int s0,
-                    __global const sv_view* view, int* li, int* lj, int* lk, int* ln, long8* X) {
+/* Lanes of the segments at positions s0 .. s0 + 7 (those past nseg repeat
+ * the last with length 0): segment order[position] if `ordered`, else the
+ * position itself. (i, j, k0) and length per lane, and X[a] = the
+ * fixed-point position of each lane's first sample; returns the longest
+ * length. */
+SV_FN int sv_lanes8(__global const sv_segment* segs, __global const int* order, const int ordered,
+                    const int nseg, const int s0, __global const sv_view* view, int* li, int* lj,
+                    int* lk, int* ln, long8* X) {
   int T = 0;
 #pragma unroll
   for (int l = 0; l < 8; ++l) {
-    const int s = min(s0 + l, nseg - 1);
+    const int pos = min(s0 + l, nseg - 1);
+    const int s = ordered ? order[pos] : pos;
     const sv_segment g = segs[s];
     li[l] = g.i;
     lj[l] = g.j;
@@ -405,7 +409,7 @@ __kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nse
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8], lo[8];
   long8 X[3];
-  const int T = sv_lanes8(segs, nseg, s0, view, li, lj, lk, ln, X);
+  const int T = sv_lanes8(segs, sample_off, 0, nseg, s0, view, li, lj, lk, ln, X);
 #pragma unroll
   for (int l = 0; l < 8; ++l) lo[l] = sample_off[min(s0 + l, nseg - 1)];
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];

@@ -96,6 +96,11 @@ SV_FN float sv_uniform(sv_u64 seed, sv_u32 ray, sv_u32 sample, sv_u32 step) {
 /* Empty-space skipping: bricks of 2^SV_BRICK_LOG2 voxels per axis
  * (resample.cl, classify.cl; the host's kBrick). */
 #define SV_BRICK_LOG2 2
+
+/* The fused resample + local kernel's lane order (local.cl:
+ * simdvol_segment_order): segments sorted by length within blocks of
+ * SV_ORDER_BLOCK consecutive segments. */
+#define SV_ORDER_BLOCK 256
 #define SV_MAX_KNOTS 32
 #define SV_CLASSIFY_MIXTURE 0
 #define SV_CLASSIFY_TRANSFER 1

@@ -159,7 +159,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   const int W = view.width(), H = view.height();
   const int64_t npx = static_cast<int64_t>(W) * H;
 
-  cl::Event e_zero, e_local;
+  cl::Event e_zero, e_order, e_local;
   std::vector<StageEvent> offset_events, walk_events;
   std::vector<StageEvent> ray_events;
   std::optional<DeviceFootprints> fp;
@@ -171,8 +171,14 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       enqueue_occupancy_reach(device, *occupancy);
     else if (skip)
       occupancy.emplace(enqueue_occupancy(device, *S.rgba, opt.order));
-    e_local = enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp,
-                                     LocalKernel::vector8, occupancy ? &*occupancy : nullptr);
+    std::optional<SegmentOrder> lanes;
+    if (eo.order_lanes) {
+      lanes.emplace(enqueue_segment_order(device, segs));
+      e_order = lanes->event;
+    }
+    e_local =
+        enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp, LocalKernel::vector8,
+                               occupancy ? &*occupancy : nullptr, lanes ? &*lanes : nullptr);
   } else {
     // The samples in segment order at offsets scanned on the device.
     const int pes = static_cast<int>(segs.pes);
@@ -285,8 +291,8 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     times->balance_ms = stage_ms(dm.balance_events);
     if (occupancy)
       for (const cl::Event& e : occupancy->events) times->occupancy_ms += ms(e);
-    times->resample_local_ms =
-        (mode == CompositeMode::direct ? ms(e_zero) : 0.0) + times->occupancy_ms + ms(e_local);
+    times->resample_local_ms = (mode == CompositeMode::direct ? ms(e_zero) : 0.0) +
+                               times->occupancy_ms + ms(e_order) + ms(e_local);
     times->offsets_ms = stage_ms(offset_events);
     times->rays_ms = stage_ms(ray_events);
     times->walk_ms = stage_ms(walk_events) + (mode == CompositeMode::direct ? 0.0 : ms(e_zero));

@@ -263,27 +263,43 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
   return o;
 }
 
+SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs) {
+  SegmentOrder o;
+  o.count = segs.count;
+  const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(segs.count, 1));
+  o.order = device.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int), nullptr, "segment order");
+  const std::string name = "simdvol_segment_order";
+  cl::Kernel k = stage_kernel(device, name, 1);
+  set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
+           static_cast<cl_int>(log2_exact(segs.pes)), o.order);
+  const int64_t blocks = (segs.count + SV_ORDER_BLOCK - 1) / SV_ORDER_BLOCK;
+  o.event = device.run(k, name, segment_range(blocks), cl::NDRange(kSegmentWgs));
+  return o;
+}
+
 cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
                                  DeviceFootprints& fp, LocalKernel variant,
-                                 const DeviceOccupancy* skip) {
+                                 const DeviceOccupancy* skip, const SegmentOrder* lanes) {
   check_tables(segs, tables, voxels);
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
     throw ArgumentError("footprints", "PE count differs from the segments'");
   if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
     throw ArgumentError("occupancy", "was made for other voxels or another interpolation order");
+  if (lanes && lanes->count != segs.count)
+    throw ArgumentError("segment order", "was made for other segments");
   const bool v8 = variant == LocalKernel::vector8;
   const std::string name = v8 ? "simdvol_resample_local_v8" : "simdvol_resample_local";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
            static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),
            tables.channel_stride, segs.rects, fp.offsets, fp.pixels);
-  // The float8 kernel's skipping arguments; without skipping the reach
-  // argument is never read: any buffer will do.
+  // The float8 kernel's skipping and order arguments; without them the
+  // reach and order buffers are never read: any buffer will do.
   if (v8)
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
-                  cl_int(skip ? 1 : 0));
+                  cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }

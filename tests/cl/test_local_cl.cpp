@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstring>
 #include <limits>
+#include <numeric>
 #include <random>
 
 #include "simdvol/engine.hpp"
@@ -392,6 +393,14 @@ TEST(LocalCl, SkippingEmptyBricksKeepsEveryBit) {
         enqueue_resample_local(dev, segs, tables, vb, order, skip, LocalKernel::vector8, &occ);
         const Footprints p = read_footprints(dev, plain), s = read_footprints(dev, skip);
         EXPECT_TRUE(same_bits(p, s));
+        // The lanes' segment order, with and without skipping: the same bits.
+        const SegmentOrder lanes = enqueue_segment_order(dev, segs);
+        for (const DeviceOccupancy* o : {static_cast<const DeviceOccupancy*>(nullptr), &occ}) {
+          enqueue_zero_footprints(dev, skip);
+          enqueue_resample_local(dev, segs, tables, vb, order, skip, LocalKernel::vector8, o,
+                                 &lanes);
+          EXPECT_TRUE(same_bits(p, read_footprints(dev, skip))) << (o ? "skip" : "no skip");
+        }
         // The test can fail: with no brick in reach every footprint is 0.
         DeviceOccupancy none = occ;
         none.reach = dev.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(occ.count()), nullptr,
@@ -423,7 +432,67 @@ TEST(LocalCl, SkippingEmptyBricksKeepsEveryBit) {
                ArgumentError);  // made for another order
 }
 
-// The engine with and without skip_empty: the same image, bit for bit.
+// The lanes' order: in each block of SV_ORDER_BLOCK positions cut at the PEs'
+// boundaries, the segments stably sorted by min(k1 - k0, 63), longest first
+// (a host sort of the same keys), so each segment stays in its PE's range.
+TEST(LocalCl, SegmentOrderSortsWithinPeBlocks) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Dims3 dims{93, 57, 31};
+  const Volume vol(dims, VoxelType::f32);
+  int sorted_cases = 0;
+  for (int64_t pes : {int64_t(1), int64_t(8), int64_t(512), int64_t(8192)})
+    for (const ViewAngles a :
+         {ViewAngles{0, 0, 0}, ViewAngles{0, 30, 0}, ViewAngles{33, 71, -12}}) {
+      const ViewGeometry view = make_view(vol, a, 120, 100, Sampling::voxel);
+      const KdSplit split = kd_split(dims, pes);
+      const Matching m = balance_reference(match_reference(view, split), view, split);
+      const LocalSegments segs = upload_segments(dev, m);
+      const SegmentOrder o = enqueue_segment_order(dev, segs);
+      std::vector<cl_int> got(m.segments.size());
+      ASSERT_EQ(o.count, static_cast<int64_t>(got.size()));
+      cl_check(dev.queue().enqueueReadBuffer(o.order, CL_TRUE, 0, got.size() * sizeof(cl_int),
+                                             got.data()),
+               "read order");
+      std::vector<cl_int> want(got.size());
+      const auto key = [&](cl_int s) {
+        return std::clamp(
+            m.segments[static_cast<std::size_t>(s)].k1 - m.segments[static_cast<std::size_t>(s)].k0,
+            0, 63);
+      };
+      for (int64_t p = 0; p < pes; ++p)
+        for (int64_t b0 = m.seg_offset[p]; b0 < m.seg_offset[p + 1];) {
+          const int64_t b1 =
+              std::min<int64_t>((b0 / SV_ORDER_BLOCK + 1) * SV_ORDER_BLOCK, m.seg_offset[p + 1]);
+          std::iota(want.begin() + b0, want.begin() + b1, static_cast<cl_int>(b0));
+          std::stable_sort(want.begin() + b0, want.begin() + b1,
+                           [&](cl_int x, cl_int y) { return key(x) > key(y); });
+          b0 = b1;
+        }
+      EXPECT_EQ(got, want) << "P " << pes << " view " << a.theta << "," << a.phi;
+      std::vector<cl_int> identity(got.size());
+      std::iota(identity.begin(), identity.end(), 0);
+      sorted_cases += got != identity;
+    }
+  EXPECT_GT(sorted_cases, 3);  // the oblique views do reorder segments
+  // An order made for other segments is refused.
+  const ViewGeometry view = make_view(vol, {}, 16, 16, Sampling::voxel);
+  const Matching m = match_reference(view, kd_split(dims, 8));
+  const LocalSegments segs = upload_segments(dev, m);
+  const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, 8, 1));
+  VoxelBuffer vb(dev, L);
+  const ResampleTables tables = make_resample_tables(dev, L, view);
+  DeviceFootprints fp = make_footprints(dev, m.rects);
+  SegmentOrder wrong = enqueue_segment_order(dev, segs);
+  wrong.count += 1;
+  EXPECT_THROW(
+      enqueue_resample_local(dev, segs, tables, vb, 1, fp, LocalKernel::vector8, nullptr, &wrong),
+      ArgumentError);
+}
+
+// The engine with and without skip_empty and order_lanes: the same image,
+// bit for bit.
 TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
@@ -436,6 +505,7 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
       EngineOptions on, off;
       on.pes = off.pes = 512;
       off.skip_empty = false;
+      off.order_lanes = false;
       RenderEngine e_on(*dp, on), e_off(*dp, off);
       EngineTimes t;
       const Image a_on = e_on.render(vol, opt, &t), a_off = e_off.render(vol, opt);

@@ -58,9 +58,9 @@ struct EngineTimes {
   double gather_ms = 0;          ///< unused (0): nothing is gathered back any more
   double match_ms = 0;           ///< matching
   double balance_ms = 0;         ///< balancing
-  double resample_local_ms = 0;  ///< zero footprints + brick occupancy + fused resample +
-                                 ///< local (direct); resample into the sample buffer
-                                 ///< (adaptive, mc)
+  double resample_local_ms = 0;  ///< zero footprints + brick occupancy + lane order +
+                                 ///< fused resample + local (direct); resample into the
+                                 ///< sample buffer (adaptive, mc)
   double occupancy_ms = 0;       ///< direct with skip_empty: the brick occupancy's zeroing,
                                  ///< scan (not fused: fused marks it inside classify_ms) and
                                  ///< reach (included in resample_local_ms)
@@ -115,6 +115,10 @@ struct EngineOptions {
   /// (enqueue_occupancy; the same image bit for bit). Off: every sample is
   /// resampled (for comparison).
   bool skip_empty = true;
+  /// Direct compositing: the fused kernel's lanes take segments sorted by
+  /// length within blocks of one PE (enqueue_segment_order; the same image
+  /// bit for bit). Off: in segment order (for comparison).
+  bool order_lanes = true;
 };
 
 /// Checks the options against each other and `opt`; ArgumentError naming

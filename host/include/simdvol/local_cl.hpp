@@ -120,13 +120,28 @@ DeviceOccupancy make_occupancy(Device& device, const VoxelLayout& L, int order);
 /// `reach` from `occupied` (simdvol_occupancy_reach); appends its event.
 void enqueue_occupancy_reach(Device& device, DeviceOccupancy& o);
 
+/// The order in which the vector8 fused kernel takes segments into its 8
+/// lanes (local.cl: simdvol_segment_order): within each block of
+/// SV_ORDER_BLOCK consecutive segments of one PE, by length, longest first,
+/// so that the lanes that step together have similar lengths. Any order
+/// gives the same footprints, bit for bit.
+struct SegmentOrder {
+  int64_t count = 0;  ///< the segments it orders (segs.count)
+  cl::Buffer order;   ///< cl_int[count]: position -> segment index
+  cl::Event event;
+};
+/// Enqueues the sort of `segs` (their current k0, k1).
+SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs);
+
 /// Fused resample + local: the same footprints, samples never stored
 /// (`variant` as for enqueue_resample). With `skip` (made for these voxels
 /// and `order`) the vector8 kernel steps over samples whose every stencil
-/// voxel is zero; the scalar `segment` kernel ignores it.
+/// voxel is zero; with `lanes` (made for `segs`) it takes the segments in
+/// that order. The scalar `segment` kernel ignores both.
 cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
                                  DeviceFootprints& fp, LocalKernel variant = LocalKernel::vector8,
-                                 const DeviceOccupancy* skip = nullptr);
+                                 const DeviceOccupancy* skip = nullptr,
+                                 const SegmentOrder* lanes = nullptr);
 
 }  // namespace simdvol
