@@ -400,18 +400,24 @@ SV_FN int sv_trim8(long8* X, int8* N, const int T, const long s0, const long s1,
 
 /* simdvol_resample_v8: simdvol_resample with 8 consecutive segments per
  * work-item as float8 lanes (range: ceil(nseg / 8) work-items); lane l
- * stores its sample t at out[sample_off[s0 + l] + t] while t < its length. */
+ * stores its sample t at out[sample_off[s] + t] while t < its length, s =
+ * order[s0 + l] if `ordered` (local.cl: simdvol_segment_order), else
+ * s0 + l. */
 __kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nseg,
                                   __global const int* sample_off, __global const sv_view* view,
                                   __global const int* table, __global const float* vox,
-                                  const int cs, __global float4* out) {
+                                  const int cs, __global float4* out, __global const int* order,
+                                  const int ordered) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8], lo[8];
   long8 X[3];
-  const int T = sv_lanes8(segs, sample_off, 0, nseg, s0, view, li, lj, lk, ln, X);
+  const int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X);
 #pragma unroll
-  for (int l = 0; l < 8; ++l) lo[l] = sample_off[min(s0 + l, nseg - 1)];
+  for (int l = 0; l < 8; ++l) {
+    const int pos = min(s0 + l, nseg - 1);
+    lo[l] = sample_off[ordered ? order[pos] : pos];
+  }
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
   const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
   for (int t = 0; t < T; ++t) {

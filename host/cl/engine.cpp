@@ -210,7 +210,13 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
                                         " samples: more than 32-bit offsets can index");
     const cl::Buffer& samples =
         S.samples.at_least(device, static_cast<std::size_t>(nsamples) * 16, "samples");
-    e_local = enqueue_resample(device, segs, soff, tables, *S.rgba, opt.order, samples);
+    std::optional<SegmentOrder> lanes;
+    if (eo.order_lanes) {
+      lanes.emplace(enqueue_segment_order(device, segs));
+      e_order = lanes->event;
+    }
+    e_local = enqueue_resample(device, segs, soff, tables, *S.rgba, opt.order, samples,
+                               LocalKernel::vector8, lanes ? &*lanes : nullptr);
     const bool subray = mode == CompositeMode::mc && eo.mc_scope == McScope::subray;
     std::optional<DeviceRayLists> rays;
     if (!subray || eo.mc_allocate) {

@@ -82,6 +82,11 @@ void check_case(Device& dev, const Fixture& fx, const ViewGeometry& view, int64_
                  nullptr, "samples (one segment per work-item)");
   enqueue_resample(dev, segs, soff, tables, vb, order, samples1, LocalKernel::segment);
   enqueue_resample(dev, segs, soff, tables, vb, order, samples);
+  cl::Buffer samples2 =
+      dev.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(std::max<int64_t>(nsamples, 1)) * 16,
+                 nullptr, "samples (lanes in length order)");
+  const SegmentOrder lanes = enqueue_segment_order(dev, segs);
+  enqueue_resample(dev, segs, soff, tables, vb, order, samples2, LocalKernel::vector8, &lanes);
   enqueue_local(dev, segs, soff, samples, fp);
   enqueue_resample_local(dev, segs, tables, vb, order, fused);
   dev.finish();
@@ -97,6 +102,11 @@ void check_case(Device& dev, const Fixture& fx, const ViewGeometry& view, int64_
     cl_check(dev.queue().enqueueReadBuffer(samples1, CL_TRUE, 0, got1.size() * 16, got1.data()),
              "read samples");
   EXPECT_EQ(max_diff(got, got1), 0.0f);  // float8 lanes: the same arithmetic
+  std::vector<Rgba> got2(got.size());
+  if (nsamples > 0)
+    cl_check(dev.queue().enqueueReadBuffer(samples2, CL_TRUE, 0, got2.size() * 16, got2.data()),
+             "read samples");
+  EXPECT_EQ(std::memcmp(got.data(), got2.data(), got.size() * sizeof(Rgba)), 0);  // any lane order
 
   const Footprints ref =
       footprints_reference(m, local_reference(m, fx.voxels, fx.dims, view, order));

@@ -115,9 +115,10 @@ struct EngineOptions {
   /// (enqueue_occupancy; the same image bit for bit). Off: every sample is
   /// resampled (for comparison).
   bool skip_empty = true;
-  /// Direct compositing: the fused kernel's lanes take segments sorted by
-  /// length within blocks of one PE (enqueue_segment_order; the same image
-  /// bit for bit). Off: in segment order (for comparison).
+  /// The float8 resample kernels (fused with local compositing for direct,
+  /// alone for adaptive and Monte Carlo) take segments into their lanes
+  /// sorted by length within blocks of one PE (enqueue_segment_order; the
+  /// same image bit for bit). Off: in segment order (for comparison).
   bool order_lanes = true;
 };
 

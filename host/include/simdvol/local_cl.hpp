@@ -82,15 +82,31 @@ cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp);
 /// Reads the footprints back (blocking) as local.hpp's Footprints.
 Footprints read_footprints(Device& device, const DeviceFootprints& fp);
 
+/// The order in which the vector8 kernels take segments into their 8
+/// lanes (local.cl: simdvol_segment_order): within each block of
+/// SV_ORDER_BLOCK consecutive segments of one PE, by length, longest first,
+/// so that the lanes that step together have similar lengths. Any order
+/// gives the same footprints, bit for bit.
+struct SegmentOrder {
+  int64_t count = 0;  ///< the segments it orders (segs.count)
+  cl::Buffer order;   ///< cl_int[count]: position -> segment index
+  cl::Event event;
+};
+/// Enqueues the sort of `segs` (their current k0, k1).
+SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs);
+
 /// Kernel of the resample stages: `vector8` (the default: 8 segments per
 /// work-item in explicit float8 lanes, see resample.cl) or `segment` (one
 /// segment per work-item, scalar under PoCL). Same results bit for bit.
 enum class LocalKernel { vector8, segment };
 /// Resamples every sample of `segs` into `samples` (cl_float4, at
-/// sample_offsets(m).back() elements at least), in segment order.
+/// sample_offsets(m).back() elements at least), in segment order. With
+/// `lanes` (made for `segs`) the vector8 kernel takes the segments in that
+/// order into its lanes (the same samples).
 cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                            const ResampleTables& tables, const VoxelBuffer& voxels, int order,
-                           const cl::Buffer& samples, LocalKernel variant = LocalKernel::vector8);
+                           const cl::Buffer& samples, LocalKernel variant = LocalKernel::vector8,
+                           const SegmentOrder* lanes = nullptr);
 /// Composites the samples of each segment into the footprints (zeroed first).
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                         const cl::Buffer& samples, DeviceFootprints& fp);
@@ -119,19 +135,6 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
 DeviceOccupancy make_occupancy(Device& device, const VoxelLayout& L, int order);
 /// `reach` from `occupied` (simdvol_occupancy_reach); appends its event.
 void enqueue_occupancy_reach(Device& device, DeviceOccupancy& o);
-
-/// The order in which the vector8 fused kernel takes segments into its 8
-/// lanes (local.cl: simdvol_segment_order): within each block of
-/// SV_ORDER_BLOCK consecutive segments of one PE, by length, longest first,
-/// so that the lanes that step together have similar lengths. Any order
-/// gives the same footprints, bit for bit.
-struct SegmentOrder {
-  int64_t count = 0;  ///< the segments it orders (segs.count)
-  cl::Buffer order;   ///< cl_int[count]: position -> segment index
-  cl::Event event;
-};
-/// Enqueues the sort of `segs` (their current k0, k1).
-SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs);
 
 /// Fused resample + local: the same footprints, samples never stored
 /// (`variant` as for enqueue_resample). With `skip` (made for these voxels
