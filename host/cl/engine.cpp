@@ -159,7 +159,10 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   const int W = view.width(), H = view.height();
   const int64_t npx = static_cast<int64_t>(W) * H;
 
-  cl::Event e_zero, e_order, e_local;
+  cl::Event e_zero, e_local;
+  // The float8 resample kernels' lanes in length order (either mode).
+  std::optional<SegmentOrder> lanes;
+  if (eo.order_lanes) lanes.emplace(enqueue_segment_order(device, segs));
   std::vector<StageEvent> offset_events, walk_events;
   std::vector<StageEvent> ray_events;
   std::optional<DeviceFootprints> fp;
@@ -171,11 +174,6 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       enqueue_occupancy_reach(device, *occupancy);
     else if (skip)
       occupancy.emplace(enqueue_occupancy(device, *S.rgba, opt.order));
-    std::optional<SegmentOrder> lanes;
-    if (eo.order_lanes) {
-      lanes.emplace(enqueue_segment_order(device, segs));
-      e_order = lanes->event;
-    }
     e_local =
         enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp, LocalKernel::vector8,
                                occupancy ? &*occupancy : nullptr, lanes ? &*lanes : nullptr);
@@ -210,11 +208,6 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
                                         " samples: more than 32-bit offsets can index");
     const cl::Buffer& samples =
         S.samples.at_least(device, static_cast<std::size_t>(nsamples) * 16, "samples");
-    std::optional<SegmentOrder> lanes;
-    if (eo.order_lanes) {
-      lanes.emplace(enqueue_segment_order(device, segs));
-      e_order = lanes->event;
-    }
     e_local = enqueue_resample(device, segs, soff, tables, *S.rgba, opt.order, samples,
                                LocalKernel::vector8, lanes ? &*lanes : nullptr);
     const bool subray = mode == CompositeMode::mc && eo.mc_scope == McScope::subray;
@@ -298,7 +291,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     if (occupancy)
       for (const cl::Event& e : occupancy->events) times->occupancy_ms += ms(e);
     times->resample_local_ms = (mode == CompositeMode::direct ? ms(e_zero) : 0.0) +
-                               times->occupancy_ms + ms(e_order) + ms(e_local);
+                               times->occupancy_ms + (lanes ? ms(lanes->event) : 0.0) + ms(e_local);
     times->offsets_ms = stage_ms(offset_events);
     times->rays_ms = stage_ms(ray_events);
     times->walk_ms = stage_ms(walk_events) + (mode == CompositeMode::direct ? 0.0 : ms(e_zero));
