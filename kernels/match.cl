@@ -77,7 +77,8 @@ SV_FN int sv_pe_box(__constant sv_view* view, int4 ci, int4 cell, long* lo, long
   return 1;
 }
 
-/* Exact [k0, k1) of ray (i, j) in the box; k0 >= k1 when empty (slow path). */
+/* Exact [k0, k1) of ray (i, j) in the box; k0 >= k1 when empty (the fill's
+ * cursor over rows with holes). */
 SV_FN int2 sv_box_ray(__constant sv_view* view, const long* lo, const long* hi, int i, int j) {
   const int D = view->grid[2];
   int k0 = 0, k1 = D;
@@ -274,7 +275,8 @@ SV_FN void sv_row8_init(__constant sv_view* view, __constant long* stepc, const 
   }
 }
 
-/* One column of the 8 lanes (sv_row_eval): k0, k1; act = lanes with a
+/* One column of the 8 lanes: k0, k1 = the largest entry bound and the
+ * smallest exit bound over the axes, clamped to [0, D]; act = lanes with a
  * segment inside [ia, ib]; lnk = those whose segment has a balance link
  * (one exit axis, k1 < D, the neighbour cell inside the volume), exit axis
  * in ea. */
@@ -306,7 +308,8 @@ SV_FN void sv_row8_eval(const sv_row8* st, __constant sv_view* view, const long*
     const long8 ex = st->qhi[a] == hi;
     n -= ex;
     e = select(e, (int8)(a), convert_int8(ex));
-    /* sv_link_pe's test: the sample k1 lies in the next cell along a. */
+    /* A link needs the sample k1 inside the volume and in the next cell
+     * along a (not past it). */
     const long8 f = (st->base[a] + K1 * d) >> SV_FRAC_BITS;
     const long8 in = d > 0 ? (f < (long8)(view->dims[a])) & (f < (long8)((Hb[a] >> SV_FRAC_BITS) + c[a]))
                            : (f >= (long8)(0)) & (f >= (long8)((L[a] >> SV_FRAC_BITS) - c[a]));
@@ -428,8 +431,9 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
    * first link: t0 = the index its row's segment at column 0 would have, or
    * SV_HOLES if the row has holes; then hb = the index of the row's first
    * segment, and a cursor (hc, hn): hn segments in columns before hc,
-   * advanced with sv_box_ray as the lane's columns grow (sv_segment_index
-   * counts from the row's start at every link). SV_UNSET before. */
+   * advanced with sv_box_ray as the lane's columns grow, so a row's holes
+   * are counted once, not from the row's start at every link. SV_UNSET
+   * before. */
 #define SV_UNSET INT_MAX
 #define SV_HOLES INT_MIN
   int nq[3], t0[3][8], hb[3][8], hc[3][8], hn[3][8];

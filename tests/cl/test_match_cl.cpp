@@ -39,7 +39,7 @@ void expect_same(const Matching& a, const Matching& b, const std::string& what) 
 // Runs match (and balance when sweeps >= 0) on the device and checks both
 // against the references.
 // Rows of a PE whose segments skip a ray between their first and last (the
-// device's slow path for link targets).
+// device fill's cursor for link targets).
 int64_t rows_with_holes(const Matching& m) {
   int64_t n = 0;
   for (int64_t p = 0; p < m.pes(); ++p)
@@ -109,7 +109,7 @@ TEST(MatchCl, EqualsReferenceRandomViews) {
     check_device(dev, v, kd_split(dims, pes), n % 4 == 0 ? 4 : -1, name(va, pes));
     holes += rows_with_holes(match_reference(v, kd_split(dims, pes)));
   }
-  // The random views include rows with holes, so the slow path is covered.
+  // The random views include rows with holes, so the cursor is covered.
   EXPECT_GT(holes, 0);
 }
 
