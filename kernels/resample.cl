@@ -234,8 +234,11 @@ SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int
         const int8 o = row + ax[a];
 #pragma unroll
         for (int ch = 0; ch < 4; ++ch) {
-          const int8 oc = o + ch * cs;
-          v[a * R + ch * SV_M * SV_M + c * SV_M + b] = SV_G8(vox, oc);
+          /* the channel's plane, then the lanes' offsets: the 8 offsets are
+           * taken out of `o` once for the 4 channels (o + ch * cs took them
+           * out 4 times: -20% in the fused kernel). */
+          __global const float* vc = vox + ch * cs;
+          v[a * R + ch * SV_M * SV_M + c * SV_M + b] = SV_G8(vc, o);
         }
       }
     }
