@@ -62,6 +62,37 @@ __kernel void simdvol_swap_stage(__global const float4* in, __global const int8*
   const bool p_front = ((p >> k) & 1) == front;
   int row = e.y / o.s2;
   int col = e.y - row * o.s2;
+  if (o.s6 >= rp.s6 && o.s6 >= rq.s6) {
+    /* Row by row: along a row of o, x steps by 1 << o.s6, a multiple of
+     * each input rectangle's x stride, so a pixel's alignment with an input
+     * rectangle is that of the row's first, and its column there steps by
+     * 1 << (o.s6 - r.s6): sv_rect_index's result, incrementally. */
+    const int ip_inc = 1 << (o.s6 - rp.s6), iq_inc = 1 << (o.s6 - rq.s6);
+    for (int i = 0; i < n;) {
+      const int x = o.s0 + (col << o.s6), y = o.s1 + (row << o.s7);
+      const int m = min(o.s2 - col, n - i);
+      const int dxp = x - rp.s0, dyp = y - rp.s1, dxq = x - rq.s0, dyq = y - rq.s1;
+      const int bp = dyp >> rp.s7, bq = dyq >> rq.s7;
+      const bool okp = dyp >= 0 && (dyp & (rp.s5 - 1)) == 0 && bp < rp.s3 &&
+                       (dxp & (rp.s4 - 1)) == 0;
+      const bool okq = dyq >= 0 && (dyq & (rq.s5 - 1)) == 0 && bq < rq.s3 &&
+                       (dxq & (rq.s4 - 1)) == 0;
+      int ap = dxp >> rp.s6, aq = dxq >> rq.s6;
+      __global const float4* rowp = inp + bp * rp.s2;
+      __global const float4* rowq = inq + bq * rq.s2;
+      for (int j = 0; j < m; ++j) {
+        const float4 vp = okp && ap >= 0 && ap < rp.s2 ? rowp[ap] : (float4)(0.0f);
+        const float4 vq = okq && aq >= 0 && aq < rq.s2 ? rowq[aq] : (float4)(0.0f);
+        out[base + i + j] = p_front ? sv_swap_over(vp, vq) : sv_swap_over(vq, vp);
+        ap += ip_inc;
+        aq += iq_inc;
+      }
+      i += m;
+      col = 0;
+      ++row;
+    }
+    return;
+  }
   for (int i = 0; i < n; ++i) {
     const int x = o.s0 + (col << o.s6), y = o.s1 + (row << o.s7);
     const int ip = sv_rect_index(rp, x, y);
