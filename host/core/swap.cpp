@@ -2,6 +2,7 @@
 #include "simdvol/swap.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 #include "simdvol/composite.hpp"
@@ -83,6 +84,18 @@ bool SwapRect::contains(int64_t x, int64_t y) const {
 StridedRange strided_range(int64_t lo, int64_t hi, int64_t stride, int64_t residue) {
   if (stride < 1) throw ArgumentError("stride", "must be positive");
   StridedRange r;
+  if ((stride & (stride - 1)) == 0) {
+    // A power of two (every stride of plan_swap): x mod stride is x & m for
+    // any x in two's complement, and the divisions are shifts; the same
+    // results as the general path below (tested).
+    const int64_t m = stride - 1;
+    r.first = lo + (((residue & m) - (lo & m)) & m);
+    r.count = r.first < hi
+                  ? ((hi - 1 - r.first) >> std::countr_zero(static_cast<uint64_t>(stride))) + 1
+                  : 0;
+    if (r.count == 0) r.first = lo;
+    return r;
+  }
   const int64_t rr = ((residue % stride) + stride) % stride;
   const int64_t lm = ((lo % stride) + stride) % stride;
   r.first = lo + ((rr - lm) % stride + stride) % stride;

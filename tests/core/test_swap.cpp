@@ -69,6 +69,26 @@ TEST(SwapSchedule, StridedRange) {
   EXPECT_THROW(strided_range(0, 1, 0, 0), ArgumentError);
 }
 
+// Every (lo, hi, stride, residue) in a small box, negative values included,
+// against counting the members one by one: the power-of-two strides take
+// masks and shifts, the others divisions.
+TEST(SwapSchedule, StridedRangeEqualsEnumeration) {
+  for (int64_t stride : {1, 2, 3, 4, 5, 8, 16, 64})
+    for (int64_t lo = -20; lo <= 20; ++lo)
+      for (int64_t hi = lo - 2; hi <= lo + 40; ++hi)
+        for (int64_t residue = -9; residue <= 9; ++residue) {
+          int64_t first = -1, count = 0;
+          for (int64_t x = lo; x < hi; ++x)
+            if (((x - residue) % stride) == 0) {
+              if (count++ == 0) first = x;
+            }
+          const StridedRange r = strided_range(lo, hi, stride, residue);
+          ASSERT_EQ(r.count, count) << lo << " " << hi << " " << stride << " " << residue;
+          ASSERT_EQ(r.first, count > 0 ? first : lo)
+              << lo << " " << hi << " " << stride << " " << residue;
+        }
+}
+
 // Stage bits: N of them, alternating axes, levels ascending (cut-and-stack)
 // or descending from B - 1 (hierarchical); every pixel lands on the PE the
 // layout's formula names.
