@@ -13,9 +13,11 @@
  * X-Net transfer) and writes over(front, back), p in front when bit k of p
  * equals `front`. (One work-item per pixel, as before, spent ~13 ns per
  * pixel on the chunk lookup, a division and the rectangles' loads.) Where
- * the output's x stride is a multiple of both inputs' (always, for both
- * layouts), the chunk goes row by row and steps each input's column
- * instead of indexing both rectangles per pixel (the same pixels).
+ * the output's x stride is a multiple of both inputs' (in every plan of
+ * plan_swap, both layouts: a level's strides never shrink), the chunk goes
+ * row by row and steps each input's column instead of indexing both
+ * rectangles per pixel (the same pixels); a plan made otherwise takes the
+ * per-pixel path.
  *
  * simdvol_display: one work-item per intermediate pixel (x, y): the PE
  * xpe[x] | ype[y] holds it after the swap (0 if outside its rectangle).
