@@ -1,13 +1,15 @@
 # ctest simdvol_bench_harness: runs simdvol-bench (${BENCH}) on a tiny case
 # and checks its JSON (${OUT}): the device's details, one case per
-# compositing mode with its stage times, the frame's samples, utilisation
-# and X-Net bytes, and direct compositing equal to the reference (PSNR
-# >= 80 dB, or identical); then that a bad option value exits 2 naming the
+# compositing mode and balance sweep count (8 and 0) with its stage times,
+# the frame's samples, utilisation and X-Net bytes, and direct compositing
+# equal to the reference (PSNR >= 80 dB, or identical) either way, no
+# balance time without sweeps and the same samples; then that a bad option value exits 2 naming the
 # option and leaves no JSON behind.
 file(REMOVE ${OUT})
 execute_process(
   COMMAND ${BENCH} --volumes phantom32 --sizes 64 --orders 1 --pes 64
-          --compositing direct,adaptive,mc4 --repeat 2 --turntable 4 --json ${OUT}
+          --compositing direct,adaptive,mc4 --balance-sweeps 8,0 --repeat 2 --turntable 4
+          --json ${OUT}
   RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "simdvol-bench failed (${rc}):\n${out}\n${err}")
@@ -29,8 +31,8 @@ foreach(key name platform_version cpu_model triad_gbs)
   get(v device ${key})
 endforeach()
 string(JSON ncases LENGTH "${text}" cases)
-if(NOT ncases EQUAL 3)
-  message(FATAL_ERROR "expected 3 cases, got ${ncases}")
+if(NOT ncases EQUAL 6)
+  message(FATAL_ERROR "expected 6 cases, got ${ncases}")
 endif()
 math(EXPR last "${ncases} - 1")
 foreach(i RANGE ${last})
@@ -50,6 +52,21 @@ foreach(i RANGE ${last})
   get(swapped cases ${i} xnet swapped)
   get(bytes cases ${i} xnet swap_bytes)
   get(halo cases ${i} xnet halo_bytes)
+  get(sweeps cases ${i} balance_sweeps)
+  get(bal cases ${i} stages_ms balance median)
+  if(sweeps EQUAL 0)
+    if(NOT id MATCHES "/b0$" OR NOT bal EQUAL 0)
+      message(FATAL_ERROR "${id}: 0 balance sweeps but balance ${bal} ms")
+    endif()
+  elseif(NOT sweeps EQUAL 8 OR NOT bal GREATER 0 OR id MATCHES "/b")
+    message(FATAL_ERROR "${id}: ${sweeps} balance sweeps, balance ${bal} ms")
+  endif()
+  # Balancing moves samples between PEs: the total is the matching's.
+  if(i EQUAL 0)
+    set(samples0 ${samples})
+  elseif(NOT samples EQUAL samples0)
+    message(FATAL_ERROR "${id}: ${samples} samples, the first case had ${samples0}")
+  endif()
   get(psnr cases ${i} reference psnr_db)
   get(identical cases ${i} reference identical)
   if(NOT halo GREATER 0)
@@ -92,6 +109,11 @@ execute_process(COMMAND ${BENCH} --compositing direct,mcx
                 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(NOT rc EQUAL 2 OR NOT err MATCHES "--compositing")
   message(FATAL_ERROR "bad --compositing: exit ${rc}, stderr ${err}")
+endif()
+execute_process(COMMAND ${BENCH} --balance-sweeps 8,65
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL 2 OR NOT err MATCHES "--balance-sweeps")
+  message(FATAL_ERROR "bad --balance-sweeps: exit ${rc}, stderr ${err}")
 endif()
 execute_process(COMMAND ${BENCH} --volumes brainsmall --data ${OUT}.nodata
                 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)

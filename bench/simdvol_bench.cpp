@@ -4,12 +4,14 @@
 // core scaling through child processes.
 //
 //   simdvol-bench [--volumes LIST] [--sizes LIST] [--orders LIST]
-//                 [--compositing LIST] [--pes LIST] [--view T,P,V]
-//                 [--sampling voxel|pixel] [--repeat R] [--turntable F]
+//                 [--compositing LIST] [--pes LIST] [--balance-sweeps LIST]
+//                 [--view T,P,V] [--sampling voxel|pixel] [--repeat R] [--turntable F]
 //                 [--no-reference] [--no-volpack] [--volpack-runs R]
 //                 [--scaling LIST] [--data DIR] [--json FILE] [--quick]
 //
-// Cases: the product volumes x sizes x orders x compositing x P. Volumes:
+// Cases: the product volumes x sizes x orders x compositing x P x balance
+// sweeps (EngineOptions::balance_sweeps, default 8; a case with another
+// count has "/bN" at the end of its id). Volumes:
 // phantomN (the N^3 Shepp-Logan CT phantom, shepp_logan(N, 4), preset ct),
 // brainsmall (data/brainsmall.den, preset volpack: VolPack's example
 // classification), ch2 (data/ch2.nii.gz, preset mri). Compositing: direct,
@@ -25,7 +27,7 @@
 // within the run): its time, the speed-up, PSNR and max abs difference.
 // Turntable (--turntable F, default 36): F frames at 5-degree steps about
 // the vertical axis through one RenderEngine with reuse_layout, on each
-// volume at the first size, order, compositing and P; PSNR against the
+// volume at the first size, order, compositing, P and sweeps; PSNR against the
 // reference at frames 0, F/4, F/2, 3F/4.
 // VolPack (when built with it, brainsmall selected, not --no-volpack): its
 // example pipeline (volpack_peer.hpp) at every size, brute-force and
@@ -90,7 +92,8 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: simdvol-bench [--volumes LIST] [--sizes LIST] [--orders LIST] [--compositing LIST]\n"
-    "                     [--pes LIST] [--view T,P,V] [--sampling voxel|pixel] [--repeat R]\n"
+    "                     [--pes LIST] [--balance-sweeps LIST] [--view T,P,V]\n"
+    "                     [--sampling voxel|pixel] [--repeat R]\n"
     "                     [--turntable F] [--no-reference] [--no-volpack] [--volpack-runs R]\n"
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
     "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2\n"
@@ -103,6 +106,7 @@ struct Options {
   std::vector<int64_t> orders{1};
   std::vector<std::string> compositing{"direct", "adaptive", "mc16"};
   std::vector<int64_t> pes{8192};
+  std::vector<int64_t> sweeps{kBalanceSweeps};
   ViewAngles view{20, 35, 10};
   Sampling sampling = Sampling::voxel;
   int repeat = 5;
@@ -189,6 +193,8 @@ Options parse_args(int argc, char** argv) {
     } else if (a == "--pes") {
       o.pes = parse_int_list(next(), a, 1, int64_t(1) << 20);
       for (int64_t p : o.pes) pe_grid(p, "--pes");
+    } else if (a == "--balance-sweeps") {
+      o.sweeps = parse_int_list(next(), a, 0, kMaxBalanceSweeps);
     } else if (a == "--view") {
       const std::string v = next();
       const auto parts = split_list(v, a);
@@ -348,9 +354,9 @@ struct Harness {
   }
 
   static std::string case_id(const std::string& vol, int size, int order, const std::string& comp,
-                             int64_t pes) {
+                             int64_t pes, int sweeps) {
     return vol + "/" + std::to_string(size) + "/o" + std::to_string(order) + "/" + comp + "/P" +
-           std::to_string(pes);
+           std::to_string(pes) + (sweeps == kBalanceSweeps ? "" : "/b" + std::to_string(sweeps));
   }
 
   void print_case_header() const {
@@ -362,13 +368,14 @@ struct Harness {
         "util", "XNet_MB", "ref_ms", "speedup", "PSNR");
   }
 
-  void run_case(const Loaded& L, int size, int order, const Comp& c, int64_t pes) {
-    const std::string id = case_id(L.spec.name, size, order, c.name, pes);
+  void run_case(const Loaded& L, int size, int order, const Comp& c, int64_t pes, int sweeps) {
+    const std::string id = case_id(L.spec.name, size, order, c.name, pes, sweeps);
     const RenderOptions opt = render_options(L.spec, size, order, c, o.view);
     EngineOptions eo;
     eo.pes = pes;
     eo.fused = true;
     eo.mc_scope = c.scope;
+    eo.balance_sweeps = sweeps;
     json j;
     j["id"] = id;
     j["volume"] = L.spec.name;
@@ -378,6 +385,7 @@ struct Harness {
     j["order"] = order;
     j["compositing"] = c.name;
     j["pes"] = pes;
+    j["balance_sweeps"] = sweeps;
     j["sampling"] = o.sampling == Sampling::voxel ? "voxel" : "pixel";
     j["view"] = {o.view.theta, o.view.phi, o.view.varphi};
     try {
@@ -473,12 +481,13 @@ struct Harness {
     cases.push_back(j);
   }
 
-  void run_turntable(const Loaded& L, int size, int order, const Comp& c, int64_t pes) {
+  void run_turntable(const Loaded& L, int size, int order, const Comp& c, int64_t pes, int sweeps) {
     const int F = o.turntable;
     EngineOptions eo;
     eo.pes = pes;
     eo.fused = true;
     eo.mc_scope = c.scope;
+    eo.balance_sweeps = sweeps;
     eo.reuse_layout = true;
     json j;
     j["volume"] = L.spec.name;
@@ -486,6 +495,7 @@ struct Harness {
     j["order"] = order;
     j["compositing"] = c.name;
     j["pes"] = pes;
+    j["balance_sweeps"] = sweeps;
     j["frames"] = F;
     j["step_deg"] = 5.0;
     try {
@@ -587,18 +597,21 @@ struct Harness {
       timed("VolPack classified", o.repeat, [&] { return example.render(vp::Mode::classified); });
       Row refrow{"simdvol reference (order 3)", {ref.ms, ref.ms, ref.ms, 1}, ref.ms, INFINITY};
       table.push_back(refrow);
-      for (const int64_t pes : o.pes) {
-        EngineOptions eo;
-        eo.pes = pes;
-        eo.fused = true;
-        RenderEngine engine(*dev, eo);
-        for (const int64_t order : o.orders) {
-          RenderOptions opt = ropt;
-          opt.order = static_cast<int>(order);
-          timed("simdvol OpenCL order " + std::to_string(order) + " P " + std::to_string(pes),
-                o.repeat, [&] { return engine.render(vol, opt); });
+      for (const int64_t pes : o.pes)
+        for (const int64_t sweeps : o.sweeps) {
+          EngineOptions eo;
+          eo.pes = pes;
+          eo.fused = true;
+          eo.balance_sweeps = static_cast<int>(sweeps);
+          RenderEngine engine(*dev, eo);
+          for (const int64_t order : o.orders) {
+            RenderOptions opt = ropt;
+            opt.order = static_cast<int>(order);
+            timed("simdvol OpenCL order " + std::to_string(order) + " P " + std::to_string(pes) +
+                      (sweeps == kBalanceSweeps ? "" : " b" + std::to_string(sweeps)),
+                  o.repeat, [&] { return engine.render(vol, opt); });
+          }
         }
-      }
       const double cls = table[1].t.median, bf = table[0].t.median;
       std::printf("\n%dx%d: %-32s %9s %9s %9s %9s %9s %9s %8s\n", size, size, "renderer",
                   "ms/frame", "min", "max", "first", "x VPclsf", "x VPbrute", "PSNR dB");
@@ -625,6 +638,7 @@ struct Harness {
       eo.pes = o.pes[0];
       eo.fused = true;
       eo.reuse_layout = true;
+      eo.balance_sweeps = static_cast<int>(o.sweeps[0]);
       RenderEngine engine(*dev, eo);
       std::vector<double> tv, to;
       double minq_vp = INFINITY, minq_ours = INFINITY;
@@ -901,7 +915,9 @@ int main(int argc, char** argv) {
         for (const int64_t order : o.orders)
           for (const Comp& c : comps)
             for (const int64_t pes : o.pes)
-              h.run_case(L, static_cast<int>(size), static_cast<int>(order), c, pes);
+              for (const int64_t sweeps : o.sweeps)
+                h.run_case(L, static_cast<int>(size), static_cast<int>(order), c, pes,
+                           static_cast<int>(sweeps));
     std::printf(
         "(first: the warm-up frame, with fresh buffers and any program builds; util: mean / max "
         "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B (the JSON adds "
@@ -913,7 +929,7 @@ int main(int argc, char** argv) {
       std::printf("\n");
       for (const Loaded& L : vols)
         h.run_turntable(L, static_cast<int>(o.sizes[0]), static_cast<int>(o.orders[0]), comps[0],
-                        o.pes[0]);
+                        o.pes[0], static_cast<int>(o.sweeps[0]));
       root["turntables"] = h.turntables;
     }
     root["volpack"] = nullptr;

@@ -56,6 +56,9 @@ void validate(const EngineOptions& eo, const RenderOptions& opt) {
     throw ArgumentError("--allocate", "allocates walks to sub-rays: needs --mc-scope subray");
   if (eo.mc_allocate && opt.composite.mode != CompositeMode::mc)
     throw ArgumentError("--allocate", "needs --composite mc");
+  if (eo.balance_sweeps < 0 || eo.balance_sweeps > kMaxBalanceSweeps)
+    throw ArgumentError("--balance-sweeps", std::to_string(eo.balance_sweeps) + " is outside 0.." +
+                                                std::to_string(kMaxBalanceSweeps));
 }
 
 struct RenderEngine::State {
@@ -153,7 +156,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // Match and balance on the PE array.
   const KdSplit& split = S.cells->layout().split;
   DeviceMatching dm = enqueue_match(device, view, split);
-  enqueue_balance(device, dm, view, split);
+  enqueue_balance(device, dm, view, split, eo.balance_sweeps);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
   const ResampleTables tables = make_resample_tables(device, S.rgba->layout(), view);
   const int W = view.width(), H = view.height();

@@ -147,7 +147,7 @@ int main(int argc, char** argv) {
   VolumeArgs rv;
   std::string view = "0,0,0", size = "256x256", sampling = "voxel", composite = "direct",
               streams = "per-ray", classify = "auto", engine = "opencl", out = "simdvol.png";
-  int order = 1, samples = 32, frames = 1, phantom_size = 256;
+  int order = 1, samples = 32, frames = 1, phantom_size = 256, balance_sweeps = kBalanceSweeps;
   uint64_t seed = 1;
   double step = 5.0;
   float threshold = 0.95f;
@@ -195,6 +195,12 @@ int main(int argc, char** argv) {
       ->add_option("--layout", swap_layout,
                    "opencl engine: the binary swap's final layout, cut-and-stack or hierarchical "
                    "(same image)")
+      ->capture_default_str();
+  render
+      ->add_option("--balance-sweeps", balance_sweeps,
+                   "opencl engine: load-balancing sweeps after the matching (ch. 5; 0: none). "
+                   "The thesis's SIMD PEs wait for the busiest; PoCL's work-items do not, so 0 "
+                   "is faster on a CPU (the same image to float rounding)")
       ->capture_default_str();
   render->add_option("--engine", engine, "reference (serial CPU) or opencl (the PE array)")
       ->capture_default_str();
@@ -297,6 +303,7 @@ int main(int argc, char** argv) {
       eo.fused = true;
       eo.reuse_layout = true;  // the volume does not change between frames
       eo.skip_empty = !no_skip_empty;
+      eo.balance_sweeps = balance_sweeps;
       if (swap_layout == "cut-and-stack")
         eo.layout = SwapLayout::cut_and_stack;
       else if (swap_layout == "hierarchical")

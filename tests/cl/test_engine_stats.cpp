@@ -3,13 +3,17 @@
 // balance_reference's exactly (samples = their sum, utilisation = mean / max),
 // the segment count equals the balanced matching's, and the swap cost equals
 // swap_cost of the plan made from the reference rectangles (direct
-// compositing); a whole-ray adaptive frame has loads but no swap.
+// compositing); a whole-ray adaptive frame has loads but no swap. With
+// EngineOptions::balance_sweeps 0 and 1 the loads equal match_reference's
+// and balance_reference's after one sweep, and the image stays the
+// reference's (PSNR >= 80 dB, as the balanced frame's).
 #include <gtest/gtest.h>
 
 #include "simdvol/classify.hpp"
 #include "simdvol/engine.hpp"
 #include "simdvol/match.hpp"
 #include "simdvol/phantom.hpp"
+#include "simdvol/render.hpp"
 #include "simdvol/swap.hpp"
 #include "stage_testing.hpp"
 
@@ -56,4 +60,46 @@ TEST(EngineStats, LoadsAndSwapCostEqualTheReferences) {
   EXPECT_EQ(sa.loads, m.loads);
   EXPECT_FALSE(sa.swapped);
   EXPECT_EQ(sa.swap.moved, 0);
+}
+
+TEST(EngineStats, BalanceSweepsOption) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 1);
+  RenderOptions opt;
+  opt.view = {20, 35, 10};
+  opt.width = opt.height = 64;
+  opt.classifier = classifier_preset("ct");
+  const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
+  const KdSplit split = kd_split(vol.dims(), 64);
+  const Matching plain = match_reference(view, split);
+  const Image ref = render_reference(vol, opt);
+  double util_seen[2] = {0, 0};
+  for (int sweeps : {0, 1}) {
+    SCOPED_TRACE("sweeps " + std::to_string(sweeps));
+    EngineOptions eo;
+    eo.pes = 64;
+    eo.fused = true;
+    eo.balance_sweeps = sweeps;
+    RenderEngine engine(dev, eo);
+    EngineStats st;
+    EngineTimes t;
+    const Image img = engine.render(vol, opt, &t, &st);
+    const Matching m = sweeps == 0 ? plain : balance_reference(plain, view, split, sweeps);
+    EXPECT_EQ(st.loads, m.loads);
+    EXPECT_EQ(st.segments, static_cast<int64_t>(m.segments.size()));
+    EXPECT_EQ(st.samples, plain.total_load());  // balancing moves samples, never adds
+    if (sweeps == 0) {
+      EXPECT_EQ(t.balance_ms, 0.0);
+    }
+    util_seen[sweeps] = st.utilisation();
+    EXPECT_GE(psnr(ref, img), 80.0);
+  }
+  // The view is one that balancing improves, so the option reached the device.
+  EXPECT_LT(util_seen[0], util_seen[1]);
+  EngineOptions bad;
+  bad.pes = 64;
+  for (int sweeps : {-1, kMaxBalanceSweeps + 1}) {
+    bad.balance_sweeps = sweeps;
+    EXPECT_THROW(render_opencl(dev, vol, opt, bad), ArgumentError);
+  }
 }

@@ -112,6 +112,8 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --engine gpu -o " + path("x.png"), "--engine"},
       {"render --mc-scope half -o " + path("x.png"), "--mc-scope"},
       {"render --layout spiral -o " + path("x.png"), "--layout"},
+      {"render --balance-sweeps 65 -o " + path("x.png"), "--balance-sweeps"},
+      {"render --balance-sweeps -1 -o " + path("x.png"), "--balance-sweeps"},
       {"render --composite mc --allocate -o " + path("x.png"), "--allocate"},
       {"render --composite mc --mc-stratified -o " + path("x.png"), "--mc-stratified"},
       {"render --engine reference --composite mc --mc-scope subray -o " + path("x.png"),

@@ -43,6 +43,7 @@
 
 #include "simdvol/device.hpp"
 #include "simdvol/image.hpp"
+#include "simdvol/match.hpp"
 #include "simdvol/render.hpp"
 #include "simdvol/swap.hpp"
 #include "simdvol/volume.hpp"
@@ -120,7 +121,18 @@ struct EngineOptions {
   /// sorted by length within blocks of one PE (enqueue_segment_order; the
   /// same image bit for bit). Off: in segment order (for comparison).
   bool order_lanes = true;
+  /// Load-balancing sweeps after the matching (enqueue_balance; the loads
+  /// equal balance_reference's with as many sweeps). 0: none, the matching's
+  /// own assignment. The thesis balances because its PEs step in lockstep;
+  /// PoCL's work-items do not, so on a CPU device balancing costs its own
+  /// time and saves none elsewhere (README: the figures). The image is the
+  /// reference's either way, to float rounding (the samples composite in
+  /// other groupings). 0 .. kMaxBalanceSweeps (--balance-sweeps).
+  int balance_sweeps = kBalanceSweeps;
 };
+
+/// The largest EngineOptions::balance_sweeps (each sweep is 6 launches).
+inline constexpr int kMaxBalanceSweeps = 64;
 
 /// Checks the options against each other and `opt`; ArgumentError naming
 /// the CLI option.
