@@ -7,6 +7,7 @@
 // sampling, cut-and-stack and hierarchical layouts.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -118,6 +119,69 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
         ++n;
       }
   EXPECT_EQ(n, 3 * 4 * 2);
+}
+
+// A plan whose output x stride is finer than an input's (plan_swap never
+// makes one: its strides only grow) takes the stage kernel's per-pixel
+// path; it too equals the reference bit for bit. Level k + 1 of a real plan
+// is replaced by rectangles of x stride 1 over the same columns, at every
+// stage k whose inputs have x stride >= 2.
+TEST(SwapKernels, FinerOutputStrideTakesThePerPixelPath) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 d{29, 23, 17};
+  const ViewGeometry view = make_view(d, {1, 1, 1}, {30, 45, 0}, 45, 37, Sampling::voxel);
+  int checked = 0;
+  for (int64_t P : {8, 64})
+    for (SwapLayout L : {SwapLayout::cut_and_stack, SwapLayout::hierarchical}) {
+      const KdSplit split = kd_split(d, P);
+      const Matching m = balance_reference(match_reference(view, split), view, split);
+      const SwapPlan real = plan_swap(m.rects, split, view, pe_grid(P), L);
+      for (int k = 0; k < real.stages(); ++k) {
+        const auto& in_rects = real.held[static_cast<std::size_t>(k)];
+        if (std::none_of(in_rects.begin(), in_rects.end(),
+                         [](const SwapRect& r) { return r.lx > 0 && r.count() > 0; }))
+          continue;
+        SCOPED_TRACE("P " + std::to_string(P) + " " + swap_layout_name(L) + " stage " +
+                     std::to_string(k));
+        SwapPlan plan = real;
+        auto& out = plan.held[static_cast<std::size_t>(k + 1)];
+        auto& off = plan.offset[static_cast<std::size_t>(k + 1)];
+        for (std::size_t p = 0; p < out.size(); ++p) {
+          SwapRect& r = out[p];
+          if (r.count() > 0) r.nx = (r.nx - 1) * r.sx + 1;  // the same columns, stride 1
+          r.sx = 1;
+          r.lx = 0;
+          off[p + 1] = off[p] + r.count();
+        }
+        // Level k from random pixels, then the one stage on the device.
+        std::mt19937 rng(unsigned(P * 10 + k));
+        std::uniform_real_distribution<float> u(0.0f, 1.0f);
+        std::vector<Rgba> level(static_cast<std::size_t>(plan.level_size(k)));
+        for (Rgba& x : level) {
+          x.a = u(rng) * 0.7f;
+          x.r = x.a * u(rng), x.g = x.a * u(rng), x.b = x.a * u(rng);
+        }
+        const std::vector<Rgba> want = swap_stage_reference(plan, k, level);
+        DeviceSwapPlan dp = upload_swap_plan(dev, plan);
+        cl::Buffer in = dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(level.size(), 1) * 16,
+                                   nullptr, "level");
+        cl_check(dev.queue().enqueueWriteBuffer(in, CL_TRUE, 0, level.size() * sizeof(Rgba),
+                                                level.data()),
+                 "write");
+        cl::Buffer outb = dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(want.size(), 1) * 16,
+                                     nullptr, "level");
+        enqueue_swap_stage(dev, dp, k, in, outb);
+        ASSERT_TRUE(bitwise_equal(read_rgba(dev, outb, int64_t(want.size())), want));
+        // Not a vacuous comparison: the finer rectangles hold pixels of both
+        // kinds, those the inputs have and those between their columns.
+        int64_t lit = 0;
+        for (const Rgba& x : want) lit += x.a > 0.0f;
+        EXPECT_GT(lit, 0);
+        EXPECT_LT(lit, int64_t(want.size()));
+        ++checked;
+      }
+    }
+  EXPECT_GE(checked, 4);
 }
 
 namespace {
