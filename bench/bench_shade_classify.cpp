@@ -241,6 +241,26 @@ int main(int argc, char** argv) {
                                 enqueue_shade(dev, cells, sp, shading, ShadeKernel::range3d)};
                           }});
     }
+    // The flat side of the comparison must compute the same voxels: its
+    // output against the PE-major fused kernel's, gathered, bit for bit.
+    if (flat16_ok) {
+      enqueue_shade_classify(dev, cells, sp, cp, rgba);
+      std::vector<Rgba> pe(n), flat(n);
+      gather_rgba(dev, rgba, pe.data());
+      dev.run(k_flat_fused16, "flat fused float16", flat16, flat16_local);
+      std::vector<float> planes(4 * n);
+      cl_check(dev.queue().enqueueReadBuffer(flat_rgba, CL_TRUE, 0, n * 16, planes.data()),
+               "clEnqueueReadBuffer(flat rgba)");
+      std::size_t differ = 0;
+      for (std::size_t v = 0; v < n; ++v) {
+        const Rgba f{planes[v], planes[n + v], planes[2 * n + v], planes[3 * n + v]};
+        differ += std::memcmp(&f, &pe[v], sizeof f) != 0;
+      }
+      std::printf(
+          "flat fused float16 against the PE-major fused kernel: %zu of %zu voxels differ\n",
+          differ, n);
+      if (differ) throw Error("the flat fused kernel's voxels differ from the PE-major kernel's");
+    }
     std::vector<const char*> wgs = {"256"};
     if (sweep) wgs = {"64", "256", "1024"};
     const char* old_wgs = std::getenv("SIMDVOL_VOXEL_WGS");

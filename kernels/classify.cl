@@ -235,12 +235,17 @@ SV_FN float16 sv_ramp_eval16(__constant const sv_ramp* r, const int n, float16 v
   ((float16)(__builtin_ia32_permvarsf256((t), (i).lo), __builtin_ia32_permvarsf256((t), (i).hi)))
 #endif
 
+/* The mixture's index I of values v (sv_mixture16). */
+SV_FN float16 sv_mixture_index16(__constant const sv_classify_params* cp, float16 v) {
+  if (cp->relative)
+    return cp->range_scale > 0.0f ? (v - cp->range_min) * cp->range_scale : (float16)(0.0f);
+  return v;
+}
+
 SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n, float16 v,
                            float16* cr, float16* cg, float16* cb) {
   __constant const sv_materials* m = &cp->materials;
-  float16 I = v;
-  if (cp->relative)
-    I = cp->range_scale > 0.0f ? (v - cp->range_min) * cp->range_scale : (float16)(0.0f);
+  const float16 I = sv_mixture_index16(cp, v);
 #ifdef SV_MIX_PERMUTE
   /* i = the number of means mean_1 .. mean_{n-2} <= I (the means ascend, so
    * the last k of the select chain below), j = i + 1; each parameter is
@@ -546,6 +551,15 @@ __kernel void simdvol_shade_classify16(__global const float* restrict cells,
     const float16 a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
     sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
   } else {
+    /* A chunk at or below the first material's mean everywhere, when that
+     * material is transparent, is empty without the mixture: there
+     * sv_mixture16 takes p_i = 1, a_i = opacity[0] = 0 and p_j = 0, so
+     * a0 = 0 (NaN values fail the compare and take the full path). */
+    if (cp->materials.opacity[0] == 0.0f &&
+        !any(in & ~(sv_mixture_index16(cp, v) <= cp->materials.mean[0]))) {
+      sv_store16(dst, vstride, e0, z, z, z, z);
+      return;
+    }
     float16 cr, cg, cb;
     const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
     if (!any((a0 > 0.0f) & ~isnan(v) & in)) {
@@ -614,11 +628,40 @@ __kernel void simdvol_shade_classify_flat16(__global const float* restrict volum
   const float16 ym = vload16(0, c - (y > 0 ? sy : 0)), yp = vload16(0, c + (y + 1 < dims.y ? sy : 0));
   const float16 zm = vload16(0, c - (z > 0 ? sz : 0)), zp = vload16(0, c + (z + 1 < dims.z ? sz : 0));
   const float16 iota = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-  float16 id, is, mag, r, g, b, a;
-  sv_shade16(sp, xm, xp, ym, yp, zm, zp, (float)x0 + iota, (float16)((float)y),
-             (float16)((float)z), &id, &is, &mag);
-  sv_classify16(cp, id, is, mag, v, &r, &g, &b, &a);
   const size_t n = (size_t)dims.x * (size_t)dims.y * (size_t)dims.z;
+  const float16 zero = 0.0f;
+  float16 id, is, mag, r, g, b, a;
+  /* Empty chunks as in simdvol_shade_classify16 (the same tests, so that
+   * the PE-major / flat comparison compares layouts, not skips). */
+  float16 cr, cg, cb, a0;
+  bool empty;
+  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
+    const float16 d = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v);
+    empty = !any((d != 0.0f) & ~isnan(v));
+    if (!empty) {
+      sv_shade16(sp, xm, xp, ym, yp, zm, zp, (float)x0 + iota, (float16)((float)y),
+                 (float16)((float)z), &id, &is, &mag);
+      a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
+    }
+  } else {
+    empty = cp->materials.opacity[0] == 0.0f &&
+            all(sv_mixture_index16(cp, v) <= cp->materials.mean[0]);
+    if (!empty) {
+      a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+      empty = !any((a0 > 0.0f) & ~isnan(v));
+      if (!empty)
+        sv_shade16(sp, xm, xp, ym, yp, zm, zp, (float)x0 + iota, (float16)((float)y),
+                   (float16)((float)z), &id, &is, &mag);
+    }
+  }
+  if (empty) {
+    SV_VSTORE16(zero, out + i);
+    SV_VSTORE16(zero, out + n + i);
+    SV_VSTORE16(zero, out + 2 * n + i);
+    SV_VSTORE16(zero, out + 3 * n + i);
+    return;
+  }
+  sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
   SV_VSTORE16(r, out + i); /* 64-byte aligned when nx is a multiple of 16 */
   SV_VSTORE16(g, out + n + i);
   SV_VSTORE16(b, out + 2 * n + i);

@@ -177,6 +177,10 @@ TEST(ClassifyKernel, SheppLoganPresetsAndPeCounts) {
     for (int64_t pes : {1, 8, 512, 8192}) check_case({&vol, name, kViews[1], pes});
   check_case({&vol, "ct", kViews[2], 512});
   check_case({&vol, "knots", kViews[0], 8});
+  // Air (-1000) at the first material's mean: whole chunks of it are empty
+  // for the presets (opacity 0 there; the fused kernel stores them without
+  // the mixture), not for these mixtures (first opacity 0.05).
+  for (const char* name : {"mix2", "mix8"}) check_case({&vol, name, kViews[1], 512});
 }
 
 TEST(ClassifyKernel, MarschnerLobbRelativeMixture) {
