@@ -242,6 +242,15 @@ SV_FN float16 sv_mixture_index16(__constant const sv_classify_params* cp, float1
   return v;
 }
 
+/* -1 in the lanes whose mixture alpha is 0 without evaluating it: I at or
+ * below the first material's mean when that material is transparent
+ * (there sv_mixture16 takes p_i = 1, a_i = opacity[0] = 0 and p_j = 0, so
+ * a0 = 0; NaN fails the compare). 0 elsewhere: those need the mixture. */
+SV_FN int16 sv_mixture_zero16(__constant const sv_classify_params* cp, float16 v) {
+  if (cp->materials.opacity[0] != 0.0f) return (int16)(0);
+  return sv_mixture_index16(cp, v) <= cp->materials.mean[0];
+}
+
 SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n, float16 v,
                            float16* cr, float16* cg, float16* cb) {
   __constant const sv_materials* m = &cp->materials;
@@ -551,12 +560,8 @@ __kernel void simdvol_shade_classify16(__global const float* restrict cells,
     const float16 a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
     sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
   } else {
-    /* A chunk at or below the first material's mean everywhere, when that
-     * material is transparent, is empty without the mixture: there
-     * sv_mixture16 takes p_i = 1, a_i = opacity[0] = 0 and p_j = 0, so
-     * a0 = 0 (NaN values fail the compare and take the full path). */
-    if (cp->materials.opacity[0] == 0.0f &&
-        !any(in & ~(sv_mixture_index16(cp, v) <= cp->materials.mean[0]))) {
+    /* A chunk whose alpha is 0 without the mixture (sv_mixture_zero16). */
+    if (!any(in & ~sv_mixture_zero16(cp, v))) {
       sv_store16(dst, vstride, e0, z, z, z, z);
       return;
     }
@@ -644,8 +649,7 @@ __kernel void simdvol_shade_classify_flat16(__global const float* restrict volum
       a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
     }
   } else {
-    empty = cp->materials.opacity[0] == 0.0f &&
-            all(sv_mixture_index16(cp, v) <= cp->materials.mean[0]);
+    empty = all(sv_mixture_zero16(cp, v));
     if (!empty) {
       a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
       empty = !any((a0 > 0.0f) & ~isnan(v));

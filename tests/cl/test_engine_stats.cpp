@@ -19,16 +19,32 @@
 
 using namespace simdvol;
 
-TEST(EngineStats, LoadsAndSwapCostEqualTheReferences) {
-  SIMDVOL_TEST_DEVICE(dev);
-  const Volume vol = shepp_logan(32, 1);
+namespace {
+
+// The frame both tests render: the 32^3 phantom at the headline view.
+RenderOptions frame_options() {
   RenderOptions opt;
   opt.view = {20, 35, 10};
   opt.width = opt.height = 64;
   opt.classifier = classifier_preset("ct");
+  return opt;
+}
+
+EngineOptions engine_options(int sweeps = kBalanceSweeps) {
   EngineOptions eo;
   eo.pes = 64;
   eo.fused = true;
+  eo.balance_sweeps = sweeps;
+  return eo;
+}
+
+}  // namespace
+
+TEST(EngineStats, LoadsAndSwapCostEqualTheReferences) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 1);
+  RenderOptions opt = frame_options();
+  const EngineOptions eo = engine_options();
   RenderEngine engine(dev, eo);
   EngineStats st;
   EngineTimes t;
@@ -65,10 +81,7 @@ TEST(EngineStats, LoadsAndSwapCostEqualTheReferences) {
 TEST(EngineStats, BalanceSweepsOption) {
   SIMDVOL_TEST_DEVICE(dev);
   const Volume vol = shepp_logan(32, 1);
-  RenderOptions opt;
-  opt.view = {20, 35, 10};
-  opt.width = opt.height = 64;
-  opt.classifier = classifier_preset("ct");
+  const RenderOptions opt = frame_options();
   const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
   const KdSplit split = kd_split(vol.dims(), 64);
   const Matching plain = match_reference(view, split);
@@ -76,11 +89,7 @@ TEST(EngineStats, BalanceSweepsOption) {
   double util_seen[2] = {0, 0};
   for (int sweeps : {0, 1}) {
     SCOPED_TRACE("sweeps " + std::to_string(sweeps));
-    EngineOptions eo;
-    eo.pes = 64;
-    eo.fused = true;
-    eo.balance_sweeps = sweeps;
-    RenderEngine engine(dev, eo);
+    RenderEngine engine(dev, engine_options(sweeps));
     EngineStats st;
     EngineTimes t;
     const Image img = engine.render(vol, opt, &t, &st);
@@ -96,10 +105,6 @@ TEST(EngineStats, BalanceSweepsOption) {
   }
   // The view is one that balancing improves, so the option reached the device.
   EXPECT_LT(util_seen[0], util_seen[1]);
-  EngineOptions bad;
-  bad.pes = 64;
-  for (int sweeps : {-1, kMaxBalanceSweeps + 1}) {
-    bad.balance_sweeps = sweeps;
-    EXPECT_THROW(render_opencl(dev, vol, opt, bad), ArgumentError);
-  }
+  for (int sweeps : {-1, kMaxBalanceSweeps + 1})
+    EXPECT_THROW(render_opencl(dev, vol, opt, engine_options(sweeps)), ArgumentError);
 }
