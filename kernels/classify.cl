@@ -388,6 +388,18 @@ __kernel void simdvol_classify16(__global const float* restrict shading,
   __global const float* s = shading + base;
   __global float* o = out + base;
   float16 r, g, b, a;
+  /* A chunk whose alpha is 0 without the mixture (sv_mixture_zero16) is
+   * stored as zeros without reading the lighting planes or evaluating the
+   * mixture: the same bits. */
+  if (SV_KIND_OF(cp) == SV_CLASSIFY_MIXTURE &&
+      all(sv_mixture_zero16(cp, vload16(0, s + 3 * vstride)))) {
+    const float16 z = 0.0f;
+    SV_VSTORE16(z, o);
+    SV_VSTORE16(z, o + vstride);
+    SV_VSTORE16(z, o + 2 * vstride);
+    SV_VSTORE16(z, o + 3 * vstride);
+    return;
+  }
   sv_classify16(cp, vload16(0, s), vload16(0, s + vstride), vload16(0, s + 2 * vstride),
                 vload16(0, s + 3 * vstride), &r, &g, &b, &a);
   SV_VSTORE16(r, o);
