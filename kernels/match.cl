@@ -16,6 +16,8 @@
  *   simdvol_match_fill   per (PE, row): the segments again, written at
  *                        seg_offset[p] + rowoff, with their balance links
  *                        (balance_links) and the per-(PE, axis) link lists
+ *   simdvol_match_active per PE: active[p] = some brick with reach meets
+ *                        the PE's cell (empty-space skipping, below)
  *
  * A row's columns: the row j cuts the projection of the PE's cell (a
  * zonogon, the intersection of three strips |n_a . (p - centre)| <= h_a)
@@ -38,6 +40,10 @@
  *   int4 splits                 cells per axis
  *   global const int* pe_of     PE of cell (ix, iy, iz) at (iz sy + iy) sx + ix
  *   int pes, int H
+ *   global const uchar* active  per PE: 0 = the PE takes no part (no
+ *                               segments, no link into it; match.hpp:
+ *                               Matching::active); all 1 for the plain
+ *                               matching
  */
 #ifndef SIMDVOL_COMMON_CL
 #include "common.cl"
@@ -336,17 +342,34 @@ SV_FN void sv_row8_step(sv_row8* st, __constant sv_view* view, __constant long* 
   }
 }
 
+/* The face neighbour along each axis that the rays pass into (the sign of
+ * the depth step), if it exists and is active: nq[a] = its PE, else -1. */
+SV_FN void sv_link_targets(__constant sv_view* view, int4 ci, int4 splits,
+                           global const int* pe_of, global const uchar* active, int* nq) {
+  for (int e = 0; e < 3; ++e) {
+    int idx[3] = {ci.x, ci.y, ci.z};
+    const int sa = e == 0 ? splits.x : (e == 1 ? splits.y : splits.z);
+    idx[e] += view->step[e][2] > 0 ? 1 : -1;
+    const int q =
+        idx[e] >= 0 && idx[e] < sa ? pe_of[(idx[2] * splits.y + idx[1]) * splits.x + idx[0]] : -1;
+    nq[e] = q >= 0 && active[q] ? q : -1;
+  }
+}
+
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_rows(
     __constant sv_view* view, __constant float* geo, __constant long* stepc,
     global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,
-    global const int* pe_of, int pes, int H, global int4* rowsum, global int4* rowlk) {
+    global const int* pe_of, global const uchar* active, int pes, int H, global int4* rowsum,
+    global int4* rowlk) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
   const sv_rect r = cand[p];
   const int4 ci = cidx[p];
   long lo[3], hi[3];
-  const int box = sv_pe_box(view, ci, cell, lo, hi);
+  const int box = active[p] && sv_pe_box(view, ci, cell, lo, hi);
+  int qa[3]; /* a link along axis a needs an active neighbour */
+  sv_link_targets(view, ci, splits, pe_of, active, qa);
   int ia[8], ib[8], jj[8], on[8];
   int i0 = INT_MAX, i1 = INT_MIN;
   for (int l = 0; l < 8; ++l) {
@@ -374,7 +397,8 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_row
       load += select((int8)(0), k1 - k0, act);
       last = select(last, (int8)(i), act);
 #pragma unroll
-      for (int a = 0; a < 3; ++a) lk[a] -= lnk & (ea == (int8)(a));
+      for (int a = 0; a < 3; ++a)
+        if (qa[a] >= 0) lk[a] -= lnk & (ea == (int8)(a));
       sv_row8_step(&st, view, stepc);
     }
   }
@@ -395,8 +419,8 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_row
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fill(
     __constant sv_view* view, __constant float* geo, __constant long* stepc,
     global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,
-    global const int* pe_of, int pes, int H, global const int4* rowsum,
-    global const int4* rowoff, global const int* seg_offset, global const int4* lofs,
+    global const int* pe_of, global const uchar* active, int pes, int H,
+    global const int4* rowsum, global const int4* rowoff, global const int* seg_offset, global const int4* lofs,
     global sv_segment* segments, global int* links, global int2* llist) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
@@ -437,13 +461,9 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
 #define SV_UNSET INT_MAX
 #define SV_HOLES INT_MIN
   int nq[3], t0[3][8], hb[3][8], hc[3][8], hn[3][8];
-  for (int e = 0; e < 3; ++e) {
-    int idx[3] = {ci.x, ci.y, ci.z};
-    const int sa = e == 0 ? splits.x : (e == 1 ? splits.y : splits.z);
-    idx[e] += view->step[e][2] > 0 ? 1 : -1;
-    nq[e] = idx[e] >= 0 && idx[e] < sa ? pe_of[(idx[2] * splits.y + idx[1]) * splits.x + idx[0]] : -1;
+  sv_link_targets(view, ci, splits, pe_of, active, nq);
+  for (int e = 0; e < 3; ++e)
     for (int l = 0; l < 8; ++l) t0[e][l] = SV_UNSET;
-  }
   sv_row8 st;
   sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
   const int8 IA = vload8(0, ia), IB = vload8(0, ib);
@@ -466,7 +486,7 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
         sg.k1 = K1[l];
         segments[at[l]] = sg;
         int link = -1;
-        if (LK[l]) {
+        if (LK[l] && nq[E[l]] >= 0) {
           const int e = E[l], q = nq[e];
           if (t0[e][l] == SV_UNSET) {
             const int gq = q * H + (jj[l] - cand[q].j0);
@@ -503,4 +523,36 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
   }
 #undef SV_UNSET
 #undef SV_HOLES
+}
+
+/* ---- simdvol_match_active: the PEs that take part (empty-space skipping) ----
+ * One work-item per PE: active[p] = 1 if some brick b with reach[b] != 0
+ * (resample.cl: simdvol_occupancy_reach; bricks of SV_BRICK^3 voxels,
+ * `bricks` per axis) meets the PE's cell clipped to the volume, else 0.
+ * Every sample the matching gives p has floor(X) in that cell, so in such a
+ * brick; where none has reach, every sample of p is +-0 in every channel
+ * (the fused kernel would skip them all) and p's footprint stays 0. */
+__kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_active(
+    global const int4* cidx, int4 cell, int4 dims, int pes, global const uchar* reach,
+    int4 bricks, global uchar* active) {
+  const int p = (int)get_global_id(0);
+  if (p >= pes) return;
+  const int4 ci = cidx[p];
+  const int c[3] = {cell.x, cell.y, cell.z}, i[3] = {ci.x, ci.y, ci.z};
+  const int n[3] = {dims.x, dims.y, dims.z};
+  int b0[3], b1[3];
+  for (int a = 0; a < 3; ++a) {
+    const int lo = i[a] * c[a], hi = min(lo + c[a], n[a]);
+    if (lo >= hi) {
+      active[p] = 0;
+      return;
+    }
+    b0[a] = lo >> SV_BRICK_LOG2;
+    b1[a] = (hi - 1) >> SV_BRICK_LOG2;
+  }
+  uchar r = 0;
+  for (int z = b0[2]; z <= b1[2]; ++z)
+    for (int y = b0[1]; y <= b1[1]; ++y)
+      for (int x = b0[0]; x <= b1[0]; ++x) r |= reach[(z * bricks.y + y) * bricks.x + x];
+  active[p] = r != 0;
 }

@@ -106,7 +106,67 @@ std::array<cl_long, 9> step_constants(const ViewGeometry& view) {
 
 }  // namespace
 
+namespace {
+
+// The matching with the PE mask `active` (cl_uchar[P]) already enqueued.
+DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, const KdSplit& split,
+                                    DeviceMatching m);
+
+}  // namespace
+
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split) {
+  return enqueue_match(device, view, split, std::vector<uint8_t>{});
+}
+
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             const std::vector<uint8_t>& active) {
+  const int64_t pes = split.pes();
+  if (!active.empty() && static_cast<int64_t>(active.size()) != pes)
+    throw ArgumentError(
+        "active", std::to_string(active.size()) + " flags for " + std::to_string(pes) + " PEs");
+  DeviceMatching m;
+  m.masked = !active.empty();
+  std::vector<cl_uchar> flags(static_cast<std::size_t>(std::max<int64_t>(pes, 1)), 1);
+  for (std::size_t p = 0; p < active.size(); ++p) flags[p] = active[p] ? 1 : 0;
+  m.active =
+      device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, flags.size(), flags.data(), "PE mask");
+  return enqueue_match_masked(device, view, split, std::move(m));
+}
+
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             const BrickReach& reach) {
+  if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
+  for (int a = 0; a < 3; ++a)
+    if (reach.bricks[a] != (split.dims[a] + (1 << SV_BRICK_LOG2) - 1) >> SV_BRICK_LOG2)
+      throw ArgumentError("reach", "bricks do not tile the volume of the split");
+  const int64_t pes = split.pes();
+  DeviceMatching m;
+  m.masked = true;
+  m.active = device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(std::max<int64_t>(pes, 1)),
+                           nullptr, "PE mask");
+  std::vector<cl_int4> cidx(static_cast<std::size_t>(pes));
+  for (int64_t p = 0; p < pes; ++p) {
+    const Dims3 c = split.cell_index(p);
+    cidx[p] = int4(c[0], c[1], c[2], 0);
+  }
+  const auto ro = CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR;
+  m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
+  const cl_int4 cell = int4(split.cell[0], split.cell[1], split.cell[2], 0);
+  const cl_int4 dims = int4(split.dims[0], split.dims[1], split.dims[2], 0);
+  const cl_int4 nb = int4(reach.bricks[0], reach.bricks[1], reach.bricks[2], 0);
+  cl::Kernel k = device.kernel("match", "simdvol_match_active", match_defines());
+  set_args(k, "simdvol_match_active", m.cidx, cell, dims, static_cast<cl_int>(pes), *reach.reach,
+           nb, m.active);
+  m.match_events.push_back(
+      {"match_active", device.run(k, "simdvol_match_active",
+                                  cl::NDRange(static_cast<std::size_t>(pes)), cl::NDRange(kWgs))});
+  return enqueue_match_masked(device, view, split, std::move(m));
+}
+
+namespace {
+
+DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, const KdSplit& split,
+                                    DeviceMatching m) {
   const std::vector<sv_rect> cand = match_candidates(view, split);  // validates the split
   const int64_t pes = split.pes();
   if (pes > INT_MAX / 2) throw ArgumentError("split", "too many PEs");
@@ -123,7 +183,6 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
     if (split.cell[a] > INT_MAX) throw ArgumentError("split", "cell too large");
   capacity = std::max<int64_t>(capacity, 1);
 
-  DeviceMatching m;
   m.pes = pes;
   m.capacity = capacity;
   m.rows = rows;
@@ -138,7 +197,8 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   std::array<float, 20> geo = row_geometry(view, split);
   std::array<cl_long, 9> steps = step_constants(view);
   const auto ro = CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR;
-  m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
+  if (!m.cidx())
+    m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
   m.pe_of = device.buffer(ro, pe_of.size() * sizeof(cl_int), pe_of.data(), "PE of cell");
   m.candidates = device.buffer(ro, cand.size() * sizeof(sv_rect), const_cast<sv_rect*>(cand.data()),
                                "candidate rectangles");
@@ -169,7 +229,7 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
 
   cl::Kernel k_rows = device.kernel("match", "simdvol_match_rows", match_defines());
   set_args(k_rows, "simdvol_match_rows", m.view, m.geometry, m.steps, m.candidates, m.cidx, cell,
-           splits, m.pe_of, npes, H, m.rowsum, m.rowlinks);
+           splits, m.pe_of, m.active, npes, H, m.rowsum, m.rowlinks);
   m.match_events.push_back({"match_rows", device.run(k_rows, "simdvol_match_rows",
                                                      cl::NDRange(R / 8), cl::NDRange(kWgs))});
   cl::Kernel k_pe = device.kernel("match", "simdvol_match_pe", match_defines());
@@ -183,12 +243,14 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
                                                      cl::NDRange(kWgs), cl::NDRange(kWgs))});
   cl::Kernel k_fill = device.kernel("match", "simdvol_match_fill", match_defines());
   set_args(k_fill, "simdvol_match_fill", m.view, m.geometry, m.steps, m.candidates, m.cidx, cell,
-           splits, m.pe_of, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset, m.segments,
-           m.links, m.link_list);
+           splits, m.pe_of, m.active, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset,
+           m.segments, m.links, m.link_list);
   m.match_events.push_back({"match_fill", device.run(k_fill, "simdvol_match_fill",
                                                      cl::NDRange(R / 8), cl::NDRange(kWgs))});
   return m;
 }
+
+}  // namespace
 
 bool balance_bounds16(int64_t depth) {
   return depth <= 32767;
@@ -261,6 +323,11 @@ Matching DeviceMatching::read(Device& device) const {
            "clEnqueueReadBuffer(loads)");
   m.seg_offset.assign(off.begin(), off.end());
   m.loads.assign(loads32.begin(), loads32.end());
+  if (masked) {
+    m.active.resize(P);
+    cl_check(q.enqueueReadBuffer(active, CL_TRUE, 0, P, m.active.data()),
+             "clEnqueueReadBuffer(PE mask)");
+  }
   return m;
 }
 

@@ -133,14 +133,23 @@ std::vector<sv_rect> match_candidates(const ViewGeometry& view, const KdSplit& s
   return rects;
 }
 
-Matching match_reference(const ViewGeometry& view, const KdSplit& split) {
+Matching match_reference(const ViewGeometry& view, const KdSplit& split,
+                         const std::vector<uint8_t>& active) {
   const std::vector<sv_rect> cand = match_candidates(view, split);
   const int64_t pes = split.pes();
+  if (!active.empty() && static_cast<int64_t>(active.size()) != pes)
+    throw ArgumentError(
+        "active", std::to_string(active.size()) + " flags for " + std::to_string(pes) + " PEs");
   Matching m;
   m.seg_offset.assign(static_cast<std::size_t>(pes + 1), 0);
   m.rects.assign(static_cast<std::size_t>(pes), sv_rect{0, 0, 0, 0});
   m.loads.assign(static_cast<std::size_t>(pes), 0);
+  m.active = active;
   for (int64_t p = 0; p < pes; ++p) {
+    if (!active.empty() && !active[p]) {
+      m.seg_offset[p + 1] = static_cast<int64_t>(m.segments.size());
+      continue;
+    }
     const CellBox box = cell_box(split, p);
     const sv_rect& c = cand[p];
     int64_t i0 = INT64_MAX, j0 = INT64_MAX, i1 = -1, j1 = -1, load = 0;
@@ -165,6 +174,26 @@ Matching match_reference(const ViewGeometry& view, const KdSplit& split) {
   return m;
 }
 
+std::vector<uint8_t> match_active_reference(const KdSplit& split,
+                                            const std::vector<uint8_t>& reach) {
+  const int64_t brick = int64_t(1) << SV_BRICK_LOG2;
+  Dims3 nb{};
+  for (int a = 0; a < 3; ++a) nb[a] = (split.dims[a] + brick - 1) / brick;
+  if (static_cast<int64_t>(reach.size()) != nb[0] * nb[1] * nb[2])
+    throw ArgumentError("reach", std::to_string(reach.size()) + " bricks, not " +
+                                     std::to_string(nb[0] * nb[1] * nb[2]));
+  std::vector<uint8_t> active(static_cast<std::size_t>(split.pes()), 0);
+  for (int64_t p = 0; p < split.pes(); ++p) {
+    const CellBox box = cell_box(split, p);
+    if (box.empty()) continue;
+    for (int64_t z = box.lo[2] / brick; z <= (box.hi[2] - 1) / brick; ++z)
+      for (int64_t y = box.lo[1] / brick; y <= (box.hi[1] - 1) / brick; ++y)
+        for (int64_t x = box.lo[0] / brick; x <= (box.hi[0] - 1) / brick; ++x)
+          if (reach[static_cast<std::size_t>((z * nb[1] + y) * nb[0] + x)]) active[p] = 1;
+  }
+  return active;
+}
+
 std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
                                    const KdSplit& split) {
   check_split(view, split);
@@ -173,6 +202,8 @@ std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
     throw ArgumentError("matching", "made for another PE count");
   if (m.segments.size() > static_cast<std::size_t>(INT32_MAX / 4))
     throw ArgumentError("matching", "too many segments for 32-bit links");
+  if (!m.active.empty() && m.active.size() != static_cast<std::size_t>(pes))
+    throw ArgumentError("matching", "active flags for another PE count");
   std::vector<int32_t> link(m.segments.size(), -1);
   for (int64_t p = 0; p < pes; ++p) {
     const Dims3 cp = split.cell_index(p);
@@ -198,6 +229,7 @@ std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
       }
       if (differing != 1 || !face) continue;
       const int64_t q = split.pe_of_cell(cq);
+      if (!m.active.empty() && !m.active[q]) continue;  // no link into an inactive PE
       const auto first = m.segments.begin() + m.seg_offset[q];
       const auto last = m.segments.begin() + m.seg_offset[q + 1];
       const auto it =

@@ -2,6 +2,7 @@
 // exactly, plus the balancing invariants and the utilisation reached.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 #include <string>
 
@@ -51,10 +52,13 @@ int64_t rows_with_holes(const Matching& m) {
 }
 
 void check_device(Device& dev, const ViewGeometry& v, const KdSplit& split, int sweeps,
-                  const std::string& what, BalanceBounds bounds = BalanceBounds::automatic) {
-  const Matching ref = match_reference(v, split);
-  DeviceMatching dm = enqueue_match(dev, v, split);
+                  const std::string& what, BalanceBounds bounds = BalanceBounds::automatic,
+                  const std::vector<uint8_t>& active = {}) {
+  const Matching ref = match_reference(v, split, active);
+  DeviceMatching dm =
+      active.empty() ? enqueue_match(dev, v, split) : enqueue_match(dev, v, split, active);
   const Matching got = dm.read(dev);
+  ASSERT_EQ(got.active, ref.active) << what;
   expect_same(got, ref, what + " (match)");
   if (sweeps < 0) return;
   enqueue_balance(dev, dm, v, split, sweeps, bounds);
@@ -171,4 +175,92 @@ TEST(MatchCl, UtilisationAfterBalancing256) {
     EXPECT_GE(after.utilisation(), before.utilisation()) << name(c.view, c.pes);
     EXPECT_EQ(after.total_load(), before.total_load()) << name(c.view, c.pes);
   }
+}
+
+// ---- the PE mask (empty-space skipping of whole PEs) ----
+
+namespace {
+
+std::vector<uint8_t> random_mask(int64_t pes, double p_on, std::mt19937& rng) {
+  std::bernoulli_distribution on(p_on);
+  std::vector<uint8_t> m(static_cast<std::size_t>(pes));
+  for (uint8_t& x : m) x = on(rng) ? 1 : 0;
+  return m;
+}
+
+}  // namespace
+
+TEST(MatchCl, MaskedEqualsReference) {
+  // Random masks: the device's segments, links and balance equal the
+  // reference's with the same mask exactly; the mask removes whole PEs and
+  // every link into them (a device that linked into an inactive PE, or kept
+  // its rows, differs here).
+  SIMDVOL_TEST_DEVICE(dev);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> ang(-360.0, 360.0);
+  const Dims3 dims{61, 47, 39};
+  int64_t dropped_links = 0;
+  for (int n = 0; n < 24; ++n) {
+    const ViewAngles va = n < 4 ? kViews[n] : ViewAngles{ang(rng), ang(rng), ang(rng)};
+    const int64_t pes = int64_t(1) << (3 + n % 11);
+    const ViewGeometry v = geometry(dims, va, 64, 64);
+    const KdSplit split = kd_split(dims, pes);
+    const std::vector<uint8_t> mask = random_mask(pes, n % 3 == 0 ? 0.9 : 0.5, rng);
+    check_device(dev, v, split, 4, name(va, pes) + " masked", BalanceBounds::automatic, mask);
+    // What the mask changed against the plain matching: the active PEs keep
+    // their segments, the others have none, and links into them are gone.
+    const Matching all = match_reference(v, split), some = match_reference(v, split, mask);
+    for (int64_t p = 0; p < pes; ++p) {
+      const int64_t na = all.seg_offset[p + 1] - all.seg_offset[p];
+      const int64_t ns = some.seg_offset[p + 1] - some.seg_offset[p];
+      ASSERT_EQ(ns, mask[p] ? na : 0) << name(va, pes) << " pe " << p;
+      EXPECT_EQ(some.loads[p], mask[p] ? all.loads[p] : 0);
+    }
+    const auto count = [](const std::vector<int32_t>& l) {
+      return std::count_if(l.begin(), l.end(), [](int32_t x) { return x >= 0; });
+    };
+    dropped_links += count(balance_links(all, v, split)) - count(balance_links(some, v, split));
+  }
+  EXPECT_GT(dropped_links, 0);
+  // A mask of another size is refused, naming it.
+  const ViewGeometry v = geometry(dims, kViews[2], 64, 64);
+  EXPECT_THROW(enqueue_match(dev, v, kd_split(dims, 64), std::vector<uint8_t>(63, 1)),
+               ArgumentError);
+  EXPECT_THROW(match_reference(v, kd_split(dims, 64), std::vector<uint8_t>(65, 1)), ArgumentError);
+}
+
+TEST(MatchCl, ActiveFromReachEqualsReference) {
+  // simdvol_match_active against match_active_reference on random brick
+  // reach (sparse and dense), odd dims and P from 1 to 8192; then the whole
+  // matching made from the reach equals the reference's with that mask.
+  SIMDVOL_TEST_DEVICE(dev);
+  std::mt19937 rng(17);
+  const Dims3 dims{93, 57, 31};
+  const int64_t brick = int64_t(1) << SV_BRICK_LOG2;
+  const std::array<cl_int, 3> nb = {static_cast<cl_int>((dims[0] + brick - 1) / brick),
+                                    static_cast<cl_int>((dims[1] + brick - 1) / brick),
+                                    static_cast<cl_int>((dims[2] + brick - 1) / brick)};
+  const std::size_t nbricks = static_cast<std::size_t>(nb[0]) * nb[1] * nb[2];
+  const ViewGeometry v = geometry(dims, kViews[3], 96, 96);
+  int64_t on = 0, off = 0;
+  for (int64_t pes = 1; pes <= 8192; pes *= 2) {
+    const std::vector<uint8_t> reach =
+        random_mask(static_cast<int64_t>(nbricks), pes % 4 == 0 ? 0.002 : 0.05, rng);
+    const cl::Buffer rb = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, nbricks,
+                                     const_cast<uint8_t*>(reach.data()), "reach");
+    const KdSplit split = kd_split(dims, pes);
+    const std::vector<uint8_t> want = match_active_reference(split, reach);
+    DeviceMatching dm = enqueue_match(dev, v, split, BrickReach{&rb, nb});
+    const Matching got = dm.read(dev);
+    ASSERT_EQ(got.active, want) << "P=" << pes;
+    expect_same(got, match_reference(v, split, want), "reach P=" + std::to_string(pes));
+    on += std::count(want.begin(), want.end(), 1);
+    off += std::count(want.begin(), want.end(), 0);
+  }
+  EXPECT_GT(on, 0);
+  EXPECT_GT(off, 0);
+  // Bricks that do not tile the split's volume are refused.
+  const cl::Buffer rb = dev.buffer(CL_MEM_READ_WRITE, nbricks, nullptr, "reach");
+  EXPECT_THROW(enqueue_match(dev, v, kd_split(dims, 8), BrickReach{&rb, {nb[0] + 1, nb[1], nb[2]}}),
+               ArgumentError);
 }

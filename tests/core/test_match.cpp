@@ -149,3 +149,30 @@ TEST(Balance, ZeroSweepsIsIdentityAndRejectsNegative) {
   EXPECT_EQ(b.loads, m.loads);
   EXPECT_THROW(balance_reference(m, v, split, -1), ArgumentError);
 }
+
+TEST(Match, ActiveFromReachByVoxels) {
+  // match_active_reference against a brute force over the voxels: PE p is
+  // active iff some voxel it owns (split.owner) lies in a brick with reach.
+  std::mt19937 rng(23);
+  const int64_t brick = int64_t(1) << SV_BRICK_LOG2;
+  for (const Dims3 dims : {Dims3{93, 57, 31}, Dims3{16, 16, 16}, Dims3{5, 9, 3}}) {
+    Dims3 nb{};
+    for (int a = 0; a < 3; ++a) nb[a] = (dims[a] + brick - 1) / brick;
+    for (int64_t pes = 1; pes <= 4096; pes *= 4) {
+      const KdSplit split = kd_split(dims, pes);
+      std::bernoulli_distribution on(pes % 16 == 0 ? 0.01 : 0.1);
+      std::vector<uint8_t> reach(static_cast<std::size_t>(nb[0] * nb[1] * nb[2]));
+      for (uint8_t& r : reach) r = on(rng) ? 1 : 0;
+      std::vector<uint8_t> want(static_cast<std::size_t>(pes), 0);
+      for (int64_t z = 0; z < dims[2]; ++z)
+        for (int64_t y = 0; y < dims[1]; ++y)
+          for (int64_t x = 0; x < dims[0]; ++x)
+            if (reach[static_cast<std::size_t>(((z / brick) * nb[1] + y / brick) * nb[0] +
+                                               x / brick)])
+              want[static_cast<std::size_t>(split.owner({x, y, z}))] = 1;
+      EXPECT_EQ(match_active_reference(split, reach), want) << "P=" << pes;
+    }
+  }
+  const KdSplit split = kd_split({16, 16, 16}, 8);
+  EXPECT_THROW(match_active_reference(split, std::vector<uint8_t>(63, 1)), ArgumentError);
+}

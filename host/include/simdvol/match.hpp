@@ -51,6 +51,9 @@ struct Matching {
   std::vector<sv_segment> segments;  ///< per PE sorted by (j, i)
   std::vector<sv_rect> rects;        ///< P footprints (bbox of the PE's rays)
   std::vector<int64_t> loads;        ///< P sample counts (sum of k1 - k0)
+  /// Empty: every PE takes part. Else P flags (match_reference's `active`):
+  /// a PE with 0 has no segments, and no balance link goes into it.
+  std::vector<uint8_t> active;
 
   int64_t pes() const { return static_cast<int64_t>(rects.size()); }
   /// SIMD utilisation: mean load / max load (1 when every PE is idle).
@@ -79,7 +82,24 @@ std::array<int64_t, 2> box_ray_range(const ViewGeometry& view, const CellBox& bo
 /// Sample (i, j, k) belongs to PE p iff floor(X(i, j, k)) lies in p's cell
 /// clipped to the volume. Exact (integer arithmetic). Throws ArgumentError if
 /// the split's dims differ from the view's.
-Matching match_reference(const ViewGeometry& view, const KdSplit& split);
+///
+/// With `active` (P flags; empty: all), only the PEs flagged take part: the
+/// others get no segments (their samples are nobody's), and balancing moves
+/// nothing into or out of them (balance_links gives no link into them).
+/// ArgumentError if `active` has another size.
+Matching match_reference(const ViewGeometry& view, const KdSplit& split,
+                         const std::vector<uint8_t>& active = {});
+
+/// Empty-space skipping of whole PEs (match_active): active[p] = 1 iff some
+/// brick b with reach[b] != 0 meets p's cell clipped to the volume; bricks
+/// of 2^SV_BRICK_LOG2 voxels, ceil(dims / brick) per axis, b = (bz * nby +
+/// by) * nbx + bx (local_cl.hpp: DeviceOccupancy::reach). Every sample the
+/// matching gives p has floor(X) in its cell, so where this is 0 every
+/// sample of p reads only zero voxels and p's footprint is 0: leaving p out
+/// changes no pixel (with balancing, only the grouping of the other
+/// samples). ArgumentError if `reach` has another size.
+std::vector<uint8_t> match_active_reference(const KdSplit& split,
+                                            const std::vector<uint8_t>& reach);
 
 /// Default number of balancing sweeps.
 inline constexpr int kBalanceSweeps = 8;

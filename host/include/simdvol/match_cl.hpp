@@ -14,6 +14,11 @@
 //                          offsets (a serial scan of P entries: microseconds)
 //   4. simdvol_match_fill  the segments again, written in place, with their
 //                          balance links and the per-(PE, axis) link lists
+// With a PE mask (enqueue_match's `active`, or its `reach`: first
+//   0. simdvol_match_active  one work-item per PE: the mask from the brick
+//                            reach, as match_active_reference)
+// an inactive PE has no rows (no segments, an empty rect, load 0) and no
+// link goes into it: the result equals match_reference(view, split, mask).
 // Each row's columns are those where the row cuts the projection of the cell
 // (a zonogon: three strips); along the row the slab bounds are stepped
 // exactly in integers (no division per column). The segment buffer is
@@ -46,6 +51,7 @@
 //   links       cl_int[capacity] balance_links() (written by enqueue_match)
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <utility>
@@ -88,7 +94,9 @@ struct DeviceMatching {
   cl::Buffer links;        ///< cl_int[capacity], balance_links() format
   cl::Buffer link_offset;  ///< cl_int4[P + 1]: y, z, w = start of PE p's list along x, y, z
   cl::Buffer link_list;    ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE)
-  std::vector<StageEvent> match_events;    ///< rows, pe, scan, fill
+  cl::Buffer active;       ///< cl_uchar[P]: the PE mask (all 1 without one)
+  bool masked = false;     ///< made with a mask (read() then returns it in Matching::active)
+  std::vector<StageEvent> match_events;    ///< (active,) rows, pe, scan, fill
   std::vector<StageEvent> balance_events;  ///< pack, every round, unpack
 
   /// Blocking read-back as a Matching (loads as int64).
@@ -101,6 +109,22 @@ struct DeviceMatching {
 /// Enqueues the matching. Throws ArgumentError if the split does not fit the
 /// view or the sizes exceed 32-bit indexing.
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split);
+/// The matching of the PEs flagged in `active` (P flags, uploaded; see the
+/// file comment); ArgumentError if it has another size.
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             const std::vector<uint8_t>& active);
+/// The brick reach of empty-space skipping (local_cl.hpp: DeviceOccupancy):
+/// cl_uchar per brick, `bricks` per axis.
+struct BrickReach {
+  const cl::Buffer* reach = nullptr;
+  std::array<cl_int, 3> bricks{0, 0, 0};
+};
+/// The matching of the PEs whose cell meets a brick with reach, the mask
+/// made on the device (simdvol_match_active, equal to
+/// match_active_reference). ArgumentError if the bricks do not tile the
+/// split's volume.
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             const BrickReach& reach);
 
 /// The width of the bounds the balance rounds move: 16-bit where every k of
 /// the grid fits (automatic: balance_bounds16), or as asked.
