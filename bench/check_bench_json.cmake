@@ -1,14 +1,17 @@
 # ctest simdvol_bench_harness: runs simdvol-bench (${BENCH}) on a tiny case
 # and checks its JSON (${OUT}): the device's details, one case per
-# compositing mode and balance sweep count (8 and 0) with its stage times,
-# the frame's samples, utilisation and X-Net bytes, and direct compositing
-# equal to the reference (PSNR >= 80 dB, or identical) either way, no
-# balance time without sweeps and the same samples; then that a bad option value exits 2 naming the
-# option and leaves no JSON behind.
+# compositing mode, balance sweep count (8 and 0) and --skip-pes (on, off)
+# with its stage times, the frame's samples, utilisation and X-Net bytes,
+# and direct compositing equal to the reference (PSNR >= 80 dB, or
+# identical) either way, no balance time without sweeps, the same samples
+# (fewer for direct compositing with skip-pes, which leaves out the PEs with
+# nothing in reach); then that a bad option value exits 2 naming the option
+# and leaves no JSON behind.
 file(REMOVE ${OUT})
 execute_process(
   COMMAND ${BENCH} --volumes phantom32 --sizes 64 --orders 1 --pes 64
-          --compositing direct,adaptive,mc4 --balance-sweeps 8,0 --repeat 2 --turntable 4
+          --compositing direct,adaptive,mc4 --balance-sweeps 8,0 --skip-pes on,off --repeat 2
+          --turntable 4
           --json ${OUT}
   RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(NOT rc EQUAL 0)
@@ -31,8 +34,8 @@ foreach(key name platform_version cpu_model triad_gbs)
   get(v device ${key})
 endforeach()
 string(JSON ncases LENGTH "${text}" cases)
-if(NOT ncases EQUAL 6)
-  message(FATAL_ERROR "expected 6 cases, got ${ncases}")
+if(NOT ncases EQUAL 12)
+  message(FATAL_ERROR "expected 12 cases, got ${ncases}")
 endif()
 math(EXPR last "${ncases} - 1")
 foreach(i RANGE ${last})
@@ -53,19 +56,34 @@ foreach(i RANGE ${last})
   get(bytes cases ${i} xnet swap_bytes)
   get(halo cases ${i} xnet halo_bytes)
   get(sweeps cases ${i} balance_sweeps)
+  get(skip_pes cases ${i} skip_pes)
   get(bal cases ${i} stages_ms balance median)
+  if(skip_pes STREQUAL "OFF" OR skip_pes STREQUAL "false")
+    set(skip_pes OFF)
+    if(NOT id MATCHES "/allpe$")
+      message(FATAL_ERROR "${id}: skip_pes off but the id does not say so")
+    endif()
+  elseif(id MATCHES "/allpe")
+    message(FATAL_ERROR "${id}: skip_pes ${skip_pes}")
+  endif()
   if(sweeps EQUAL 0)
-    if(NOT id MATCHES "/b0$" OR NOT bal EQUAL 0)
+    if(NOT id MATCHES "/b0(/allpe)?$" OR NOT bal EQUAL 0)
       message(FATAL_ERROR "${id}: 0 balance sweeps but balance ${bal} ms")
     endif()
   elseif(NOT sweeps EQUAL 8 OR NOT bal GREATER 0 OR id MATCHES "/b")
     message(FATAL_ERROR "${id}: ${sweeps} balance sweeps, balance ${bal} ms")
   endif()
-  # Balancing moves samples between PEs: the total is the matching's.
-  if(i EQUAL 0)
-    set(samples0 ${samples})
-  elseif(NOT samples EQUAL samples0)
-    message(FATAL_ERROR "${id}: ${samples} samples, the first case had ${samples0}")
+  # Balancing moves samples between PEs: the total is the matching's, of
+  # every PE or (direct with skip-pes) of the PEs with something in reach.
+  if(comp STREQUAL "direct" AND skip_pes)
+    set(kind skip)
+  else()
+    set(kind all)
+  endif()
+  if(NOT DEFINED samples_${kind})
+    set(samples_${kind} ${samples})
+  elseif(NOT samples EQUAL samples_${kind})
+    message(FATAL_ERROR "${id}: ${samples} samples, an earlier case had ${samples_${kind}}")
   endif()
   get(psnr cases ${i} reference psnr_db)
   get(identical cases ${i} reference identical)
@@ -94,6 +112,9 @@ foreach(i RANGE ${last})
     endif()
   endif()
 endforeach()
+if(NOT samples_skip LESS samples_all)
+  message(FATAL_ERROR "skip-pes: ${samples_skip} samples, not fewer than ${samples_all}")
+endif()
 get(tframes turntables 0 frames)
 if(NOT tframes EQUAL 4)
   message(FATAL_ERROR "turntable frames = ${tframes}")
@@ -114,6 +135,11 @@ execute_process(COMMAND ${BENCH} --balance-sweeps 8,65
                 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(NOT rc EQUAL 2 OR NOT err MATCHES "--balance-sweeps")
   message(FATAL_ERROR "bad --balance-sweeps: exit ${rc}, stderr ${err}")
+endif()
+execute_process(COMMAND ${BENCH} --skip-pes on,maybe
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL 2 OR NOT err MATCHES "--skip-pes")
+  message(FATAL_ERROR "bad --skip-pes: exit ${rc}, stderr ${err}")
 endif()
 execute_process(COMMAND ${BENCH} --volumes brainsmall --data ${OUT}.nodata
                 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)

@@ -5,13 +5,16 @@
 //
 //   simdvol-bench [--volumes LIST] [--sizes LIST] [--orders LIST]
 //                 [--compositing LIST] [--pes LIST] [--balance-sweeps LIST]
+//                 [--skip-pes LIST]
 //                 [--view T,P,V] [--sampling voxel|pixel] [--repeat R] [--turntable F]
 //                 [--no-reference] [--no-volpack] [--volpack-runs R]
 //                 [--scaling LIST] [--data DIR] [--json FILE] [--quick]
 //
 // Cases: the product volumes x sizes x orders x compositing x P x balance
 // sweeps (EngineOptions::balance_sweeps, default 8; a case with another
-// count has "/bN" at the end of its id). Volumes:
+// count has "/bN" at the end of its id) x skip-pes (on, off:
+// EngineOptions::skip_pes, default on; an off case's id ends in "/allpe").
+// Volumes:
 // phantomN (the N^3 Shepp-Logan CT phantom, shepp_logan(N, 4), preset ct),
 // brainsmall (data/brainsmall.den, preset volpack: VolPack's example
 // classification), ch2 (data/ch2.nii.gz, preset mri). Compositing: direct,
@@ -92,7 +95,8 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: simdvol-bench [--volumes LIST] [--sizes LIST] [--orders LIST] [--compositing LIST]\n"
-    "                     [--pes LIST] [--balance-sweeps LIST] [--view T,P,V]\n"
+    "                     [--pes LIST] [--balance-sweeps LIST] [--skip-pes on,off]\n"
+    "                     [--view T,P,V]\n"
     "                     [--sampling voxel|pixel] [--repeat R]\n"
     "                     [--turntable F] [--no-reference] [--no-volpack] [--volpack-runs R]\n"
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
@@ -107,6 +111,7 @@ struct Options {
   std::vector<std::string> compositing{"direct", "adaptive", "mc16"};
   std::vector<int64_t> pes{8192};
   std::vector<int64_t> sweeps{kBalanceSweeps};
+  std::vector<bool> skip_pes{true};
   ViewAngles view{20, 35, 10};
   Sampling sampling = Sampling::voxel;
   int repeat = 5;
@@ -195,6 +200,12 @@ Options parse_args(int argc, char** argv) {
       for (int64_t p : o.pes) pe_grid(p, "--pes");
     } else if (a == "--balance-sweeps") {
       o.sweeps = parse_int_list(next(), a, 0, kMaxBalanceSweeps);
+    } else if (a == "--skip-pes") {
+      o.skip_pes.clear();
+      for (const std::string& v : split_list(next(), a)) {
+        if (v != "on" && v != "off") throw ArgumentError(a, "'" + v + "' is neither on nor off");
+        o.skip_pes.push_back(v == "on");
+      }
     } else if (a == "--view") {
       const std::string v = next();
       const auto parts = split_list(v, a);
@@ -354,9 +365,10 @@ struct Harness {
   }
 
   static std::string case_id(const std::string& vol, int size, int order, const std::string& comp,
-                             int64_t pes, int sweeps) {
+                             int64_t pes, int sweeps, bool skip_pes) {
     return vol + "/" + std::to_string(size) + "/o" + std::to_string(order) + "/" + comp + "/P" +
-           std::to_string(pes) + (sweeps == kBalanceSweeps ? "" : "/b" + std::to_string(sweeps));
+           std::to_string(pes) + (sweeps == kBalanceSweeps ? "" : "/b" + std::to_string(sweeps)) +
+           (skip_pes ? "" : "/allpe");
   }
 
   void print_case_header() const {
@@ -368,14 +380,16 @@ struct Harness {
         "util", "XNet_MB", "ref_ms", "speedup", "PSNR");
   }
 
-  void run_case(const Loaded& L, int size, int order, const Comp& c, int64_t pes, int sweeps) {
-    const std::string id = case_id(L.spec.name, size, order, c.name, pes, sweeps);
+  void run_case(const Loaded& L, int size, int order, const Comp& c, int64_t pes, int sweeps,
+                bool skip_pes) {
+    const std::string id = case_id(L.spec.name, size, order, c.name, pes, sweeps, skip_pes);
     const RenderOptions opt = render_options(L.spec, size, order, c, o.view);
     EngineOptions eo;
     eo.pes = pes;
     eo.fused = true;
     eo.mc_scope = c.scope;
     eo.balance_sweeps = sweeps;
+    eo.skip_pes = skip_pes;
     json j;
     j["id"] = id;
     j["volume"] = L.spec.name;
@@ -386,6 +400,7 @@ struct Harness {
     j["compositing"] = c.name;
     j["pes"] = pes;
     j["balance_sweeps"] = sweeps;
+    j["skip_pes"] = skip_pes;
     j["sampling"] = o.sampling == Sampling::voxel ? "voxel" : "pixel";
     j["view"] = {o.view.theta, o.view.phi, o.view.varphi};
     try {
@@ -481,13 +496,15 @@ struct Harness {
     cases.push_back(j);
   }
 
-  void run_turntable(const Loaded& L, int size, int order, const Comp& c, int64_t pes, int sweeps) {
+  void run_turntable(const Loaded& L, int size, int order, const Comp& c, int64_t pes, int sweeps,
+                     bool skip_pes) {
     const int F = o.turntable;
     EngineOptions eo;
     eo.pes = pes;
     eo.fused = true;
     eo.mc_scope = c.scope;
     eo.balance_sweeps = sweeps;
+    eo.skip_pes = skip_pes;
     eo.reuse_layout = true;
     json j;
     j["volume"] = L.spec.name;
@@ -496,6 +513,7 @@ struct Harness {
     j["compositing"] = c.name;
     j["pes"] = pes;
     j["balance_sweeps"] = sweeps;
+    j["skip_pes"] = skip_pes;
     j["frames"] = F;
     j["step_deg"] = 5.0;
     try {
@@ -598,20 +616,23 @@ struct Harness {
       Row refrow{"simdvol reference (order 3)", {ref.ms, ref.ms, ref.ms, 1}, ref.ms, INFINITY};
       table.push_back(refrow);
       for (const int64_t pes : o.pes)
-        for (const int64_t sweeps : o.sweeps) {
-          EngineOptions eo;
-          eo.pes = pes;
-          eo.fused = true;
-          eo.balance_sweeps = static_cast<int>(sweeps);
-          RenderEngine engine(*dev, eo);
-          for (const int64_t order : o.orders) {
-            RenderOptions opt = ropt;
-            opt.order = static_cast<int>(order);
-            timed("simdvol OpenCL order " + std::to_string(order) + " P " + std::to_string(pes) +
-                      (sweeps == kBalanceSweeps ? "" : " b" + std::to_string(sweeps)),
-                  o.repeat, [&] { return engine.render(vol, opt); });
+        for (const int64_t sweeps : o.sweeps)
+          for (const bool skip_pes : o.skip_pes) {
+            EngineOptions eo;
+            eo.pes = pes;
+            eo.fused = true;
+            eo.balance_sweeps = static_cast<int>(sweeps);
+            eo.skip_pes = skip_pes;
+            RenderEngine engine(*dev, eo);
+            for (const int64_t order : o.orders) {
+              RenderOptions opt = ropt;
+              opt.order = static_cast<int>(order);
+              timed("simdvol OpenCL order " + std::to_string(order) + " P " + std::to_string(pes) +
+                        (sweeps == kBalanceSweeps ? "" : " b" + std::to_string(sweeps)) +
+                        (skip_pes ? "" : " allpe"),
+                    o.repeat, [&] { return engine.render(vol, opt); });
+            }
           }
-        }
       const double cls = table[1].t.median, bf = table[0].t.median;
       std::printf("\n%dx%d: %-32s %9s %9s %9s %9s %9s %9s %8s\n", size, size, "renderer",
                   "ms/frame", "min", "max", "first", "x VPclsf", "x VPbrute", "PSNR dB");
@@ -639,6 +660,7 @@ struct Harness {
       eo.fused = true;
       eo.reuse_layout = true;
       eo.balance_sweeps = static_cast<int>(o.sweeps[0]);
+      eo.skip_pes = o.skip_pes[0];
       RenderEngine engine(*dev, eo);
       std::vector<double> tv, to;
       double minq_vp = INFINITY, minq_ours = INFINITY;
@@ -916,8 +938,9 @@ int main(int argc, char** argv) {
           for (const Comp& c : comps)
             for (const int64_t pes : o.pes)
               for (const int64_t sweeps : o.sweeps)
-                h.run_case(L, static_cast<int>(size), static_cast<int>(order), c, pes,
-                           static_cast<int>(sweeps));
+                for (const bool skip_pes : o.skip_pes)
+                  h.run_case(L, static_cast<int>(size), static_cast<int>(order), c, pes,
+                             static_cast<int>(sweeps), skip_pes);
     std::printf(
         "(first: the warm-up frame, with fresh buffers and any program builds; util: mean / max "
         "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B (the JSON adds "
@@ -929,7 +952,7 @@ int main(int argc, char** argv) {
       std::printf("\n");
       for (const Loaded& L : vols)
         h.run_turntable(L, static_cast<int>(o.sizes[0]), static_cast<int>(o.orders[0]), comps[0],
-                        o.pes[0], static_cast<int>(o.sweeps[0]));
+                        o.pes[0], static_cast<int>(o.sweeps[0]), o.skip_pes[0]);
       root["turntables"] = h.turntables;
     }
     root["volpack"] = nullptr;

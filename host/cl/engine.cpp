@@ -153,9 +153,20 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     e_shade = enqueue_shade(device, *S.cells, sp, *S.shading);
     e_classify = enqueue_classify(device, *S.shading, cp, *S.rgba);
   }
+  // The brick reach of empty-space skipping, before the matching (it may
+  // leave out the PEs with nothing in reach).
+  if (skip) {
+    if (occupancy)
+      enqueue_occupancy_reach(device, *occupancy);
+    else
+      occupancy.emplace(enqueue_occupancy(device, *S.rgba, opt.order));
+  }
   // Match and balance on the PE array.
   const KdSplit& split = S.cells->layout().split;
-  DeviceMatching dm = enqueue_match(device, view, split);
+  DeviceMatching dm =
+      skip && eo.skip_pes
+          ? enqueue_match(device, view, split, BrickReach{&occupancy->reach, occupancy->bricks})
+          : enqueue_match(device, view, split);
   enqueue_balance(device, dm, view, split, eo.balance_sweeps);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
   const ResampleTables tables = make_resample_tables(device, S.rgba->layout(), view);
@@ -173,10 +184,6 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   if (mode == CompositeMode::direct) {
     fp.emplace(make_footprints(device, segs.host_rects));
     e_zero = enqueue_zero_footprints(device, *fp);
-    if (occupancy)
-      enqueue_occupancy_reach(device, *occupancy);
-    else if (skip)
-      occupancy.emplace(enqueue_occupancy(device, *S.rgba, opt.order));
     e_local =
         enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp, LocalKernel::vector8,
                                occupancy ? &*occupancy : nullptr, lanes ? &*lanes : nullptr);

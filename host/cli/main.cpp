@@ -151,8 +151,8 @@ int main(int argc, char** argv) {
   uint64_t seed = 1;
   double step = 5.0;
   float threshold = 0.95f;
-  bool no_shade = false, no_skip_empty = false, show_times = false, exact_opacity = false,
-       allocate = false;
+  bool no_shade = false, no_skip_empty = false, no_skip_pes = false, show_times = false,
+       exact_opacity = false, allocate = false;
   bool stratified = false;
   std::string swap_layout = "cut-and-stack", mc_scope = "whole";
   render->add_option("volume", rv.path, "volume file (.den, .nrrd, .nhdr, .nii, .nii.gz, .raw)");
@@ -178,6 +178,10 @@ int main(int argc, char** argv) {
   render->add_flag("--no-skip-empty", no_skip_empty,
                    "opencl, direct: resample every sample, also those whose stencil reads only "
                    "transparent voxels (the same image; for timing comparisons)");
+  render->add_flag("--no-skip-pes", no_skip_pes,
+                   "opencl, direct: match every PE, also those whose cell has nothing in reach "
+                   "(the same image to float rounding, bit for bit with --balance-sweeps 0; the "
+                   "loads then count every PE)");
   render->add_flag("--exact-opacity", exact_opacity,
                    "Monte Carlo: exact opacity, Monte Carlo colour (ch. 7.5 (a))");
   render->add_flag("--mc-stratified", stratified,
@@ -303,6 +307,7 @@ int main(int argc, char** argv) {
       eo.fused = true;
       eo.reuse_layout = true;  // the volume does not change between frames
       eo.skip_empty = !no_skip_empty;
+      eo.skip_pes = !no_skip_pes;
       eo.balance_sweeps = balance_sweeps;
       if (swap_layout == "cut-and-stack")
         eo.layout = SwapLayout::cut_and_stack;

@@ -5,14 +5,20 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/layout.hpp"
+#include "simdvol/local_cl.hpp"
+#include "simdvol/match.hpp"
+#include "simdvol/render.hpp"
+#include "simdvol/shade.hpp"
 #include "simdvol/stages.hpp"
 #include "simdvol/volume.hpp"
 
@@ -67,6 +73,47 @@ inline Volume random_volume(Dims3 dims, float lo, float hi, std::array<double, 3
   std::uniform_real_distribution<float> u(lo, hi);
   for (float& x : v.data()) x = u(rng);
   return v;
+}
+
+// The occupancy and reach by brute force over the flat volume (kBrick^3
+// bricks, a voxel counts unless all four channels are +-0).
+inline void host_occupancy(const std::vector<Rgba>& v, const Dims3& d, int order,
+                           std::vector<cl_uint>& occ, std::vector<cl_uchar>& reach) {
+  const int64_t nb[3] = {(d[0] + kBrick - 1) / kBrick, (d[1] + kBrick - 1) / kBrick,
+                         (d[2] + kBrick - 1) / kBrick};
+  occ.assign(static_cast<std::size_t>(nb[0] * nb[1] * nb[2]), 0);
+  for (int64_t z = 0; z < d[2]; ++z)
+    for (int64_t y = 0; y < d[1]; ++y)
+      for (int64_t x = 0; x < d[0]; ++x) {
+        const Rgba& c = v[static_cast<std::size_t>((z * d[1] + y) * d[0] + x)];
+        const bool zero = c.r == 0 && c.g == 0 && c.b == 0 && c.a == 0;  // NaN compares unequal
+        if (!zero)
+          occ[static_cast<std::size_t>((z / kBrick * nb[1] + y / kBrick) * nb[0] + x / kBrick)] = 1;
+      }
+  const int64_t lo = order >= 2 ? 1 : 0, hi = 1;
+  reach.assign(occ.size(), 0);
+  for (int64_t z = 0; z < nb[2]; ++z)
+    for (int64_t y = 0; y < nb[1]; ++y)
+      for (int64_t x = 0; x < nb[0]; ++x)
+        for (int64_t k = std::max<int64_t>(z - lo, 0); k <= std::min(z + hi, nb[2] - 1); ++k)
+          for (int64_t j = std::max<int64_t>(y - lo, 0); j <= std::min(y + hi, nb[1] - 1); ++j)
+            for (int64_t i = std::max<int64_t>(x - lo, 0); i <= std::min(x + hi, nb[0] - 1); ++i)
+              if (occ[static_cast<std::size_t>((k * nb[1] + j) * nb[0] + i)])
+                reach[static_cast<std::size_t>((z * nb[1] + y) * nb[0] + x)] = 1;
+}
+
+/// The PE mask of EngineOptions::skip_pes for a frame, from the serial
+/// reference: its shaded and classified voxels, host_occupancy,
+/// match_active_reference.
+inline std::vector<uint8_t> reference_active(const Volume& vol, const RenderOptions& opt,
+                                             const KdSplit& split) {
+  const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
+  const std::vector<Rgba> voxels =
+      classify(vol, shade(vol, view, opt.shade), opt.classifier, view.step);
+  std::vector<cl_uint> occ;
+  std::vector<cl_uchar> reach;
+  host_occupancy(voxels, vol.dims(), opt.order, occ, reach);
+  return match_active_reference(split, std::vector<uint8_t>(reach.begin(), reach.end()));
 }
 
 }  // namespace simdvol::testing

@@ -6,8 +6,12 @@
 // compositing); a whole-ray adaptive frame has loads but no swap. With
 // EngineOptions::balance_sweeps 0 and 1 the loads equal match_reference's
 // and balance_reference's after one sweep, and the image stays the
-// reference's (PSNR >= 80 dB, as the balanced frame's).
+// reference's (PSNR >= 80 dB, as the balanced frame's). The references take
+// EngineOptions::skip_pes's PE mask from the reference's own classified
+// voxels (stage_testing.hpp: reference_active).
 #include <gtest/gtest.h>
+
+#include <algorithm>
 
 #include "simdvol/classify.hpp"
 #include "simdvol/engine.hpp"
@@ -43,39 +47,51 @@ EngineOptions engine_options(int sweeps = kBalanceSweeps) {
 TEST(EngineStats, LoadsAndSwapCostEqualTheReferences) {
   SIMDVOL_TEST_DEVICE(dev);
   const Volume vol = shepp_logan(32, 1);
-  RenderOptions opt = frame_options();
-  const EngineOptions eo = engine_options();
-  RenderEngine engine(dev, eo);
-  EngineStats st;
-  EngineTimes t;
-  engine.render(vol, opt, &t, &st);
+  for (const bool skip_pes : {true, false}) {
+    SCOPED_TRACE(skip_pes ? "skip_pes" : "every PE");
+    RenderOptions opt = frame_options();
+    EngineOptions eo = engine_options();
+    eo.skip_pes = skip_pes;
+    RenderEngine engine(dev, eo);
+    EngineStats st;
+    EngineTimes t;
+    engine.render(vol, opt, &t, &st);
 
-  const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
-  const KdSplit split = kd_split(vol.dims(), eo.pes);
-  const Matching m = balance_reference(match_reference(view, split), view, split);
-  EXPECT_EQ(st.loads, m.loads);
-  EXPECT_EQ(st.samples, m.total_load());
-  EXPECT_GT(st.samples, 0);
-  EXPECT_EQ(st.max_load(), m.max_load());
-  EXPECT_DOUBLE_EQ(st.utilisation(), m.utilisation());
-  EXPECT_EQ(st.segments, static_cast<int64_t>(m.segments.size()));
-  ASSERT_TRUE(st.swapped);
-  const PeGrid grid = pe_grid(eo.pes);
-  const SwapCost want =
-      swap_cost(plan_swap(m.rects, split, view, grid, eo.layout), split, view, grid);
-  EXPECT_EQ(st.swap.moved, want.moved);
-  EXPECT_GT(st.swap.moved, 0);
-  EXPECT_EQ(st.swap.max_pe_sent, want.max_pe_sent);
-  ASSERT_EQ(st.swap.stages.size(), want.stages.size());
-  EXPECT_EQ(st.swap.stages.size(), 6u);  // log2(64)
+    const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
+    const KdSplit split = kd_split(vol.dims(), eo.pes);
+    // With skip_pes the PEs whose cells have nothing in reach take no part
+    // (the mask from the reference's classified voxels); some do here.
+    const std::vector<uint8_t> active =
+        skip_pes ? simdvol::testing::reference_active(vol, opt, split) : std::vector<uint8_t>{};
+    if (skip_pes) {
+      EXPECT_GT(std::count(active.begin(), active.end(), 0), 0);
+    }
+    const Matching m = balance_reference(match_reference(view, split, active), view, split);
+    EXPECT_EQ(st.loads, m.loads);
+    EXPECT_EQ(st.samples, m.total_load());
+    EXPECT_GT(st.samples, 0);
+    EXPECT_EQ(st.max_load(), m.max_load());
+    EXPECT_DOUBLE_EQ(st.utilisation(), m.utilisation());
+    EXPECT_EQ(st.segments, static_cast<int64_t>(m.segments.size()));
+    ASSERT_TRUE(st.swapped);
+    const PeGrid grid = pe_grid(eo.pes);
+    const SwapCost want =
+        swap_cost(plan_swap(m.rects, split, view, grid, eo.layout), split, view, grid);
+    EXPECT_EQ(st.swap.moved, want.moved);
+    EXPECT_GT(st.swap.moved, 0);
+    EXPECT_EQ(st.swap.max_pe_sent, want.max_pe_sent);
+    ASSERT_EQ(st.swap.stages.size(), want.stages.size());
+    EXPECT_EQ(st.swap.stages.size(), 6u);  // log2(64)
 
-  // Whole-ray adaptive compositing: the same loads, no swap.
-  opt.composite.mode = CompositeMode::adaptive;
-  EngineStats sa;
-  engine.render(vol, opt, nullptr, &sa);
-  EXPECT_EQ(sa.loads, m.loads);
-  EXPECT_FALSE(sa.swapped);
-  EXPECT_EQ(sa.swap.moved, 0);
+    // Whole-ray adaptive compositing: no swap, and every PE matched (skip_pes
+    // acts with direct compositing only).
+    opt.composite.mode = CompositeMode::adaptive;
+    EngineStats sa;
+    engine.render(vol, opt, nullptr, &sa);
+    EXPECT_EQ(sa.loads, balance_reference(match_reference(view, split), view, split).loads);
+    EXPECT_FALSE(sa.swapped);
+    EXPECT_EQ(sa.swap.moved, 0);
+  }
 }
 
 TEST(EngineStats, BalanceSweepsOption) {
@@ -84,7 +100,8 @@ TEST(EngineStats, BalanceSweepsOption) {
   const RenderOptions opt = frame_options();
   const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
   const KdSplit split = kd_split(vol.dims(), 64);
-  const Matching plain = match_reference(view, split);
+  const Matching plain =
+      match_reference(view, split, simdvol::testing::reference_active(vol, opt, split));
   const Image ref = render_reference(vol, opt);
   double util_seen[2] = {0, 0};
   for (int sweeps : {0, 1}) {

@@ -17,6 +17,7 @@
 #include "stage_testing.hpp"
 
 using namespace simdvol;
+using simdvol::testing::host_occupancy;
 using simdvol::testing::test_device;
 
 namespace {
@@ -288,33 +289,6 @@ std::vector<Rgba> sparse_voxels(const Dims3& d, unsigned seed) {
   return v;
 }
 
-// The occupancy and reach by brute force over the flat volume (kBrick^3
-// bricks, a voxel counts unless all four channels are +-0).
-void host_occupancy(const std::vector<Rgba>& v, const Dims3& d, int order,
-                    std::vector<cl_uint>& occ, std::vector<cl_uchar>& reach) {
-  const int64_t nb[3] = {(d[0] + kBrick - 1) / kBrick, (d[1] + kBrick - 1) / kBrick,
-                         (d[2] + kBrick - 1) / kBrick};
-  occ.assign(static_cast<std::size_t>(nb[0] * nb[1] * nb[2]), 0);
-  for (int64_t z = 0; z < d[2]; ++z)
-    for (int64_t y = 0; y < d[1]; ++y)
-      for (int64_t x = 0; x < d[0]; ++x) {
-        const Rgba& c = v[static_cast<std::size_t>((z * d[1] + y) * d[0] + x)];
-        const bool zero = c.r == 0 && c.g == 0 && c.b == 0 && c.a == 0;  // NaN compares unequal
-        if (!zero)
-          occ[static_cast<std::size_t>((z / kBrick * nb[1] + y / kBrick) * nb[0] + x / kBrick)] = 1;
-      }
-  const int64_t lo = order >= 2 ? 1 : 0, hi = 1;
-  reach.assign(occ.size(), 0);
-  for (int64_t z = 0; z < nb[2]; ++z)
-    for (int64_t y = 0; y < nb[1]; ++y)
-      for (int64_t x = 0; x < nb[0]; ++x)
-        for (int64_t k = std::max<int64_t>(z - lo, 0); k <= std::min(z + hi, nb[2] - 1); ++k)
-          for (int64_t j = std::max<int64_t>(y - lo, 0); j <= std::min(y + hi, nb[1] - 1); ++j)
-            for (int64_t i = std::max<int64_t>(x - lo, 0); i <= std::min(x + hi, nb[0] - 1); ++i)
-              if (occ[static_cast<std::size_t>((k * nb[1] + j) * nb[0] + i)])
-                reach[static_cast<std::size_t>((z * nb[1] + y) * nb[0] + x)] = 1;
-}
-
 template <class T>
 std::vector<T> read_all(Device& dev, const cl::Buffer& b, std::size_t n) {
   std::vector<T> out(n);
@@ -501,28 +475,50 @@ TEST(LocalCl, SegmentOrderSortsWithinPeBlocks) {
       ArgumentError);
 }
 
-// The engine with and without skip_empty and order_lanes: the same image,
-// bit for bit.
+// The engine with and without skip_empty, skip_pes and order_lanes: the
+// same image, bit for bit, where no balancing regroups the samples (0
+// sweeps, or every PE matched); with balancing and skip_pes, the same to
+// float rounding.
 TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
   const Volume vol = shepp_logan(45, 2);
   for (int order : {1, 3})
-    for (const ViewAngles a : {ViewAngles{0, 0, 0}, ViewAngles{20, 35, 10}}) {
-      RenderOptions opt;
-      opt.width = opt.height = 48, opt.view = a, opt.order = order;
-      opt.classifier = classifier_preset("ct");
-      EngineOptions on, off;
-      on.pes = off.pes = 512;
-      off.skip_empty = false;
-      off.order_lanes = false;
-      RenderEngine e_on(*dp, on), e_off(*dp, off);
-      EngineTimes t;
-      const Image a_on = e_on.render(vol, opt, &t), a_off = e_off.render(vol, opt);
-      EXPECT_GT(t.occupancy_ms, 0.0);
-      ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
-      EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
-                            a_on.pixels().size() * sizeof(Rgba)),
-                0);
-    }
+    for (const ViewAngles a : {ViewAngles{0, 0, 0}, ViewAngles{20, 35, 10}})
+      for (const int sweeps : {0, kBalanceSweeps})
+        for (const bool skip_pes : {true, false}) {
+          SCOPED_TRACE("order " + std::to_string(order) + " sweeps " + std::to_string(sweeps) +
+                       (skip_pes ? " skip_pes" : ""));
+          RenderOptions opt;
+          opt.width = opt.height = 48, opt.view = a, opt.order = order;
+          opt.classifier = classifier_preset("ct");
+          EngineOptions on, off;
+          on.pes = off.pes = 512;
+          on.balance_sweeps = off.balance_sweeps = sweeps;
+          on.skip_pes = skip_pes;
+          off.skip_empty = false;
+          off.order_lanes = false;
+          RenderEngine e_on(*dp, on), e_off(*dp, off);
+          EngineTimes t;
+          EngineStats st_on, st_off;
+          const Image a_on = e_on.render(vol, opt, &t, &st_on);
+          const Image a_off = e_off.render(vol, opt, nullptr, &st_off);
+          EXPECT_GT(t.occupancy_ms, 0.0);
+          ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
+          if (sweeps == 0 || !skip_pes) {
+            EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
+                                  a_on.pixels().size() * sizeof(Rgba)),
+                      0);
+          } else {
+            EXPECT_GE(psnr(a_off, a_on), 100.0);
+          }
+          // skip_pes left PEs out (fewer segments), and they were PEs with
+          // samples: the test can tell the option from its absence.
+          if (skip_pes) {
+            EXPECT_LT(st_on.segments, st_off.segments);
+            EXPECT_LT(st_on.samples, st_off.samples);
+          } else {
+            EXPECT_EQ(st_on.samples, st_off.samples);
+          }
+        }
 }

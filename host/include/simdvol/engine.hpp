@@ -116,6 +116,15 @@ struct EngineOptions {
   /// (enqueue_occupancy; the same image bit for bit). Off: every sample is
   /// resampled (for comparison).
   bool skip_empty = true;
+  /// Direct compositing with skip_empty: PEs whose whole cell lies in bricks
+  /// without reach (match.hpp: match_active_reference) take no part in the
+  /// matching, balancing and swap: their samples read only zero voxels and
+  /// their footprints would be 0. With 0 balance sweeps the image is the
+  /// same bit for bit; with balancing the other PEs' samples are grouped
+  /// otherwise (no sample moves into an inactive PE), the same to float
+  /// rounding. The loads (EngineStats) count the skipped PEs as idle.
+  /// Off: every PE is matched (--no-skip-pes).
+  bool skip_pes = true;
   /// The float8 resample kernels (fused with local compositing for direct,
   /// alone for adaptive and Monte Carlo) take segments into their lanes
   /// sorted by length within blocks of one PE (enqueue_segment_order; the
