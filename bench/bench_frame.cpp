@@ -231,10 +231,11 @@ int main(int argc, char** argv) try {
       size, static_cast<long long>(pes), static_cast<long long>(L.cell()[0]),
       static_cast<long long>(L.cell()[1]), static_cast<long long>(L.cell()[2]), order, runs);
   std::printf(
-      "%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s\n",
+      "%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s | "
+      "%7s %8s %8s %8s | %8s %8s\n",
       "view", "samples", "segments", "util", "match", "balance", "resample", "local", "zero",
       "fused", "fused1", "occ", "skip", "ordered", "ref m+b", "ref r+l", "ref/dev", "Gld/s",
-      "xnet rd", "xnet max");
+      "xnet rd", "xnet max", "active", "match'", "balance'", "rsloc'", "sum", "sum'");
   for (const double phi : views) {
     const ViewAngles angles{0.0, phi, 0.0};
     const ViewGeometry view = make_view(vol, angles, size, size, Sampling::voxel);
@@ -337,6 +338,38 @@ int main(int argc, char** argv) try {
       t_loc.push_back(ev_ms(el));
       t_fused.push_back(ev_ms(ef));
     }
+    // The frame path with EngineOptions::skip_pes: the brick reach before
+    // the matching, the PEs with nothing in reach left out (checked against
+    // the references with the device's mask, then timed).
+    std::vector<double> t_match2, t_bal2, t_rl2;
+    double active = 0;
+    for (int r = 0; r <= runs; ++r) {
+      const DeviceOccupancy occ = enqueue_occupancy(device, rgba, order);
+      DeviceMatching dm = enqueue_match(device, view, split, BrickReach{&occ.reach, occ.bricks});
+      enqueue_balance(device, dm, view, split);
+      const LocalSegments ls = device_segments(device, dm);
+      const SegmentOrder lanes = enqueue_segment_order(device, ls);
+      DeviceFootprints fp2 = make_footprints(device, ls.host_rects);
+      const cl::Event ez = enqueue_zero_footprints(device, fp2);
+      const cl::Event eo = enqueue_resample_local(device, ls, tables, rgba, order, fp2,
+                                                  LocalKernel::vector8, &occ, &lanes);
+      device.finish();
+      if (r == 0) {
+        const Matching got = dm.read(device);
+        const Matching want =
+            balance_reference(match_reference(view, split, got.active), view, split);
+        if (got.loads != want.loads || got.segments.size() != want.segments.size())
+          throw Error("device match/balance with the PE mask differs from the reference");
+        active = static_cast<double>(std::count(got.active.begin(), got.active.end(), 1)) /
+                 static_cast<double>(got.active.size());
+        continue;
+      }
+      double occ_ms = 0;
+      for (const cl::Event& e : occ.events) occ_ms += ev_ms(e);
+      t_match2.push_back(static_cast<double>(events_ns(dm.match_events)) * 1e-6);
+      t_bal2.push_back(static_cast<double>(events_ns(dm.balance_events)) * 1e-6);
+      t_rl2.push_back(occ_ms + ev_ms(lanes.event) + ev_ms(ez) + ev_ms(eo));
+    }
     double ref_rl = 0;
     if (reference) {
       t0 = Clock::now();
@@ -353,13 +386,16 @@ int main(int argc, char** argv) try {
         "%9.1f %9.1f "
         "%7.2f "
         "| "
-        "%8.3g %8lld\n",
+        "%8.3g %8lld | %7.3f %8.2f %8.2f %8.2f | %8.1f %8.1f\n",
         phi, static_cast<long long>(nsamples), static_cast<long long>(m.segments.size()),
         m.utilisation(), median(t_match), median(t_bal), median(t_res), median(t_loc),
         median(t_zero), median(t_fused), median(t_fused1), median(t_occ), median(t_skip),
         median(t_ord), ref_match + ref_balance, ref_rl, reference ? ref_rl / fused : 0.0,
         loads / (median(t_fused) * 1e6), static_cast<double>(x.total_reads()),
-        static_cast<long long>(x.max_voxels()));
+        static_cast<long long>(x.max_voxels()), active, median(t_match2), median(t_bal2),
+        median(t_rl2),
+        median(t_match) + median(t_bal) + median(t_occ) + median(t_ord) + median(t_zero),
+        median(t_match2) + median(t_bal2) + median(t_rl2));
   }
   std::printf(
       "\nms from profiling events; match/balance: device stages (enqueue_match, enqueue_balance, "
@@ -372,7 +408,10 @@ int main(int argc, char** argv) try {
       "gather loads of the fused "
       "kernel per "
       "second. xnet rd: remote stencil reads in all; xnet max: distinct remote voxels of the "
-      "busiest PE.\n");
+      "busiest PE. The frame path, every PE matched: sum = match + balance + occ + ordered + "
+      "zero. With EngineOptions::skip_pes (the frame's default): active = the fraction of PEs "
+      "whose cell has something in reach; match', balance' = their matching and balancing; "
+      "rsloc' = occ + order + zero + the fused kernel on their segments; sum' = the three.\n");
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "simdvol-bench-frame: %s\n", e.what());
