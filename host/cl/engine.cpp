@@ -145,8 +145,16 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // brick occupancy as it writes the voxels; otherwise a scan makes it.
   std::optional<DeviceOccupancy> occupancy;
   const bool skip = eo.skip_empty && mode == CompositeMode::direct;
+  // Leaving out the PEs with nothing in reach (skip_pes): direct compositing
+  // (the same footprints where no balancing regroups the samples), and
+  // whole-ray adaptive compositing, which walks each ray's samples in depth
+  // order, so that leaving out samples that are all +-0 changes no pixel
+  // whatever the balancing. Not Monte Carlo: its walks draw per sample.
+  const bool mask_pes = eo.skip_empty && eo.skip_pes &&
+                        (mode == CompositeMode::direct || mode == CompositeMode::adaptive);
+  const bool need_reach = skip || mask_pes;
   if (eo.fused) {
-    if (skip) occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));
+    if (need_reach) occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));
     e_classify = enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba, ShadeKernel::vec16,
                                         occupancy ? &*occupancy : nullptr);
   } else {
@@ -155,7 +163,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   }
   // The brick reach of empty-space skipping, before the matching (it may
   // leave out the PEs with nothing in reach).
-  if (skip) {
+  if (need_reach) {
     if (occupancy)
       enqueue_occupancy_reach(device, *occupancy);
     else
@@ -163,10 +171,9 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   }
   // Match and balance on the PE array.
   const KdSplit& split = S.cells->layout().split;
-  DeviceMatching dm =
-      skip && eo.skip_pes
-          ? enqueue_match(device, view, split, BrickReach{&occupancy->reach, occupancy->bricks})
-          : enqueue_match(device, view, split);
+  DeviceMatching dm = mask_pes ? enqueue_match(device, view, split,
+                                               BrickReach{&occupancy->reach, occupancy->bricks})
+                               : enqueue_match(device, view, split);
   enqueue_balance(device, dm, view, split, eo.balance_sweeps);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
   const ResampleTables tables = make_resample_tables(device, S.rgba->layout(), view);

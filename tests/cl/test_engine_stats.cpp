@@ -83,14 +83,19 @@ TEST(EngineStats, LoadsAndSwapCostEqualTheReferences) {
     ASSERT_EQ(st.swap.stages.size(), want.stages.size());
     EXPECT_EQ(st.swap.stages.size(), 6u);  // log2(64)
 
-    // Whole-ray adaptive compositing: no swap, and every PE matched (skip_pes
-    // acts with direct compositing only).
+    // Whole-ray adaptive compositing: no swap, the same PEs left out; Monte
+    // Carlo matches every PE.
     opt.composite.mode = CompositeMode::adaptive;
     EngineStats sa;
     engine.render(vol, opt, nullptr, &sa);
-    EXPECT_EQ(sa.loads, balance_reference(match_reference(view, split), view, split).loads);
+    EXPECT_EQ(sa.loads, m.loads);
     EXPECT_FALSE(sa.swapped);
     EXPECT_EQ(sa.swap.moved, 0);
+    opt.composite.mode = CompositeMode::mc;
+    opt.composite.samples = 2;
+    EngineStats sm;
+    engine.render(vol, opt, nullptr, &sm);
+    EXPECT_EQ(sm.loads, balance_reference(match_reference(view, split), view, split).loads);
   }
 }
 

@@ -476,49 +476,60 @@ TEST(LocalCl, SegmentOrderSortsWithinPeBlocks) {
 }
 
 // The engine with and without skip_empty, skip_pes and order_lanes: the
-// same image, bit for bit, where no balancing regroups the samples (0
-// sweeps, or every PE matched); with balancing and skip_pes, the same to
+// same image, bit for bit, where no balancing regroups the samples into
+// other sub-rays (0 sweeps, every PE matched, or whole-ray adaptive
+// compositing); with direct compositing, balancing and skip_pes, the same to
 // float rounding.
 TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
   const Volume vol = shepp_logan(45, 2);
-  for (int order : {1, 3})
-    for (const ViewAngles a : {ViewAngles{0, 0, 0}, ViewAngles{20, 35, 10}})
-      for (const int sweeps : {0, kBalanceSweeps})
-        for (const bool skip_pes : {true, false}) {
-          SCOPED_TRACE("order " + std::to_string(order) + " sweeps " + std::to_string(sweeps) +
-                       (skip_pes ? " skip_pes" : ""));
-          RenderOptions opt;
-          opt.width = opt.height = 48, opt.view = a, opt.order = order;
-          opt.classifier = classifier_preset("ct");
-          EngineOptions on, off;
-          on.pes = off.pes = 512;
-          on.balance_sweeps = off.balance_sweeps = sweeps;
-          on.skip_pes = skip_pes;
-          off.skip_empty = false;
-          off.order_lanes = false;
-          RenderEngine e_on(*dp, on), e_off(*dp, off);
-          EngineTimes t;
-          EngineStats st_on, st_off;
-          const Image a_on = e_on.render(vol, opt, &t, &st_on);
-          const Image a_off = e_off.render(vol, opt, nullptr, &st_off);
-          EXPECT_GT(t.occupancy_ms, 0.0);
-          ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
-          if (sweeps == 0 || !skip_pes) {
-            EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
-                                  a_on.pixels().size() * sizeof(Rgba)),
-                      0);
-          } else {
-            EXPECT_GE(psnr(a_off, a_on), 100.0);
+  for (const CompositeMode mode : {CompositeMode::direct, CompositeMode::adaptive})
+    for (int order : {1, 3})
+      for (const ViewAngles a : {ViewAngles{0, 0, 0}, ViewAngles{20, 35, 10}})
+        for (const int sweeps : {0, kBalanceSweeps})
+          for (const bool skip_pes : {true, false}) {
+            SCOPED_TRACE("order " + std::to_string(order) + " sweeps " + std::to_string(sweeps) +
+                         (skip_pes ? " skip_pes" : "") +
+                         (mode == CompositeMode::adaptive ? " adaptive" : " direct"));
+            RenderOptions opt;
+            opt.width = opt.height = 48, opt.view = a, opt.order = order;
+            opt.classifier = classifier_preset("ct");
+            opt.composite.mode = mode;
+            opt.composite.threshold = 0.9f;
+            EngineOptions on, off;
+            on.pes = off.pes = 512;
+            on.balance_sweeps = off.balance_sweeps = sweeps;
+            on.skip_pes = skip_pes;
+            off.skip_empty = false;
+            off.order_lanes = false;
+            RenderEngine e_on(*dp, on), e_off(*dp, off);
+            EngineTimes t;
+            EngineStats st_on, st_off;
+            const Image a_on = e_on.render(vol, opt, &t, &st_on);
+            const Image a_off = e_off.render(vol, opt, nullptr, &st_off);
+            // The brick occupancy is made for direct compositing's skipping,
+            // and for adaptive only to leave PEs out.
+            if (mode == CompositeMode::direct || skip_pes) {
+              EXPECT_GT(t.occupancy_ms, 0.0);
+            } else {
+              EXPECT_EQ(t.occupancy_ms, 0.0);
+            }
+            ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
+            if (sweeps == 0 || !skip_pes || mode == CompositeMode::adaptive) {
+              EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
+                                    a_on.pixels().size() * sizeof(Rgba)),
+                        0);
+            } else {
+              EXPECT_GE(psnr(a_off, a_on), 100.0);
+            }
+            // skip_pes left PEs out (fewer segments), and they were PEs with
+            // samples: the test can tell the option from its absence.
+            if (skip_pes) {
+              EXPECT_LT(st_on.segments, st_off.segments);
+              EXPECT_LT(st_on.samples, st_off.samples);
+            } else {
+              EXPECT_EQ(st_on.samples, st_off.samples);
+            }
           }
-          // skip_pes left PEs out (fewer segments), and they were PEs with
-          // samples: the test can tell the option from its absence.
-          if (skip_pes) {
-            EXPECT_LT(st_on.segments, st_off.segments);
-            EXPECT_LT(st_on.samples, st_off.samples);
-          } else {
-            EXPECT_EQ(st_on.samples, st_off.samples);
-          }
-        }
 }
