@@ -146,12 +146,18 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   std::optional<DeviceOccupancy> occupancy;
   const bool skip = eo.skip_empty && mode == CompositeMode::direct;
   // Leaving out the PEs with nothing in reach (skip_pes): direct compositing
-  // (the same footprints where no balancing regroups the samples), and
-  // whole-ray adaptive compositing, which walks each ray's samples in depth
-  // order, so that leaving out samples that are all +-0 changes no pixel
-  // whatever the balancing. Not Monte Carlo: its walks draw per sample.
-  const bool mask_pes = eo.skip_empty && eo.skip_pes &&
-                        (mode == CompositeMode::direct || mode == CompositeMode::adaptive);
+  // (the same footprints where no balancing regroups the samples), and the
+  // whole-ray modes that walk each ray's samples in depth order, where
+  // leaving out samples that are all +-0 changes no pixel whatever the
+  // balancing: adaptive, and Monte Carlo without exact opacity (its draws
+  // are keyed by the absolute depth, and a sample of alpha 0 stops no walk).
+  // Not exact opacity (its fallback and stratified draws are keyed by the
+  // ray's first sample) nor per sub-ray Monte Carlo.
+  const bool whole_mc =
+      mode == CompositeMode::mc && eo.mc_scope == McScope::whole && !opt.composite.exact_opacity;
+  const bool mask_pes =
+      eo.skip_empty && eo.skip_pes &&
+      (mode == CompositeMode::direct || mode == CompositeMode::adaptive || whole_mc);
   const bool need_reach = skip || mask_pes;
   if (eo.fused) {
     if (need_reach) occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));

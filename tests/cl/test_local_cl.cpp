@@ -484,19 +484,24 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
   const Volume vol = shepp_logan(45, 2);
-  for (const CompositeMode mode : {CompositeMode::direct, CompositeMode::adaptive})
+  for (const CompositeMode mode :
+       {CompositeMode::direct, CompositeMode::adaptive, CompositeMode::mc})
     for (int order : {1, 3})
       for (const ViewAngles a : {ViewAngles{0, 0, 0}, ViewAngles{20, 35, 10}})
         for (const int sweeps : {0, kBalanceSweeps})
           for (const bool skip_pes : {true, false}) {
             SCOPED_TRACE("order " + std::to_string(order) + " sweeps " + std::to_string(sweeps) +
                          (skip_pes ? " skip_pes" : "") +
-                         (mode == CompositeMode::adaptive ? " adaptive" : " direct"));
+                         (mode == CompositeMode::direct ? " direct" : " whole ray"));
             RenderOptions opt;
             opt.width = opt.height = 48, opt.view = a, opt.order = order;
             opt.classifier = classifier_preset("ct");
             opt.composite.mode = mode;
             opt.composite.threshold = 0.9f;
+            opt.composite.samples = 8;
+            // Both kinds of stream, and draws for transparent samples too.
+            opt.composite.streams = order == 1 ? RandomStreams::per_ray : RandomStreams::shared;
+            opt.composite.drop_transparent = sweeps == 0;
             EngineOptions on, off;
             on.pes = off.pes = 512;
             on.balance_sweeps = off.balance_sweeps = sweeps;
@@ -516,7 +521,7 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
               EXPECT_EQ(t.occupancy_ms, 0.0);
             }
             ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
-            if (sweeps == 0 || !skip_pes || mode == CompositeMode::adaptive) {
+            if (sweeps == 0 || !skip_pes || mode != CompositeMode::direct) {
               EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
                                     a_on.pixels().size() * sizeof(Rgba)),
                         0);

@@ -116,16 +116,18 @@ struct EngineOptions {
   /// (enqueue_occupancy; the same image bit for bit). Off: every sample is
   /// resampled (for comparison).
   bool skip_empty = true;
-  /// Direct or adaptive compositing with skip_empty: PEs whose whole cell
-  /// lies in bricks without reach (match.hpp: match_active_reference) take
-  /// no part in the matching, balancing, resampling and swap: their samples
-  /// read only zero voxels (+-0 in every channel). Adaptive compositing
-  /// walks each ray's samples in order, so its image is the same bit for
-  /// bit; so is direct compositing's with 0 balance sweeps; with balancing
-  /// the other PEs' samples are grouped otherwise (no sample moves into an
-  /// inactive PE), the same to float rounding. Monte Carlo matches every PE
-  /// (its walks draw per sample). The loads (EngineStats) count the skipped
-  /// PEs as idle. Off: every PE is matched (--no-skip-pes).
+  /// With skip_empty: PEs whose whole cell lies in bricks without reach
+  /// (match.hpp: match_active_reference) take no part in the matching,
+  /// balancing, resampling and swap: their samples read only zero voxels
+  /// (+-0 in every channel). Whole-ray adaptive compositing and whole-ray
+  /// Monte Carlo without exact opacity walk each ray's samples in depth
+  /// order (the draws keyed by the absolute depth; alpha 0 stops no walk),
+  /// so their images are the same bit for bit; so is direct compositing's
+  /// with 0 balance sweeps; with balancing the other PEs' samples are
+  /// grouped otherwise (no sample moves into an inactive PE), the same to
+  /// float rounding. Exact-opacity and per sub-ray Monte Carlo match every
+  /// PE. The loads (EngineStats) count the skipped PEs as idle. Off: every
+  /// PE is matched (--no-skip-pes).
   bool skip_pes = true;
   /// The float8 resample kernels (fused with local compositing for direct,
   /// alone for adaptive and Monte Carlo) take segments into their lanes
