@@ -4,8 +4,8 @@
 # with its stage times, the frame's samples, utilisation and X-Net bytes,
 # and direct compositing equal to the reference (PSNR >= 80 dB, or
 # identical) either way, no balance time without sweeps, the same samples
-# (fewer for direct compositing with skip-pes, which leaves out the PEs with
-# nothing in reach); then that a bad option value exits 2 naming the option
+# (fewer with skip-pes, which leaves out the PEs with nothing in reach);
+# then that a bad option value exits 2 naming the option
 # and leaves no JSON behind.
 file(REMOVE ${OUT})
 execute_process(
@@ -74,8 +74,9 @@ foreach(i RANGE ${last})
     message(FATAL_ERROR "${id}: ${sweeps} balance sweeps, balance ${bal} ms")
   endif()
   # Balancing moves samples between PEs: the total is the matching's, of
-  # every PE or (direct with skip-pes) of the PEs with something in reach.
-  if(comp STREQUAL "direct" AND skip_pes)
+  # every PE or (skip-pes: direct, adaptive and mc4 all leave them out) of
+  # the PEs with something in reach.
+  if(skip_pes)
     set(kind skip)
   else()
     set(kind all)

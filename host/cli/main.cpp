@@ -179,9 +179,9 @@ int main(int argc, char** argv) {
                    "opencl, direct: resample every sample, also those whose stencil reads only "
                    "transparent voxels (the same image; for timing comparisons)");
   render->add_flag("--no-skip-pes", no_skip_pes,
-                   "opencl, direct: match every PE, also those whose cell has nothing in reach "
-                   "(the same image to float rounding, bit for bit with --balance-sweeps 0; the "
-                   "loads then count every PE)");
+                   "opencl, direct, adaptive, whole-ray mc: match every PE, also those whose cell "
+                   "has nothing in reach (the same image; for direct with balancing, to float "
+                   "rounding)");
   render->add_flag("--exact-opacity", exact_opacity,
                    "Monte Carlo: exact opacity, Monte Carlo colour (ch. 7.5 (a))");
   render->add_flag("--mc-stratified", stratified,
