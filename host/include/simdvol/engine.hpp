@@ -82,12 +82,15 @@ struct EngineTimes {
 /// the benchmarks; collecting them costs a read of P ints and the swap's
 /// cost on the host, outside the times above).
 struct EngineStats {
-  std::vector<int64_t> loads;  ///< samples per PE after balancing (P entries)
-  int64_t samples = 0;         ///< sum of the loads: samples resampled this frame
-  int64_t segments = 0;        ///< ray segments of the matching
-  bool swapped = false;        ///< the frame went through the binary swap (direct, mc subray)
-  SwapCost swap{};             ///< swap_cost of the frame's plan (when swapped)
-  /// SIMD utilisation after balancing: mean load / max load (1 when idle).
+  /// Samples per PE after balancing (P entries; 0 for the PEs that
+  /// EngineOptions::skip_pes left out).
+  std::vector<int64_t> loads;
+  int64_t samples = 0;   ///< sum of the loads: samples resampled this frame
+  int64_t segments = 0;  ///< ray segments of the matching
+  bool swapped = false;  ///< the frame went through the binary swap (direct, mc subray)
+  SwapCost swap{};       ///< swap_cost of the frame's plan (when swapped)
+  /// SIMD utilisation after balancing: mean load / max load over all P PEs,
+  /// the skipped ones included (1 when idle).
   double utilisation() const;
   int64_t max_load() const;
 };
