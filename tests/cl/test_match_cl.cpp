@@ -17,6 +17,13 @@ namespace {
 
 const ViewAngles kViews[] = {{0, 0, 0}, {0, 90, 0}, {0, 45, 0}, {30, 30, 30}};
 
+// Three angles uniform in [-360, 360) degrees.
+ViewAngles random_view(std::mt19937& rng) {
+  std::uniform_real_distribution<double> ang(-360.0, 360.0);
+  const double t = ang(rng), p = ang(rng);
+  return {t, p, ang(rng)};
+}
+
 std::string name(ViewAngles v, int64_t pes) {
   return "view (" + std::to_string(v.theta) + "," + std::to_string(v.phi) + "," +
          std::to_string(v.varphi) + ") P=" + std::to_string(pes);
@@ -103,11 +110,10 @@ TEST(MatchCl, BalanceBoundsWidths) {
 TEST(MatchCl, EqualsReferenceRandomViews) {
   SIMDVOL_TEST_DEVICE(dev);
   std::mt19937 rng(9);
-  std::uniform_real_distribution<double> ang(-360.0, 360.0);
   const Dims3 dims{23, 17, 13};
   int64_t holes = 0;
   for (int n = 0; n < 200; ++n) {
-    const ViewAngles va{ang(rng), ang(rng), ang(rng)};
+    const ViewAngles va = random_view(rng);
     const int64_t pes = int64_t(1) << (n % 14);
     const ViewGeometry v = geometry(dims, va, 40, 32, n % 3 ? Sampling::voxel : Sampling::pixel);
     check_device(dev, v, kd_split(dims, pes), n % 4 == 0 ? 4 : -1, name(va, pes));
@@ -121,9 +127,8 @@ TEST(MatchCl, BalanceInvariantsOnDevice) {
   SIMDVOL_TEST_DEVICE(dev);
   const Dims3 dims{61, 47, 39};
   std::mt19937 rng(2);
-  std::uniform_real_distribution<double> ang(-360.0, 360.0);
   for (int n = 0; n < 8; ++n) {
-    const ViewAngles va = n < 4 ? kViews[n] : ViewAngles{ang(rng), ang(rng), ang(rng)};
+    const ViewAngles va = n < 4 ? kViews[n] : random_view(rng);
     const ViewGeometry v = geometry(dims, va, 64, 64);
     for (int64_t pes : {64, 512, 4096}) {
       const KdSplit split = kd_split(dims, pes);
@@ -197,11 +202,10 @@ TEST(MatchCl, MaskedEqualsReference) {
   // its rows, differs here).
   SIMDVOL_TEST_DEVICE(dev);
   std::mt19937 rng(5);
-  std::uniform_real_distribution<double> ang(-360.0, 360.0);
   const Dims3 dims{61, 47, 39};
   int64_t dropped_links = 0;
   for (int n = 0; n < 24; ++n) {
-    const ViewAngles va = n < 4 ? kViews[n] : ViewAngles{ang(rng), ang(rng), ang(rng)};
+    const ViewAngles va = n < 4 ? kViews[n] : random_view(rng);
     const int64_t pes = int64_t(1) << (3 + n % 11);
     const ViewGeometry v = geometry(dims, va, 64, 64);
     const KdSplit split = kd_split(dims, pes);
