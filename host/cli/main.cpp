@@ -354,7 +354,8 @@ int main(int argc, char** argv) {
         Image img;
         if (device) {
           EngineTimes t;
-          img = gpu->render(vol, opt, &t);
+          EngineStats st;
+          img = gpu->render(vol, opt, &t, show_times ? &st : nullptr);
           if (show_times) {
             std::ostringstream os;
             os << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
@@ -366,8 +367,11 @@ int main(int argc, char** argv) {
                << " ms (host), swap " << t.swap_ms << " ms (";
             for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
               os << (k ? " " : "") << t.swap_stage_ms[k];
+            const auto busy =
+                std::count_if(st.loads.begin(), st.loads.end(), [](int64_t l) { return l > 0; });
             os << "), display " << t.display_ms << " ms, warp " << t.warp_ms << " ms; frame wall "
-               << t.device_wall_ms << " ms\n";
+               << t.device_wall_ms << " ms; " << st.samples << " samples on " << busy << " of "
+               << st.loads.size() << " PEs, utilisation " << st.utilisation() << "\n";
             std::cerr << os.str();
           }
         } else {

@@ -97,6 +97,36 @@ TEST_F(Cli, TurntableWritesNumberedFrames) {
     EXPECT_TRUE(fs::exists(dir_ / f)) << f;
 }
 
+TEST_F(Cli, SkipPesLeavesPesOutWithTheSameImage) {
+  // --times reports the PEs that got samples: fewer by default (the PEs with
+  // nothing in reach take no part) than with --no-skip-pes, and without
+  // balancing the images are the same.
+  auto busy = [](const std::string& out) {
+    const std::size_t at = out.find(" samples on ");
+    EXPECT_NE(at, std::string::npos) << out;
+    return at == std::string::npos ? -1 : std::stol(out.substr(at + 12));
+  };
+  const std::string common =
+      "render --phantom-size 32 --size 40x40 --pe 64 --view 20,35,10 "
+      "--balance-sweeps 0 --times -o ";
+  const Result a = run(common + path("a.png"));
+  const Result b = run(common + path("b.png") + " --no-skip-pes");
+  ASSERT_EQ(a.code, 0) << a.output;
+  ASSERT_EQ(b.code, 0) << b.output;
+  EXPECT_GT(busy(a.output), 0);
+  EXPECT_LT(busy(a.output), busy(b.output));
+  const simdvol::Image ia = simdvol::read_image(path("a.png"));
+  const simdvol::Image ib = simdvol::read_image(path("b.png"));
+  ASSERT_EQ(ia.pixels().size(), ib.pixels().size());
+  double sum = 0;
+  for (std::size_t k = 0; k < ia.pixels().size(); ++k) {
+    EXPECT_EQ(ia.pixels()[k].r, ib.pixels()[k].r);
+    EXPECT_EQ(ia.pixels()[k].a, ib.pixels()[k].a);
+    sum += ia.pixels()[k].r;
+  }
+  EXPECT_GT(sum, 1.0);
+}
+
 TEST_F(Cli, BadArgumentsFailClearly) {
   struct Case {
     std::string args, needle;
