@@ -63,22 +63,30 @@
 
 /* sv_log, sv_exp and their float16 forms are in common.cl. */
 
-/* x^y for x >= 0, y >= 0 as C's pow (0^0 = 1); x below FLT_MIN counts as 0. */
-/* x^y for x >= 0: a whole y in 1..64 by repeated squaring, other y by
- * exp(y log x) (sv_pow16 below, lane by lane). */
+/* r = x^n (type T: float or float16) for a whole n >= 1 by repeated
+ * squaring: 5 multiplications for the default Phong exponent 24, within a
+ * few ulp of the reference's std::pow. */
+#define SV_POWN(T, x, n, r)               \
+  do {                                    \
+    T b_ = (x);                           \
+    int n_ = (n);                         \
+    while (!(n_ & 1)) {                   \
+      b_ = b_ * b_;                       \
+      n_ >>= 1;                           \
+    }                                     \
+    (r) = b_;                             \
+    for (n_ >>= 1; n_; n_ >>= 1) {        \
+      b_ = b_ * b_;                       \
+      if (n_ & 1) (r) = (r)*b_;           \
+    }                                     \
+  } while (0)
+
+/* x^y for x >= 0, y >= 0 as C's pow (0^0 = 1); x below FLT_MIN counts as 0.
+ * A whole y in 1..64 by SV_POWN, other y by exp(y log x). */
 SV_FN float sv_pow(float x, float y) {
   if (y >= 1.0f && y <= 64.0f && y == floor(y)) {
-    float b = x, r;
-    int n = (int)y;
-    while (!(n & 1)) {
-      b = b * b;
-      n >>= 1;
-    }
-    r = b;
-    for (n >>= 1; n; n >>= 1) {
-      b = b * b;
-      if (n & 1) r = r * b;
-    }
+    float r;
+    SV_POWN(float, x, (int)y, r);
     return x < FLT_MIN ? 0.0f : r;
   }
   const float r = sv_exp(y * sv_log(x));
@@ -235,24 +243,13 @@ __kernel void simdvol_shade_rows(__global const float* restrict cells,
 #endif
 #endif
 
-/* x^y for x >= 0 (|N.H|, the Phong exponent y). A whole y in 1..64 (the
- * default 24) by repeated squaring: 5 multiplications for 24, within a few
- * ulp of the reference's std::pow, against exp(y log x) (~50 operations and
- * a division); simdvol-bench-shade, alternated 3 times: shade 42-45 -> 31-33
- * ms, fused shade + classify 36.1-36.8 -> 33.8-34.5 ms. Other y: exp(y log x). */
+/* sv_pow on 16 lanes. SV_POWN against exp(y log x) (~50 operations and a
+ * division): simdvol-bench-shade, alternated 3 times, shade 42-45 -> 31-33
+ * ms, fused shade + classify 36.1-36.8 -> 33.8-34.5 ms. */
 SV_FN float16 sv_pow16(float16 x, float y) {
   if (y >= 1.0f && y <= 64.0f && y == floor(y)) {
-    float16 b = x, r;
-    int n = (int)y;
-    while (!(n & 1)) {
-      b = b * b;
-      n >>= 1;
-    }
-    r = b;
-    for (n >>= 1; n; n >>= 1) {
-      b = b * b;
-      if (n & 1) r = r * b;
-    }
+    float16 r;
+    SV_POWN(float16, x, (int)y, r);
     return select(r, (float16)(0.0f), x < FLT_MIN);
   }
   const float16 r = sv_exp16(y * sv_log16(x));
