@@ -538,3 +538,50 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
             }
           }
 }
+
+// skip_pes on random cases where it claims the same bits: odd dims, P from
+// 1 to 512, orders 0-3, both samplings, fused or not, mostly transparent
+// volumes; direct compositing without balancing, adaptive and Monte Carlo
+// with it. Some case must leave PEs out (fewer samples), so the comparison
+// is not between two identical runs.
+TEST(RenderOpenClFrame, SkipPesRandomCasesSameImage) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<double> ang(-180.0, 180.0);
+  std::uniform_int_distribution<int> dim(5, 40);
+  int64_t left_out = 0;
+  for (int n = 0; n < 48; ++n) {
+    const Dims3 d{dim(rng), dim(rng), dim(rng)};
+    Volume vol = n % 2 ? shepp_logan(static_cast<int>(d[0]), 1)
+                       : simdvol::testing::random_volume(d, -1000.0f, 2000.0f, {1, 1, 1}, n);
+    if (n % 2 == 0)  // air with scattered dense voxels
+      for (float& x : vol.data()) x = x > 1500.0f ? x : -1000.0f;
+    RenderOptions opt;
+    opt.width = 8 + n % 30, opt.height = 8 + (n * 7) % 30;
+    opt.view = {ang(rng), ang(rng), ang(rng)};
+    opt.order = n % 4;
+    opt.sampling = n % 3 ? Sampling::voxel : Sampling::pixel;
+    opt.classifier = classifier_preset(n % 5 ? "ct" : "mri");
+    const CompositeMode modes[] = {CompositeMode::direct, CompositeMode::adaptive,
+                                   CompositeMode::mc};
+    opt.composite.mode = modes[n % 3];
+    opt.composite.samples = 4;
+    EngineOptions on, off;
+    on.pes = off.pes = int64_t(1) << (n % 10);
+    on.balance_sweeps = off.balance_sweeps = n % 3 == 0 ? 0 : kBalanceSweeps;
+    off.skip_pes = false;
+    on.fused = off.fused = n % 2 == 1;
+    SCOPED_TRACE("case " + std::to_string(n) + " P " + std::to_string(on.pes));
+    RenderEngine e_on(*dp, on), e_off(*dp, off);
+    EngineStats s_on, s_off;
+    const Image a = e_on.render(vol, opt, nullptr, &s_on);
+    const Image b = e_off.render(vol, opt, nullptr, &s_off);
+    ASSERT_EQ(a.pixels().size(), b.pixels().size());
+    EXPECT_EQ(std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(Rgba)),
+              0);
+    EXPECT_LE(s_on.samples, s_off.samples);
+    left_out += s_off.samples - s_on.samples;
+  }
+  EXPECT_GT(left_out, 0);
+}
