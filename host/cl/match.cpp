@@ -108,9 +108,26 @@ std::array<cl_long, 9> step_constants(const ViewGeometry& view) {
 
 namespace {
 
-// The matching with the PE mask `active` (cl_uchar[P]) already enqueued.
+// The matching with the PE mask `active` (cl_uchar[P]) already enqueued and
+// the PE tables uploaded (upload_pe_tables).
 DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, const KdSplit& split,
                                     DeviceMatching m);
+
+// m.cidx (cell index of each PE) and m.pe_of (PE of each cell).
+void upload_pe_tables(Device& device, const KdSplit& split, DeviceMatching& m) {
+  const int64_t pes = split.pes();
+  std::vector<cl_int4> cidx(static_cast<std::size_t>(pes));
+  std::vector<cl_int> pe_of(static_cast<std::size_t>(pes));
+  const Dims3 sp = split.splits();
+  for (int64_t p = 0; p < pes; ++p) {
+    const Dims3 c = split.cell_index(p);
+    cidx[p] = int4(c[0], c[1], c[2], 0);
+    pe_of[(c[2] * sp[1] + c[1]) * sp[0] + c[0]] = static_cast<cl_int>(p);
+  }
+  const auto ro = CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR;
+  m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
+  m.pe_of = device.buffer(ro, pe_of.size() * sizeof(cl_int), pe_of.data(), "PE of cell");
+}
 
 }  // namespace
 
@@ -130,6 +147,7 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   for (std::size_t p = 0; p < active.size(); ++p) flags[p] = active[p] ? 1 : 0;
   m.active =
       device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, flags.size(), flags.data(), "PE mask");
+  upload_pe_tables(device, split, m);
   return enqueue_match_masked(device, view, split, std::move(m));
 }
 
@@ -144,13 +162,7 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   m.masked = true;
   m.active = device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(std::max<int64_t>(pes, 1)),
                            nullptr, "PE mask");
-  std::vector<cl_int4> cidx(static_cast<std::size_t>(pes));
-  for (int64_t p = 0; p < pes; ++p) {
-    const Dims3 c = split.cell_index(p);
-    cidx[p] = int4(c[0], c[1], c[2], 0);
-  }
-  const auto ro = CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR;
-  m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
+  upload_pe_tables(device, split, m);
   const cl_int4 cell = int4(split.cell[0], split.cell[1], split.cell[2], 0);
   const cl_int4 dims = int4(split.dims[0], split.dims[1], split.dims[2], 0);
   const cl_int4 nb = int4(reach.bricks[0], reach.bricks[1], reach.bricks[2], 0);
@@ -186,20 +198,10 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   m.pes = pes;
   m.capacity = capacity;
   m.rows = rows;
-  std::vector<cl_int4> cidx(static_cast<std::size_t>(pes));
-  std::vector<cl_int> pe_of(static_cast<std::size_t>(pes));
   const Dims3 sp = split.splits();
-  for (int64_t p = 0; p < pes; ++p) {
-    const Dims3 c = split.cell_index(p);
-    cidx[p] = int4(c[0], c[1], c[2], 0);
-    pe_of[(c[2] * sp[1] + c[1]) * sp[0] + c[0]] = static_cast<cl_int>(p);
-  }
   std::array<float, 20> geo = row_geometry(view, split);
   std::array<cl_long, 9> steps = step_constants(view);
   const auto ro = CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR;
-  if (!m.cidx())
-    m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
-  m.pe_of = device.buffer(ro, pe_of.size() * sizeof(cl_int), pe_of.data(), "PE of cell");
   m.candidates = device.buffer(ro, cand.size() * sizeof(sv_rect), const_cast<sv_rect*>(cand.data()),
                                "candidate rectangles");
   sv_view v = view.grid;
