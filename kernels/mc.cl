@@ -23,7 +23,10 @@
  *
  * Options (defines): SHARED (1: key SV_SHARED_RAY), EXACT (exact opacity),
  * STRAT (with EXACT: stratified picks, composite_mc_stratified), DROP (no
- * draw for alpha <= 0), ALLOC (mc_local reads walks[s]).
+ * draw for alpha <= 0), ALLOC (mc_local reads walks[s]), SV_MC_SCALAR (the
+ * walks one by one, each a pass over the samples, as the reference writes
+ * them; kept for timing comparisons: the default takes 8 walks per pass,
+ * with the same draws and sums).
  * stats (if STATS): one int4 per work-item (walks, draws, skipped, fallback).
  */
 #ifndef SIMDVOL_COMMON_CL
@@ -102,6 +105,25 @@ __kernel void simdvol_mc_ray_sort(__global const sv_segment* segs, const int npx
     }
     items[u + 1] = v;
   }
+}
+
+/* sv_uniform (simdvol_shared.h) for 8 walks `sample` at once: the same
+ * Philox4x32-10 in uint8 lanes, the same bits per lane. */
+SV_FN float8 sv_uniform8(const ulong seed, const uint ray, const uint8 sample, const uint step) {
+  uint8 c0 = (uint8)(ray), c1 = sample, c2 = (uint8)(step), c3 = (uint8)(0x73696d64u);
+  uint k0 = (uint)seed, k1 = (uint)(seed >> 32);
+#pragma unroll
+  for (int q = 0; q < 10; ++q) {
+    const uint8 lo0 = c0 * 0xD2511F53u, hi0 = mul_hi(c0, (uint8)(0xD2511F53u));
+    const uint8 lo1 = c2 * 0xCD9E8D57u, hi1 = mul_hi(c2, (uint8)(0xCD9E8D57u));
+    c0 = hi1 ^ c1 ^ k0;
+    c1 = lo1;
+    c2 = hi0 ^ c3 ^ k1;
+    c3 = lo0;
+    k0 += 0x9E3779B9u;
+    k1 += 0xBB67AE85u;
+  }
+  return convert_float8(c0 >> 8) * (1.0f / 16777216.0f);
 }
 
 /* Exact opacity of `count` segments in depth order (over's alpha
@@ -183,6 +205,57 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
 #else
   double r = 0.0, g = 0.0, b = 0.0;
   int stopped = 0, draws = 0, skipped = 0;
+#ifndef SV_MC_SCALAR
+  /* The walks 8 at a time, one pass over the samples per 8: each sample is
+   * read once for the 8 and their draws come from one 8-lane Philox
+   * (sv_uniform8). Walk m stops at the first sample k with u(m, k) < alpha,
+   * as in the walk-by-walk loop (SV_MC_SCALAR), and the stopped walks' colours
+   * are summed afterwards in walk order: the same sums bit for bit. */
+  const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+  for (int m0 = 0; m0 < walks; m0 += 8) {
+    const int8 real = (m0 + lane) < (int8)(walks);
+    const uint8 mm = convert_uint8(m0 + lane);
+    int8 live = real;
+    int nlive = min(walks - m0, 8);
+    float8 cr = (float8)(0.0f), cg = cr, cb = cr;
+    for (int t = 0; t < count && nlive > 0; ++t) {
+      const int s = items ? items[first + t] : first + t;
+      const sv_segment sg = segs[s];
+      __global const float4* in = samples + sample_off[s];
+      for (int k = sg.k0; k < sg.k1; ++k) {
+        const float4 v = in[k - sg.k0];
+        if (v.w <= 0.0f && DROP) {
+          skipped += nlive;
+          continue;
+        }
+        draws += nlive;
+        const int8 h = live & (sv_uniform8(seed, key, mm, (uint)k) < (float8)(v.w));
+        if (any(h)) {
+          cr = select(cr, (float8)(v.x / v.w), h);
+          cg = select(cg, (float8)(v.y / v.w), h);
+          cb = select(cb, (float8)(v.z / v.w), h);
+          live &= ~h;
+          nlive = -(live.s0 + live.s1 + live.s2 + live.s3 + live.s4 + live.s5 + live.s6 + live.s7);
+          if (nlive == 0) break;
+        }
+      }
+    }
+    const int8 done = real & ~live;
+    float fr[8], fg[8], fb[8];
+    int fd[8];
+    vstore8(cr, 0, fr);
+    vstore8(cg, 0, fg);
+    vstore8(cb, 0, fb);
+    vstore8(done, 0, fd);
+    for (int l = 0; l < 8; ++l)
+      if (fd[l]) {
+        r += (double)fr[l];
+        g += (double)fg[l];
+        b += (double)fb[l];
+        ++stopped;
+      }
+  }
+#else
   for (int m = 0; m < walks; ++m) {
     int done = 0;
     for (int t = 0; t < count && !done; ++t) {
@@ -208,6 +281,7 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
       }
     }
   }
+#endif
   float4 out = (float4)(0.0f);
   int fallback = 0;
 #if !EXACT

@@ -7,7 +7,9 @@
 // views, orders and P from 1 to 8192; balanced matchings.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <random>
+#include <string>
 
 #include "simdvol/local.hpp"
 #include "simdvol/local_cl.hpp"
@@ -53,8 +55,9 @@ Diff diff(const std::vector<Rgba>& a, const std::vector<Rgba>& b) {
 }
 
 void check_case(Device& dev, const Dims3& dims, const std::vector<Rgba>& voxels,
-                const ViewGeometry& view, int64_t pes, int order) {
-  SCOPED_TRACE("P " + std::to_string(pes) + " order " + std::to_string(order));
+                const ViewGeometry& view, int64_t pes, int order, int nwalks) {
+  SCOPED_TRACE("P " + std::to_string(pes) + " order " + std::to_string(order) + ", " +
+               std::to_string(nwalks) + " walks");
   const KdSplit split = kd_split(dims, pes);
   const Matching m = balance_reference(match_reference(view, split), view, split);
   const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, pes, 1));
@@ -96,7 +99,7 @@ void check_case(Device& dev, const Dims3& dims, const std::vector<Rgba>& voxels,
                      (drop ? " drop" : " keep"));
         CompositeParams p;
         p.mode = CompositeMode::mc;
-        p.samples = 5;
+        p.samples = nwalks;  // the kernels take the walks 8 at a time: 5 and 19
         p.seed = 0x1234567890ull;
         p.streams = st;
         p.exact_opacity = exact;
@@ -122,8 +125,8 @@ void check_case(Device& dev, const Dims3& dims, const std::vector<Rgba>& voxels,
           std::vector<int32_t> walks;
           std::optional<DeviceAllocation> da;
           if (alloc) {
-            walks = allocation_reference(m, smp, ref_rays, 6);
-            da = enqueue_mc_allocation(dev, segs, soff, samples, rays, 6);
+            walks = allocation_reference(m, smp, ref_rays, nwalks + 1);
+            da = enqueue_mc_allocation(dev, segs, soff, samples, rays, nwalks + 1);
             std::vector<cl_int> w(m.segments.size());
             if (!w.empty())
               cl_check(dev.queue().enqueueReadBuffer(da->walks, CL_TRUE, 0, w.size() * 4, w.data()),
@@ -158,9 +161,30 @@ TEST(McCl, DeviceEqualsReferenceAcrossViewsOrdersAndPes) {
   for (std::size_t v = 0; v < std::size(views); ++v) {
     const ViewGeometry view = make_view(d, {1.0, 1.0, 1.0}, views[v], 40, 40, Sampling::voxel);
     SCOPED_TRACE("view " + std::to_string(v));
-    check_case(*dp, dims, voxels, view, v == 0 ? 1 : 64, 1);
-    check_case(*dp, dims, voxels, view, 8192, v == 2 ? 3 : 1);
+    check_case(*dp, dims, voxels, view, v == 0 ? 1 : 64, 1, 5);
+    check_case(*dp, dims, voxels, view, 8192, v == 2 ? 3 : 1, 19);
   }
+}
+
+// The walk-by-walk loop the kernels keep for timing comparisons
+// (SV_MC_SCALAR; the default takes the walks 8 at a time) against the same
+// references.
+TEST(McCl, WalkByWalkLoopEqualsReference) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  const char* old = std::getenv("SIMDVOL_CL_OPTIONS");
+  const std::string saved = old ? old : "";
+  setenv("SIMDVOL_CL_OPTIONS", "-DSV_MC_SCALAR", 1);
+  const Dims3 dims{37, 29, 23};
+  const std::vector<Rgba> voxels = random_voxels(dims, 11);
+  const std::array<int64_t, 3> d{dims[0], dims[1], dims[2]};
+  const ViewGeometry view =
+      make_view(d, {1.0, 1.0, 1.0}, {-23.5, 71.25, 133.0}, 40, 40, Sampling::voxel);
+  check_case(*dp, dims, voxels, view, 512, 1, 19);
+  if (old)
+    setenv("SIMDVOL_CL_OPTIONS", saved.c_str(), 1);
+  else
+    unsetenv("SIMDVOL_CL_OPTIONS");
 }
 
 TEST(McCl, RejectsBadArguments) {
