@@ -108,20 +108,57 @@ __kernel void simdvol_mc_ray_sort(__global const sv_segment* segs, const int npx
 }
 
 /* sv_uniform (simdvol_shared.h) for 8 walks `sample` at once: the same
- * Philox4x32-10 in uint8 lanes, the same bits per lane. */
-SV_FN float8 sv_uniform8(const ulong seed, const uint ray, const uint8 sample, const uint step) {
-  uint8 c0 = (uint8)(ray), c1 = sample, c2 = (uint8)(step), c3 = (uint8)(0x73696d64u);
-  uint k0 = (uint)seed, k1 = (uint)(seed >> 32);
+ * Philox4x32-10 in uint8 lanes, the same bits per lane. Of the counter
+ * (ray, walk, step, "simd") only the walk differs between the lanes, so
+ * the first rounds are partly the same for all lanes, and their parts that
+ * depend on the ray alone are the same for every step: sv_philox_ray makes
+ * those once per ray, sv_uniform8 the rest (8 of the 20 lane-wide
+ * multiplications become scalar or per-ray ones). */
+typedef struct {
+  uint lo0, c2, lo1, hi1; /* round 1: lo(K0 * ray); round 2: c2, lo(K1 * c2), hi(K1 * c2) */
+  uint k0, k1;            /* the key */
+} sv_philox_ray;
+
+SV_FN sv_philox_ray sv_philox_ray_init(const ulong seed, const uint ray) {
+  sv_philox_ray R;
+  R.k0 = (uint)seed;
+  R.k1 = (uint)(seed >> 32);
+  const uint lo0 = ray * 0xD2511F53u, hi0 = mul_hi(ray, 0xD2511F53u);
+  R.lo0 = lo0;
+  R.c2 = hi0 ^ 0x73696d64u ^ R.k1; /* round 1's c2 (counter word 3 is "simd") */
+  R.lo1 = R.c2 * 0xCD9E8D57u;      /* round 2 on it */
+  R.hi1 = mul_hi(R.c2, 0xCD9E8D57u);
+  return R;
+}
+
+SV_FN float8 sv_uniform8(const sv_philox_ray* R, const uint8 sample, const uint step) {
+  const uint w0 = 0x9E3779B9u, w1 = 0xBB67AE85u;
+  /* Round 1: counter (ray, sample, step, "simd"), key (k0, k1). */
+  const uint s_lo1 = step * 0xCD9E8D57u, s_hi1 = mul_hi(step, 0xCD9E8D57u);
+  uint8 c0 = s_hi1 ^ sample ^ R->k0; /* c1 = s_lo1, c2 = R->c2, c3 = R->lo0 */
+  /* Round 2, key + w. */
+  uint8 lo0 = c0 * 0xD2511F53u, hi0 = mul_hi(c0, (uint8)(0xD2511F53u));
+  const uint t0 = R->hi1 ^ s_lo1 ^ (R->k0 + w0); /* c0, the same in every lane */
+  uint8 c2 = hi0 ^ R->lo0 ^ (R->k1 + w1);     /* c1 = R->lo1, c3 = lo0 */
+  uint8 c3 = lo0;
+  /* Round 3, key + 2w. */
+  const uint u_lo0 = t0 * 0xD2511F53u, u_hi0 = mul_hi(t0, 0xD2511F53u);
+  const uint8 lo1 = c2 * 0xCD9E8D57u, hi1 = mul_hi(c2, (uint8)(0xCD9E8D57u));
+  c0 = hi1 ^ R->lo1 ^ (R->k0 + 2u * w0);
+  uint8 c1 = lo1;
+  c2 = u_hi0 ^ c3 ^ (R->k1 + 2u * w1);
+  c3 = (uint8)(u_lo0);
+  uint k0 = R->k0 + 3u * w0, k1 = R->k1 + 3u * w1;
 #pragma unroll
-  for (int q = 0; q < 10; ++q) {
-    const uint8 lo0 = c0 * 0xD2511F53u, hi0 = mul_hi(c0, (uint8)(0xD2511F53u));
-    const uint8 lo1 = c2 * 0xCD9E8D57u, hi1 = mul_hi(c2, (uint8)(0xCD9E8D57u));
-    c0 = hi1 ^ c1 ^ k0;
-    c1 = lo1;
-    c2 = hi0 ^ c3 ^ k1;
-    c3 = lo0;
-    k0 += 0x9E3779B9u;
-    k1 += 0xBB67AE85u;
+  for (int q = 3; q < 10; ++q) {
+    const uint8 a0 = c0 * 0xD2511F53u, b0 = mul_hi(c0, (uint8)(0xD2511F53u));
+    const uint8 a1 = c2 * 0xCD9E8D57u, b1 = mul_hi(c2, (uint8)(0xCD9E8D57u));
+    c0 = b1 ^ c1 ^ k0;
+    c1 = a1;
+    c2 = b0 ^ c3 ^ k1;
+    c3 = a0;
+    k0 += w0;
+    k1 += w1;
   }
   return convert_float8(c0 >> 8) * (1.0f / 16777216.0f);
 }
@@ -212,6 +249,7 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
    * as in the walk-by-walk loop (SV_MC_SCALAR), and the stopped walks' colours
    * are summed afterwards in walk order: the same sums bit for bit. */
   const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+  const sv_philox_ray R = sv_philox_ray_init(seed, key);
   for (int m0 = 0; m0 < walks; m0 += 8) {
     const int8 real = (m0 + lane) < (int8)(walks);
     const uint8 mm = convert_uint8(m0 + lane);
@@ -229,7 +267,7 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
           continue;
         }
         draws += nlive;
-        const int8 h = live & (sv_uniform8(seed, key, mm, (uint)k) < (float8)(v.w));
+        const int8 h = live & (sv_uniform8(&R, mm, (uint)k) < (float8)(v.w));
         if (any(h)) {
           cr = select(cr, (float8)(v.x / v.w), h);
           cg = select(cg, (float8)(v.y / v.w), h);
