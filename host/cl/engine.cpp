@@ -151,13 +151,21 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // leaving out samples that are all +-0 changes no pixel whatever the
   // balancing: adaptive, and Monte Carlo without exact opacity (its draws
   // are keyed by the absolute depth, and a sample of alpha 0 stops no walk).
-  // Not exact opacity (its fallback and stratified draws are keyed by the
-  // ray's first sample) nor per sub-ray Monte Carlo.
+  // Not whole-ray exact opacity (its fallback and stratified draws are
+  // keyed by the ray's first sample, which may be a left-out PE's). Per
+  // sub-ray Monte Carlo (every variant) without balancing: the other PEs'
+  // sub-rays are the same (their draws keyed by the ray and the absolute
+  // depth, or by the sub-ray's own first sample), and a left-out sub-ray's
+  // estimate is (0, 0, 0, 0), which over leaves unchanged, and which the
+  // allocation by opacity gives no walk; with balancing the sub-rays would
+  // be cut otherwise, so every PE is matched.
   const bool whole_mc =
       mode == CompositeMode::mc && eo.mc_scope == McScope::whole && !opt.composite.exact_opacity;
+  const bool subray_mc =
+      mode == CompositeMode::mc && eo.mc_scope == McScope::subray && eo.balance_sweeps == 0;
   const bool mask_pes =
       eo.skip_empty && eo.skip_pes &&
-      (mode == CompositeMode::direct || mode == CompositeMode::adaptive || whole_mc);
+      (mode == CompositeMode::direct || mode == CompositeMode::adaptive || whole_mc || subray_mc);
   const bool need_reach = skip || mask_pes;
   if (eo.fused) {
     if (need_reach) occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));

@@ -178,10 +178,11 @@ int main(int argc, char** argv) {
   render->add_flag("--no-skip-empty", no_skip_empty,
                    "opencl, direct: resample every sample, also those whose stencil reads only "
                    "transparent voxels (the same image; for timing comparisons)");
-  render->add_flag("--no-skip-pes", no_skip_pes,
-                   "opencl, direct, adaptive, whole-ray mc: match every PE, also those whose cell "
-                   "has nothing in reach (the same image; for direct with balancing, to float "
-                   "rounding)");
+  render->add_flag(
+      "--no-skip-pes", no_skip_pes,
+      "opencl, direct, adaptive, whole-ray mc, per sub-ray mc with --balance-sweeps 0: "
+      "match every PE, also those whose cell has nothing in reach (the same image; "
+      "for direct with balancing, to float rounding)");
   render->add_flag("--exact-opacity", exact_opacity,
                    "Monte Carlo: exact opacity, Monte Carlo colour (ch. 7.5 (a))");
   render->add_flag("--mc-stratified", stratified,
