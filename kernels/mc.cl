@@ -164,17 +164,27 @@ SV_FN float8 sv_uniform8(const sv_philox_ray* R, const uint8 sample, const uint 
 }
 
 /* Exact opacity of `count` segments in depth order (over's alpha
- * recurrence); *k_first = the first segment's k0. */
+ * recurrence); *k_first = the depth of the first sample with alpha > 0 (the
+ * first segment's k0 if none), which keys the exact-opacity draws
+ * (composite.cpp: first_opaque_step). */
 SV_FN float sv_mc_alpha(__global const sv_segment* segs, __global const int* sample_off,
                         __global const float4* samples, __global const int* items,
                         const int first, const int count, int* k_first) {
   float acc = 0.0f;
+  int found = 0;
   for (int t = 0; t < count; ++t) {
     const int s = items ? items[first + t] : first + t;
     const sv_segment sg = segs[s];
     if (t == 0) *k_first = sg.k0;
     __global const float4* in = samples + sample_off[s];
-    for (int k = sg.k0; k < sg.k1; ++k) acc = acc + (1.0f - acc) * in[k - sg.k0].w;
+    for (int k = sg.k0; k < sg.k1; ++k) {
+      const float a = in[k - sg.k0].w;
+      if (!found && a > 0.0f) {
+        *k_first = k;
+        found = 1;
+      }
+      acc = acc + (1.0f - acc) * a;
+    }
   }
   return acc;
 }

@@ -149,18 +149,18 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // (the same footprints where no balancing regroups the samples), and the
   // whole-ray modes that walk each ray's samples in depth order, where
   // leaving out samples that are all +-0 changes no pixel whatever the
-  // balancing: adaptive, and Monte Carlo without exact opacity (its draws
-  // are keyed by the absolute depth, and a sample of alpha 0 stops no walk).
-  // Not whole-ray exact opacity (its fallback and stratified draws are
-  // keyed by the ray's first sample, which may be a left-out PE's). Per
+  // balancing: adaptive, and Monte Carlo (its walks' draws are keyed by the
+  // absolute depth, and a sample of alpha 0 stops no walk; exact opacity's
+  // stratified and fallback draws by the depth of the first sample with
+  // alpha > 0, never a left-out PE's; its opacity is over's recurrence in
+  // depth order, which samples of alpha 0 leave as it is). Per
   // sub-ray Monte Carlo (every variant) without balancing: the other PEs'
   // sub-rays are the same (their draws keyed by the ray and the absolute
   // depth, or by the sub-ray's own first sample), and a left-out sub-ray's
   // estimate is (0, 0, 0, 0), which over leaves unchanged, and which the
   // allocation by opacity gives no walk; with balancing the sub-rays would
   // be cut otherwise, so every PE is matched.
-  const bool whole_mc =
-      mode == CompositeMode::mc && eo.mc_scope == McScope::whole && !opt.composite.exact_opacity;
+  const bool whole_mc = mode == CompositeMode::mc && eo.mc_scope == McScope::whole;
   const bool subray_mc =
       mode == CompositeMode::mc && eo.mc_scope == McScope::subray && eo.balance_sweeps == 0;
   const bool mask_pes =

@@ -35,6 +35,22 @@ Rgba composite_mc(const RaySamples& ray, uint32_t ray_id, const CompositeParams&
   return composite_mc_walks(ray, ray_id, p.samples, p);
 }
 
+namespace {
+
+// The depth index that keys the exact-opacity draws (the stratified walks'
+// and the fallback pick's): that of the ray's first sample with alpha > 0
+// (first_step if none; then no such draw is made). Samples of alpha 0 before
+// it change nothing, so leaving them out (EngineOptions::skip_pes) keeps
+// every draw.
+uint32_t first_opaque_step(const RaySamples& ray) {
+  for (std::size_t s = 0; s < ray.rgba.size(); ++s)
+    if (ray.rgba[s].a > 0.0f)
+      return static_cast<uint32_t>(ray.first_step + static_cast<int64_t>(s));
+  return static_cast<uint32_t>(ray.first_step);
+}
+
+}  // namespace
+
 Rgba composite_mc_stratified(const RaySamples& ray, uint32_t key, int walks,
                              const CompositeParams& p, McStats* stats) {
   // CompositeParams::stratified. Opacity exact (over's alpha recurrence);
@@ -51,7 +67,7 @@ Rgba composite_mc_stratified(const RaySamples& ray, uint32_t key, int walks,
   Rgba out;
   out.a = acc;
   if (walks > 0 && acc > 0.0f) {
-    const uint32_t k0 = static_cast<uint32_t>(ray.first_step);
+    const uint32_t k0 = first_opaque_step(ray);
     const float inv_n = 1.0f / static_cast<float>(walks);
     auto target = [&](int m) {
       const float u = sv_uniform(p.seed, key, static_cast<uint32_t>(m), k0);
@@ -152,12 +168,12 @@ Rgba composite_mc_walks(const RaySamples& ray, uint32_t ray_id, int walks, const
       // p_s / alpha by inversion of the cumulative opacity (the recurrence
       // above): t = u * alpha, the first s whose cumulative opacity exceeds t
       // (the last sample with alpha_s > 0 if rounding leaves none). Keyed as
-      // walk `walks` at the first sample's depth. E[alpha * C_pick] = C', so
+      // walk `walks` at the depth of the first sample with alpha > 0 (of
+      // which there is one: acc > 0). E[alpha * C_pick] = C', so
       // the estimator stays unbiased; it costs one draw and one scan.
       ++st.fallbacks;
       ++st.draws;
-      const float u = sv_uniform(p.seed, key, static_cast<uint32_t>(walks),
-                                 static_cast<uint32_t>(ray.first_step));
+      const float u = sv_uniform(p.seed, key, static_cast<uint32_t>(walks), first_opaque_step(ray));
       const float t = u * acc;
       float c = 0.0f;
       std::size_t pick = ray.rgba.size();

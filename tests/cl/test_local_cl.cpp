@@ -539,48 +539,53 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
           }
 }
 
-// skip_pes for per sub-ray Monte Carlo: without balancing every variant
-// (plain, exact opacity, stratified, walks allocated by opacity; both
-// streams) gives the same bits with fewer samples; with balancing every PE
-// is matched (the same samples).
-TEST(RenderOpenClFrame, SkipPesPerSubRayMonteCarlo) {
+// skip_pes and Monte Carlo's variants (plain, exact opacity, stratified,
+// and per sub-ray walks allocated by opacity; both streams): whole rays
+// give the same bits with fewer samples whatever the balancing (exact
+// opacity's draws are keyed by the first sample with alpha > 0), per
+// sub-ray without balancing; with balancing per sub-ray matches every PE
+// (the same samples).
+TEST(RenderOpenClFrame, SkipPesMonteCarloVariants) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
   const Volume vol = shepp_logan(45, 2);
-  for (int variant = 0; variant < 4; ++variant)
-    for (int order : {1, 3})
-      for (const int sweeps : {0, kBalanceSweeps}) {
-        SCOPED_TRACE("variant " + std::to_string(variant) + " order " + std::to_string(order) +
-                     " sweeps " + std::to_string(sweeps));
-        RenderOptions opt;
-        opt.width = opt.height = 48, opt.view = {20, 35, 10}, opt.order = order;
-        opt.classifier = classifier_preset("ct");
-        opt.composite.mode = CompositeMode::mc;
-        opt.composite.samples = 11;
-        opt.composite.streams = order == 1 ? RandomStreams::per_ray : RandomStreams::shared;
-        opt.composite.drop_transparent = order == 1;
-        opt.composite.exact_opacity = variant >= 1;
-        opt.composite.stratified = variant == 2;
-        EngineOptions on, off;
-        on.pes = off.pes = 512;
-        on.balance_sweeps = off.balance_sweeps = sweeps;
-        on.mc_scope = off.mc_scope = McScope::subray;
-        on.mc_allocate = off.mc_allocate = variant == 3;
-        off.skip_pes = false;
-        RenderEngine e_on(*dp, on), e_off(*dp, off);
-        EngineStats st_on, st_off;
-        const Image a_on = e_on.render(vol, opt, nullptr, &st_on);
-        const Image a_off = e_off.render(vol, opt, nullptr, &st_off);
-        ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
-        EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
-                              a_on.pixels().size() * sizeof(Rgba)),
-                  0);
-        if (sweeps == 0) {
-          EXPECT_LT(st_on.samples, st_off.samples);
-        } else {
-          EXPECT_EQ(st_on.samples, st_off.samples);
+  for (const McScope scope : {McScope::whole, McScope::subray})
+    for (int variant = 0; variant < 4; ++variant)
+      for (int order : {1, 3})
+        for (const int sweeps : {0, kBalanceSweeps}) {
+          if (scope == McScope::whole && variant == 3) continue;  // allocation: per sub-ray
+          SCOPED_TRACE(std::string(scope == McScope::whole ? "whole" : "subray") + " variant " +
+                       std::to_string(variant) + " order " + std::to_string(order) + " sweeps " +
+                       std::to_string(sweeps));
+          RenderOptions opt;
+          opt.width = opt.height = 48, opt.view = {20, 35, 10}, opt.order = order;
+          opt.classifier = classifier_preset("ct");
+          opt.composite.mode = CompositeMode::mc;
+          opt.composite.samples = 11;
+          opt.composite.streams = order == 1 ? RandomStreams::per_ray : RandomStreams::shared;
+          opt.composite.drop_transparent = order == 1;
+          opt.composite.exact_opacity = variant >= 1;
+          opt.composite.stratified = variant == 2;
+          EngineOptions on, off;
+          on.pes = off.pes = 512;
+          on.balance_sweeps = off.balance_sweeps = sweeps;
+          on.mc_scope = off.mc_scope = scope;
+          on.mc_allocate = off.mc_allocate = variant == 3;
+          off.skip_pes = false;
+          RenderEngine e_on(*dp, on), e_off(*dp, off);
+          EngineStats st_on, st_off;
+          const Image a_on = e_on.render(vol, opt, nullptr, &st_on);
+          const Image a_off = e_off.render(vol, opt, nullptr, &st_off);
+          ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
+          EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
+                                a_on.pixels().size() * sizeof(Rgba)),
+                    0);
+          if (sweeps == 0 || scope == McScope::whole) {
+            EXPECT_LT(st_on.samples, st_off.samples);
+          } else {
+            EXPECT_EQ(st_on.samples, st_off.samples);
+          }
         }
-      }
 }
 
 // skip_pes on random cases where it claims the same bits: odd dims, P from

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -160,4 +161,37 @@ TEST(MonteCarlo, SameSeedSameResultAndStreamsDiffer) {
   p.streams = RandomStreams::shared;
   for (uint32_t r = 0; r < 50; ++r)
     EXPECT_EQ(composite_mc({ray, 0}, r, p).r, composite_mc({ray, 0}, r + 1000, p).r);
+}
+
+// Exact opacity's stratified and fallback draws are keyed by the depth of
+// the ray's first sample with alpha > 0: transparent samples in front of it
+// (a PE left out by EngineOptions::skip_pes) change no result bit, for
+// every variant and both streams; a different first opaque depth does.
+TEST(MonteCarlo, TransparentSamplesInFrontChangeNoDraw) {
+  std::mt19937 rng(5);
+  int moved = 0;
+  for (int trial = 0; trial < 40; ++trial) {
+    std::vector<Rgba> ray = random_ray(rng, 30, 0.15f);
+    ray[0] = Rgba{0.2f, 0.1f, 0.05f, 0.3f};  // the first opaque sample at depth 20
+    const std::vector<Rgba> front(7, Rgba{});
+    std::vector<Rgba> longer = front;
+    longer.insert(longer.end(), ray.begin(), ray.end());
+    for (int variant : {0, 1, 2})
+      for (RandomStreams st : {RandomStreams::per_ray, RandomStreams::shared}) {
+        CompositeParams p;
+        p.mode = CompositeMode::mc;
+        p.samples = 1 + trial % 9;
+        p.seed = 99 + static_cast<uint64_t>(trial);
+        p.streams = st;
+        p.exact_opacity = variant >= 1;
+        p.stratified = variant == 2;
+        const Rgba a = composite_mc({ray, 20}, 3, p), b = composite_mc({longer, 13}, 3, p);
+        EXPECT_EQ(std::memcmp(&a, &b, sizeof a), 0) << "trial " << trial << " variant " << variant;
+        if (variant == 2) {
+          const Rgba c = composite_mc({ray, 21}, 3, p);  // the opaque samples one step deeper
+          moved += std::memcmp(&a, &c, sizeof a) != 0;
+        }
+      }
+  }
+  EXPECT_GT(moved, 20);
 }

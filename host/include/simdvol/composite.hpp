@@ -37,7 +37,8 @@ struct CompositeParams {
   /// C' = a * mean of the colours C'_s / alpha_s that the walks which stopped
   /// picked. When no walk stops (and alpha > 0) one sample is picked from the
   /// conditional distribution p_s / alpha by inverting the cumulative opacity
-  /// (one draw, keyed as walk n at the first sample's depth; see
+  /// (one draw, keyed as walk n at the depth of the first sample with
+  /// alpha > 0, so that transparent samples before it change no draw; see
   /// composite.cpp): colour alpha * C_pick. The estimator stays unbiased.
   bool exact_opacity = false;
   /// Monte Carlo, ch. 7.5 (c): samples with alpha <= 0 draw no random number
@@ -45,7 +46,8 @@ struct CompositeParams {
   /// depth index this changes no result, only the number of draws.
   bool drop_transparent = true;
   /// Monte Carlo, beyond the thesis (with exact_opacity only): stratified
-  /// picks. Walk m draws one u_m = sv_uniform(seed, key, m, first depth) and
+  /// picks. Walk m draws one u_m = sv_uniform(seed, key, m, the depth of the
+  /// first sample with alpha > 0) and
   /// picks from the conditional distribution p_s / alpha by inverting the
   /// cumulative opacity at t_m = ((m + u_m) / n) * alpha (the rule of the
   /// fallback above); colour alpha * mean of the picks. Unbiased (each

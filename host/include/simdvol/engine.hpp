@@ -123,17 +123,17 @@ struct EngineOptions {
   /// (match.hpp: match_active_reference) take no part in the matching,
   /// balancing, resampling and swap: their samples read only zero voxels
   /// (+-0 in every channel). Whole-ray adaptive compositing and whole-ray
-  /// Monte Carlo without exact opacity walk each ray's samples in depth
-  /// order (the draws keyed by the absolute depth; alpha 0 stops no walk),
-  /// so their images are the same bit for bit; so is direct compositing's
-  /// with 0 balance sweeps; with balancing the other PEs' samples are
-  /// grouped otherwise (no sample moves into an inactive PE), the same to
-  /// float rounding. Per sub-ray Monte Carlo without balancing (0 sweeps)
-  /// leaves them out too, with the same bits (the other sub-rays are cut and
-  /// keyed as before; a left-out one is (0, 0, 0, 0)); with balancing, and
-  /// whole-ray Monte Carlo with exact opacity (draws keyed by the ray's
-  /// first sample), match every PE. The loads (EngineStats) count the skipped PEs as idle. Off:
-  /// every PE is matched (--no-skip-pes).
+  /// Monte Carlo walk each ray's samples in depth order (the walks' draws
+  /// keyed by the absolute depth, exact opacity's stratified and fallback
+  /// draws by the depth of the first sample with alpha > 0; alpha 0 stops no
+  /// walk), so their images are the same bit for bit; so is direct
+  /// compositing's with 0 balance sweeps; with balancing the other PEs'
+  /// samples are grouped otherwise (no sample moves into an inactive PE),
+  /// the same to float rounding. Per sub-ray Monte Carlo without balancing
+  /// (0 sweeps) leaves them out too, with the same bits (the other sub-rays
+  /// are cut and keyed as before; a left-out one is (0, 0, 0, 0)); with
+  /// balancing it matches every PE. The loads (EngineStats) count the
+  /// skipped PEs as idle. Off: every PE is matched (--no-skip-pes).
   bool skip_pes = true;
   /// The float8 resample kernels (fused with local compositing for direct,
   /// alone for adaptive and Monte Carlo) take segments into their lanes
