@@ -10,7 +10,7 @@
 file(REMOVE ${OUT})
 execute_process(
   COMMAND ${BENCH} --volumes phantom32 --sizes 64 --orders 1 --pes 64
-          --compositing direct,adaptive,mc4 --balance-sweeps 8,0 --skip-pes on,off --repeat 2
+          --compositing direct,adaptive,mc4s --balance-sweeps 8,0 --skip-pes on,off --repeat 2
           --turntable 4
           --json ${OUT}
   RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
@@ -74,7 +74,7 @@ foreach(i RANGE ${last})
     message(FATAL_ERROR "${id}: ${sweeps} balance sweeps, balance ${bal} ms")
   endif()
   # Balancing moves samples between PEs: the total is the matching's, of
-  # every PE or (skip-pes: direct, adaptive and mc4 all leave them out) of
+  # every PE or (skip-pes: direct, adaptive and mc4s (stratified, exact opacity) all leave them out) of
   # the PEs with something in reach.
   if(skip_pes)
     set(kind skip)

@@ -101,7 +101,8 @@ constexpr const char* kUsage =
     "                     [--turntable F] [--no-reference] [--no-volpack] [--volpack-runs R]\n"
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
     "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2\n"
-    "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNsub (per sub-ray)\n";
+    "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNx (exact opacity), mcNs (exact\n"
+    "    opacity, stratified picks), each with sub for per sub-ray (mcNsub, mcNxsub, mcNssub)\n";
 
 struct Options {
   std::vector<std::string> volumes{"phantom128", "phantom256", "brainsmall", "ch2"};
@@ -145,6 +146,14 @@ Comp parse_comp(const std::string& s) {
       n.resize(n.size() - 3);
     }
     c.params.mode = CompositeMode::mc;
+    // x: exact opacity (ch. 7.5 (a)); s: exact opacity, stratified picks.
+    if (!n.empty() && (n.back() == 'x' || n.back() == 's')) {
+      c.params.exact_opacity = true;
+      c.params.stratified = n.back() == 's';
+      n.pop_back();
+    }
+    if (n.empty())
+      throw ArgumentError("--compositing", "'" + s + "': no walk count (mcN, e.g. mc16)");
     const int64_t walks = parse_int(n, "--compositing");
     if (walks < 1 || walks > 4096)
       throw ArgumentError("--compositing", "'" + s + "': walks must lie in 1..4096");
@@ -152,7 +161,9 @@ Comp parse_comp(const std::string& s) {
     return c;
   }
   throw ArgumentError("--compositing",
-                      "'" + s + "' is not direct, adaptive, mcN or mcNsub (e.g. mc16)");
+                      "'" + s +
+                          "' is not direct, adaptive or mcN[x|s][sub] (e.g. mc16, mc16s, mc16sub: "
+                          "x exact opacity, s stratified, sub per sub-ray)");
 }
 
 // A volume by name, loaded once.
@@ -318,13 +329,14 @@ struct RefResult {
 class RefCache {
  public:
   const RefResult& get(const std::string& volume, const Volume& vol, const RenderOptions& opt) {
-    char key[256];
-    std::snprintf(key, sizeof key, "%s|%d|%d|%d|%.6f,%.6f,%.6f|%d|%d|%.4f|%llu|%d|%.4f,%.4f",
-                  volume.c_str(), opt.width, opt.height, opt.order, opt.view.theta, opt.view.phi,
-                  opt.view.varphi, static_cast<int>(opt.sampling),
-                  static_cast<int>(opt.composite.mode), opt.composite.threshold,
-                  static_cast<unsigned long long>(opt.composite.seed), opt.composite.samples,
-                  opt.shade.k1, opt.shade.k2);
+    char key[320];
+    const CompositeParams& c = opt.composite;
+    std::snprintf(
+        key, sizeof key, "%s|%d|%d|%d|%.6f,%.6f,%.6f|%d|%d|%.4f|%llu|%d|%d%d%d%d|%.4f,%.4f",
+        volume.c_str(), opt.width, opt.height, opt.order, opt.view.theta, opt.view.phi,
+        opt.view.varphi, static_cast<int>(opt.sampling), static_cast<int>(c.mode), c.threshold,
+        static_cast<unsigned long long>(c.seed), c.samples, static_cast<int>(c.streams),
+        c.exact_opacity, c.stratified, c.drop_transparent, opt.shade.k1, opt.shade.k2);
     auto it = cache_.find(key);
     if (it != cache_.end()) return it->second;
     RefResult r;
