@@ -112,8 +112,8 @@ __kernel void simdvol_mc_ray_sort(__global const sv_segment* segs, const int npx
  * (ray, walk, step, "simd") only the walk differs between the lanes, so
  * the first rounds are partly the same for all lanes, and their parts that
  * depend on the ray alone are the same for every step: sv_philox_ray makes
- * those once per ray, sv_uniform8 the rest (8 of the 20 lane-wide
- * multiplications become scalar or per-ray ones). */
+ * those once per ray, sv_uniform8 the rest: 16 lane-wide high-low
+ * multiplication pairs instead of 20, the other 4 scalar or per ray. */
 typedef struct {
   uint lo0, c2, lo1, hi1; /* round 1: lo(K0 * ray); round 2: c2, lo(K1 * c2), hi(K1 * c2) */
   uint k0, k1;            /* the key */
