@@ -156,10 +156,10 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // depth order, which samples of alpha 0 leave as it is). Per
   // sub-ray Monte Carlo (every variant) without balancing: the other PEs'
   // sub-rays are the same (their draws keyed by the ray and the absolute
-  // depth, or by the sub-ray's own first sample), and a left-out sub-ray's
-  // estimate is (0, 0, 0, 0), which over leaves unchanged, and which the
-  // allocation by opacity gives no walk; with balancing the sub-rays would
-  // be cut otherwise, so every PE is matched.
+  // depth, or by their own first sample with alpha > 0), and a left-out
+  // sub-ray's estimate is (0, 0, 0, 0), which over leaves unchanged, and
+  // which the allocation by opacity gives no walk; with balancing the
+  // sub-rays would be cut otherwise, so every PE is matched.
   const bool whole_mc = mode == CompositeMode::mc && eo.mc_scope == McScope::whole;
   const bool subray_mc =
       mode == CompositeMode::mc && eo.mc_scope == McScope::subray && eo.balance_sweeps == 0;
