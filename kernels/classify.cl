@@ -142,16 +142,21 @@ SV_FN float sv_mixture(__constant const sv_classify_params* cp, const int n, flo
   /* p_i = 1 / (1 + exp(L_j - L_i)), L_m = -(I - mean_m)^2 / (2 sigma_m^2) - ln sigma_m. */
   const float di = I - mi, dj = I - mj;
   const float dl = (di * di * hi + li) - (dj * dj * hj + lj);
-  float pi = 1.0f / (1.0f + sv_exp(dl));
+  /* The smaller fraction from e^-|dl|, not as 1 minus the larger: it keeps
+   * its value far below 2^-24 (classify.cpp). */
+  const float e = sv_exp(-fabs(dl));
+  const float big = 1.0f / (1.0f + e), small = e * big;
+  float pi = dl <= 0.0f ? big : small;
+  float pj = dl <= 0.0f ? small : big;
   /* Pure first / last material outside the means. */
   const int first = I <= m->mean[0];
   const int last = I >= m->mean[n - 1];
   pi = (first || last) ? 1.0f : pi;
+  pj = (first || last) ? 0.0f : pj;
   ai = first ? m->opacity[0] : last ? m->opacity[n - 1] : ai;
   ri = first ? m->r[0] : last ? m->r[n - 1] : ri;
   gi = first ? m->g[0] : last ? m->g[n - 1] : gi;
   bi = first ? m->b[0] : last ? m->b[n - 1] : bi;
-  const float pj = 1.0f - pi;
   const float wi = pi * ai, wj = pj * aj;
   *cr = wi * ri + wj * rj;
   *cg = wi * gi + wj * gj;
@@ -171,6 +176,19 @@ SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float 
 }
 
 
+/* The opacity for a sampling step s: a' = 1 - (1 - a)^s. Below 2^-8 the
+ * binomial series s a (1 - (s - 1) a / 2 (1 - (s - 2) a / 3)) (truncation
+ * below (s - 1)(s - 2)(s - 3) a^3 / 24 relative): 1 - a would round to 1
+ * below 2^-24 and give a' = 0 where the reference's
+ * -expm1(s log1p(-a)) has a' > 0. Above, 1 - exp(s ln(1 - a)), with
+ * (1 - a) 0 or >= 2^-24. */
+SV_FN float sv_step_alpha(float a, float s) {
+  const float om = 1.0f - a;
+  const float big = om < FLT_MIN ? 1.0f : 1.0f - sv_exp(s * sv_log(om));
+  const float small = s * a * (1.0f - 0.5f * (s - 1.0f) * a * (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a));
+  return a < 0.00390625f ? small : big;
+}
+
 /* One voxel: (Id, Is, |g|, v) -> premultiplied RGBA in r, g, b, a. */
 SV_FN void sv_classify_voxel(__constant const sv_classify_params* cp, float id, float is,
                              float gmag, float v, float* r, float* g, float* b, float* alpha) {
@@ -178,15 +196,13 @@ SV_FN void sv_classify_voxel(__constant const sv_classify_params* cp, float id, 
   const float a = SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER ? sv_transfer(cp, v, gmag, &cr, &cg, &cb)
                                                          : sv_mixture(cp, SV_NMAT_OF(cp), v, &cr,
                                                                       &cg, &cb);
-  /* a' = 1 - (1 - a)^step = 1 - exp(step ln(1 - a)); (1 - a) is 0 or >= 2^-24. */
 #ifdef SV_STEP_ONE
   const float a1 = a;
 #else
-  const float om = 1.0f - a;
-  const float a1 =
-      cp->step_is_one ? a : (om < FLT_MIN ? 1.0f : 1.0f - sv_exp(cp->opacity_step * sv_log(om)));
+  const float a1 = cp->step_is_one ? a : sv_step_alpha(a, cp->opacity_step);
 #endif
-  const int ok = a > 0.0f && !isnan(v); /* else transparent (0, 0, 0, 0) */
+  /* Else transparent (0, 0, 0, 0); so is a subnormal alpha (classify.cpp). */
+  const int ok = a >= FLT_MIN && !isnan(v);
   const float inv = 1.0f / a;
   *r = ok ? a1 * fmin(1.0f, cr * inv * id + is) : 0.0f;
   *g = ok ? a1 * fmin(1.0f, cg * inv * id + is) : 0.0f;
@@ -301,15 +317,17 @@ SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n,
 #endif
   const float16 di = I - mi, dj = I - mj;
   const float16 dl = (di * di * hi + li) - (dj * dj * hj + lj);
-  float16 pi = 1.0f / (1.0f + sv_exp16(dl));
+  const float16 e = sv_exp16(-fabs(dl));
+  const float16 big = 1.0f / (1.0f + e), small = e * big;
+  const int16 lo = dl <= 0.0f;
   const int16 first = I <= m->mean[0];
   const int16 last = I >= m->mean[n - 1];
-  pi = select(pi, (float16)(1.0f), first | last);
+  const float16 pi = select(select(small, big, lo), (float16)(1.0f), first | last);
+  const float16 pj = select(select(big, small, lo), (float16)(0.0f), first | last);
   ai = select(select(ai, (float16)(m->opacity[n - 1]), last), (float16)(m->opacity[0]), first);
   ri = select(select(ri, (float16)(m->r[n - 1]), last), (float16)(m->r[0]), first);
   gi = select(select(gi, (float16)(m->g[n - 1]), last), (float16)(m->g[0]), first);
   bi = select(select(bi, (float16)(m->b[n - 1]), last), (float16)(m->b[0]), first);
-  const float16 pj = 1.0f - pi;
   const float16 wi = pi * ai, wj = pj * aj;
   *cr = wi * ri + wj * rj;
   *cg = wi * gi + wj * gj;
@@ -333,6 +351,15 @@ SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, 
                          cg, cb);
 }
 
+/* sv_step_alpha on 16 voxels (the same operations lane by lane). */
+SV_FN float16 sv_step_alpha16(float16 a, float s) {
+  const float16 om = 1.0f - a;
+  const float16 big = select(1.0f - sv_exp16(s * sv_log16(om)), (float16)(1.0f), om < FLT_MIN);
+  const float16 small =
+      s * a * (1.0f - 0.5f * (s - 1.0f) * a * (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a));
+  return select(big, small, a < 0.00390625f);
+}
+
 /* The lit premultiplied RGBA of 16 voxels from the classifier's alpha `a`
  * and premultiplied material colour (cr, cg, cb) (sv_classify16's second
  * half). */
@@ -342,13 +369,9 @@ SV_FN void sv_classify16_lit(__constant const sv_classify_params* cp, float16 a,
 #ifdef SV_STEP_ONE
   const float16 a1 = a;
 #else
-  const float16 om = 1.0f - a;
-  const float16 a1 =
-      cp->step_is_one
-          ? a
-          : select(1.0f - sv_exp16(cp->opacity_step * sv_log16(om)), (float16)(1.0f), om < FLT_MIN);
+  const float16 a1 = cp->step_is_one ? a : sv_step_alpha16(a, cp->opacity_step);
 #endif
-  const int16 ok = (a > 0.0f) & ~isnan(v); /* else transparent (0, 0, 0, 0) */
+  const int16 ok = (a >= FLT_MIN) & ~isnan(v); /* else transparent, as sv_classify_voxel */
   const float16 inv = 1.0f / a;
   const float16 z = 0.0f;
   *r = select(z, a1 * fmin(1.0f, cr * inv * id + is), ok);

@@ -47,6 +47,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include "simdvol/error.hpp"
@@ -121,8 +122,8 @@ float classify_mixture(const MaterialMixture& mix, const ValueRange& range, floa
     I = span > 0.0 ? (static_cast<double>(value) - static_cast<double>(range.min)) / span : 0.0;
   }
   const auto& m = mix.materials;
-  std::size_t i = 0, j = 0;  // the bracketing pair
-  double pi = 1.0;           // fraction of material i; material j has 1 - pi
+  std::size_t i = 0, j = 0;   // the bracketing pair
+  double pi = 1.0, pj = 0.0;  // fractions of materials i and j (pi + pj = 1)
   if (I <= m.front().mean) {
     i = j = 0;
   } else if (I >= m.back().mean) {
@@ -135,9 +136,16 @@ float classify_mixture(const MaterialMixture& mix, const ValueRange& range, floa
             m.begin()) -
         1;
     j = i + 1;
-    pi = 1.0 / (1.0 + std::exp(log_likelihood(m[j], I) - log_likelihood(m[i], I)));
+    // p_i = 1 / (1 + e^dl), p_j = e^dl / (1 + e^dl) = 1 - p_i: the smaller
+    // of the two is e^-|dl| / (1 + e^-|dl|), not 1 minus the larger, so a
+    // fraction far below 1e-16 keeps its value (1 - p_i would round it to 0,
+    // in float below 6e-8: the device's zero voxels would not be ours).
+    const double dl = log_likelihood(m[j], I) - log_likelihood(m[i], I);
+    const double e = std::exp(-std::fabs(dl));
+    const double big = 1.0 / (1.0 + e), small = e * big;
+    pi = dl <= 0.0 ? big : small;
+    pj = dl <= 0.0 ? small : big;
   }
-  const double pj = 1.0 - pi;
   const double ai = pi * m[i].opacity, aj = pj * m[j].opacity;
   colour[0] = static_cast<float>(ai * m[i].r + aj * m[j].r);
   colour[1] = static_cast<float>(ai * m[i].g + aj * m[j].g);
@@ -226,10 +234,14 @@ std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& sh
   for (std::size_t n = 0; n < data.size(); ++n) {
     float col[3];
     const float a = classify_unchecked(c, range, data[n], shading[n].gradient, col);
-    if (!(a > 0.0f)) continue;  // out[n] stays (0, 0, 0, 0)
+    // out[n] stays (0, 0, 0, 0), also for a subnormal alpha: the device's
+    // float exp stops at 2^-126, so it has none, and a voxel the reference
+    // keeps while the device drops it would key Monte Carlo's draws apart.
+    if (!(a >= std::numeric_limits<float>::min())) continue;
+    // 1 - (1 - a)^step without the cancellation of 1 - a for small a.
     const double a1 = opacity_step == 1.0
                           ? static_cast<double>(a)
-                          : 1.0 - std::pow(1.0 - static_cast<double>(a), opacity_step);
+                          : -std::expm1(opacity_step * std::log1p(-static_cast<double>(a)));
     double C[3];
     for (int k = 0; k < 3; ++k)
       C[k] =

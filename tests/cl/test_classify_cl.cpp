@@ -46,6 +46,16 @@ double max_diff(const std::vector<Rgba>& a, const std::vector<Rgba>& b) {
   return d;
 }
 
+// Voxels empty (alpha 0) in one and not the other. Must be none: Monte
+// Carlo's allocation gives a walk to every sub-ray with alpha > 0 and its
+// stratified picks are keyed by the first sample with alpha > 0, so a voxel
+// of alpha 1e-11 that the device makes 0 changes the picks of whole rays.
+int64_t empty_mismatches(const std::vector<Rgba>& a, const std::vector<Rgba>& b) {
+  int64_t n = 0;
+  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) n += (a[i].a > 0) != (b[i].a > 0);
+  return n;
+}
+
 // A transfer function with several knots, colour ramps and a step.
 Classifier many_knots() {
   Classifier c;
@@ -123,6 +133,7 @@ void check_case(const Case& k) {
   const std::vector<Rgba> alone = voxels_from_cells(out.read<Rgba>(dev), L);
   const double d_alone = max_diff(ref, alone);
   EXPECT_LE(d_alone, kTol) << "classify alone";
+  EXPECT_EQ(empty_mismatches(ref, alone), 0) << "classify alone";
   // 1b. the scalar classify kernel gives the same (same float operations).
   VoxelBuffer scalar_out(dev, L);
   enqueue_classify(dev, shade_buf, cp, scalar_out, ClassifyKernel::scalar);
@@ -137,6 +148,7 @@ void check_case(const Case& k) {
   gather_rgba(dev, out, staged.data());
   const double d_staged = max_diff(ref, staged);
   EXPECT_LE(d_staged, kTol) << "shade + classify";
+  EXPECT_EQ(empty_mismatches(ref, staged), 0) << "shade + classify";
 
   // 3. fused, marking the brick occupancy of what it writes: the same as
   // the scan of the written voxels (enqueue_occupancy), exactly.
@@ -232,6 +244,43 @@ TEST(ClassifyKernel, Float16CellShapes) {
     check_case({&b, name, kViews[1], 2});       // 8 x 3 x 5, tail 8
     check_case({&c, name, kViews[2], 2, 0.5});  // 4 x 3 x 3, tail 12
   }
+}
+
+// Values across the ct preset's air / fat boundary in steps of 1/16 HU:
+// there the fat fraction falls from 1/2 to e^-87 and below (subnormal alpha:
+// transparent). The device computes it in float, the reference in double;
+// both keep the small fraction's value instead of 1 minus the large one, so
+// the same voxels are empty (check_case) and the small alphas agree to a
+// relative 1e-3 (the float log-likelihoods differ by up to ~1e-4 at
+// |L_j - L_i| ~ 90).
+TEST(ClassifyKernel, SmallFractionsAtAMaterialBoundary) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Classifier ct = classifier_preset("ct");
+  const auto& mats = ct.mixture.materials;
+  ASSERT_EQ(mats[0].opacity, 0.0f);  // air
+  Volume vol({32, 32, 16}, VoxelType::f32);
+  for (std::size_t n = 0; n < vol.data().size(); ++n)
+    vol.data()[n] = mats[0].mean + static_cast<float>(n) / 16.0f;
+  ASSERT_GT(vol.data().back(), mats[1].mean);
+  for (double step : {1.0, 0.6}) check_case({&vol, "ct", kViews[1], 8, step});
+
+  const ViewGeometry view = make_view(vol, kViews[1], 64, 64, Sampling::voxel);
+  const std::vector<Rgba> ref = classify(vol, shade(vol, view, {}), ct, 1.0);
+  PeArray array(dev, pe_grid(8));
+  CellBuffer cells = array.layout(vol, 1);
+  const VoxelLayout L = make_voxel_layout(cells.layout());
+  VoxelBuffer out(dev, L);
+  enqueue_shade_classify(dev, cells, shade_params(make_shade_frame(vol, view, {}), {}),
+                         classify_params(ct, {}, 1.0), out);
+  dev.finish();
+  const std::vector<Rgba> got = voxels_from_cells(out.read<Rgba>(dev), L);
+  int small = 0;
+  for (std::size_t n = 0; n < ref.size(); ++n)
+    if (ref[n].a > 0 && ref[n].a < 1e-7f) {
+      ++small;
+      EXPECT_NEAR(got[n].a, ref[n].a, 1e-3 * ref[n].a) << "value " << vol.data()[n];
+    }
+  EXPECT_GT(small, 20);  // the range reaches fractions far below float's 1 - p
 }
 
 TEST(ClassifyKernel, NanVoxelsAreTransparent) {

@@ -166,6 +166,37 @@ TEST(Mixture, FarBetweenTwoMaterialsDoesNotOverflow) {
   EXPECT_FLOAT_EQ(classify_voxel(c, {}, 5e5f, 0.0f, col), 0.9f);
 }
 
+TEST(Mixture, SmallFractionKeepsItsValue) {
+  // Between a transparent "air" (mean 0, sigma 1) and "fat" (100, 1,
+  // opacity 0.5): L_fat - L_air = (I^2 - (100 - I)^2) / 2, so p_fat =
+  // e^dl / (1 + e^dl) is 4e-18 at I = 49.6 (dl = -40) and 2e-35 at 49.2
+  // (-80). 1 - p_air rounds each to 0 in double (and below 6e-8 in float):
+  // the device and the reference then disagreed on which voxels are empty.
+  Classifier c;
+  c.mixture.materials = {{"air", 0.0f, 1.0f, 0, 0, 0, 0.0f}, {"fat", 100.0f, 1.0f, 1, 1, 1, 0.5f}};
+  float col[3];
+  for (float I : {49.6f, 49.5f, 49.3f, 49.2f}) {
+    const double dl = (static_cast<double>(I) * I - (100.0 - I) * (100.0 - I)) / 2.0;
+    const double want = 0.5 * std::exp(dl) / (1.0 + std::exp(dl));
+    SCOPED_TRACE("I = " + std::to_string(I) + ", dl = " + std::to_string(dl));
+    ASSERT_LT(want, 1e-16);  // 1 - p_air in double would give 0
+    EXPECT_NEAR(classify_voxel(c, {}, I, 0.0f, col), want, want * 1e-6);
+  }
+  // The classify stage keeps such a voxel and corrects its opacity for the
+  // step without cancellation (1 - (1 - a)^s = s a for small a), and makes
+  // a subnormal alpha transparent.
+  Volume vol({2, 1, 1}, VoxelType::f32);
+  vol.data() = {49.5f, 49.0f};
+  const std::vector<ShadeSample> sh(2, ShadeSample{1.0f, 0.0f, 0, 0});
+  const double a = classify_voxel(c, {}, 49.5f, 0.0f, col);
+  for (double step : {0.5, 1.7}) {
+    const auto out = classify(vol, sh, c, step);
+    EXPECT_NEAR(out[0].a, step * a, step * a * 1e-6) << "step " << step;
+    EXPECT_EQ(out[1].a, 0.0f) << "step " << step;
+    EXPECT_EQ(out[1].r, 0.0f) << "step " << step;
+  }
+}
+
 TEST(Mixture, RelativeMapsTheRangeToZeroOne) {
   Classifier c;
   c.mixture.relative = true;
