@@ -115,6 +115,16 @@ TEST(RenderEngine, AdaptiveAndMonteCarloSheppLogan) {
   check_modes(dev, vol, classifier_preset("ct"), 26, 8, {-23.5, 71.25, 133.0}, 2);
 }
 
+// The CLI's phantom (supersampled partial volumes): at the air / fat
+// boundary its voxels' fat fractions run down to 1e-35, where float and
+// double once disagreed on which voxels are empty (test_classify_cl.cpp),
+// and that re-keyed the stratified picks of whole rays.
+TEST(RenderEngine, AdaptiveAndMonteCarloPartialVolumePhantom) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(64, 4);
+  check_modes(dev, vol, classifier_preset("ct"), 64, 512, {20, 35, 10}, 1);
+}
+
 TEST(RenderEngine, AdaptiveAndMonteCarloBrainsmall) {
   SIMDVOL_TEST_DEVICE(dev);
   const auto path = simdvol::testing::data_dir() / "brainsmall.den";
