@@ -107,15 +107,17 @@ __kernel void simdvol_mc_ray_sort(__global const sv_segment* segs, const int npx
   }
 }
 
-/* sv_uniform (simdvol_shared.h) for 8 walks `sample` at once: the same
- * Philox4x32-10 in uint8 lanes, the same bits per lane. Of the counter
- * (ray, walk, step, "simd") only the walk differs between the lanes, so
- * the first rounds are partly the same for all lanes, and their parts that
- * depend on the ray alone are the same for every step: sv_philox_ray makes
- * those once per ray, sv_uniform8 the rest: 16 lane-wide high-low
- * multiplication pairs instead of 20, the other 4 scalar or per ray. */
+/* sv_uniform (simdvol_shared.h) for 8 walks at 4 steps at once: one
+ * Philox4x32-10 in uint8 lanes, the same bits per draw. Lane L = 4h + i
+ * takes the counter (ray, q0 + h, kb + i, "simd"); its four words are the
+ * draws of walks 4 (q0 + h) .. 4 (q0 + h) + 3 at step kb + i. Word 0 of the
+ * counter (the ray) and word 3 ("simd") are the same in every lane, so
+ * round 1's product of word 0 and round 2's of word 2 depend on the ray
+ * alone: sv_philox_ray makes them once per ray, and a block takes 18
+ * lane-wide high-low multiplication pairs for 32 draws (one pair per draw
+ * as 8 walks at one step took 16 for 8). */
 typedef struct {
-  uint lo0, c2, lo1, hi1; /* round 1: lo(K0 * ray); round 2: c2, lo(K1 * c2), hi(K1 * c2) */
+  uint lo0, c2, lo1, hi1; /* round 1: lo(K0 * ray), word 2; round 2: lo, hi(K1 * word 2) */
   uint k0, k1;            /* the key */
 } sv_philox_ray;
 
@@ -125,42 +127,47 @@ SV_FN sv_philox_ray sv_philox_ray_init(const ulong seed, const uint ray) {
   R.k1 = (uint)(seed >> 32);
   const uint lo0 = ray * 0xD2511F53u, hi0 = mul_hi(ray, 0xD2511F53u);
   R.lo0 = lo0;
-  R.c2 = hi0 ^ 0x73696d64u ^ R.k1; /* round 1's c2 (counter word 3 is "simd") */
+  R.c2 = hi0 ^ 0x73696d64u ^ R.k1; /* round 1's word 2 (counter word 3 is "simd") */
   R.lo1 = R.c2 * 0xCD9E8D57u;      /* round 2 on it */
   R.hi1 = mul_hi(R.c2, 0xCD9E8D57u);
   return R;
 }
 
-SV_FN float8 sv_uniform8(const sv_philox_ray* R, const uint8 sample, const uint step) {
+/* U[i] lane w = sv_uniform(seed, ray, 4 q0 + w, kb + i), i = 0..3, w = 0..7. */
+SV_FN void sv_uniform8x4(const sv_philox_ray* R, const uint q0, const uint kb, float8* U) {
   const uint w0 = 0x9E3779B9u, w1 = 0xBB67AE85u;
-  /* Round 1: counter (ray, sample, step, "simd"), key (k0, k1). */
-  const uint s_lo1 = step * 0xCD9E8D57u, s_hi1 = mul_hi(step, 0xCD9E8D57u);
-  uint8 c0 = s_hi1 ^ sample ^ R->k0; /* c1 = s_lo1, c2 = R->c2, c3 = R->lo0 */
-  /* Round 2, key + w. */
-  uint8 lo0 = c0 * 0xD2511F53u, hi0 = mul_hi(c0, (uint8)(0xD2511F53u));
-  const uint t0 = R->hi1 ^ s_lo1 ^ (R->k0 + w0); /* c0, the same in every lane */
-  uint8 c2 = hi0 ^ R->lo0 ^ (R->k1 + w1);     /* c1 = R->lo1, c3 = lo0 */
-  uint8 c3 = lo0;
-  /* Round 3, key + 2w. */
-  const uint u_lo0 = t0 * 0xD2511F53u, u_hi0 = mul_hi(t0, 0xD2511F53u);
+  const uint8 L = (uint8)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u);
+  const uint8 c1 = q0 + (L >> 2), c2 = kb + (L & 3u);
+  /* Round 1, key (k0, k1): word 0 = ray (R), word 2 = the step. */
   const uint8 lo1 = c2 * 0xCD9E8D57u, hi1 = mul_hi(c2, (uint8)(0xCD9E8D57u));
-  c0 = hi1 ^ R->lo1 ^ (R->k0 + 2u * w0);
-  uint8 c1 = lo1;
-  c2 = u_hi0 ^ c3 ^ (R->k1 + 2u * w1);
-  c3 = (uint8)(u_lo0);
-  uint k0 = R->k0 + 3u * w0, k1 = R->k1 + 3u * w1;
+  const uint8 n0 = hi1 ^ c1 ^ R->k0; /* n1 = lo1, n2 = R->c2, n3 = R->lo0 */
+  /* Round 2, key + w: word 2 = R->c2 (R->lo1, R->hi1). */
+  const uint8 lo0 = n0 * 0xD2511F53u, hi0 = mul_hi(n0, (uint8)(0xD2511F53u));
+  uint8 c0 = R->hi1 ^ lo1 ^ (R->k0 + w0);
+  uint8 d1 = (uint8)(R->lo1);
+  uint8 d2 = hi0 ^ R->lo0 ^ (R->k1 + w1);
+  uint8 d3 = lo0;
+  uint k0 = R->k0 + 2u * w0, k1 = R->k1 + 2u * w1;
 #pragma unroll
-  for (int q = 3; q < 10; ++q) {
+  for (int q = 2; q < 10; ++q) {
     const uint8 a0 = c0 * 0xD2511F53u, b0 = mul_hi(c0, (uint8)(0xD2511F53u));
-    const uint8 a1 = c2 * 0xCD9E8D57u, b1 = mul_hi(c2, (uint8)(0xCD9E8D57u));
-    c0 = b1 ^ c1 ^ k0;
-    c1 = a1;
-    c2 = b0 ^ c3 ^ k1;
-    c3 = a0;
+    const uint8 a1 = d2 * 0xCD9E8D57u, b1 = mul_hi(d2, (uint8)(0xCD9E8D57u));
+    c0 = b1 ^ d1 ^ k0;
+    d1 = a1;
+    d2 = b0 ^ d3 ^ k1;
+    d3 = a0;
     k0 += w0;
     k1 += w1;
   }
-  return convert_float8(c0 >> 8) * (1.0f / 16777216.0f);
+  const float s = 1.0f / 16777216.0f;
+  const float8 f0 = convert_float8(c0 >> 8) * s, f1 = convert_float8(d1 >> 8) * s;
+  const float8 f2 = convert_float8(d2 >> 8) * s, f3 = convert_float8(d3 >> 8) * s;
+  /* Walk 4h + w at step kb + i is word w of lane 4h + i: a 4 x 4 transpose
+   * in each half. */
+  U[0] = (float8)(f0.s0, f1.s0, f2.s0, f3.s0, f0.s4, f1.s4, f2.s4, f3.s4);
+  U[1] = (float8)(f0.s1, f1.s1, f2.s1, f3.s1, f0.s5, f1.s5, f2.s5, f3.s5);
+  U[2] = (float8)(f0.s2, f1.s2, f2.s2, f3.s2, f0.s6, f1.s6, f2.s6, f3.s6);
+  U[3] = (float8)(f0.s3, f1.s3, f2.s3, f3.s3, f0.s7, f1.s7, f2.s7, f3.s7);
 }
 
 /* Exact opacity of `count` segments in depth order (over's alpha
@@ -254,18 +261,20 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
   int stopped = 0, draws = 0, skipped = 0;
 #ifndef SV_MC_SCALAR
   /* The walks 8 at a time, one pass over the samples per 8: each sample is
-   * read once for the 8 and their draws come from one 8-lane Philox
-   * (sv_uniform8). Walk m stops at the first sample k with u(m, k) < alpha,
-   * as in the walk-by-walk loop (SV_MC_SCALAR), and the stopped walks' colours
-   * are summed afterwards in walk order: the same sums bit for bit. */
+   * read once for the 8, and their draws come 4 steps at a time from one
+   * 8-lane Philox (sv_uniform8x4; drawn again when a step falls outside the
+   * 4). Walk m stops at the first sample k with u(m, k) < alpha, as in the
+   * walk-by-walk loop (SV_MC_SCALAR), and the stopped walks' colours are
+   * summed afterwards in walk order: the same sums bit for bit. */
   const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
   const sv_philox_ray R = sv_philox_ray_init(seed, key);
   for (int m0 = 0; m0 < walks; m0 += 8) {
     const int8 real = (m0 + lane) < (int8)(walks);
-    const uint8 mm = convert_uint8(m0 + lane);
     int8 live = real;
     int nlive = min(walks - m0, 8);
     float8 cr = (float8)(0.0f), cg = cr, cb = cr;
+    float8 U[4];
+    int kb = 0, drawn = 0; /* U holds the draws of steps kb .. kb + 3 */
     for (int t = 0; t < count && nlive > 0; ++t) {
       const int s = items ? items[first + t] : first + t;
       const sv_segment sg = segs[s];
@@ -277,7 +286,12 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
           continue;
         }
         draws += nlive;
-        const int8 h = live & (sv_uniform8(&R, mm, (uint)k) < (float8)(v.w));
+        if (!drawn || (uint)(k - kb) >= 4u) {
+          kb = k;
+          drawn = 1;
+          sv_uniform8x4(&R, (uint)m0 >> 2, (uint)k, U);
+        }
+        const int8 h = live & (U[k - kb] < (float8)(v.w));
         if (any(h)) {
           cr = select(cr, (float8)(v.x / v.w), h);
           cg = select(cg, (float8)(v.y / v.w), h);
