@@ -133,6 +133,19 @@ SV_FN sv_philox_ray sv_philox_ray_init(const ulong seed, const uint ray) {
   return R;
 }
 
+/* u[w] = sv_uniform(seed, ray, 4 q + w, step), w = 0..3: one block. */
+SV_FN void sv_uniform4(const ulong seed, const uint ray, const uint q, const uint step,
+                       float* u) {
+  sv_u32x4 c;
+  c.v[0] = ray;
+  c.v[1] = q;
+  c.v[2] = step;
+  c.v[3] = 0x73696d64u; /* "simd" */
+  const sv_u32x4 r = sv_philox4x32_10(c, (uint)seed, (uint)(seed >> 32));
+#pragma unroll
+  for (int w = 0; w < 4; ++w) u[w] = (float)(r.v[w] >> 8) * (1.0f / 16777216.0f);
+}
+
 /* U[i] lane w = sv_uniform(seed, ray, 4 q0 + w, kb + i), i = 0..3, w = 0..7. */
 SV_FN void sv_uniform8x4(const sv_philox_ray* R, const uint q0, const uint kb, float8* U) {
   const uint w0 = 0x9E3779B9u, w1 = 0xBB67AE85u;
@@ -214,7 +227,9 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
     const float inv_n = 1.0f / (float)walks;
     double r = 0.0, g = 0.0, b = 0.0;
     int m = 0;
-    float tt = (((float)0 + sv_uniform(seed, key, 0u, (uint)k_first)) * inv_n) * acc;
+    float ub[4]; /* the draws of walks 4q .. 4q + 3: one Philox block */
+    sv_uniform4(seed, key, 0u, (uint)k_first, ub);
+    float tt = (((float)0 + ub[0]) * inv_n) * acc;
     float c = 0.0f;
     float4 last = (float4)(0.0f);
     for (int t = 0; t < count && m < walks; ++t) {
@@ -234,8 +249,10 @@ SV_FN float4 sv_mc_estimate(__global const sv_segment* segs, __global const int*
           g += (double)(v.y / v.w);
           b += (double)(v.z / v.w);
           ++m;
-          if (m < walks)
-            tt = (((float)m + sv_uniform(seed, key, (uint)m, (uint)k_first)) * inv_n) * acc;
+          if (m < walks) {
+            if ((m & 3) == 0) sv_uniform4(seed, key, (uint)m >> 2, (uint)k_first, ub);
+            tt = (((float)m + ub[m & 3]) * inv_n) * acc;
+          }
         }
       }
     }
