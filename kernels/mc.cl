@@ -133,19 +133,6 @@ SV_FN sv_philox_ray sv_philox_ray_init(const ulong seed, const uint ray) {
   return R;
 }
 
-/* u[w] = sv_uniform(seed, ray, 4 q + w, step), w = 0..3: one block. */
-SV_FN void sv_uniform4(const ulong seed, const uint ray, const uint q, const uint step,
-                       float* u) {
-  sv_u32x4 c;
-  c.v[0] = ray;
-  c.v[1] = q;
-  c.v[2] = step;
-  c.v[3] = 0x73696d64u; /* "simd" */
-  const sv_u32x4 r = sv_philox4x32_10(c, (uint)seed, (uint)(seed >> 32));
-#pragma unroll
-  for (int w = 0; w < 4; ++w) u[w] = (float)(r.v[w] >> 8) * (1.0f / 16777216.0f);
-}
-
 /* U[i] lane w = sv_uniform(seed, ray, 4 q0 + w, kb + i), i = 0..3, w = 0..7. */
 SV_FN void sv_uniform8x4(const sv_philox_ray* R, const uint q0, const uint kb, float8* U) {
   const uint w0 = 0x9E3779B9u, w1 = 0xBB67AE85u;

@@ -73,20 +73,27 @@ SV_FN sv_u32x4 sv_philox4x32_10(sv_u32x4 c, sv_u32 k0, sv_u32 k1) {
   return c;
 }
 
-/* Uniform float in [0, 1) with 24 random bits, for Monte Carlo walk `sample`
- * of ray `ray` at depth index `step`. The thesis's shared front-end sequence
- * is ray = SV_SHARED_RAY for every ray. Walks 4q .. 4q + 3 take the four
- * words of one Philox block, counter (ray, q, step, "simd"): one block
- * serves four walks (kernels/mc.cl: sv_uniform8x4). */
+/* Uniform floats in [0, 1) with 24 random bits, for Monte Carlo walks
+ * 4q .. 4q + 3 of ray `ray` at depth index `step`: u[w] from word w of the
+ * Philox block at counter (ray, q, step, "simd"). One block serves four
+ * walks (kernels/mc.cl: sv_uniform8x4 draws 8 walks at 4 steps). The
+ * thesis's shared front-end sequence is ray = SV_SHARED_RAY for every ray. */
 #define SV_SHARED_RAY 0xFFFFFFFFu
-SV_FN float sv_uniform(sv_u64 seed, sv_u32 ray, sv_u32 sample, sv_u32 step) {
+SV_FN void sv_uniform4(sv_u64 seed, sv_u32 ray, sv_u32 q, sv_u32 step, float* u) {
   sv_u32x4 c;
   c.v[0] = ray;
-  c.v[1] = sample >> 2;
+  c.v[1] = q;
   c.v[2] = step;
   c.v[3] = 0x73696d64u; /* "simd" */
   sv_u32x4 r = sv_philox4x32_10(c, (sv_u32)seed, (sv_u32)(seed >> 32));
-  return (float)(r.v[sample & 3u] >> 8) * (1.0f / 16777216.0f);
+  for (int w = 0; w < 4; ++w) u[w] = (float)(r.v[w] >> 8) * (1.0f / 16777216.0f);
+}
+
+/* The draw of walk `sample`: sv_uniform4's word sample mod 4. */
+SV_FN float sv_uniform(sv_u64 seed, sv_u32 ray, sv_u32 sample, sv_u32 step) {
+  float u[4];
+  sv_uniform4(seed, ray, sample >> 2, step, u);
+  return u[sample & 3u];
 }
 
 /* ---- shade and classify stages (kernels/shade.cl, kernels/classify.cl) ----
