@@ -149,8 +149,12 @@ cl::Event PeArray::enqueue_layout(const cl::Buffer& flat, CellBuffer& cells,
   const bool rows = variant == LayoutKernel::rows;
   const std::string name = rows ? "simdvol_layout" : "simdvol_layout_voxel";
   cl::Kernel k = device_->kernel("layout", name, layout_defines());
-  set_args(k, name, flat, cells.cells(), cells.origins(), cells.dims_arg(), cells.cell_arg(),
-           cells.block_arg(), static_cast<cl_int>(L.pes()));
+  if (rows)
+    set_args(k, name, flat, cells.cells(), cells.origins(), cells.pe_of_cell(), cells.dims_arg(),
+             cells.cell_arg(), cells.block_arg(), cells.splits_arg());
+  else
+    set_args(k, name, flat, cells.cells(), cells.origins(), cells.dims_arg(), cells.cell_arg(),
+             cells.block_arg(), static_cast<cl_int>(L.pes()));
   const std::size_t items =
       static_cast<std::size_t>(rows ? L.pes() * L.block[1] * L.block[2] : L.elements());
   return device_->run(k, name, cl::NDRange(items), cl::NDRange(kWgs));
