@@ -222,13 +222,25 @@ SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int
   sv_axis8(X[0], nx, table, ax, dx, &lx);
   sv_axis8(X[1], ny, table + nx, ay, dy, &ly);
   sv_axis8(X[2], nz, table + nx + ny, az, dz, &lz);
-  const int R = 4 * SV_M * SV_M;
-  float8 v[SV_M * 4 * SV_M * SV_M];
+  /* z outermost: the x pass of a row (b, c) runs as soon as its SV_M
+   * corners are loaded, the y pass of a plane c as soon as its rows are
+   * done, so about 4 * (SV_M + 2) float8 values are live instead of the
+   * 4 * SV_M^3 gathered ones. Each column is interpolated by the same
+   * operations as when every corner was gathered first (the columns are
+   * independent), so the samples are the same bit for bit. Gathering every
+   * corner first kept most of its 32 float8 values (order 1) in memory
+   * (a store after each gather in the profile): the fused kernel on the 256^3 phantom (simdvol-bench-frame,
+   * column `skip`, alternated four times) took 95-115 / 172-188 / 150-175
+   * ms at 0 / 30 / 45 degrees against 84-102 / 145-164 / 130-162 ms now;
+   * order 3 the same within the noise. */
+  float8 qz[SV_M * 4];
 #pragma unroll
-  for (int c = 0; c < SV_M; ++c)
+  for (int c = 0; c < SV_M; ++c) {
+    float8 qy[SV_M * 4];
 #pragma unroll
     for (int b = 0; b < SV_M; ++b) {
       const int8 row = ay[b] + az[c];
+      float8 qx[SV_M * 4];
 #pragma unroll
       for (int a = 0; a < SV_M; ++a) {
         const int8 o = row + ax[a];
@@ -238,28 +250,20 @@ SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int
            * taken out of `o` once for the 4 channels (o + ch * cs took them
            * out 4 times: -20% in the fused kernel). */
           __global const float* vc = vox + ch * cs;
-          v[a * R + ch * SV_M * SV_M + c * SV_M + b] = SV_G8(vc, o);
+          qx[a * 4 + ch] = SV_G8(vc, o);
         }
       }
+      sv_neville8(qx, 4, dx, lx);
+#pragma unroll
+      for (int ch = 0; ch < 4; ++ch) qy[b * 4 + ch] = qx[ch];
     }
-  sv_neville8(v, R, dx, lx);
-  float8 w[SV_M * 4 * SV_M];
+    sv_neville8(qy, 4, dy, ly);
 #pragma unroll
-  for (int ch = 0; ch < 4; ++ch)
+    for (int ch = 0; ch < 4; ++ch) qz[c * 4 + ch] = qy[ch];
+  }
+  sv_neville8(qz, 4, dz, lz);
 #pragma unroll
-    for (int c = 0; c < SV_M; ++c)
-#pragma unroll
-      for (int b = 0; b < SV_M; ++b)
-        w[b * 4 * SV_M + ch * SV_M + c] = v[ch * SV_M * SV_M + c * SV_M + b];
-  sv_neville8(w, 4 * SV_M, dy, ly);
-  float8 q[SV_M * 4];
-#pragma unroll
-  for (int ch = 0; ch < 4; ++ch)
-#pragma unroll
-    for (int c = 0; c < SV_M; ++c) q[c * 4 + ch] = w[ch * SV_M + c];
-  sv_neville8(q, 4, dz, lz);
-#pragma unroll
-  for (int ch = 0; ch < 4; ++ch) u[ch] = q[ch];
+  for (int ch = 0; ch < 4; ++ch) u[ch] = qz[ch];
 }
 
 /* Lanes of the segments at positions s0 .. s0 + 7 (those past nseg repeat
