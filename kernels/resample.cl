@@ -409,12 +409,19 @@ SV_FN int sv_trim8(long8* X, int8* N, const int T, const long s0, const long s1,
  * work-item as float8 lanes (range: ceil(nseg / 8) work-items); lane l
  * stores its sample t at out[sample_off[s] + t] while t < its length, s =
  * order[s0 + l] if `ordered` (local.cl: simdvol_segment_order), else
- * s0 + l. */
+ * s0 + l. With `skip`, a step at which no lane still stepping has its
+ * sample in a brick with reach (sv_reach8) stores +0 in every channel of
+ * those lanes' samples without gathering: the gathered samples would be
+ * +-0 there (see above), so the samples are the same but for the sign of
+ * a zero, which neither over, nor adaptive compositing, nor a Monte Carlo
+ * walk can tell (a walk stops where a draw is below alpha, and no draw in
+ * [0, 1) is below +-0). */
 __kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nseg,
                                   __global const int* sample_off, __global const sv_view* view,
                                   __global const int* table, __global const float* vox,
                                   const int cs, __global float4* out, __global const int* order,
-                                  const int ordered) {
+                                  const int ordered, __global const uchar* reach, const int nbx,
+                                  const int nby, const int skip) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8], lo[8];
@@ -427,7 +434,17 @@ __kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nse
   }
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
   const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
+  const int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   for (int t = 0; t < T; ++t) {
+    if (skip && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, (int8)(t) < N))) {
+#pragma unroll
+      for (int l = 0; l < 8; ++l)
+        if (t < ln[l]) out[lo[l] + t] = (float4)(0.0f);
+      X[0] += s_0;
+      X[1] += s_1;
+      X[2] += s_2;
+      continue;
+    }
     float8 u[4];
     sv_sample8(X, nx, ny, nz, table, vox, cs, u);
     float r[8], g[8], b[8], a[8];

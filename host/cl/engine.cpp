@@ -141,10 +141,12 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.laid_out = &vol;
     S.laid_data = vol.data().data();
   }
-  // Empty-space skipping (direct compositing): the fused kernel marks the
-  // brick occupancy as it writes the voxels; otherwise a scan makes it.
+  // Empty-space skipping: the fused kernel marks the brick occupancy as it
+  // writes the voxels (otherwise a scan makes it); direct compositing's
+  // fused resample + local steps over the samples out of reach, the other
+  // modes' resample stores them as +0 without gathering.
   std::optional<DeviceOccupancy> occupancy;
-  const bool skip = eo.skip_empty && mode == CompositeMode::direct;
+  const bool skip = eo.skip_empty;
   // Leaving out the PEs with nothing in reach (skip_pes): direct compositing
   // (the same footprints where no balancing regroups the samples), and the
   // whole-ray modes that walk each ray's samples in depth order, where
@@ -240,7 +242,8 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     const cl::Buffer& samples =
         S.samples.at_least(device, static_cast<std::size_t>(nsamples) * 16, "samples");
     e_local = enqueue_resample(device, segs, soff, tables, *S.rgba, opt.order, samples,
-                               LocalKernel::vector8, lanes ? &*lanes : nullptr);
+                               LocalKernel::vector8, lanes ? &*lanes : nullptr,
+                               occupancy ? &*occupancy : nullptr);
     const bool subray = mode == CompositeMode::mc && eo.mc_scope == McScope::subray;
     std::optional<DeviceRayLists> rays;
     if (!subray || eo.mc_allocate) {

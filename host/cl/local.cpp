@@ -181,17 +181,24 @@ Footprints read_footprints(Device& device, const DeviceFootprints& fp) {
 cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                            const ResampleTables& tables, const VoxelBuffer& voxels, int order,
                            const cl::Buffer& samples, LocalKernel variant,
-                           const SegmentOrder* lanes) {
+                           const SegmentOrder* lanes, const DeviceOccupancy* skip) {
   check_tables(segs, tables, voxels);
   if (lanes && lanes->count != segs.count)
     throw ArgumentError("segment order", "was made for other segments");
   const bool v8 = variant == LocalKernel::vector8;
+  if (skip && !v8) throw ArgumentError("occupancy", "only the vector8 resample kernel skips");
+  if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
+    throw ArgumentError("occupancy", "was made for other voxels or another interpolation order");
   const std::string name = v8 ? "simdvol_resample_v8" : "simdvol_resample";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), sample_off, tables.view,
            tables.table, voxels.buffer(), tables.channel_stride, samples);
-  // Without an order the order buffer is never read: any buffer will do.
-  if (v8) set_args_from(k, name, 8, lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0));
+  // Without an order or skipping, the order and reach buffers are never
+  // read: any buffer will do.
+  if (v8)
+    set_args_from(k, name, 8, lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
+                  skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
+                  skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }

@@ -176,7 +176,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render->add_flag("--no-shade", no_shade, "skip lighting (colour = material colour)");
   render->add_flag("--no-skip-empty", no_skip_empty,
-                   "opencl, direct: resample every sample, also those whose stencil reads only "
+                   "opencl: resample every sample, also those whose stencil reads only "
                    "transparent voxels (the same image; for timing comparisons)");
   render->add_flag(
       "--no-skip-pes", no_skip_pes,

@@ -385,6 +385,37 @@ TEST(LocalCl, SkippingEmptyBricksKeepsEveryBit) {
                                  &lanes);
           EXPECT_TRUE(same_bits(p, read_footprints(dev, skip))) << (o ? "skip" : "no skip");
         }
+        // The stored samples (adaptive, Monte Carlo): with skipping, those
+        // out of reach are +0 without being gathered; every sample equals
+        // the one gathered, bit for bit but for the sign of a zero, and
+        // some were skipped.
+        const cl::Buffer soff = upload_sample_offsets(dev, m);
+        const std::size_t ns = static_cast<std::size_t>(sample_offsets(m).back());
+        std::vector<Rgba> stored[2];
+        for (int k = 0; k < 2; ++k) {
+          cl::Buffer samples =
+              dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
+          // NaN everywhere first: a sample the kernel did not store fails.
+          cl_check(dev.queue().enqueueFillBuffer(samples, std::numeric_limits<float>::quiet_NaN(),
+                                                 0, std::max<std::size_t>(ns, 1) * 16),
+                   "fill");
+          enqueue_resample(dev, segs, soff, tables, vb, order, samples, LocalKernel::vector8,
+                           &lanes, k == 1 ? &occ : nullptr);
+          if (ns > 0) stored[k] = read_all<Rgba>(dev, samples, ns);
+        }
+        std::size_t zeros = 0;
+        for (std::size_t i = 0; i < ns; ++i) {
+          const float* a = &stored[0][i].r;
+          const float* b = &stored[1][i].r;
+          for (int c = 0; c < 4; ++c) {
+            if (a[c] == 0.0f && b[c] == 0.0f) {
+              ++zeros;
+            } else {
+              ASSERT_EQ(std::memcmp(&a[c], &b[c], sizeof(float)), 0) << "sample " << i;
+            }
+          }
+        }
+        EXPECT_GT(zeros, 0u);
         // The test can fail: with no brick in reach every footprint is 0.
         DeviceOccupancy none = occ;
         none.reach = dev.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(occ.count()), nullptr,
@@ -513,13 +544,10 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
             EngineStats st_on, st_off;
             const Image a_on = e_on.render(vol, opt, &t, &st_on);
             const Image a_off = e_off.render(vol, opt, nullptr, &st_off);
-            // The brick occupancy is made for direct compositing's skipping,
-            // and for adaptive only to leave PEs out.
-            if (mode == CompositeMode::direct || skip_pes) {
-              EXPECT_GT(t.occupancy_ms, 0.0);
-            } else {
-              EXPECT_EQ(t.occupancy_ms, 0.0);
-            }
+            // The brick occupancy is made whenever samples are skipped:
+            // direct compositing steps over those out of reach, the other
+            // modes store them as +0 without gathering.
+            EXPECT_GT(t.occupancy_ms, 0.0);
             ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
             if (sweeps == 0 || !skip_pes || mode != CompositeMode::direct) {
               EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
@@ -586,6 +614,49 @@ TEST(RenderOpenClFrame, SkipPesMonteCarloVariants) {
             EXPECT_EQ(st_on.samples, st_off.samples);
           }
         }
+}
+
+// Per sub-ray Monte Carlo with balancing matches every PE, so the stored
+// resample sees samples out of reach in PEs with nothing to draw; with
+// skip_empty it stores them as +0 without gathering. Every variant (plain,
+// exact opacity, stratified, allocated by opacity; both streams, transparent
+// samples dropped or drawn) gives the same image bit for bit as without.
+TEST(RenderOpenClFrame, SkipEmptyPerSubRayMonteCarloSameImage) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  const Volume vol = shepp_logan(45, 2);
+  for (int variant = 0; variant < 4; ++variant)
+    for (int order : {1, 2}) {
+      SCOPED_TRACE("variant " + std::to_string(variant) + " order " + std::to_string(order));
+      RenderOptions opt;
+      opt.width = opt.height = 48, opt.view = {20, 35, 10}, opt.order = order;
+      opt.classifier = classifier_preset("ct");
+      opt.composite.mode = CompositeMode::mc;
+      opt.composite.samples = 9;
+      opt.composite.streams = order == 1 ? RandomStreams::per_ray : RandomStreams::shared;
+      opt.composite.drop_transparent = order == 1;
+      opt.composite.exact_opacity = variant == 1 || variant == 2;
+      opt.composite.stratified = variant == 2;
+      EngineOptions on, off;
+      on.pes = off.pes = 512;
+      on.mc_scope = off.mc_scope = McScope::subray;
+      on.mc_allocate = off.mc_allocate = variant == 3;
+      off.skip_empty = false;
+      RenderEngine e_on(*dp, on), e_off(*dp, off);
+      EngineTimes t_on, t_off;
+      EngineStats st_on, st_off;
+      const Image a_on = e_on.render(vol, opt, &t_on, &st_on);
+      const Image a_off = e_off.render(vol, opt, &t_off, &st_off);
+      EXPECT_GT(t_on.occupancy_ms, 0.0);
+      EXPECT_EQ(t_off.occupancy_ms, 0.0);
+      EXPECT_EQ(st_on.samples, st_off.samples);  // balanced: every PE matched
+      ASSERT_EQ(a_on.pixels().size(), a_off.pixels().size());
+      EXPECT_EQ(std::memcmp(a_on.pixels().data(), a_off.pixels().data(),
+                            a_on.pixels().size() * sizeof(Rgba)),
+                0);
+      EXPECT_TRUE(std::any_of(a_on.pixels().begin(), a_on.pixels().end(),
+                              [](const Rgba& c) { return c.a > 0.0f; }));
+    }
 }
 
 // skip_pes on random cases where it claims the same bits: odd dims, P from

@@ -62,7 +62,7 @@ struct EngineTimes {
   double resample_local_ms = 0;  ///< zero footprints + brick occupancy + lane order +
                                  ///< fused resample + local (direct); resample into the
                                  ///< sample buffer (adaptive, mc)
-  double occupancy_ms = 0;       ///< direct with skip_empty: the brick occupancy's zeroing,
+  double occupancy_ms = 0;       ///< with skip_empty: the brick occupancy's zeroing,
                                  ///< scan (not fused: fused marks it inside classify_ms) and
                                  ///< reach (included in resample_local_ms)
   double offsets_ms = 0;         ///< adaptive, mc: the sample offsets' scan
@@ -115,8 +115,9 @@ struct EngineOptions {
   /// same data pointer and dims) has not changed: its layout into PE cells
   /// is kept (a turntable). Off: every frame lays the volume out again.
   bool reuse_layout = false;
-  /// Direct compositing: skip samples whose stencil reads only zero voxels
-  /// (enqueue_occupancy; the same image bit for bit). Off: every sample is
+  /// Skip samples whose stencil reads only zero voxels (enqueue_occupancy):
+  /// direct compositing steps over them, the other modes store them as +0
+  /// without gathering (the same image bit for bit). Off: every sample is
   /// resampled (for comparison).
   bool skip_empty = true;
   /// With skip_empty: PEs whose whole cell lies in bricks without reach

@@ -99,14 +99,19 @@ SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs);
 /// work-item in explicit float8 lanes, see resample.cl) or `segment` (one
 /// segment per work-item, scalar under PoCL). Same results bit for bit.
 enum class LocalKernel { vector8, segment };
+struct DeviceOccupancy;
 /// Resamples every sample of `segs` into `samples` (cl_float4, at
 /// sample_offsets(m).back() elements at least), in segment order. With
 /// `lanes` (made for `segs`) the vector8 kernel takes the segments in that
-/// order into its lanes (the same samples).
+/// order into its lanes (the same samples). With `skip` (the occupancy of
+/// `voxels` for `order`; vector8 only) the samples out of reach are stored
+/// as +0 without gathering their stencils: the same samples but for the
+/// sign of a zero.
 cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                            const ResampleTables& tables, const VoxelBuffer& voxels, int order,
                            const cl::Buffer& samples, LocalKernel variant = LocalKernel::vector8,
-                           const SegmentOrder* lanes = nullptr);
+                           const SegmentOrder* lanes = nullptr,
+                           const DeviceOccupancy* skip = nullptr);
 /// Composites the samples of each segment into the footprints (zeroed first).
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                         const cl::Buffer& samples, DeviceFootprints& fp);
