@@ -6,17 +6,16 @@
 #include "common.cl"
 #endif
 
-/* simdvol_layout: one work-item per (PE, padded row), launched over
- * pes * by * bz work-items (rounded up to WGS) with local size WGS.
- * Work-item g takes PE pe_of_cell[c * sx + ix] and its row r, where
- * (ix, r, c) = (g % sx, (g / sx) % (by * bz), g / (sx * by * bz)) and c =
- * iy + sy * iz: the sx PEs of one row of cells (splits (sx, sy, sz)) come
- * one after the other for each row r, so consecutive work-items read one
- * volume row from left to right. Row r of a PE is (ly, lz) = (r % by - h,
- * r / by - h); the work-item copies its bx values, x clamped into the
- * volume, to the contiguous row of the block (8 at a time where the whole
- * row lies inside the volume). The last row of each block also zeroes the
- * block's alignment tail.
+/* simdvol_layout: one work-item per padded row of a row of cells,
+ * launched over sy * sz * by * bz work-items (splits (sx, sy, sz); rounded
+ * up to WGS) with local size WGS. Work-item g takes row r = g % (by * bz)
+ * of the sx cells c = g / (by * bz) = iy + sy * iz, PEs pe_of_cell[c * sx +
+ * ix] for ix = 0 .. sx - 1, left to right: one volume row read once, from
+ * left to right. Row r of a cell is (ly, lz) = (r % by - h, r / by - h);
+ * each PE's bx values, x clamped into the volume, go to the contiguous row
+ * of its block (8 at a time where they lie inside the volume). Cells are
+ * uniform (pe_array.hpp): cell (ix, iy, iz) starts at (ix cx, iy cy, iz cz).
+ * The work-item of the blocks' last row also zeroes their alignment tails.
  *
  * Why rows: three variants were timed (PoCL 3.1, 2 cores, 256^3, kernel
  * time from profiling events, best of 7, a loaded shared machine so only
@@ -24,46 +23,51 @@
  * was 4-7x slower than rows, its four integer divisions per element
  * dominating; one work-item per PE looping over its whole cell was 0.7-1.3x
  * the time of rows at P = 512 and 8192, but gives only P work-items, i.e. a
- * single work-group on one thread for P <= 64. Rows keeps >= 32 groups for
- * every P and amortises the divisions over a row. The same holds for the
- * gather kernels (rows 4-10x faster than per voxel). Why this order: with
- * the rows of one PE after one another (the first form), each volume row was
- * read in pieces of bx floats by sx PEs far apart in time, so a 256^3
- * volume (64 MiB, more than the L3) came from memory about twice; the
- * 256^3 phantom's layout took 33-37 ms against 20-30 ms in this order, and
- * ch2's 20-26 against 11-14 ms (simdvol-bench, alternated three times). */
+ * single work-group on one thread for P <= 64. The same holds for the
+ * gather kernels (rows 4-10x faster than per voxel). Why whole rows of
+ * cells: with the rows of one PE after one another (the first form), each
+ * volume row was read in pieces of bx floats by sx PEs far apart in time,
+ * so a 256^3 volume (64 MiB, more than the L3) came from memory about
+ * twice, and each piece paid the row's index arithmetic. simdvol-bench,
+ * layout stage at 8,192 PEs, alternated three times: one work-item per (PE,
+ * row) with the sx PEs of a row of cells one after the other 26-28 ms
+ * (phantom), 6.2-7.6 (brainsmall), 11.3-13.4 (ch2); one work-item per row
+ * of cells 19.9-22.4, 3.9-4.2, 9.0-11.2 ms. (The first form: 37-41 ms on
+ * the phantom.) The range has sy * sz * by * bz work-items, at least
+ * by * bz >= 9. */
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_layout(
     __global const float* restrict volume, __global float* restrict cells,
     __global const int4* restrict origins, __global const int* restrict pe_of_cell, int4 dims,
     int4 cell, int4 block, int4 splits) {
   const int rows = block.y * block.z;
   const size_t gid = get_global_id(0);
-  if (gid >= (size_t)splits.x * (size_t)splits.y * (size_t)splits.z * (size_t)rows) return;
-  const int ix = (int)(gid % (size_t)splits.x);
-  const size_t t = gid / (size_t)splits.x;
-  const int r = (int)(t % (size_t)rows);
-  const int c = (int)(t / (size_t)rows);
-  const int p = pe_of_cell[c * splits.x + ix];
+  if (gid >= (size_t)splits.y * (size_t)splits.z * (size_t)rows) return;
+  const int r = (int)(gid % (size_t)rows);
+  const int c = (int)(gid / (size_t)rows);
   const int h = cell.w;
   const int ly = r % block.y - h;
   const int lz = r / block.y - h;
-  const int4 o = origins[p];
+  __global const int* row_pes = pe_of_cell + (size_t)c * (size_t)splits.x;
+  const int4 o = origins[row_pes[0]];
   const int y = clamp(o.y + ly, 0, dims.y - 1);
   const int z = clamp(o.z + lz, 0, dims.z - 1);
   __global const float* src = volume + sv_flat_index(dims, 0, y, z);
-  __global float* dst = cells + sv_block_start(block, p) + (size_t)r * (size_t)block.x;
-  const int x0 = o.x - h;
-  if (x0 >= 0 && x0 + block.x <= dims.x) {
-    __global const float* s = src + x0;
-    int i = 0;
-    for (; i + 8 <= block.x; i += 8) vstore8(vload8(0, s + i), 0, dst + i);
-    for (; i < block.x; ++i) dst[i] = s[i];
-  } else {
-    for (int i = 0; i < block.x; ++i) dst[i] = src[clamp(x0 + i, 0, dims.x - 1)];
-  }
-  if (r == rows - 1) {
-    __global float* tail = cells + sv_block_start(block, p);
-    for (int i = rows * block.x; i < block.w; ++i) tail[i] = 0.0f;
+  for (int ix = 0; ix < splits.x; ++ix) {
+    const int p = row_pes[ix];
+    const int x0 = ix * cell.x - h;
+    __global float* dst = cells + sv_block_start(block, p) + (size_t)r * (size_t)block.x;
+    if (x0 >= 0 && x0 + block.x <= dims.x) {
+      __global const float* s = src + x0;
+      int i = 0;
+      for (; i + 8 <= block.x; i += 8) vstore8(vload8(0, s + i), 0, dst + i);
+      for (; i < block.x; ++i) dst[i] = s[i];
+    } else {
+      for (int i = 0; i < block.x; ++i) dst[i] = src[clamp(x0 + i, 0, dims.x - 1)];
+    }
+    if (r == rows - 1) {
+      __global float* tail = cells + sv_block_start(block, p);
+      for (int i = rows * block.x; i < block.w; ++i) tail[i] = 0.0f;
+    }
   }
 }
 

@@ -155,8 +155,10 @@ cl::Event PeArray::enqueue_layout(const cl::Buffer& flat, CellBuffer& cells,
   else
     set_args(k, name, flat, cells.cells(), cells.origins(), cells.dims_arg(), cells.cell_arg(),
              cells.block_arg(), static_cast<cl_int>(L.pes()));
-  const std::size_t items =
-      static_cast<std::size_t>(rows ? L.pes() * L.block[1] * L.block[2] : L.elements());
+  // rows: one work-item per padded row of a row of cells (layout.cl).
+  const Dims3 splits = L.split.splits();
+  const std::size_t items = static_cast<std::size_t>(
+      rows ? splits[1] * splits[2] * L.block[1] * L.block[2] : L.elements());
   return device_->run(k, name, cl::NDRange(items), cl::NDRange(kWgs));
 }
 
