@@ -567,6 +567,26 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
           }
 }
 
+namespace {
+
+// Monte Carlo on the CLI's small phantom at view (20, 35, 10), 48 x 48:
+// per-ray streams at order 1, the shared sequence otherwise; transparent
+// samples dropped at order 1, drawn for otherwise.
+RenderOptions mc_options(int order, int samples, bool exact, bool stratified) {
+  RenderOptions opt;
+  opt.width = opt.height = 48, opt.view = {20, 35, 10}, opt.order = order;
+  opt.classifier = classifier_preset("ct");
+  opt.composite.mode = CompositeMode::mc;
+  opt.composite.samples = samples;
+  opt.composite.streams = order == 1 ? RandomStreams::per_ray : RandomStreams::shared;
+  opt.composite.drop_transparent = order == 1;
+  opt.composite.exact_opacity = exact;
+  opt.composite.stratified = stratified;
+  return opt;
+}
+
+}  // namespace
+
 // skip_pes and Monte Carlo's variants (plain, exact opacity, stratified,
 // and per sub-ray walks allocated by opacity; both streams): whole rays
 // give the same bits with fewer samples whatever the balancing (exact
@@ -585,15 +605,7 @@ TEST(RenderOpenClFrame, SkipPesMonteCarloVariants) {
           SCOPED_TRACE(std::string(scope == McScope::whole ? "whole" : "subray") + " variant " +
                        std::to_string(variant) + " order " + std::to_string(order) + " sweeps " +
                        std::to_string(sweeps));
-          RenderOptions opt;
-          opt.width = opt.height = 48, opt.view = {20, 35, 10}, opt.order = order;
-          opt.classifier = classifier_preset("ct");
-          opt.composite.mode = CompositeMode::mc;
-          opt.composite.samples = 11;
-          opt.composite.streams = order == 1 ? RandomStreams::per_ray : RandomStreams::shared;
-          opt.composite.drop_transparent = order == 1;
-          opt.composite.exact_opacity = variant >= 1;
-          opt.composite.stratified = variant == 2;
+          const RenderOptions opt = mc_options(order, 11, variant >= 1, variant == 2);
           EngineOptions on, off;
           on.pes = off.pes = 512;
           on.balance_sweeps = off.balance_sweeps = sweeps;
@@ -628,15 +640,7 @@ TEST(RenderOpenClFrame, SkipEmptyPerSubRayMonteCarloSameImage) {
   for (int variant = 0; variant < 4; ++variant)
     for (int order : {1, 2}) {
       SCOPED_TRACE("variant " + std::to_string(variant) + " order " + std::to_string(order));
-      RenderOptions opt;
-      opt.width = opt.height = 48, opt.view = {20, 35, 10}, opt.order = order;
-      opt.classifier = classifier_preset("ct");
-      opt.composite.mode = CompositeMode::mc;
-      opt.composite.samples = 9;
-      opt.composite.streams = order == 1 ? RandomStreams::per_ray : RandomStreams::shared;
-      opt.composite.drop_transparent = order == 1;
-      opt.composite.exact_opacity = variant == 1 || variant == 2;
-      opt.composite.stratified = variant == 2;
+      const RenderOptions opt = mc_options(order, 9, variant == 1 || variant == 2, variant == 2);
       EngineOptions on, off;
       on.pes = off.pes = 512;
       on.mc_scope = off.mc_scope = McScope::subray;
