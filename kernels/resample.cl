@@ -228,11 +228,11 @@ SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int
    * 4 * SV_M^3 gathered ones. Each column is interpolated by the same
    * operations as when every corner was gathered first (the columns are
    * independent), so the samples are the same bit for bit. Gathering every
-   * corner first kept most of its 32 float8 values (order 1) in memory
-   * (a store after each gather in the profile): the fused kernel on the 256^3 phantom (simdvol-bench-frame,
-   * column `skip`, alternated four times) took 95-115 / 172-188 / 150-175
-   * ms at 0 / 30 / 45 degrees against 84-102 / 145-164 / 130-162 ms now;
-   * order 3 the same within the noise. */
+   * corner first kept most of its 32 float8 values (order 1) in memory (a
+   * store after each gather in the profile): the fused kernel on the 256^3
+   * phantom (simdvol-bench-frame, column `skip`, alternated four times)
+   * took 95-115 / 172-188 / 150-175 ms at 0 / 30 / 45 degrees against
+   * 84-102 / 145-164 / 130-162 ms now; order 3 the same within the noise. */
   float8 qz[SV_M * 4];
 #pragma unroll
   for (int c = 0; c < SV_M; ++c) {
