@@ -50,11 +50,17 @@ struct Result {
 };
 
 // Runs `enqueue` (which returns the events whose device times add up) R
-// times with a finish after each, returns medians.
+// times with a finish after each, returns medians. `prepare` (if any) runs
+// before each, untimed.
 Result time_variant(Device& dev, const std::string& name, int runs, double bytes,
-                    const std::function<std::vector<cl::Event>()>& enqueue) {
+                    const std::function<std::vector<cl::Event>()>& enqueue,
+                    const std::function<void()>& prepare) {
   std::vector<double> d, w;
   for (int r = 0; r < runs; ++r) {
+    if (prepare) {
+      prepare();
+      dev.finish();
+    }
     const auto t0 = Clock::now();
     std::vector<cl::Event> ev = enqueue();
     dev.finish();
@@ -143,6 +149,9 @@ int main(int argc, char** argv) {
     CellBuffer cells1 = one.layout(vol, 1);
     const VoxelLayout L1 = make_voxel_layout(cells1.layout());
     VoxelBuffer shading1(dev, L1), rgba1(dev, L1);
+    // In-place classify overwrites its input: each run first copies the
+    // shading into these (untimed).
+    VoxelBuffer work(dev, L), work1(dev, L1);
     const Defines defs = classify_defines(cp);
     cl::Buffer cbuf = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof cp,
                                  const_cast<sv_classify_params*>(&cp), "classify parameters");
@@ -177,6 +186,14 @@ int main(int argc, char** argv) {
       std::string name;
       double bytes;
       std::function<std::vector<cl::Event>()> run;
+      std::function<void()> prepare = {};
+    };
+    auto copy_into = [&](const VoxelBuffer& from, VoxelBuffer& to) {
+      return [&dev, &from, &to] {
+        cl_check(
+            dev.queue().enqueueCopyBuffer(from.buffer(), to.buffer(), 0, 0, from.layout().bytes()),
+            "clEnqueueCopyBuffer(shading)");
+      };
     };
     std::vector<Variant> variants = {
         {"shade", cells_bytes + vox_bytes,
@@ -188,10 +205,21 @@ int main(int argc, char** argv) {
            return std::vector{enqueue_shade(dev, cells, sp, shading),
                               enqueue_classify(dev, shading, cp, rgba)};
          }},
+        {"classify (in place)", 2 * vox_bytes,
+         [&] { return std::vector{enqueue_classify_in_place(dev, work, cp)}; },
+         copy_into(shading, work)},
+        {"shade+classify (2 launches, in place)", cells_bytes + 3 * vox_bytes,
+         [&] {
+           return std::vector{enqueue_shade(dev, cells, sp, work),
+                              enqueue_classify_in_place(dev, work, cp)};
+         }},
         {"shade+classify fused", cells_bytes + vox_bytes,
          [&] { return std::vector{enqueue_shade_classify(dev, cells, sp, cp, rgba)}; }},
         {"flat classify (1 PE)", 2 * flat4,
          [&] { return std::vector{enqueue_classify(dev, shading1, cp, rgba1)}; }},
+        {"flat classify in place (1 PE)", 2 * flat4,
+         [&] { return std::vector{enqueue_classify_in_place(dev, work1, cp)}; },
+         copy_into(shading1, work1)},
         {"flat shade (1 PE)", 4.0 * voxels + flat4,
          [&] { return std::vector{enqueue_shade(dev, cells1, sp, shading1)}; }},
     };
@@ -270,6 +298,7 @@ int main(int argc, char** argv) {
     for (std::size_t w = 0; w < wgs.size(); ++w) {
       setenv("SIMDVOL_VOXEL_WGS", wgs[w], 1);
       for (auto& v : variants) {  // warm-up: compiles each local size
+        if (v.prepare) v.prepare();
         v.run();
         dev.finish();
       }
@@ -285,8 +314,8 @@ int main(int argc, char** argv) {
       for (std::size_t w = 0; w < wgs.size(); ++w) {
         setenv("SIMDVOL_VOXEL_WGS", wgs[w], 1);
         for (std::size_t i = 0; i < variants.size(); ++i) {
-          const Result one =
-              time_variant(dev, variants[i].name, 1, variants[i].bytes, variants[i].run);
+          const Result one = time_variant(dev, variants[i].name, 1, variants[i].bytes,
+                                          variants[i].run, variants[i].prepare);
           dms[w][i].push_back(one.device_ms);
           wms[w][i].push_back(one.wall_ms);
         }
@@ -313,7 +342,8 @@ int main(int argc, char** argv) {
 
     std::printf("\n%-36s %6s %10s %10s %9s %9s %8s %9s\n", "variant", "wgs", "device ms", "wall ms",
                 "Gvox/s", "GB/s", "%triad", "x serial");
-    double pe_cls = 0, flat_cls = 0, pe_fused = 0, flat_fused = 0, pe_fused_s = 0, flat_fused_s = 0;
+    double pe_cls = 0, flat_cls = 0, pe_cls_ip = 0, flat_cls_ip = 0, pe_fused = 0, flat_fused = 0,
+           pe_fused_s = 0, flat_fused_s = 0;
     for (std::size_t w = 0; w < wgs.size(); ++w)
       for (std::size_t i = 0; i < variants.size(); ++i) {
         const double d = median(dms[w][i]), wall = median(wms[w][i]);
@@ -326,14 +356,18 @@ int main(int argc, char** argv) {
         if (std::strcmp(wgs[w], "256") == 0) {
           if (variants[i].name == "classify") pe_cls = d;
           if (variants[i].name == "flat classify (1 PE)") flat_cls = d;
+          if (variants[i].name == "classify (in place)") pe_cls_ip = d;
+          if (variants[i].name == "flat classify in place (1 PE)") flat_cls_ip = d;
           if (variants[i].name == "shade+classify fused") pe_fused = d;
           if (variants[i].name == "flat shade+classify fused") flat_fused = d;
           if (variants[i].name == "shade+classify fused (scalar)") pe_fused_s = d;
           if (variants[i].name == "flat shade+classify fused (scalar)") flat_fused_s = d;
         }
       }
-    std::printf("\nPE-major / flat: classify %.2f, fused shade+classify %.2f (goal <= 1.5)\n",
-                pe_cls / flat_cls, flat_fused > 0 ? pe_fused / flat_fused : 0.0);
+    std::printf(
+        "\nPE-major / flat: classify %.2f, in place %.2f, fused shade+classify %.2f (goal <= "
+        "1.5)\n",
+        pe_cls / flat_cls, pe_cls_ip / flat_cls_ip, flat_fused > 0 ? pe_fused / flat_fused : 0.0);
     if (pe_fused_s > 0 && flat_fused_s > 0)
       std::printf("PE-major / flat, scalar kernels: fused shade+classify %.2f\n",
                   pe_fused_s / flat_fused_s);

@@ -399,14 +399,11 @@ SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, fl
 #endif
 #endif
 
-/* simdvol_classify16 (the default): 16 positions per work-item, 2-D range
- * (chunk, PE) = (vstride / 16 rounded up to the local size, pes). */
-__kernel void simdvol_classify16(__global const float* restrict shading,
-                                 __global float* restrict out, int vstride, int pes,
-                                 __constant const sv_classify_params* cp) {
-  const int e0 = 16 * (int)get_global_id(0);
-  const int p = (int)get_global_id(1);
-  if (e0 >= vstride || p >= pes) return;
+/* One chunk of 16 positions of PE p's planes from `shading` to `out`. The
+ * pointers may be equal (simdvol_classify16_in_place): every plane a store
+ * touches was loaded before it. */
+SV_FN void sv_classify16_chunk(__global const float* shading, __global float* out, int vstride,
+                               int p, int e0, __constant const sv_classify_params* cp) {
   const size_t base = (size_t)p * 4 * (size_t)vstride + (size_t)e0;
   __global const float* s = shading + base;
   __global float* o = out + base;
@@ -431,14 +428,32 @@ __kernel void simdvol_classify16(__global const float* restrict shading,
   SV_VSTORE16(a, o + 3 * vstride);
 }
 
-/* simdvol_classify: see the file comment. 2-D range (element of a plane,
- * PE) = (vstride rounded up to the local size, pes). */
-__kernel void simdvol_classify(__global const float* restrict shading,
-                               __global float* restrict out, int vstride, int pes,
-                               __constant const sv_classify_params* cp) {
-  const int e = (int)get_global_id(0);
+/* simdvol_classify16 (the default): 16 positions per work-item, 2-D range
+ * (chunk, PE) = (vstride / 16 rounded up to the local size, pes). */
+__kernel void simdvol_classify16(__global const float* restrict shading,
+                                 __global float* restrict out, int vstride, int pes,
+                                 __constant const sv_classify_params* cp) {
+  const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
-  if (e >= vstride || p >= pes) return;
+  if (e0 >= vstride || p >= pes) return;
+  sv_classify16_chunk(shading, out, vstride, p, e0, cp);
+}
+
+/* simdvol_classify16_in_place: simdvol_classify16 with the output written
+ * over its input. A line that is read and then written back costs one read
+ * and one write; a store to a line not read first also reads it
+ * (write-allocate), so out of place a voxel moves 48 bytes, in place 32. */
+__kernel void simdvol_classify16_in_place(__global float* voxels, int vstride, int pes,
+                                          __constant const sv_classify_params* cp) {
+  const int e0 = 16 * (int)get_global_id(0);
+  const int p = (int)get_global_id(1);
+  if (e0 >= vstride || p >= pes) return;
+  sv_classify16_chunk(voxels, voxels, vstride, p, e0, cp);
+}
+
+/* One position of PE p's planes; the pointers may be equal. */
+SV_FN void sv_classify_position(__global const float* shading, __global float* out, int vstride,
+                                int p, int e, __constant const sv_classify_params* cp) {
   const size_t base = (size_t)p * 4 * (size_t)vstride + (size_t)e;
   __global const float* s = shading + base;
   __global float* o = out + base;
@@ -448,6 +463,26 @@ __kernel void simdvol_classify(__global const float* restrict shading,
   o[vstride] = g;
   o[2 * vstride] = b;
   o[3 * vstride] = a;
+}
+
+/* simdvol_classify: see the file comment. 2-D range (element of a plane,
+ * PE) = (vstride rounded up to the local size, pes). */
+__kernel void simdvol_classify(__global const float* restrict shading,
+                               __global float* restrict out, int vstride, int pes,
+                               __constant const sv_classify_params* cp) {
+  const int e = (int)get_global_id(0);
+  const int p = (int)get_global_id(1);
+  if (e >= vstride || p >= pes) return;
+  sv_classify_position(shading, out, vstride, p, e, cp);
+}
+
+/* simdvol_classify_in_place: simdvol_classify written over its input. */
+__kernel void simdvol_classify_in_place(__global float* voxels, int vstride, int pes,
+                                        __constant const sv_classify_params* cp) {
+  const int e = (int)get_global_id(0);
+  const int p = (int)get_global_id(1);
+  if (e >= vstride || p >= pes) return;
+  sv_classify_position(voxels, voxels, vstride, p, e, cp);
 }
 
 /* simdvol_gather_voxels: the in-volume voxels of voxel cells to a flat

@@ -145,6 +145,21 @@ cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
   return device.run(k, name, r.global, r.local);
 }
 
+cl::Event enqueue_classify_in_place(Device& device, VoxelBuffer& voxels,
+                                    const sv_classify_params& params, ClassifyKernel variant) {
+  cl::Buffer pbuf = params_buffer(device, &params, sizeof params, "classify parameters");
+  const bool vec = variant == ClassifyKernel::vec16;
+  const std::string name = vec ? "simdvol_classify16_in_place" : "simdvol_classify_in_place";
+  Defines defines = classify_defines(params);
+  if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+  cl::Kernel k = device.kernel("classify", name, defines);
+  const VoxelLayout& V = voxels.layout();
+  set_args(k, name, voxels.buffer(), static_cast<cl_int>(V.stride), static_cast<cl_int>(V.pes()),
+           pbuf);
+  const detail::PlaneRange r = vec ? detail::chunk_range(V) : detail::plane_range(V);
+  return device.run(k, name, r.global, r.local);
+}
+
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
                                  VoxelBuffer& out, ShadeKernel variant, DeviceOccupancy* mark) {

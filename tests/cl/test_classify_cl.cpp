@@ -21,6 +21,7 @@
 //    work-item) and the float16 ones (16 voxels per work-item, the
 //    defaults), which do the same float operations lane by lane.
 #include <gtest/gtest.h>
+#include <cstring>
 
 #include <algorithm>
 #include <cmath>
@@ -146,6 +147,21 @@ void check_case(const Case& k) {
   dev.finish();
   EXPECT_EQ(max_diff(alone, voxels_from_cells(scalar_out.read<Rgba>(dev), L)), 0.0)
       << "scalar vs float16 classify";
+  // 1c. in place (both kernels): the same bits in every position of the
+  // buffer (block tails included), the shading overwritten.
+  {
+    const std::vector<Rgba> whole = out.read<Rgba>(dev);
+    for (ClassifyKernel v : {ClassifyKernel::vec16, ClassifyKernel::scalar}) {
+      VoxelBuffer in_place(dev, L);
+      in_place.write(dev, voxels_to_cells(s4, L));
+      enqueue_classify_in_place(dev, in_place, cp, v);
+      dev.finish();
+      const std::vector<Rgba> got = in_place.read<Rgba>(dev);
+      ASSERT_EQ(got.size(), whole.size());
+      EXPECT_EQ(std::memcmp(got.data(), whole.data(), got.size() * sizeof(Rgba)), 0)
+          << "classify in place, " << (v == ClassifyKernel::vec16 ? "float16" : "scalar");
+    }
+  }
 
   // 2. shade -> classify on the device, gathered by the device gather.
   enqueue_shade(dev, cells, sp, shade_buf);

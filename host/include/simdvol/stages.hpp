@@ -183,6 +183,14 @@ cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
                            const sv_classify_params& params, VoxelBuffer& out,
                            ClassifyKernel variant = ClassifyKernel::vec16);
 
+/// Classifies `voxels` in place: the shade stage's output in it becomes
+/// what enqueue_classify would write (the same bits). A voxel moves 32
+/// bytes instead of 48 (no write-allocate of a separate output); the
+/// shading is lost.
+cl::Event enqueue_classify_in_place(Device& device, VoxelBuffer& voxels,
+                                    const sv_classify_params& params,
+                                    ClassifyKernel variant = ClassifyKernel::vec16);
+
 struct DeviceOccupancy;  // local_cl.hpp
 
 /// Shade and classify fused in one launch: `out` receives what
