@@ -36,6 +36,7 @@
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/layout.hpp"
+#include "simdvol/local_cl.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/shade.hpp"
 #include "simdvol/stages.hpp"
@@ -154,6 +155,9 @@ int main(int argc, char** argv) {
     // In-place classify overwrites its input: each run first copies the
     // shading into these (untimed).
     VoxelBuffer work(dev, L), work1(dev, L1);
+    // The frame's fused kernel also marks the brick occupancy for
+    // empty-space skipping (zeroed before each run, untimed).
+    DeviceOccupancy occ = make_occupancy(dev, L, 1);
     const Defines defs = classify_defines(cp);
     cl::Buffer cbuf = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof cp,
                                  const_cast<sv_classify_params*>(&cp), "classify parameters");
@@ -217,6 +221,16 @@ int main(int argc, char** argv) {
          }},
         {"shade+classify fused", cells_bytes + vox_bytes,
          [&] { return std::vector{enqueue_shade_classify(dev, cells, sp, cp, rgba)}; }},
+        {"shade+classify fused, marking", cells_bytes + vox_bytes,
+         [&] {
+           return std::vector{
+               enqueue_shade_classify(dev, cells, sp, cp, rgba, ShadeKernel::vec16, &occ)};
+         },
+         [&] {
+           cl_check(dev.queue().enqueueFillBuffer(occ.occupied, cl_uint(0), 0,
+                                                  static_cast<std::size_t>(occ.count()) * 4),
+                    "clEnqueueFillBuffer(brick occupancy)");
+         }},
         {"flat classify (1 PE)", 2 * flat4,
          [&] { return std::vector{enqueue_classify(dev, shading1, cp, rgba1)}; }},
         {"flat classify in place (1 PE)", 2 * flat4,
