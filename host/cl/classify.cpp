@@ -126,38 +126,44 @@ Defines classify_defines(const sv_classify_params& p) {
   return d;
 }
 
+namespace {
+
+// The classify kernel of `variant` over voxel cells of layout V: from
+// `shading` into `out`, or in place (in `out`) without `shading`.
+cl::Event run_classify(Device& device, const sv_classify_params& params, ClassifyKernel variant,
+                       const VoxelLayout& V, const cl::Buffer* shading, const cl::Buffer& out) {
+  cl::Buffer pbuf = params_buffer(device, &params, sizeof params, "classify parameters");
+  const bool vec = variant == ClassifyKernel::vec16;
+  const std::string name =
+      std::string(vec ? "simdvol_classify16" : "simdvol_classify") + (shading ? "" : "_in_place");
+  Defines defines = classify_defines(params);
+  if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+  cl::Kernel k = device.kernel("classify", name, defines);
+  const cl_int stride = static_cast<cl_int>(V.stride), pes = static_cast<cl_int>(V.pes());
+  if (shading)
+    set_args(k, name, *shading, out, stride, pes, pbuf);
+  else
+    set_args(k, name, out, stride, pes, pbuf);
+  const detail::PlaneRange r = vec ? detail::chunk_range(V) : detail::plane_range(V);
+  return device.run(k, name, r.global, r.local);
+}
+
+}  // namespace
+
 cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
                            const sv_classify_params& params, VoxelBuffer& out,
                            ClassifyKernel variant) {
   check_same(shading.layout(), out.layout(), "classify output");
   if (shading.buffer()() == out.buffer()())
-    throw ArgumentError("classify output", "must not be the shading buffer");
-  cl::Buffer pbuf = params_buffer(device, &params, sizeof params, "classify parameters");
-  const bool vec = variant == ClassifyKernel::vec16;
-  const std::string name = vec ? "simdvol_classify16" : "simdvol_classify";
-  Defines defines = classify_defines(params);
-  if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
-  cl::Kernel k = device.kernel("classify", name, defines);
-  const VoxelLayout& V = out.layout();
-  set_args(k, name, shading.buffer(), out.buffer(), static_cast<cl_int>(V.stride),
-           static_cast<cl_int>(V.pes()), pbuf);
-  const detail::PlaneRange r = vec ? detail::chunk_range(V) : detail::plane_range(V);
-  return device.run(k, name, r.global, r.local);
+    throw ArgumentError("classify output",
+                        "must not be the shading buffer (enqueue_classify_in_place classifies "
+                        "in place)");
+  return run_classify(device, params, variant, out.layout(), &shading.buffer(), out.buffer());
 }
 
 cl::Event enqueue_classify_in_place(Device& device, VoxelBuffer& voxels,
                                     const sv_classify_params& params, ClassifyKernel variant) {
-  cl::Buffer pbuf = params_buffer(device, &params, sizeof params, "classify parameters");
-  const bool vec = variant == ClassifyKernel::vec16;
-  const std::string name = vec ? "simdvol_classify16_in_place" : "simdvol_classify_in_place";
-  Defines defines = classify_defines(params);
-  if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
-  cl::Kernel k = device.kernel("classify", name, defines);
-  const VoxelLayout& V = voxels.layout();
-  set_args(k, name, voxels.buffer(), static_cast<cl_int>(V.stride), static_cast<cl_int>(V.pes()),
-           pbuf);
-  const detail::PlaneRange r = vec ? detail::chunk_range(V) : detail::plane_range(V);
-  return device.run(k, name, r.global, r.local);
+  return run_classify(device, params, variant, voxels.layout(), nullptr, voxels.buffer());
 }
 
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
