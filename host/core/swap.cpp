@@ -159,50 +159,54 @@ SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
   const int64_t extent[2] = {plan.width, plan.height};
   plan.held.resize(static_cast<std::size_t>(N + 1));
   plan.offset.resize(static_cast<std::size_t>(N + 1));
+  // Constraints of the stages before level L, per axis: j[a] constrained
+  // levels, and PE p's values of them v[a][p] (grown by one stage per level).
+  int j[2] = {0, 0};
+  std::vector<int64_t> v[2] = {std::vector<int64_t>(static_cast<std::size_t>(P), 0),
+                               std::vector<int64_t>(static_cast<std::size_t>(P), 0)};
+  int B[2];  // hierarchical: the pixel bits per axis
+  for (int a = 0; a < 2; ++a)
+    B[a] =
+        std::max(ceil_log2(extent[a]), a == 0 ? exact_log2(grid.width) : exact_log2(grid.height));
+  std::vector<Box2> G(F.size());
   for (int L = 0; L <= N; ++L) {
     if (L > 0) {
-      std::vector<Box2> G(F.size());
+      const int k = L - 1;
       for (int64_t p = 0; p < P; ++p)
-        G[static_cast<std::size_t>(p)] =
-            bbox(F[static_cast<std::size_t>(p)],
-                 F[static_cast<std::size_t>(p ^ (int64_t(1) << (L - 1)))]);
-      F = std::move(G);
+        G[static_cast<std::size_t>(p)] = bbox(F[static_cast<std::size_t>(p)],
+                                              F[static_cast<std::size_t>(p ^ (int64_t(1) << k))]);
+      std::swap(F, G);
+      const PixelBit& b = plan.bits[static_cast<std::size_t>(k)];
+      for (int64_t p = 0; p < P; ++p)
+        v[b.axis][static_cast<std::size_t>(p)] |= ((p >> k) & 1) << b.level;
+      ++j[b.axis];
     }
     auto& held = plan.held[static_cast<std::size_t>(L)];
     auto& off = plan.offset[static_cast<std::size_t>(L)];
     held.resize(static_cast<std::size_t>(P));
     off.assign(static_cast<std::size_t>(P + 1), 0);
+    const bool cut = layout == SwapLayout::cut_and_stack;
+    const int64_t stride[2] = {cut ? int64_t(1) << j[0] : 1, cut ? int64_t(1) << j[1] : 1};
+    const int32_t lx = cut ? j[0] : 0, ly = cut ? j[1] : 0;
     for (int64_t p = 0; p < P; ++p) {
-      // Constraints of stages < L: per axis, the constrained levels and their values.
-      int j[2] = {0, 0};
-      int64_t v[2] = {0, 0};
-      for (int k = 0; k < L; ++k) {
-        const PixelBit& b = plan.bits[static_cast<std::size_t>(k)];
-        v[b.axis] |= ((p >> k) & 1) << b.level;
-        ++j[b.axis];
-      }
       const Box2& f = F[static_cast<std::size_t>(p)];
       const int64_t lo[2] = {f.x0, f.y0}, hi[2] = {f.x1, f.y1};
       StridedRange rg[2];
-      int64_t stride[2];
       for (int a = 0; a < 2; ++a) {
-        if (layout == SwapLayout::cut_and_stack) {
-          stride[a] = int64_t(1) << j[a];
-          rg[a] = strided_range(lo[a], hi[a], stride[a], v[a]);
+        const int64_t va = v[a][static_cast<std::size_t>(p)];
+        if (cut) {
+          rg[a] = strided_range(lo[a], hi[a], stride[a], va);
         } else {
           // Levels B-1 .. B-j fixed: the block [v, v + 2^(B - j)).
-          const int B = std::max(ceil_log2(extent[a]),
-                                 a == 0 ? exact_log2(grid.width) : exact_log2(grid.height));
-          const int64_t blo = v[a], bhi = v[a] + (int64_t(1) << (B - j[a]));
-          stride[a] = 1;
+          const int64_t blo = va, bhi = va + (int64_t(1) << (B[a] - j[a]));
           rg[a] = strided_range(std::max(lo[a], blo), std::min(hi[a], bhi), 1, 0);
         }
       }
       SwapRect h;
       h.sx = static_cast<int32_t>(stride[0]);
       h.sy = static_cast<int32_t>(stride[1]);
-      h.lx = exact_log2(stride[0]);
-      h.ly = exact_log2(stride[1]);
+      h.lx = lx;
+      h.ly = ly;
       if (!f.empty() && rg[0].count > 0 && rg[1].count > 0) {
         h.x0 = static_cast<int32_t>(rg[0].first);
         h.y0 = static_cast<int32_t>(rg[1].first);
