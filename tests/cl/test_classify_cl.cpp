@@ -21,10 +21,10 @@
 //    work-item) and the float16 ones (16 voxels per work-item, the
 //    defaults), which do the same float operations lane by lane.
 #include <gtest/gtest.h>
-#include <cstring>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "simdvol/engine.hpp"
 #include "simdvol/io.hpp"
