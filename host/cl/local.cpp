@@ -62,6 +62,12 @@ void check_tables(const LocalSegments& segs, const ResampleTables& t, const Voxe
   if (segs.pes != t.pes) throw ArgumentError("segments", "PE count differs from the voxels'");
 }
 
+// An occupancy for skipping, if any, must be that of `voxels` for `order`.
+void check_occupancy(const DeviceOccupancy* skip, const VoxelBuffer& voxels, int order) {
+  if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
+    throw ArgumentError("occupancy", "was made for other voxels or another interpolation order");
+}
+
 }  // namespace
 
 LocalSegments upload_segments(Device& device, const Matching& m) {
@@ -187,8 +193,7 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
     throw ArgumentError("segment order", "was made for other segments");
   const bool v8 = variant == LocalKernel::vector8;
   if (skip && !v8) throw ArgumentError("occupancy", "only the vector8 resample kernel skips");
-  if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
-    throw ArgumentError("occupancy", "was made for other voxels or another interpolation order");
+  check_occupancy(skip, voxels, order);
   const std::string name = v8 ? "simdvol_resample_v8" : "simdvol_resample";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), sample_off, tables.view,
@@ -296,8 +301,7 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   check_tables(segs, tables, voxels);
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
     throw ArgumentError("footprints", "PE count differs from the segments'");
-  if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
-    throw ArgumentError("occupancy", "was made for other voxels or another interpolation order");
+  check_occupancy(skip, voxels, order);
   if (lanes && lanes->count != segs.count)
     throw ArgumentError("segment order", "was made for other segments");
   const bool v8 = variant == LocalKernel::vector8;
