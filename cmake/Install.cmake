@@ -10,6 +10,8 @@
 #   lib/cmake/simdvol/simdvolConfig.cmake, ...ConfigVersion.cmake,
 #     simdvolTargets.cmake, FindNiftiIO.cmake, FindTeemNrrd.cmake
 #   bin/simdvol                                   (the command-line program)
+#   lib/simdvol/libsimdvol_oiio.so                (OpenImageIO, loaded by
+#                                                 simdvol_core on first use)
 # A consumer: find_package(simdvol) then target_link_libraries(app
 # simdvol::simdvol) (the OpenCL layer; simdvol::core, the CPU library without
 # OpenCL, comes with it). See examples/embed.
@@ -29,6 +31,7 @@ install(TARGETS simdvol_core simdvol_cl EXPORT simdvolTargets
   RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR}
   INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 install(TARGETS simdvol RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+install(TARGETS simdvol_oiio LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}/simdvol)
 if(BUILD_SHARED_LIBS)
   # The installed program finds the installed shared libraries.
   set_target_properties(simdvol PROPERTIES INSTALL_RPATH "\$ORIGIN/../${CMAKE_INSTALL_LIBDIR}")

@@ -1,18 +1,25 @@
-// Float RGBA images and their atomic output through OpenImageIO.
+// Float RGBA images and their atomic output: PNG through teem, the other
+// formats and all reading through OpenImageIO, loaded on first use
+// (oiio_module.hpp).
 #include "simdvol/image.hpp"
 
-#include <OpenImageIO/imageio.h>
+#include <dlfcn.h>
+#include <teem/biff.h>
+#include <teem/nrrd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <string>
 #include <system_error>
 
+#include "oiio_module.hpp"
 #include "simdvol/error.hpp"
 
 namespace simdvol {
@@ -40,48 +47,156 @@ fs::path temp_path_for(const fs::path& path) {
   return path.parent_path() / name;
 }
 
-// Writes `img` to `file` in `format`; returns an error message ("" on success).
-std::string write_with_oiio(const Image& img, const fs::path& file, Format format) {
-  const int w = img.width(), h = img.height();
-  const std::size_t count = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
-  const char* format_name = format == Format::png   ? "png"
-                            : format == Format::exr ? "openexr"
-                                                    : "tiff";
-  auto out = OIIO::ImageOutput::create(format_name);
-  if (!out)
-    return "OpenImageIO has no " + std::string(format_name) + " writer: " + OIIO::geterror();
+// ------------------------------------------------------------ the module
+// OpenImageIO, loaded on first use (oiio_module.hpp says why).
 
-  bool ok = false;
-  if (format == Format::png) {
-    // Premultiplied colour over black is the colour itself; alpha is dropped.
-    std::vector<unsigned char> rgb(count * 3);
-    auto q = [](float v) {
-      if (!(v > 0.0f)) return static_cast<unsigned char>(0);  // also NaN
-      if (v >= 1.0f) return static_cast<unsigned char>(255);
-      return static_cast<unsigned char>(std::lround(v * 255.0f));
-    };
-    const std::vector<Rgba>& px = img.pixels();
-    for (std::size_t i = 0; i < count; ++i) {
-      rgb[3 * i + 0] = q(px[i].r);
-      rgb[3 * i + 1] = q(px[i].g);
-      rgb[3 * i + 2] = q(px[i].b);
-    }
-    OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
-    ok = out->open(file.string(), spec) && out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) &&
-         out->close();
-  } else {
-    static_assert(sizeof(Rgba) == 4 * sizeof(float));
-    OIIO::ImageSpec spec(w, h, 4,
-                         format == Format::exr ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
-    spec.alpha_channel = 3;
-    spec.attribute("oiio:UnassociatedAlpha", 0);  // colour is premultiplied
-    if (format == Format::tiff) spec.attribute("compression", "zip");
-    ok = out->open(file.string(), spec) &&
-         out->write_image(OIIO::TypeDesc::FLOAT, img.pixels().data()) && out->close();
+struct OiioModule {
+  simdvol_oiio_write_fn write = nullptr;
+  simdvol_oiio_read_fn read = nullptr;
+  simdvol_oiio_free_fn free = nullptr;
+  std::string problem;  ///< why it could not be loaded ("" when loaded)
+};
+
+// The directory of the running program and, when simdvol_core is a shared
+// library, of that library.
+std::vector<fs::path> own_directories() {
+  std::vector<fs::path> dirs;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) dirs.push_back(exe.parent_path());
+  Dl_info info{};
+  if (dladdr(reinterpret_cast<void*>(&own_directories), &info) && info.dli_fname &&
+      info.dli_fname[0] == '/')
+    dirs.push_back(fs::path(info.dli_fname).parent_path());
+  return dirs;
+}
+
+// Where the module may be: $SIMDVOL_OIIO_MODULE alone if set; else beside
+// the program or library (the build tree), in its installed place relative
+// to them (bin/../lib/simdvol, lib/simdvol), then the build tree's and the
+// install prefix's absolute paths.
+std::vector<fs::path> module_candidates() {
+  if (const char* env = std::getenv("SIMDVOL_OIIO_MODULE"); env && *env) return {fs::path(env)};
+  const fs::path name = fs::path(SIMDVOL_OIIO_INSTALL_PATH).filename();
+  std::vector<fs::path> c;
+  for (const fs::path& d : own_directories()) {
+    c.push_back(d / name);
+    c.push_back((d / SIMDVOL_OIIO_BIN_TO_MODULE / name).lexically_normal());
+    c.push_back(d / "simdvol" / name);
   }
-  if (ok) return "";
-  std::string msg = out->geterror();
-  return msg.empty() ? "OpenImageIO could not write the image" : msg;
+  c.push_back(SIMDVOL_OIIO_BUILD_PATH);
+  c.push_back(SIMDVOL_OIIO_INSTALL_PATH);
+  std::vector<fs::path> unique;
+  for (const fs::path& p : c)
+    if (std::find(unique.begin(), unique.end(), p) == unique.end()) unique.push_back(p);
+  return unique;
+}
+
+OiioModule load_oiio_module() {
+  OiioModule m;
+  std::string tried;
+  for (const fs::path& path : module_candidates()) {
+    std::error_code ec;
+    // A bare name (from SIMDVOL_OIIO_MODULE) goes to dlopen's own search.
+    if (path.has_parent_path() && !fs::is_regular_file(path, ec)) {
+      tried += "\n  " + path.string() + ": not there";
+      continue;
+    }
+    void* h = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (!h) {
+      const char* e = dlerror();
+      tried += "\n  " + path.string() + ": " + (e ? e : "dlopen failed");
+      continue;
+    }
+    auto abi = reinterpret_cast<simdvol_oiio_abi_fn>(dlsym(h, "simdvol_oiio_abi"));
+    m.write = reinterpret_cast<simdvol_oiio_write_fn>(dlsym(h, "simdvol_oiio_write"));
+    m.read = reinterpret_cast<simdvol_oiio_read_fn>(dlsym(h, "simdvol_oiio_read"));
+    m.free = reinterpret_cast<simdvol_oiio_free_fn>(dlsym(h, "simdvol_oiio_free"));
+    if (abi && m.write && m.read && m.free && abi() == SIMDVOL_OIIO_ABI) return m;  // kept loaded
+    tried += "\n  " + path.string() + ": not a simdvol OpenImageIO module of interface version " +
+             std::to_string(SIMDVOL_OIIO_ABI);
+    m = OiioModule{};
+    dlclose(h);
+  }
+  m.problem =
+      "simdvol's OpenImageIO module (" + fs::path(SIMDVOL_OIIO_INSTALL_PATH).filename().string() +
+      ", for .exr and .tif output and for reading images) could not be loaded; tried:" + tried +
+      (std::getenv("SIMDVOL_OIIO_MODULE") && *std::getenv("SIMDVOL_OIIO_MODULE")
+           ? "\n  (only SIMDVOL_OIIO_MODULE's path is tried when it is set)"
+           : "\n  (SIMDVOL_OIIO_MODULE=<path> names it)");
+  return m;
+}
+
+const OiioModule& oiio_module() {
+  static const OiioModule m = load_oiio_module();
+  return m;
+}
+
+// A message from the module, freed.
+std::string take_message(char* msg) {
+  std::string s = msg ? msg : "";
+  if (msg) oiio_module().free(msg);
+  return s;
+}
+
+// 8-bit RGB over black: premultiplied colour over black is the colour
+// itself; alpha is dropped.
+std::vector<unsigned char> png_bytes(const Image& img) {
+  const std::vector<Rgba>& px = img.pixels();
+  std::vector<unsigned char> rgb(px.size() * 3);
+  auto q = [](float v) {
+    if (!(v > 0.0f)) return static_cast<unsigned char>(0);  // also NaN
+    if (v >= 1.0f) return static_cast<unsigned char>(255);
+    return static_cast<unsigned char>(std::lround(v * 255.0f));
+  };
+  for (std::size_t i = 0; i < px.size(); ++i) {
+    rgb[3 * i + 0] = q(px[i].r);
+    rgb[3 * i + 1] = q(px[i].g);
+    rgb[3 * i + 2] = q(px[i].b);
+  }
+  return rgb;
+}
+
+// teem's error stack on one line.
+std::string teem_message() {
+  char* err = biffGetDone(NRRD);
+  if (!err) return "teem could not write the PNG";
+  std::string s(err);
+  std::free(err);
+  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+  for (char& c : s)
+    if (c == '\n') c = ';';
+  return s;
+}
+
+// Writes `img` to `file` in `format`; returns an error message ("" on
+// success). PNG through teem (its libpng writer), the others through the
+// OpenImageIO module.
+std::string write_file(const Image& img, const fs::path& file, Format format) {
+  if (format == Format::png) {
+    std::vector<unsigned char> rgb = png_bytes(img);
+    Nrrd* n = nrrdNew();
+    NrrdIoState* nio = nrrdIoStateNew();
+    std::string problem;
+    if (!n || !nio)
+      problem = "out of memory";
+    else if (nrrdWrap_va(n, rgb.data(), nrrdTypeUChar, 3u, std::size_t{3},
+                         static_cast<std::size_t>(img.width()),
+                         static_cast<std::size_t>(img.height())) != 0)
+      problem = teem_message();
+    else {
+      nio->format = nrrdFormatPNG;
+      if (nrrdSave(file.c_str(), n, nio) != 0) problem = teem_message();
+    }
+    if (nio) nrrdIoStateNix(nio);
+    if (n) nrrdNix(n);  // the pixels are rgb's
+    return problem;
+  }
+  const OiioModule& m = oiio_module();
+  if (!m.problem.empty()) return m.problem;
+  static_assert(sizeof(Rgba) == 4 * sizeof(float));
+  return take_message(m.write(file.c_str(), format == Format::exr ? 1 : 2, img.width(),
+                              img.height(), &img.pixels().data()->r));
 }
 
 void check_same_size(const Image& a, const Image& b, const char* what) {
@@ -126,7 +241,7 @@ void write_image(const Image& img, const fs::path& path) {
   const fs::path tmp = temp_path_for(path);
   std::string problem;
   try {
-    problem = write_with_oiio(img, tmp, format);
+    problem = write_file(img, tmp, format);
   } catch (const std::exception& e) {
     problem = e.what();
   }
@@ -144,42 +259,22 @@ void write_image(const Image& img, const fs::path& path) {
 Image read_image(const fs::path& path) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw FileError(path, "no such image file");
-  auto in = OIIO::ImageInput::open(path.string());
-  if (!in) {
-    std::string msg = OIIO::geterror();
-    throw FileError(path, msg.empty() ? "OpenImageIO cannot open it" : msg);
-  }
-  const OIIO::ImageSpec& spec = in->spec();
-  const int w = spec.width, h = spec.height, nch = spec.nchannels;
-  if (w <= 0 || h <= 0 || nch <= 0) throw FileError(path, "image has no pixels");
-  if (spec.depth > 1) throw FileError(path, "3-D images are not supported");
-
-  std::vector<float> buf(static_cast<std::size_t>(w) * h * nch);
-  if (!in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, buf.data())) {
-    std::string msg = in->geterror();
-    throw FileError(path, msg.empty() ? "OpenImageIO could not read the pixels" : msg);
-  }
-  in->close();
-
-  // 1 channel: grey; 2: grey + alpha; 3: RGB; 4 or more: RGBA (alpha where the
-  // file says, else the fourth channel).
-  const int alpha = nch == 2   ? 1
-                    : nch >= 4 ? (spec.alpha_channel >= 0 ? spec.alpha_channel : 3)
-                               : -1;
+  const OiioModule& m = oiio_module();
+  if (!m.problem.empty()) throw FileError(path, m.problem);
+  int w = 0, h = 0;
+  float* rgba = nullptr;
+  const std::string problem = take_message(m.read(path.c_str(), &w, &h, &rgba));
+  if (!problem.empty()) throw FileError(path, problem);
+  struct Free {
+    const OiioModule& m;
+    float* p;
+    ~Free() { m.free(p); }
+  } owner{m, rgba};
   Image img(w, h);
+  static_assert(sizeof(Rgba) == 4 * sizeof(float));
   std::vector<Rgba>& px = img.pixels();
-  for (std::size_t i = 0; i < px.size(); ++i) {
-    const float* p = &buf[i * nch];
-    Rgba& o = px[i];
-    if (nch >= 3) {
-      o.r = p[0];
-      o.g = p[1];
-      o.b = p[2];
-    } else {
-      o.r = o.g = o.b = p[0];
-    }
-    o.a = alpha >= 0 ? p[alpha] : 1.0f;
-  }
+  for (std::size_t i = 0; i < px.size(); ++i)
+    px[i] = Rgba{rgba[4 * i], rgba[4 * i + 1], rgba[4 * i + 2], rgba[4 * i + 3]};
   return img;
 }
 

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <set>
 #include <string>
 
 #include "simdvol/image.hpp"
@@ -22,8 +23,10 @@ struct Result {
   std::string output;  // stdout and stderr together
 };
 
-Result run(const std::string& args) {
-  const std::string cmd = std::string(SIMDVOL_CLI) + " " + args + " 2>&1";
+// `env` ("NAME=value ..."), if any, is set for the program alone.
+Result run(const std::string& args, const std::string& env = "") {
+  const std::string cmd =
+      (env.empty() ? "" : "env " + env + " ") + std::string(SIMDVOL_CLI) + " " + args + " 2>&1";
   Result r;
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;
@@ -182,4 +185,46 @@ TEST_F(Cli, FailedRenderLeavesExistingOutputUntouched) {
   int files = 0;
   for (const auto& e : fs::directory_iterator(dir_)) files += e.is_regular_file();
   EXPECT_EQ(files, 2);
+}
+
+// OpenImageIO lives in a module loaded on first use (host/core/oiio_module.hpp):
+// a PNG render never loads it, and without it .exr fails clearly.
+TEST_F(Cli, PngNeedsNoOpenImageIoAndExrWithoutItFailsClearly) {
+  // The dynamic loader's own list of what it loads.
+  Result r = run("render --phantom-size 16 --size 16x16 -o " + path("a.png"), "LD_DEBUG=files");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("libteem"), std::string::npos) << "LD_DEBUG printed nothing?";
+  EXPECT_EQ(r.output.find("libOpenImageIO"), std::string::npos) << r.output;
+  r = run("render --phantom-size 16 --size 16x16 -o " + path("a.exr"), "LD_DEBUG=files");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("libOpenImageIO"), std::string::npos);
+  // The module elsewhere: PNG still works, EXR names the file and the module.
+  const std::string missing = "SIMDVOL_OIIO_MODULE=" + path("nowhere.so");
+  EXPECT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("b.png"), missing).code, 0);
+  EXPECT_TRUE(fs::exists(dir_ / "b.png"));
+  r = run("render --phantom-size 16 --size 16x16 -o " + path("b.exr"), missing);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("b.exr"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("OpenImageIO module"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("nowhere.so: not there"), std::string::npos) << r.output;
+  // A file that is not a module: dlopen's reason.
+  std::ofstream(dir_ / "junk.so") << "not a library";
+  r = run("compare " + path("a.png") + " " + path("b.png"),
+          "SIMDVOL_OIIO_MODULE=" + path("junk.so"));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("a.png"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("junk.so: "), std::string::npos) << r.output;
+  // A shared library without the module's functions.
+  r = run("render --phantom-size 16 --size 16x16 -o " + path("c.tif"),
+          "SIMDVOL_OIIO_MODULE=libz.so.1");
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("not a simdvol OpenImageIO module"), std::string::npos) << r.output;
+  // Nothing half-written: the two PNGs, the EXR and the junk.
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"a.exr", "a.png", "b.png", "junk.so"}));
+  // And the two PNGs hold the same image, read through OpenImageIO.
+  r = run("compare " + path("a.png") + " " + path("b.png"));
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("max_abs_diff 0"), std::string::npos) << r.output;
 }

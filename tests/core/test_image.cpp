@@ -1,5 +1,7 @@
-// Images: construction, PSNR and differences, and atomic output through
-// OpenImageIO (.png, .exr, .tif/.tiff).
+// Images: construction, PSNR and differences, and atomic output (.png
+// through teem, .exr and .tif/.tiff through the OpenImageIO module; every
+// read through OpenImageIO, so the PNG round trip checks teem's file with
+// another library).
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -1,5 +1,8 @@
 // Float RGBA images (premultiplied, i.e. associative colour over black) and
-// their output through OpenImageIO.
+// their files: PNG written through teem, EXR and TIFF written and every
+// format read through OpenImageIO, in a module loaded on first use
+// (libsimdvol_oiio.so, found beside the program, in <libdir>/simdvol, or
+// at $SIMDVOL_OIIO_MODULE).
 #pragma once
 
 #include <cstddef>
@@ -32,11 +35,13 @@ class Image {
 /// (half-float RGBA, premultiplied), .tif/.tiff (32-bit float RGBA). Written
 /// to a temporary file beside `path` and renamed, so a failure never leaves a
 /// partial or clobbered file. Throws FileError on any problem (unknown
-/// extension, missing directory, OpenImageIO error).
+/// extension, missing directory, teem or OpenImageIO error, the OpenImageIO
+/// module not found for .exr/.tif).
 void write_image(const Image& img, const std::filesystem::path& path);
 
 /// Reads an image written by write_image (any format OpenImageIO reads) as
-/// float RGBA; a missing alpha becomes 1. Throws FileError.
+/// float RGBA; a missing alpha becomes 1. Throws FileError (also when the
+/// OpenImageIO module cannot be loaded).
 Image read_image(const std::filesystem::path& path);
 
 /// Peak signal-to-noise ratio in dB over the RGB channels, peak 1.0.
