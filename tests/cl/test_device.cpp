@@ -2,6 +2,7 @@
 // embedded kernel sources, program building with cache, build logs and
 // options, running kernels, wrapping an external context and queue.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -250,6 +251,89 @@ std::vector<cl_int> run_iota(Device& dev, int n, std::size_t local) {
       dev.queue().enqueueReadBuffer(out, CL_TRUE, 0, host.size() * sizeof(cl_int), host.data()),
       "read");
   return host;
+}
+
+// Program binaries on disk (SIMDVOL_CACHE_DIR): a source build writes the
+// binary, a fresh Device builds from it with the same results; a file cut
+// short or of another hash is ignored and written again from source; a
+// cache directory that cannot be made only leaves programs uncached.
+TEST(DeviceTest, ProgramBinariesOnDiskWhenAsked) {
+  SIMDVOL_REQUIRE_OPENCL();
+  namespace fs = std::filesystem;
+  EnvGuard env("SIMDVOL_CACHE_DIR");
+  unsetenv("SIMDVOL_CACHE_DIR");
+  EXPECT_FALSE(program_cache_dir());
+  setenv("SIMDVOL_CACHE_DIR", "off", 1);
+  EXPECT_FALSE(program_cache_dir());
+  setenv("SIMDVOL_CACHE_DIR", "", 1);
+  EXPECT_FALSE(program_cache_dir());
+  const fs::path dir = fs::temp_directory_path() /
+                       ("simdvol_test_binaries_" + std::to_string(::getpid())) / "nested";
+  fs::remove_all(dir.parent_path());
+  setenv("SIMDVOL_CACHE_DIR", dir.c_str(), 1);
+  ASSERT_TRUE(program_cache_dir());
+  EXPECT_EQ(*program_cache_dir(), dir);
+
+  std::vector<cl_int> want(38, -1);
+  for (int i = 0; i < 37; ++i) want[i] = 3 * i + 1;
+  auto files = [&] {
+    std::vector<fs::path> f;
+    for (const auto& e : fs::directory_iterator(dir)) f.push_back(e.path());
+    return f;
+  };
+  // A fresh Device (an empty in-memory cache): how many programs it built
+  // from the file, after checking the kernel's results.
+  auto from_disk = [&](std::size_t local) {
+    Device d;
+    EXPECT_EQ(run_iota(d, 37, local), want);
+    return d.programs_from_disk();
+  };
+  EXPECT_EQ(from_disk(1), 0u);
+  ASSERT_EQ(files().size(), 1u);  // no temporary left
+  const fs::path bin = files()[0];
+  EXPECT_EQ(bin.extension(), ".bin");
+  const std::string written = read_text(bin);
+  EXPECT_EQ(written.compare(0, 8, "SVCLBIN1"), 0);
+  EXPECT_EQ(from_disk(8), 1u);
+  {
+    Device b;
+    b.build(kIotaSource);
+    b.build(kIotaSource);  // the in-memory cache: no second load
+    EXPECT_EQ(b.programs_from_disk(), 1u);
+  }
+  // Cut short: rebuilt from source and written again (PoCL's binary may
+  // differ from the first: it packs the kernels compiled so far).
+  { std::ofstream(bin, std::ios::binary | std::ios::trunc) << written.substr(0, 30); }
+  EXPECT_EQ(from_disk(1), 0u);
+  EXPECT_GT(fs::file_size(bin), 30u);
+  EXPECT_EQ(from_disk(1), 1u);
+  // Another check hash in the file (a name collision): ignored, rewritten.
+  std::string other = read_text(bin);
+  other[8] = static_cast<char>(other[8] ^ 1);
+  { std::ofstream(bin, std::ios::binary | std::ios::trunc) << other; }
+  EXPECT_EQ(from_disk(1), 0u);
+  EXPECT_EQ(from_disk(1), 1u);
+  // A binary the device refuses (its bytes changed past the header):
+  // built from source.
+  std::string bad = read_text(bin);
+  for (std::size_t i = 24; i < bad.size(); ++i) bad[i] = static_cast<char>(~bad[i]);
+  { std::ofstream(bin, std::ios::binary | std::ios::trunc) << bad; }
+  EXPECT_EQ(from_disk(1), 0u);
+  EXPECT_EQ(from_disk(1), 1u);
+  // Options are part of the key: a second file.
+  {
+    Device e;
+    e.build(kIotaSource, "-cl-fast-relaxed-math");
+    EXPECT_EQ(e.programs_from_disk(), 0u);
+  }
+  EXPECT_EQ(files().size(), 2u);
+  // A directory that cannot be made (its parent is a file): built, not kept.
+  const fs::path blocker = dir.parent_path() / "file";
+  { std::ofstream(blocker) << "x"; }
+  setenv("SIMDVOL_CACHE_DIR", (blocker / "cache").c_str(), 1);
+  EXPECT_EQ(from_disk(1), 0u);
+  EXPECT_FALSE(fs::exists(blocker / "cache"));
+  fs::remove_all(dir.parent_path());
 }
 
 TEST(DeviceTest, RunRoundsTheGlobalSizeUp) {
