@@ -4,7 +4,6 @@
 #include "simdvol/image.hpp"
 
 #include <dlfcn.h>
-#include <teem/biff.h>
 #include <teem/nrrd.h>
 
 #include <algorithm>
@@ -21,6 +20,7 @@
 
 #include "oiio_module.hpp"
 #include "simdvol/error.hpp"
+#include "teem_errors.hpp"
 
 namespace simdvol {
 namespace {
@@ -157,18 +157,6 @@ std::vector<unsigned char> png_bytes(const Image& img) {
   return rgb;
 }
 
-// teem's error stack on one line.
-std::string teem_message() {
-  char* err = biffGetDone(NRRD);
-  if (!err) return "teem could not write the PNG";
-  std::string s(err);
-  std::free(err);
-  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
-  for (char& c : s)
-    if (c == '\n') c = ';';
-  return s;
-}
-
 // Writes `img` to `file` in `format`; returns an error message ("" on
 // success). PNG through teem (its libpng writer), the others through the
 // OpenImageIO module.
@@ -183,10 +171,10 @@ std::string write_file(const Image& img, const fs::path& file, Format format) {
     else if (nrrdWrap_va(n, rgb.data(), nrrdTypeUChar, 3u, std::size_t{3},
                          static_cast<std::size_t>(img.width()),
                          static_cast<std::size_t>(img.height())) != 0)
-      problem = teem_message();
+      problem = detail::biff_message(NRRD);
     else {
       nio->format = nrrdFormatPNG;
-      if (nrrdSave(file.c_str(), n, nio) != 0) problem = teem_message();
+      if (nrrdSave(file.c_str(), n, nio) != 0) problem = detail::biff_message(NRRD);
     }
     if (nio) nrrdIoStateNix(nio);
     if (n) nrrdNix(n);  // the pixels are rgb's

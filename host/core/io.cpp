@@ -3,6 +3,7 @@
 // naming the file and the problem; sizes are checked before large buffers
 // are allocated, so a header that claims huge dims fails early.
 #include "simdvol/io.hpp"
+#include "teem_errors.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -25,6 +26,7 @@
 #include <vector>
 
 #include "simdvol/error.hpp"
+#include "teem_errors.hpp"
 
 extern "C" {
 #include <nifti/nifti1_io.h>
@@ -33,6 +35,21 @@ extern "C" {
 }
 
 namespace simdvol {
+
+namespace detail {
+std::string biff_message(const char* key) {
+  char* err = biffGetDone(key);
+  if (!err) return "unknown teem error";
+  std::string s(err);
+  std::free(err);
+  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+  // biff stacks messages one per line; keep them readable on one line.
+  for (char& c : s)
+    if (c == '\n') c = ';';
+  return s;
+}
+}  // namespace detail
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -144,17 +161,7 @@ void read_voxels(const fs::path& path, std::ifstream& in, VoxelType type, bool s
 
 // ---------------------------------------------------------------- teem RAII
 
-std::string biff_message(const char* key) {
-  char* err = biffGetDone(key);
-  if (!err) return "unknown teem error";
-  std::string s(err);
-  std::free(err);
-  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
-  // biff stacks messages one per line; keep them readable on one line.
-  for (char& c : s)
-    if (c == '\n') c = ';';
-  return s;
-}
+using detail::biff_message;
 
 struct NrrdDeleter {
   void operator()(Nrrd* n) const { nrrdNuke(n); }
