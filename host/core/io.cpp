@@ -3,7 +3,6 @@
 // naming the file and the problem; sizes are checked before large buffers
 // are allocated, so a header that claims huge dims fails early.
 #include "simdvol/io.hpp"
-#include "teem_errors.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
