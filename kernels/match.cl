@@ -257,19 +257,44 @@ typedef struct sv_row8 {
   long8 qlo[3], rlo[3], qhi[3], rhi[3], base[3];
 } sv_row8;
 
-/* Lanes with on[l] start at column i0 of row j[l]; the others hold zeros. */
+/* Lanes with on[l] start at column i0 of row j[l] = j[0] + l (the 8 rows
+ * are consecutive); the others hold zeros. Row j[0] is set up exactly
+ * (sv_row_init), and each next row by one exact step along j, as
+ * sv_row8_step steps along i: moving to row j + 1 adds delta = -+s_j
+ * (s_j = step[a][1], the sign as for i) to N, so with delta = dq m + dr,
+ * 0 <= dr < m, q grows by dq (+1 where r - dr < 0) and r becomes r - dr
+ * (+ m). The same values as sv_row_init for each row, without its
+ * double-precision divisions and correction loops per lane and axis. */
 SV_FN void sv_row8_init(__constant sv_view* view, __constant long* stepc, const long* lo,
                         const long* hi, int i0, const int* j, const int* on, sv_row8* st) {
   long v[5][3][8];
-  for (int l = 0; l < 8; ++l) {
-    sv_row_state t;
-    if (on[l]) sv_row_init(view, stepc, lo, hi, i0, j[l], &t);
-    for (int a = 0; a < 3; ++a) {
-      v[0][a][l] = on[l] ? t.qlo[a] : 0;
-      v[1][a][l] = on[l] ? t.rlo[a] : 0;
-      v[2][a][l] = on[l] ? t.qhi[a] : 0;
-      v[3][a][l] = on[l] ? t.rhi[a] : 0;
-      v[4][a][l] = on[l] ? t.base[a] : 0;
+  sv_row_state t;
+  sv_row_init(view, stepc, lo, hi, i0, j[0], &t);
+  for (int a = 0; a < 3; ++a) {
+    const long d = view->step[a][2], sj = view->step[a][1], m = stepc[3 * a];
+    long ql = t.qlo[a], rl = t.rlo[a], qh = t.qhi[a], rh = t.rhi[a], b = t.base[a];
+    long dq = 0, dr = 0;
+    if (d != 0) {
+      const long delta = d > 0 ? -sj : sj;
+      dq = delta / m;
+      if (delta - dq * m < 0) --dq; /* floor: m > 0 */
+      dr = delta - dq * m;
+    }
+    for (int l = 0; l < 8; ++l) {
+      v[0][a][l] = on[l] ? ql : 0;
+      v[1][a][l] = on[l] ? rl : 0;
+      v[2][a][l] = on[l] ? qh : 0;
+      v[3][a][l] = on[l] ? rh : 0;
+      v[4][a][l] = on[l] ? b : 0;
+      b += sj;
+      if (d != 0) {
+        long r = rl - dr;
+        ql += dq + (r < 0 ? 1 : 0);
+        rl = r < 0 ? r + m : r;
+        r = rh - dr;
+        qh += dq + (r < 0 ? 1 : 0);
+        rh = r < 0 ? r + m : r;
+      }
     }
   }
   for (int a = 0; a < 3; ++a) {
