@@ -1,14 +1,15 @@
-// Float RGBA images and their atomic output: PNG through teem, the other
+// Float RGBA images and their atomic output: PNG through libpng, the other
 // formats and all reading through OpenImageIO, loaded on first use
 // (oiio_module.hpp).
 #include "simdvol/image.hpp"
 
 #include <dlfcn.h>
-#include <teem/nrrd.h>
+#include <png.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -20,7 +21,6 @@
 
 #include "oiio_module.hpp"
 #include "simdvol/error.hpp"
-#include "teem_errors.hpp"
 
 namespace simdvol {
 namespace {
@@ -157,28 +157,73 @@ std::vector<unsigned char> png_bytes(const Image& img) {
   return rgb;
 }
 
+// libpng reports errors through this (then longjmps back to write_png).
+struct PngError {
+  char message[256] = "";
+};
+void png_fail(png_structp png, png_const_charp msg) {
+  auto* e = static_cast<PngError*>(png_get_error_ptr(png));
+  std::snprintf(e->message, sizeof e->message, "%s", msg ? msg : "libpng error");
+  png_longjmp(png, 1);
+}
+void png_warn(png_structp, png_const_charp) {}
+
+// 8-bit RGB rows (w * 3 bytes each, h rows) to `path` through libpng:
+// compression level 3 with the "up" filter, which on rendered frames
+// writes files as small as libpng's default (level 6, every filter tried
+// per row) in about a third of the time (a 256^2 brainsmall frame: 3.2
+// against 11.0 ms, 26.8 against 27.0 KB). Only plain C objects live here:
+// libpng's errors longjmp back to the setjmp below. Returns false with
+// `err` set on failure.
+bool write_png(const char* path, const unsigned char* rgb, int w, int h, PngError* err) {
+  FILE* f = std::fopen(path, "wb");
+  if (!f) {
+    std::snprintf(err->message, sizeof err->message, "cannot create it: %s", std::strerror(errno));
+    return false;
+  }
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, err, png_fail, png_warn);
+  png_infop info = png ? png_create_info_struct(png) : nullptr;
+  if (!png || !info) {
+    png_destroy_write_struct(&png, &info);
+    std::fclose(f);
+    std::snprintf(err->message, sizeof err->message, "out of memory for libpng");
+    return false;
+  }
+  if (setjmp(png_jmpbuf(png))) {
+    png_destroy_write_struct(&png, &info);
+    std::fclose(f);
+    return false;
+  }
+  png_init_io(png, f);
+  png_set_compression_level(png, 3);
+  png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_UP);
+  png_set_IHDR(png, info, static_cast<png_uint_32>(w), static_cast<png_uint_32>(h), 8,
+               PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
+               PNG_FILTER_TYPE_DEFAULT);
+  png_write_info(png, info);
+  for (int y = 0; y < h; ++y)
+    png_write_row(png, rgb + static_cast<std::size_t>(y) * static_cast<std::size_t>(w) * 3);
+  png_write_end(png, info);
+  png_destroy_write_struct(&png, &info);
+  if (std::fflush(f) != 0 || std::ferror(f)) {
+    std::snprintf(err->message, sizeof err->message, "cannot write it: %s", std::strerror(errno));
+    std::fclose(f);
+    return false;
+  }
+  if (std::fclose(f) != 0) {
+    std::snprintf(err->message, sizeof err->message, "cannot close it: %s", std::strerror(errno));
+    return false;
+  }
+  return true;
+}
+
 // Writes `img` to `file` in `format`; returns an error message ("" on
-// success). PNG through teem (its libpng writer), the others through the
-// OpenImageIO module.
+// success). PNG through libpng, the others through the OpenImageIO module.
 std::string write_file(const Image& img, const fs::path& file, Format format) {
   if (format == Format::png) {
-    std::vector<unsigned char> rgb = png_bytes(img);
-    Nrrd* n = nrrdNew();
-    NrrdIoState* nio = nrrdIoStateNew();
-    std::string problem;
-    if (!n || !nio)
-      problem = "out of memory";
-    else if (nrrdWrap_va(n, rgb.data(), nrrdTypeUChar, 3u, std::size_t{3},
-                         static_cast<std::size_t>(img.width()),
-                         static_cast<std::size_t>(img.height())) != 0)
-      problem = detail::biff_message(NRRD);
-    else {
-      nio->format = nrrdFormatPNG;
-      if (nrrdSave(file.c_str(), n, nio) != 0) problem = detail::biff_message(NRRD);
-    }
-    if (nio) nrrdIoStateNix(nio);
-    if (n) nrrdNix(n);  // the pixels are rgb's
-    return problem;
+    const std::vector<unsigned char> rgb = png_bytes(img);
+    PngError err;
+    return write_png(file.c_str(), rgb.data(), img.width(), img.height(), &err) ? "" : err.message;
   }
   const OiioModule& m = oiio_module();
   if (!m.problem.empty()) return m.problem;

@@ -25,7 +25,6 @@
 #include <vector>
 
 #include "simdvol/error.hpp"
-#include "teem_errors.hpp"
 
 extern "C" {
 #include <nifti/nifti1_io.h>
@@ -34,21 +33,6 @@ extern "C" {
 }
 
 namespace simdvol {
-
-namespace detail {
-std::string biff_message(const char* key) {
-  char* err = biffGetDone(key);
-  if (!err) return "unknown teem error";
-  std::string s(err);
-  std::free(err);
-  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
-  // biff stacks messages one per line; keep them readable on one line.
-  for (char& c : s)
-    if (c == '\n') c = ';';
-  return s;
-}
-}  // namespace detail
-
 namespace {
 
 namespace fs = std::filesystem;
@@ -160,7 +144,17 @@ void read_voxels(const fs::path& path, std::ifstream& in, VoxelType type, bool s
 
 // ---------------------------------------------------------------- teem RAII
 
-using detail::biff_message;
+std::string biff_message(const char* key) {
+  char* err = biffGetDone(key);
+  if (!err) return "unknown teem error";
+  std::string s(err);
+  std::free(err);
+  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+  // biff stacks messages one per line; keep them readable on one line.
+  for (char& c : s)
+    if (c == '\n') c = ';';
+  return s;
+}
 
 struct NrrdDeleter {
   void operator()(Nrrd* n) const { nrrdNuke(n); }

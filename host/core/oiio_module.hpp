@@ -4,7 +4,7 @@
 // OpenImageIO 2.4 on Debian brings about 260 shared libraries; linked into
 // every program they cost about 0.3 s of dynamic linking at each start,
 // whether an image is read or not (`simdvol --version` took 0.43 s).
-// PNG, the format of `render`'s default output, is written with teem
+// PNG, the format of `render`'s default output, is written with libpng
 // (image.cpp), so a render to .png never loads the module.
 // Private to simdvol: not installed as a header.
 #pragma once

@@ -1,6 +1,6 @@
 // Images: construction, PSNR and differences, and atomic output (.png
-// through teem, .exr and .tif/.tiff through the OpenImageIO module; every
-// read through OpenImageIO, so the PNG round trip checks teem's file with
+// through libpng, .exr and .tif/.tiff through the OpenImageIO module; every
+// read through OpenImageIO, so the PNG round trip checks libpng's file with
 // another library).
 #include <gtest/gtest.h>
 

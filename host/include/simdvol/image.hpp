@@ -1,5 +1,5 @@
 // Float RGBA images (premultiplied, i.e. associative colour over black) and
-// their files: PNG written through teem, EXR and TIFF written and every
+// their files: PNG written through libpng, EXR and TIFF written and every
 // format read through OpenImageIO, in a module loaded on first use
 // (libsimdvol_oiio.so, found beside the program, in <libdir>/simdvol, or
 // at $SIMDVOL_OIIO_MODULE).
@@ -35,7 +35,7 @@ class Image {
 /// (half-float RGBA, premultiplied), .tif/.tiff (32-bit float RGBA). Written
 /// to a temporary file beside `path` and renamed, so a failure never leaves a
 /// partial or clobbered file. Throws FileError on any problem (unknown
-/// extension, missing directory, teem or OpenImageIO error, the OpenImageIO
+/// extension, missing directory, libpng or OpenImageIO error, the OpenImageIO
 /// module not found for .exr/.tif).
 void write_image(const Image& img, const std::filesystem::path& path);
 
