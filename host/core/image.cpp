@@ -75,8 +75,8 @@ std::vector<fs::path> own_directories() {
 // the program or library (the build tree), in its installed place relative
 // to them (bin/../lib/simdvol, lib/simdvol), then the build tree's and the
 // install prefix's absolute paths.
-std::vector<fs::path> module_candidates() {
-  if (const char* env = std::getenv("SIMDVOL_OIIO_MODULE"); env && *env) return {fs::path(env)};
+std::vector<fs::path> module_candidates(const char* env) {
+  if (env && *env) return {fs::path(env)};
   const fs::path name = fs::path(SIMDVOL_OIIO_INSTALL_PATH).filename();
   std::vector<fs::path> c;
   for (const fs::path& d : own_directories()) {
@@ -94,8 +94,9 @@ std::vector<fs::path> module_candidates() {
 
 OiioModule load_oiio_module() {
   OiioModule m;
+  const char* env = std::getenv("SIMDVOL_OIIO_MODULE");
   std::string tried;
-  for (const fs::path& path : module_candidates()) {
+  for (const fs::path& path : module_candidates(env)) {
     std::error_code ec;
     // A bare name (from SIMDVOL_OIIO_MODULE) goes to dlopen's own search.
     if (path.has_parent_path() && !fs::is_regular_file(path, ec)) {
@@ -121,9 +122,8 @@ OiioModule load_oiio_module() {
   m.problem =
       "simdvol's OpenImageIO module (" + fs::path(SIMDVOL_OIIO_INSTALL_PATH).filename().string() +
       ", for .exr and .tif output and for reading images) could not be loaded; tried:" + tried +
-      (std::getenv("SIMDVOL_OIIO_MODULE") && *std::getenv("SIMDVOL_OIIO_MODULE")
-           ? "\n  (only SIMDVOL_OIIO_MODULE's path is tried when it is set)"
-           : "\n  (SIMDVOL_OIIO_MODULE=<path> names it)");
+      (env && *env ? "\n  (only SIMDVOL_OIIO_MODULE's path is tried when it is set)"
+                   : "\n  (SIMDVOL_OIIO_MODULE=<path> names it)");
   return m;
 }
 
