@@ -13,9 +13,14 @@
 
 namespace {
 
+// A failure must never read as success (a null message): when the message
+// itself cannot be allocated, this static one stands in (never freed).
+char kOutOfMemory[] = "out of memory in the OpenImageIO module";
+
 char* message(const std::string& s) {
   char* m = static_cast<char*>(std::malloc(s.size() + 1));
-  if (m) std::memcpy(m, s.c_str(), s.size() + 1);
+  if (!m) return kOutOfMemory;
+  std::memcpy(m, s.c_str(), s.size() + 1);
   return m;
 }
 
@@ -104,6 +109,6 @@ __attribute__((visibility("default"))) char* simdvol_oiio_read(const char* path,
   return guarded([&] { return read_image(path, w, h, rgba); });
 }
 __attribute__((visibility("default"))) void simdvol_oiio_free(void* p) {
-  std::free(p);
+  if (p != kOutOfMemory) std::free(p);
 }
 }
