@@ -73,6 +73,10 @@ struct RenderEngine::State {
   const float* laid_data = nullptr;
   // Sized by the frame, grown on demand.
   Scratch pe_total, total, sample_off, samples, image;
+  // The swap plan, its host vectors and device tables reused from frame to
+  // frame (written without waiting: the frame's ReuseScope finishes the
+  // queue before the next frame changes them).
+  DeviceSwapPlan swap_plan;
 };
 
 RenderEngine::RenderEngine(Device& device, EngineOptions options) : s_(std::make_unique<State>()) {
@@ -293,8 +297,9 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     // PoCL starts enqueued commands on a flush).
     cl_check(device.queue().flush(), "clFlush");
     const auto tp = std::chrono::steady_clock::now();
-    const DeviceSwapPlan plan =
-        upload_swap_plan(device, plan_swap(segs.host_rects, split, view, grid, eo.layout));
+    plan_swap_into(S.swap_plan.plan, segs.host_rects, split, view, grid, eo.layout);
+    upload_swap_plan(device, S.swap_plan, false);
+    const DeviceSwapPlan& plan = S.swap_plan;
     plan_ms = ms_since(tp);
     const DeviceSwapRun run = enqueue_swap(device, plan, *fp);
     e_display = enqueue_display(device, plan, run.last, intermediate);

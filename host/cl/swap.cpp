@@ -40,43 +40,89 @@ cl::Kernel swap_kernel(Device& device, const std::string& name) {
 
 }  // namespace
 
-std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& off) {
+void swap_chunk_table_into(const std::vector<int64_t>& off, std::vector<cl_int2>& t) {
   if (off.size() < 2) throw ArgumentError("offsets", "need P + 1 entries");
-  std::vector<cl_int2> t;
+  std::size_t n = 0;
+  for (std::size_t p = 0; p + 1 < off.size(); ++p)
+    n += static_cast<std::size_t>((off[p + 1] - off[p] + kSwapChunk - 1) / kSwapChunk);
+  t.resize(n);
+  cl_int2* e = t.data();
   for (std::size_t p = 0; p + 1 < off.size(); ++p)
     for (int64_t s = 0; s < off[p + 1] - off[p]; s += kSwapChunk) {
-      cl_int2 e;
-      e.s[0] = static_cast<cl_int>(p);
-      e.s[1] = static_cast<cl_int>(s);
-      t.push_back(e);
+      e->s[0] = static_cast<cl_int>(p);
+      e->s[1] = static_cast<cl_int>(s);
+      ++e;
     }
+}
+
+std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& off) {
+  std::vector<cl_int2> t;
+  swap_chunk_table_into(off, t);
   return t;
 }
 
+namespace {
+
+// Writes v to buffer b, blocking or not: b is kept if it holds v, else
+// replaced (blocking: by a copy of v, as upload(); else by one with a
+// quarter more room, then written). An empty table writes nothing (the
+// buffer holds at least one element: kernels take no null buffer).
+template <class T>
+void stage(Device& device, cl::Buffer& b, const std::vector<T>& v, bool blocking,
+           const char* what) {
+  const std::size_t bytes = std::max<std::size_t>(v.size(), 1) * sizeof(T);
+  std::size_t have = 0;
+  if (b()) cl_check(b.getInfo(CL_MEM_SIZE, &have), "clGetMemObjectInfo(CL_MEM_SIZE)");
+  if (have < bytes && blocking) {
+    b = upload(device, v, what);
+    return;
+  }
+  if (have < bytes) b = device.buffer(CL_MEM_READ_ONLY, bytes + bytes / 4, nullptr, what);
+  if (v.empty()) return;
+  cl_check(device.queue().enqueueWriteBuffer(b, blocking ? CL_TRUE : CL_FALSE, 0,
+                                             v.size() * sizeof(T), v.data()),
+           "clEnqueueWriteBuffer(swap plan)");
+}
+
+}  // namespace
+
 DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan) {
   DeviceSwapPlan d;
+  d.plan = std::move(plan);
+  upload_swap_plan(device, d, true);
+  return d;
+}
+
+void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
+  const SwapPlan& plan = d.plan;
   const int N = plan.stages();
   for (int L = 0; L <= N; ++L)
     if (plan.level_size(L) > kInt32Max)
       throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 pixels");
-  for (int L = 0; L <= N; ++L) {
-    d.rects.push_back(upload(device, plan.held[static_cast<std::size_t>(L)], "swap rectangles"));
-    const auto& o = plan.offset[static_cast<std::size_t>(L)];
-    std::vector<cl_int> oi(o.begin(), o.end());
-    d.offsets.push_back(upload(device, oi, "swap offsets"));
-    if (L > 0) {
-      const std::vector<cl_int2> t = swap_chunk_table(o);
-      if (static_cast<int64_t>(t.size()) * kSwapChunk > kInt32Max)
-        throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 work-items");
-      d.chunks.push_back(upload(device, t, "swap chunk table"));
-      d.chunk_count.push_back(static_cast<int64_t>(t.size()));
-    }
+  const auto levels = static_cast<std::size_t>(N + 1);
+  d.offsets32.resize(levels);
+  d.chunk_tables.resize(static_cast<std::size_t>(N));
+  d.chunk_count.assign(static_cast<std::size_t>(N), 0);
+  for (int L = 1; L <= N; ++L) {
+    auto& t = d.chunk_tables[static_cast<std::size_t>(L - 1)];
+    swap_chunk_table_into(plan.offset[static_cast<std::size_t>(L)], t);
+    if (static_cast<int64_t>(t.size()) * kSwapChunk > kInt32Max)
+      throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 work-items");
+    d.chunk_count[static_cast<std::size_t>(L - 1)] = static_cast<int64_t>(t.size());
   }
-  std::vector<cl_int> xp(plan.xpe.begin(), plan.xpe.end()), yp(plan.ype.begin(), plan.ype.end());
-  d.xpe = upload(device, xp, "display x table");
-  d.ype = upload(device, yp, "display y table");
-  d.plan = std::move(plan);
-  return d;
+  d.rects.resize(levels);
+  d.offsets.resize(levels);
+  d.chunks.resize(static_cast<std::size_t>(N));
+  for (std::size_t L = 0; L < levels; ++L) {
+    stage(device, d.rects[L], plan.held[L], blocking, "swap rectangles");
+    d.offsets32[L].assign(plan.offset[L].begin(), plan.offset[L].end());
+    stage(device, d.offsets[L], d.offsets32[L], blocking, "swap offsets");
+    if (L > 0) stage(device, d.chunks[L - 1], d.chunk_tables[L - 1], blocking, "swap chunk table");
+  }
+  d.xpe32.assign(plan.xpe.begin(), plan.xpe.end());
+  d.ype32.assign(plan.ype.begin(), plan.ype.end());
+  stage(device, d.xpe, d.xpe32, blocking, "display x table");
+  stage(device, d.ype, d.ype32, blocking, "display y table");
 }
 
 cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, const cl::Buffer& in,

@@ -134,29 +134,39 @@ int swap_front(const KdSplit& split, const ViewGeometry& view, int stage) {
 
 SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout) {
+  SwapPlan plan;
+  plan_swap_into(plan, rects, split, view, grid, layout);
+  return plan;
+}
+
+void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdSplit& split,
+                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout) {
   const int64_t P = static_cast<int64_t>(rects.size());
   if (P != split.pes() || P != grid.count())
     throw ArgumentError("rects", "one footprint per PE of the split and the grid expected");
   const int N = split.bits;
-  SwapPlan plan;
-  plan.layout = layout;
-  plan.width = view.width();
-  plan.height = view.height();
-  plan.pes = P;
-  plan.bits = swap_pixel_bits(grid, plan.width, plan.height, layout);
-  if (static_cast<int>(plan.bits.size()) != N) throw ArgumentError("grid", "PE bits differ");
-  for (int k = 0; k < N; ++k) plan.front.push_back(swap_front(split, view, k));
-
+  const int width = view.width(), height = view.height();
+  std::vector<PixelBit> bits = swap_pixel_bits(grid, width, height, layout);
+  if (static_cast<int>(bits.size()) != N) throw ArgumentError("grid", "PE bits differ");
+  // The footprints, checked before `plan` is touched.
   std::vector<Box2> F(static_cast<std::size_t>(P));
   for (int64_t p = 0; p < P; ++p) {
     const sv_rect& r = rects[static_cast<std::size_t>(p)];
     if (r.w < 0 || r.h < 0) throw ArgumentError("rects", "negative footprint size");
     if (r.w > 0 && r.h > 0 &&
-        (r.i0 < 0 || r.j0 < 0 || r.i0 + r.w > plan.width || r.j0 + r.h > plan.height))
+        (r.i0 < 0 || r.j0 < 0 || int64_t(r.i0) + r.w > width || int64_t(r.j0) + r.h > height))
       throw ArgumentError("rects", "footprint of PE " + std::to_string(p) + " outside the image");
     F[static_cast<std::size_t>(p)] = {r.i0, int64_t(r.i0) + r.w, r.j0, int64_t(r.j0) + r.h};
   }
-  const int64_t extent[2] = {plan.width, plan.height};
+  plan.layout = layout;
+  plan.width = width;
+  plan.height = height;
+  plan.pes = P;
+  plan.bits = std::move(bits);
+  plan.front.clear();
+  for (int k = 0; k < N; ++k) plan.front.push_back(swap_front(split, view, k));
+
+  const int64_t extent[2] = {width, height};
   plan.held.resize(static_cast<std::size_t>(N + 1));
   plan.offset.resize(static_cast<std::size_t>(N + 1));
   // Constraints of the stages before level L, per axis: j[a] constrained
@@ -168,53 +178,71 @@ SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
   for (int a = 0; a < 2; ++a)
     B[a] =
         std::max(ceil_log2(extent[a]), a == 0 ? exact_log2(grid.width) : exact_log2(grid.height));
-  std::vector<Box2> G(F.size());
+  const bool cut = layout == SwapLayout::cut_and_stack;
   for (int L = 0; L <= N; ++L) {
     if (L > 0) {
+      // F_L(p) = F_L(p ^ 2^k) = bbox(F_{L-1}(p), F_{L-1}(p ^ 2^k)), in place
+      // for each pair.
       const int k = L - 1;
-      for (int64_t p = 0; p < P; ++p)
-        G[static_cast<std::size_t>(p)] = bbox(F[static_cast<std::size_t>(p)],
-                                              F[static_cast<std::size_t>(p ^ (int64_t(1) << k))]);
-      std::swap(F, G);
-      const PixelBit& b = plan.bits[static_cast<std::size_t>(k)];
-      for (int64_t p = 0; p < P; ++p)
-        v[b.axis][static_cast<std::size_t>(p)] |= ((p >> k) & 1) << b.level;
-      ++j[b.axis];
+      const int64_t bit = int64_t(1) << k;
+      for (int64_t p = 0; p < P; ++p) {
+        if (p & bit) continue;
+        Box2& a = F[static_cast<std::size_t>(p)];
+        Box2& b = F[static_cast<std::size_t>(p | bit)];
+        a = b = bbox(a, b);
+      }
+      const PixelBit& pb = plan.bits[static_cast<std::size_t>(k)];
+      int64_t* va = v[pb.axis].data();
+      for (int64_t p = 0; p < P; ++p) va[p] |= ((p >> k) & 1) << pb.level;
+      ++j[pb.axis];
     }
     auto& held = plan.held[static_cast<std::size_t>(L)];
     auto& off = plan.offset[static_cast<std::size_t>(L)];
     held.resize(static_cast<std::size_t>(P));
-    off.assign(static_cast<std::size_t>(P + 1), 0);
-    const bool cut = layout == SwapLayout::cut_and_stack;
-    const int64_t stride[2] = {cut ? int64_t(1) << j[0] : 1, cut ? int64_t(1) << j[1] : 1};
+    off.resize(static_cast<std::size_t>(P + 1));
+    off[0] = 0;
+    // Cut-and-stack: per axis the values x = v (mod 2^j) of [lo, hi), v <
+    // 2^j: the first is lo + ((v - lo) mod 2^j) (strided_range's power-of-two
+    // path). Hierarchical: the block [v, v + 2^(B - j)) clipped to [lo, hi).
     const int32_t lx = cut ? j[0] : 0, ly = cut ? j[1] : 0;
+    const int64_t mx = (int64_t(1) << lx) - 1, my = (int64_t(1) << ly) - 1;
+    const int64_t bx = cut ? 0 : int64_t(1) << (B[0] - j[0]);
+    const int64_t by = cut ? 0 : int64_t(1) << (B[1] - j[1]);
+    const int64_t* vx = v[0].data();
+    const int64_t* vy = v[1].data();
+    SwapRect* h = held.data();
+    int64_t* o = off.data();
+    int64_t total = 0;
     for (int64_t p = 0; p < P; ++p) {
-      const Box2& f = F[static_cast<std::size_t>(p)];
-      const int64_t lo[2] = {f.x0, f.y0}, hi[2] = {f.x1, f.y1};
-      StridedRange rg[2];
-      for (int a = 0; a < 2; ++a) {
-        const int64_t va = v[a][static_cast<std::size_t>(p)];
+      const Box2 f = F[static_cast<std::size_t>(p)];
+      SwapRect r;
+      r.sx = static_cast<int32_t>(mx + 1);
+      r.sy = static_cast<int32_t>(my + 1);
+      r.lx = lx;
+      r.ly = ly;
+      if (f.x0 < f.x1 && f.y0 < f.y1) {
+        int64_t x0, y0, nx, ny;
         if (cut) {
-          rg[a] = strided_range(lo[a], hi[a], stride[a], va);
+          x0 = f.x0 + ((vx[p] - f.x0) & mx);
+          y0 = f.y0 + ((vy[p] - f.y0) & my);
+          nx = x0 < f.x1 ? ((f.x1 - 1 - x0) >> lx) + 1 : 0;
+          ny = y0 < f.y1 ? ((f.y1 - 1 - y0) >> ly) + 1 : 0;
         } else {
-          // Levels B-1 .. B-j fixed: the block [v, v + 2^(B - j)).
-          const int64_t blo = va, bhi = va + (int64_t(1) << (B[a] - j[a]));
-          rg[a] = strided_range(std::max(lo[a], blo), std::min(hi[a], bhi), 1, 0);
+          x0 = std::max(f.x0, vx[p]);
+          y0 = std::max(f.y0, vy[p]);
+          nx = std::max<int64_t>(0, std::min(f.x1, vx[p] + bx) - x0);
+          ny = std::max<int64_t>(0, std::min(f.y1, vy[p] + by) - y0);
+        }
+        if (nx > 0 && ny > 0) {
+          r.x0 = static_cast<int32_t>(x0);
+          r.y0 = static_cast<int32_t>(y0);
+          r.nx = static_cast<int32_t>(nx);
+          r.ny = static_cast<int32_t>(ny);
         }
       }
-      SwapRect h;
-      h.sx = static_cast<int32_t>(stride[0]);
-      h.sy = static_cast<int32_t>(stride[1]);
-      h.lx = lx;
-      h.ly = ly;
-      if (!f.empty() && rg[0].count > 0 && rg[1].count > 0) {
-        h.x0 = static_cast<int32_t>(rg[0].first);
-        h.y0 = static_cast<int32_t>(rg[1].first);
-        h.nx = static_cast<int32_t>(rg[0].count);
-        h.ny = static_cast<int32_t>(rg[1].count);
-      }
-      held[static_cast<std::size_t>(p)] = h;
-      off[static_cast<std::size_t>(p + 1)] = off[static_cast<std::size_t>(p)] + h.count();
+      h[p] = r;
+      total += r.count();
+      o[p + 1] = total;
     }
   }
   plan.xpe.assign(static_cast<std::size_t>(plan.width), 0);
@@ -225,7 +253,6 @@ SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
     for (std::size_t x = 0; x < t.size(); ++x)
       t[x] |= ((static_cast<int64_t>(x) >> b.level) & 1) << k;
   }
-  return plan;
 }
 
 std::vector<Rgba> swap_stage_reference(const SwapPlan& plan, int k, const std::vector<Rgba>& in) {

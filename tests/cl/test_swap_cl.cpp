@@ -74,6 +74,9 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
   SIMDVOL_TEST_DEVICE(dev);
   const Dims3 d{29, 23, 17};
   int n = 0;
+  // The engine's form: one DeviceSwapPlan planned into and uploaded without
+  // waiting, case after case (P grows and shrinks; its buffers are reused).
+  DeviceSwapPlan reused;
   for (const ViewAngles& va : std::vector<ViewAngles>{{0, 0, 0}, {30, 45, 0}, {-23.5, 71.25, 133}})
     for (int64_t P : {1, 8, 512, 8192})
       for (SwapLayout L : {SwapLayout::cut_and_stack, SwapLayout::hierarchical}) {
@@ -106,6 +109,16 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
         const DeviceSwapRun run = enqueue_swap(dev, plan, fp);
         ASSERT_TRUE(bitwise_equal(
             read_rgba(dev, run.last, plan.plan.level_size(plan.plan.stages())), level));
+        plan_swap_into(reused.plan, m.rects, split, view, pe_grid(P), L);
+        upload_swap_plan(dev, reused, false);
+        EXPECT_EQ(reused.chunk_count, plan.chunk_count);
+        const DeviceSwapRun again = enqueue_swap(dev, reused, fp);
+        ASSERT_TRUE(bitwise_equal(
+            read_rgba(dev, again.last, reused.plan.level_size(reused.plan.stages())), level));
+        cl::Buffer im2;
+        enqueue_display(dev, reused, again.last, im2);
+        EXPECT_TRUE(bitwise_equal(read_device_image(dev, im2, view.width(), view.height()).pixels(),
+                                  display_reference(plan.plan, level).pixels()));
         cl::Buffer im, out;
         enqueue_display(dev, plan, run.last, im);
         const Image inter = read_device_image(dev, im, view.width(), view.height());

@@ -143,6 +143,13 @@ TEST(SwapSchedule, PixelBitsAndFinalLayout) {
 
 namespace {
 
+// Every field of two plans equal.
+bool same_plan(const SwapPlan& a, const SwapPlan& b) {
+  return a.layout == b.layout && a.width == b.width && a.height == b.height && a.pes == b.pes &&
+         a.bits == b.bits && a.front == b.front && a.held == b.held && a.offset == b.offset &&
+         a.xpe == b.xpe && a.ype == b.ype;
+}
+
 // Every invariant of a plan, by brute force over the pixels (small images).
 void check_plan(const SwapPlan& plan, const std::vector<sv_rect>& rects, const PeGrid& g) {
   const int N = plan.stages();
@@ -255,6 +262,7 @@ TEST(SwapReference, EqualsDepthOrderCompositeAllP) {
   const ViewAngles views[] = {
       {0, 0, 0}, {0, 90, 0}, {0, 30, 0}, {45, 45, 0}, {-23.5, 71.25, 133.0}, {180, 10, 200}};
   int checked = 0, order_matters = 0;
+  SwapPlan reused;  // plan_swap_into over every case: P grows and shrinks
   for (const ViewAngles& va : views)
     for (Sampling smp : {Sampling::voxel, Sampling::pixel})
       for (int64_t P = 1; P <= 8192; P *= 2) {
@@ -270,6 +278,8 @@ TEST(SwapReference, EqualsDepthOrderCompositeAllP) {
                        std::to_string(P) + " " + swap_layout_name(L));
           SwapPlan plan = plan_swap(m.rects, split, view, g, L);
           check_plan(plan, m.rects, g);
+          plan_swap_into(reused, m.rects, split, view, g, L);
+          EXPECT_TRUE(same_plan(reused, plan));
           const Image got = display_reference(plan, swap_reference(plan, f));
           EXPECT_LE(max_abs_diff(want, got), 2e-6f);
           ++checked;
@@ -361,6 +371,13 @@ TEST(SwapReference, RejectsMismatchedInputs) {
   bad[0].w = 40;
   EXPECT_THROW(plan_swap(bad, split, view, pe_grid(8), SwapLayout::cut_and_stack), ArgumentError);
   const SwapPlan plan = plan_swap(m.rects, split, view, pe_grid(8), SwapLayout::cut_and_stack);
+  // A rejected plan_swap_into leaves the plan it was given as it was.
+  SwapPlan kept = plan;
+  EXPECT_THROW(plan_swap_into(kept, bad, split, view, pe_grid(8), SwapLayout::hierarchical),
+               ArgumentError);
+  EXPECT_THROW(plan_swap_into(kept, m.rects, split, view, pe_grid(16), SwapLayout::hierarchical),
+               ArgumentError);
+  EXPECT_TRUE(same_plan(kept, plan));
   EXPECT_THROW(swap_stage_reference(plan, 0, std::vector<Rgba>(3)), ArgumentError);
   EXPECT_THROW(swap_stage_reference(plan, 3, std::vector<Rgba>(plan.level_size(3))), ArgumentError);
   EXPECT_THROW(display_reference(plan, std::vector<Rgba>(1)), ArgumentError);

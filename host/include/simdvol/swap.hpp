@@ -141,6 +141,11 @@ int swap_front(const KdSplit& split, const ViewGeometry& view, int stage);
 /// ArgumentError for mismatched sizes or a rectangle outside the image.
 SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout);
+/// plan_swap into `plan`, reusing the storage of its vectors: a plan kept
+/// from frame to frame takes no fresh memory (the engine's). The same plan;
+/// on an ArgumentError `plan` is unchanged.
+void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdSplit& split,
+                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout);
 
 /// Serial reference of stage k: level k's buffer -> level k + 1's.
 std::vector<Rgba> swap_stage_reference(const SwapPlan& plan, int stage,

@@ -29,16 +29,29 @@ struct DeviceSwapPlan {
   std::vector<cl::Buffer> chunks;    ///< per stage: cl_int2 per chunk
   std::vector<int64_t> chunk_count;  ///< per stage
   cl::Buffer xpe, ype;               ///< display tables (cl_int)
+  /// The host side of the tables that are not in `plan` (the offsets and
+  /// display tables as cl_int, the chunk tables): the source of the writes.
+  std::vector<std::vector<cl_int>> offsets32;
+  std::vector<std::vector<cl_int2>> chunk_tables;
+  std::vector<cl_int> xpe32, ype32;
 };
 /// Uploads `plan` (blocking copies of small tables). ArgumentError if a
 /// level exceeds 2^31 - 1 pixels.
 DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan);
+/// Uploads d.plan into d's buffers, reusing them (and d's host tables)
+/// where they are large enough: a DeviceSwapPlan kept from frame to frame
+/// (the engine's) takes no fresh memory. With blocking false the writes are
+/// only enqueued: d must then stay alive and unchanged until the queue has
+/// run them (a later blocking call or finish). ArgumentError as above.
+void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking);
 
 /// Pixels per chunk of the swap stage (SV_SWAP_CHUNK in swap.cl).
 inline constexpr int64_t kSwapChunk = 16;
 /// The chunk table of one level (for tests): for each PE p in order, and
 /// each s = 0, 16, ... < its pixel count, the pair (p, s).
 std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& offset);
+/// swap_chunk_table into `table` (its storage reused).
+void swap_chunk_table_into(const std::vector<int64_t>& offset, std::vector<cl_int2>& table);
 
 /// The level buffers of a swap run.
 struct DeviceSwapRun {
