@@ -527,6 +527,24 @@ std::size_t Device::cached_programs() const {
 
 cl::Buffer Device::buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr,
                           const std::string& what) {
+  return allocate(flags, bytes, bytes, host_ptr, what);
+}
+
+cl::Buffer Device::scratch_buffer(cl_mem_flags flags, std::size_t bytes, const std::string& what) {
+  // A quarter more, rounded up to 64 KiB, within the device's largest
+  // allocation (never less than asked).
+  constexpr std::size_t kGrain = 65536;
+  std::size_t room = bytes;
+  if (bytes <= info_.max_alloc_bytes && bytes <= SIZE_MAX / 4) {
+    room = (bytes + bytes / 4 + kGrain - 1) / kGrain * kGrain;
+    room = std::max(bytes,
+                    static_cast<std::size_t>(std::min<std::uint64_t>(room, info_.max_alloc_bytes)));
+  }
+  return allocate(flags, bytes, room, nullptr, what);
+}
+
+cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t fresh_bytes,
+                            void* host_ptr, const std::string& what) {
   check_allocation(bytes, info_.max_alloc_bytes, what);
   const bool pooled = pool_ && host_ptr == nullptr && bytes > 0;
   std::unique_lock<std::mutex> lock;
@@ -546,9 +564,11 @@ cl::Buffer Device::buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr,
     }
   }
   cl_int err = CL_SUCCESS;
-  cl::Buffer b(context_, flags, bytes, host_ptr, &err);
+  cl::Buffer b(context_, flags, fresh_bytes, host_ptr, &err);
+  if (err != CL_SUCCESS && fresh_bytes != bytes)  // no room for the headroom: exactly as asked
+    b = cl::Buffer(context_, flags, fresh_bytes = bytes, host_ptr, &err);
   if (err != CL_SUCCESS) throw CLError("clCreateBuffer(" + what + ")", err);
-  if (pooled && pool_->depth > 0) pool_->entries.push_back({b, flags, bytes, true, 0});
+  if (pooled && pool_->depth > 0) pool_->entries.push_back({b, flags, fresh_bytes, true, 0});
   return b;
 }
 

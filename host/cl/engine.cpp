@@ -41,8 +41,8 @@ struct Scratch {
     need = std::max<std::size_t>(need, 16);
     if (need > bytes) {
       check_allocation(need, device.info().max_alloc_bytes, what);
-      buffer = device.buffer(CL_MEM_READ_WRITE, need, nullptr, what);
-      bytes = need;
+      buffer = device.scratch_buffer(CL_MEM_READ_WRITE, need, what);
+      cl_check(buffer.getInfo(CL_MEM_SIZE, &bytes), "clGetMemObjectInfo(CL_MEM_SIZE)");
     }
     return buffer;
   }

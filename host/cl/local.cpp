@@ -160,7 +160,7 @@ DeviceFootprints make_footprints(Device& device, const std::vector<sv_rect>& rec
   std::vector<cl_int> off(f.rect_offset.begin(), f.rect_offset.end() - 1);
   f.offsets = upload(device, off, "footprint offsets");
   const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(f.size(), 1));
-  f.pixels = device.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4), nullptr, "footprints");
+  f.pixels = device.scratch_buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4), "footprints");
   return f;
 }
 
@@ -284,7 +284,7 @@ SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs) {
   SegmentOrder o;
   o.count = segs.count;
   const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(segs.count, 1));
-  o.order = device.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int), nullptr, "segment order");
+  o.order = device.scratch_buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int), "segment order");
   const std::string name = "simdvol_segment_order";
   cl::Kernel k = stage_kernel(device, name, 1);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,

@@ -211,19 +211,19 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   const std::size_t P = static_cast<std::size_t>(pes);
   const std::size_t R = P * static_cast<std::size_t>(rows);
   const auto rw = CL_MEM_READ_WRITE;
-  m.rowsum = device.buffer(rw, R * sizeof(cl_int4), nullptr, "row sums");
-  m.rowlinks = device.buffer(rw, R * sizeof(cl_int4), nullptr, "row links");
-  m.rowoff = device.buffer(rw, R * sizeof(cl_int4), nullptr, "row offsets");
+  m.rowsum = device.scratch_buffer(rw, R * sizeof(cl_int4), "row sums");
+  m.rowlinks = device.scratch_buffer(rw, R * sizeof(cl_int4), "row links");
+  m.rowoff = device.scratch_buffer(rw, R * sizeof(cl_int4), "row offsets");
   m.petot = device.buffer(rw, P * sizeof(cl_int4), nullptr, "PE totals");
   m.counts = device.buffer(rw, P * sizeof(cl_int), nullptr, "segment counts");
   m.seg_offset = device.buffer(rw, (P + 1) * sizeof(cl_int), nullptr, "seg_offset");
   const std::size_t C = static_cast<std::size_t>(capacity);
-  m.segments = device.buffer(rw, C * sizeof(sv_segment), nullptr, "segments");
+  m.segments = device.scratch_buffer(rw, C * sizeof(sv_segment), "segments");
   m.rects = device.buffer(rw, P * sizeof(sv_rect), nullptr, "footprint rects");
   m.loads = device.buffer(rw, P * sizeof(cl_int), nullptr, "loads");
-  m.links = device.buffer(rw, C * sizeof(cl_int), nullptr, "balance links");
+  m.links = device.scratch_buffer(rw, C * sizeof(cl_int), "balance links");
   m.link_offset = device.buffer(rw, (P + 1) * sizeof(cl_int4), nullptr, "link offsets");
-  m.link_list = device.buffer(rw, C * sizeof(cl_int2), nullptr, "link lists");
+  m.link_list = device.scratch_buffer(rw, C * sizeof(cl_int2), "link lists");
 
   const cl_int4 cell = int4(split.cell[0], split.cell[1], split.cell[2], 0);
   const cl_int4 splits = int4(sp[0], sp[1], sp[2], 0);
@@ -286,9 +286,8 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   // The rounds move the bounds (k0, k1) in a compact copy (balance.cl).
   const Defines defs{{"WGS", std::to_string(kWgs)}, {"BOUNDS16", narrow ? "1" : "0"}};
   const std::size_t slots = static_cast<std::size_t>(m.capacity);  // Device::run rounds up
-  const cl::Buffer kk =
-      device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(m.capacity) * (narrow ? 4 : 8),
-                    nullptr, "balance bounds");
+  const cl::Buffer kk = device.scratch_buffer(
+      CL_MEM_READ_WRITE, static_cast<std::size_t>(m.capacity) * (narrow ? 4 : 8), "balance bounds");
   cl::Kernel pack = device.kernel("balance", "simdvol_balance_pack", defs);
   set_args(pack, "simdvol_balance_pack", m.seg_offset, npes, m.segments, kk);
   m.balance_events.push_back({"balance_pack", device.run(pack, "simdvol_balance_pack",

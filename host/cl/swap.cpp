@@ -64,8 +64,8 @@ std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& off) {
 namespace {
 
 // Writes v to buffer b, blocking or not: b is kept if it holds v, else
-// replaced (blocking: by a copy of v, as upload(); else by one with a
-// quarter more room, then written). An empty table writes nothing (the
+// replaced (blocking: by a copy of v, as upload(); else by a scratch
+// buffer, then written). An empty table writes nothing (the
 // buffer holds at least one element: kernels take no null buffer).
 template <class T>
 void stage(Device& device, cl::Buffer& b, const std::vector<T>& v, bool blocking,
@@ -77,7 +77,7 @@ void stage(Device& device, cl::Buffer& b, const std::vector<T>& v, bool blocking
     b = upload(device, v, what);
     return;
   }
-  if (have < bytes) b = device.buffer(CL_MEM_READ_ONLY, bytes + bytes / 4, nullptr, what);
+  if (have < bytes) b = device.scratch_buffer(CL_MEM_READ_ONLY, bytes, what);
   if (v.empty()) return;
   cl_check(device.queue().enqueueWriteBuffer(b, blocking ? CL_TRUE : CL_FALSE, 0,
                                              v.size() * sizeof(T), v.data()),
@@ -148,8 +148,11 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
   for (int L = 1; L <= N; ++L) most = std::max(most, d.plan.level_size(L));
   r.last = fp.pixels;
   if (N == 0) return r;
-  r.ping = float4_buffer(device, most, "swap level buffer");
-  r.pong = N > 1 ? float4_buffer(device, most, "swap level buffer") : r.ping;
+  const std::size_t level_bytes =
+      static_cast<std::size_t>(std::max<int64_t>(most, 1)) * sizeof(cl_float4);
+  r.ping = device.scratch_buffer(CL_MEM_READ_WRITE, level_bytes, "swap level buffer");
+  r.pong =
+      N > 1 ? device.scratch_buffer(CL_MEM_READ_WRITE, level_bytes, "swap level buffer") : r.ping;
   cl::Buffer in = fp.pixels;
   for (int k = 0; k < N; ++k) {
     const cl::Buffer& out = (k % 2 == 0) ? r.ping : r.pong;

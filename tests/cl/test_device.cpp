@@ -449,5 +449,42 @@ TEST(DeviceTest, ReuseScopeRecyclesOnlyReleasedBuffers) {
   EXPECT_EQ(d.pooled_bytes(), 0u);
 }
 
+// Device::scratch_buffer: a fresh one has a quarter more room (64 KiB
+// grains), so that a larger request in a later scope reuses it; never more
+// than the device's largest allocation, never less than asked.
+TEST(DeviceTest, ScratchBuffersHaveRoomToGrow) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  const auto rw = CL_MEM_READ_WRITE;
+  auto size = [](const cl::Buffer& b) {
+    std::size_t n = 0;
+    cl_check(b.getInfo(CL_MEM_SIZE, &n), "CL_MEM_SIZE");
+    return n;
+  };
+  cl_mem first = nullptr;
+  {
+    Device::ReuseScope scope(d);
+    const cl::Buffer a = d.scratch_buffer(rw, 1000000, "a");
+    EXPECT_EQ(size(a), 1310720u);  // 1,250,000 rounded up to 20 * 64 KiB
+    first = a();
+  }
+  EXPECT_EQ(d.pooled_bytes(), 1310720u);
+  {
+    Device::ReuseScope scope(d);
+    const cl::Buffer b = d.scratch_buffer(rw, 1200000, "b");  // 20 % more: the same buffer
+    EXPECT_EQ(b(), first);
+    const cl::Buffer c = d.scratch_buffer(rw, 1, "c");
+    EXPECT_EQ(size(c), 65536u);
+    EXPECT_EQ(size(d.buffer(rw, 1000000, nullptr, "exact")), 1000000u);  // buffer(): as asked
+  }
+  const std::size_t most = static_cast<std::size_t>(d.info().max_alloc_bytes);
+  EXPECT_THROW(d.scratch_buffer(rw, most + 1, "too large"), ArgumentError);
+  if (most <= (std::size_t(1) << 30)) {  // a real allocation of the largest size
+    const cl::Buffer m = d.scratch_buffer(rw, most - 1000, "near the largest");
+    EXPECT_GE(size(m), most - 1000);
+    EXPECT_LE(size(m), most);
+  }
+}
+
 }  // namespace
 }  // namespace simdvol

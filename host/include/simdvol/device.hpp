@@ -209,6 +209,13 @@ class Device {
   /// earlier scope (of the same flags, bytes <= size <= 2 * bytes + 64 KiB,
   /// contents unspecified, as for a fresh buffer).
   cl::Buffer buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr, const std::string& what);
+  /// buffer() for scratch whose size changes from frame to frame (the
+  /// matching's segments, footprints, swap levels, ...): when no pooled
+  /// buffer fits, the fresh one is a quarter larger than asked (within the
+  /// device's largest allocation), so that the next frames' slightly larger
+  /// requests find it in the pool instead of touching new pages (on PoCL a
+  /// fresh buffer is new host memory: a page fault per 4 KiB in the kernels).
+  cl::Buffer scratch_buffer(cl_mem_flags flags, std::size_t bytes, const std::string& what);
 
   /// Reuse of scratch buffers from frame to frame. A frame allocates tens of
   /// MB of buffers that live only for that frame; on PoCL each is fresh host
@@ -244,6 +251,8 @@ class Device {
 
  private:
   void describe_self(int index, int platform_index, const std::string& platform);
+  cl::Buffer allocate(cl_mem_flags flags, std::size_t bytes, std::size_t fresh_bytes,
+                      void* host_ptr, const std::string& what);
 
   DeviceInfo info_;
   cl::Context context_;
