@@ -293,6 +293,7 @@ struct Device::Pool {
     std::size_t bytes = 0;
     bool busy = false;  // handed out in the open scope, or still held by someone
     int idle = 0;       // closed scopes since it was last handed out
+    std::string what;   // the request it was last handed out for
   };
   std::mutex mutex;
   int depth = 0;  // open scopes
@@ -551,14 +552,23 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
   if (pooled) {
     lock = std::unique_lock<std::mutex>(pool_->mutex);
     if (pool_->depth > 0) {
+      // The smallest that fits, preferring one last handed out for the same
+      // `what`: a frame's requests keep their buffers from frame to frame
+      // as their sizes drift, instead of taking each other's.
       Pool::Entry* best = nullptr;
-      for (Pool::Entry& e : pool_->entries)
-        if (!e.busy && e.flags == flags && e.bytes >= bytes && e.bytes <= 2 * bytes + 65536 &&
-            (!best || e.bytes < best->bytes))
+      for (Pool::Entry& e : pool_->entries) {
+        if (e.busy || e.flags != flags || e.bytes < bytes || e.bytes > 2 * bytes + 65536) continue;
+        if (!best) {
           best = &e;
+          continue;
+        }
+        const bool same = e.what == what, best_same = best->what == what;
+        if (same != best_same ? same : e.bytes < best->bytes) best = &e;
+      }
       if (best) {
         best->busy = true;
         best->idle = 0;
+        best->what = what;
         return best->buffer;
       }
     }
@@ -568,7 +578,7 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
   if (err != CL_SUCCESS && fresh_bytes != bytes)  // no room for the headroom: exactly as asked
     b = cl::Buffer(context_, flags, fresh_bytes = bytes, host_ptr, &err);
   if (err != CL_SUCCESS) throw CLError("clCreateBuffer(" + what + ")", err);
-  if (pooled && pool_->depth > 0) pool_->entries.push_back({b, flags, fresh_bytes, true, 0});
+  if (pooled && pool_->depth > 0) pool_->entries.push_back({b, flags, fresh_bytes, true, 0, what});
   return b;
 }
 

@@ -449,6 +449,39 @@ TEST(DeviceTest, ReuseScopeRecyclesOnlyReleasedBuffers) {
   EXPECT_EQ(d.pooled_bytes(), 0u);
 }
 
+// The pool prefers the buffer last handed out for the same `what`, so
+// requests whose sizes drift keep their own buffers: without the
+// preference, "y" would take "x"'s smaller buffer and "x" would get none.
+TEST(DeviceTest, ReuseScopePrefersTheSameRequest) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  const auto rw = CL_MEM_READ_WRITE;
+  cl_mem x0 = nullptr, y0 = nullptr;
+  {
+    Device::ReuseScope scope(d);
+    x0 = d.buffer(rw, 1 << 20, nullptr, "x")();
+    y0 = d.buffer(rw, 3 << 19, nullptr, "y")();
+  }
+  {
+    Device::ReuseScope scope(d);
+    const cl::Buffer y = d.buffer(rw, 1 << 20, nullptr, "y");  // both fit: its own
+    const cl::Buffer x = d.buffer(rw, 1 << 20, nullptr, "x");
+    EXPECT_EQ(y(), y0);
+    EXPECT_EQ(x(), x0);
+    const cl::Buffer z = d.buffer(rw, 1 << 20, nullptr, "z");  // none left: fresh
+    EXPECT_NE(z(), x0);
+    EXPECT_NE(z(), y0);
+  }
+  {
+    Device::ReuseScope scope(d);
+    const cl::Buffer z = d.buffer(rw, 1 << 19, nullptr, "z");  // its own again
+    const cl::Buffer w = d.buffer(rw, 1 << 19, nullptr, "w");  // new: the smallest that fits
+    EXPECT_NE(z(), x0);
+    EXPECT_NE(z(), y0);
+    EXPECT_EQ(w(), x0);
+  }
+}
+
 // Device::scratch_buffer: a fresh one has a quarter more room (64 KiB
 // grains), so that a larger request in a later scope reuses it; never more
 // than the device's largest allocation, never less than asked.

@@ -207,6 +207,7 @@ class Device {
   /// allocation first (ArgumentError naming `what`). While a ReuseScope is
   /// open, a request without a host pointer may get a buffer released in an
   /// earlier scope (of the same flags, bytes <= size <= 2 * bytes + 64 KiB,
+  /// the smallest, preferring one last handed out for the same `what`;
   /// contents unspecified, as for a fresh buffer).
   cl::Buffer buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr, const std::string& what);
   /// buffer() for scratch whose size changes from frame to frame (the
