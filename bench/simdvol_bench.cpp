@@ -21,7 +21,11 @@
 // adaptive (threshold 0.95), mcN (Monte Carlo, N walks per whole ray) or
 // mcNsub (per sub-ray, ch. 7.4). Per case a fresh RenderEngine renders one
 // warm-up frame (timed as "first": page faults of fresh buffers, program
-// builds not yet cached) and R timed frames; per stage the profiling-event
+// builds not yet cached) and R timed frames; the cases of one volume, size,
+// order and compositing (every P, sweeps and skip-pes) take their timed
+// frames in turn, one each per round, so that a busy spell of the shared
+// machine falls on all of them alike and their ratios hold; per stage the
+// profiling-event
 // times (EngineTimes), median / min / max over the R frames; the frame's
 // samples (sum of the PE loads after balancing), the SIMD utilisation
 // (mean load / max load) and the binary swap's X-Net traffic (swap_cost:
@@ -60,8 +64,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
@@ -392,18 +398,44 @@ struct Harness {
         "util", "XNet_MB", "ref_ms", "speedup", "PSNR");
   }
 
-  void run_case(const Loaded& L, int size, int order, const Comp& c, int64_t pes, int sweeps,
-                bool skip_pes) {
-    const std::string id = case_id(L.spec.name, size, order, c.name, pes, sweeps, skip_pes);
-    const RenderOptions opt = render_options(L.spec, size, order, c, o.view);
+  // One case between its warm-up frame and its report. The cases of a
+  // group (one volume, size, order and compositing; every PE count,
+  // balancing and PE skipping) take their timed frames in turn, one frame
+  // each per round, so a busy spell of the machine falls on all of them
+  // alike and their ratios within a run hold (run one after the other, one
+  // case could take all of it).
+  struct Running {
+    const Loaded* L = nullptr;
+    int64_t pes = 0;
+    std::string id;
+    RenderOptions opt;
+    json j;
+    std::unique_ptr<RenderEngine> engine;
+    Image img;
+    EngineStats st;
+    double first = 0;
+    std::size_t built = 0;
+    std::vector<double> wall, devsum;
+    std::map<std::string, std::vector<double>> stage;
+    std::vector<std::vector<double>> swap_stages;
+    std::string error;  // skipped: why
+  };
+
+  Running start_case(const Loaded& L, int size, int order, const Comp& c, int64_t pes, int sweeps,
+                     bool skip_pes) {
+    Running r;
+    r.L = &L;
+    r.pes = pes;
+    r.id = case_id(L.spec.name, size, order, c.name, pes, sweeps, skip_pes);
+    r.opt = render_options(L.spec, size, order, c, o.view);
     EngineOptions eo;
     eo.pes = pes;
     eo.fused = true;
     eo.mc_scope = c.scope;
     eo.balance_sweeps = sweeps;
     eo.skip_pes = skip_pes;
-    json j;
-    j["id"] = id;
+    json& j = r.j;
+    j["id"] = r.id;
     j["volume"] = L.spec.name;
     j["dims"] = {L.vol->nx(), L.vol->ny(), L.vol->nz()};
     j["classifier"] = L.spec.classifier;
@@ -416,35 +448,59 @@ struct Harness {
     j["sampling"] = o.sampling == Sampling::voxel ? "voxel" : "pixel";
     j["view"] = {o.view.theta, o.view.phi, o.view.varphi};
     try {
-      validate(eo, opt);
-      RenderEngine engine(*dev, eo);
+      validate(eo, r.opt);
+      r.engine = std::make_unique<RenderEngine>(*dev, eo);
       EngineTimes t;
-      EngineStats st;
       const std::size_t programs0 = dev->cached_programs();
-      auto t0 = Clock::now();
-      Image img = engine.render(*L.vol, opt, &t, &st);  // warm-up: the first frame
-      const double first = ms_since(t0);
-      const std::size_t built = dev->cached_programs() - programs0;
-      std::vector<double> wall, devsum;
-      std::map<std::string, std::vector<double>> stage;
-      std::vector<std::vector<double>> swap_stages;
-      for (int r = 0; r < o.repeat; ++r) {
-        t0 = Clock::now();
-        img = engine.render(*L.vol, opt, &t);
-        wall.push_back(ms_since(t0));
-        devsum.push_back(device_sum(t));
-        for (const auto& s : kStages) stage[s.name].push_back(t.*s.field);
-        stage["occupancy"].push_back(t.occupancy_ms);  // inside resample_local
-        swap_stages.resize(t.swap_stage_ms.size());
-        for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
-          swap_stages[k].push_back(t.swap_stage_ms[k]);
-      }
-      const Summary w = summarize(wall);
+      const auto t0 = Clock::now();
+      r.img = r.engine->render(*L.vol, r.opt, &t, &r.st);  // warm-up: the first frame
+      r.first = ms_since(t0);
+      r.built = dev->cached_programs() - programs0;
+    } catch (const std::exception& e) {
+      r.error = e.what();
+      r.engine.reset();
+    }
+    return r;
+  }
+
+  void frame(Running& r) {
+    if (!r.error.empty()) return;
+    try {
+      EngineTimes t;
+      const auto t0 = Clock::now();
+      r.img = r.engine->render(*r.L->vol, r.opt, &t);
+      r.wall.push_back(ms_since(t0));
+      r.devsum.push_back(device_sum(t));
+      for (const auto& s : kStages) r.stage[s.name].push_back(t.*s.field);
+      r.stage["occupancy"].push_back(t.occupancy_ms);  // inside resample_local
+      r.swap_stages.resize(t.swap_stage_ms.size());
+      for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
+        r.swap_stages[k].push_back(t.swap_stage_ms[k]);
+    } catch (const std::exception& e) {
+      r.error = e.what();
+      r.engine.reset();
+    }
+  }
+
+  void finish_case(Running& r) {
+    r.engine.reset();  // its buffers back before the next group
+    const Loaded& L = *r.L;
+    const int64_t pes = r.pes;
+    const std::string& id = r.id;
+    const RenderOptions& opt = r.opt;
+    const Image& img = r.img;
+    const EngineStats& st = r.st;
+    const double first = r.first;
+    auto& stage = r.stage;
+    json& j = r.j;
+    try {
+      if (!r.error.empty()) throw std::runtime_error(r.error);
+      const Summary w = summarize(r.wall);
       j["first_frame_ms"] = first;
-      j["programs_built_in_first_frame"] = built;
+      j["programs_built_in_first_frame"] = r.built;
       j["repeat"] = o.repeat;
       j["wall_ms"] = summary_json(w);
-      j["device_ms"] = summary_json(summarize(devsum));
+      j["device_ms"] = summary_json(summarize(r.devsum));
       j["fps"] = 1000.0 / w.median;
       j["samples"] = st.samples;
       j["segments"] = st.segments;
@@ -455,7 +511,7 @@ struct Harness {
       // Empty-space skipping's brick occupancy: part of resample_local.
       j["occupancy_ms"] = summary_json(summarize(stage["occupancy"]));
       json sw = json::array();
-      for (const auto& v : swap_stages) sw.push_back(median(v));
+      for (const auto& v : r.swap_stages) sw.push_back(median(v));
       j["swap_stage_ms"] = sw;
       j["utilisation"] = st.utilisation();
       j["max_load"] = st.max_load();
@@ -605,28 +661,30 @@ struct Harness {
         Summary t;
         double first = 0, q = NAN;
       };
-      std::vector<Row> table;
-      auto timed = [&](const std::string& name, int runs, auto&& render) {
-        Row r;
-        r.name = name;
-        auto t0 = Clock::now();
-        Image img = render();
-        r.first = ms_since(t0);
+      // Every renderer warms up, then they take their timed frames in turn
+      // (one each per round, while it has runs left), so that a busy spell
+      // of the machine falls on all of them alike.
+      struct Player {
+        std::string name;
+        int runs = 0;
+        std::function<Image()> render;
+        double first = 0;
         std::vector<double> ms;
-        for (int k = 0; k < runs; ++k) {
-          t0 = Clock::now();
-          img = render();
-          ms.push_back(ms_since(t0));
-        }
-        r.t = summarize(ms);
-        r.q = psnr(img, ref.image);
-        table.push_back(r);
+        Image img;
       };
-      timed("VolPack brute force", o.volpack_runs,
-            [&] { return example.render(vp::Mode::brute_force); });
-      timed("VolPack classified", o.repeat, [&] { return example.render(vp::Mode::classified); });
-      Row refrow{"simdvol reference (order 3)", {ref.ms, ref.ms, ref.ms, 1}, ref.ms, INFINITY};
-      table.push_back(refrow);
+      std::vector<Player> players;
+      auto add = [&players](std::string name, int runs, std::function<Image()> render) {
+        Player p;
+        p.name = std::move(name);
+        p.runs = runs;
+        p.render = std::move(render);
+        players.push_back(std::move(p));
+      };
+      add("VolPack brute force", o.volpack_runs,
+          [&] { return example.render(vp::Mode::brute_force); });
+      add("VolPack classified", o.repeat, [&] { return example.render(vp::Mode::classified); });
+      std::vector<std::unique_ptr<RenderEngine>> engines;
+      std::deque<RenderOptions> opts;  // stable addresses for the players
       for (const int64_t pes : o.pes)
         for (const int64_t sweeps : o.sweeps)
           for (const bool skip_pes : o.skip_pes) {
@@ -635,16 +693,40 @@ struct Harness {
             eo.fused = true;
             eo.balance_sweeps = static_cast<int>(sweeps);
             eo.skip_pes = skip_pes;
-            RenderEngine engine(*dev, eo);
+            engines.push_back(std::make_unique<RenderEngine>(*dev, eo));
+            RenderEngine* engine = engines.back().get();
             for (const int64_t order : o.orders) {
-              RenderOptions opt = ropt;
-              opt.order = static_cast<int>(order);
-              timed("simdvol OpenCL order " + std::to_string(order) + " P " + std::to_string(pes) +
-                        (sweeps == kBalanceSweeps ? "" : " b" + std::to_string(sweeps)) +
-                        (skip_pes ? "" : " allpe"),
-                    o.repeat, [&] { return engine.render(vol, opt); });
+              opts.push_back(ropt);
+              opts.back().order = static_cast<int>(order);
+              const RenderOptions* opt = &opts.back();
+              add("simdvol OpenCL order " + std::to_string(order) + " P " + std::to_string(pes) +
+                      (sweeps == kBalanceSweeps ? "" : " b" + std::to_string(sweeps)) +
+                      (skip_pes ? "" : " allpe"),
+                  o.repeat, [&vol, engine, opt] { return engine->render(vol, *opt); });
             }
           }
+      int rounds = 0;
+      for (Player& p : players) {
+        const auto t0 = Clock::now();
+        p.img = p.render();
+        p.first = ms_since(t0);
+        rounds = std::max(rounds, p.runs);
+      }
+      for (int k = 0; k < rounds; ++k)
+        for (Player& p : players) {
+          if (k >= p.runs) continue;
+          const auto t0 = Clock::now();
+          p.img = p.render();
+          p.ms.push_back(ms_since(t0));
+        }
+      std::vector<Row> table;
+      for (const Player& p : players) {
+        table.push_back({p.name, summarize(p.ms), p.first, psnr(p.img, ref.image)});
+        if (table.size() == 2) {
+          Row refrow{"simdvol reference (order 3)", {ref.ms, ref.ms, ref.ms, 1}, ref.ms, INFINITY};
+          table.push_back(refrow);
+        }
+      }
       const double cls = table[1].t.median, bf = table[0].t.median;
       std::printf("\n%dx%d: %-32s %9s %9s %9s %9s %9s %9s %8s\n", size, size, "renderer",
                   "ms/frame", "min", "max", "first", "x VPclsf", "x VPbrute", "PSNR dB");
@@ -939,20 +1021,32 @@ int main(int argc, char** argv) {
     std::vector<Comp> comps;
     for (const auto& c : o.compositing) comps.push_back(parse_comp(c));
     std::printf(
-        "\nframes: %d repeats after one warm-up frame ('first'); times in ms, stage "
+        "\nframes: %d repeats after one warm-up frame ('first'), the cases of each volume / "
+        "size / order / compositing in turn, one frame each per round; times in ms, stage "
         "times from profiling events (median); view (%g, %g, %g), %s sampling\n",
         o.repeat, o.view.theta, o.view.phi, o.view.varphi,
         o.sampling == Sampling::voxel ? "voxel" : "pixel");
     h.print_case_header();
+    // A group's engines take their frames in turn (VolPack's table: also
+    // every order): the pool keeps each one's buffers over the others'
+    // frames.
+    dev.set_reuse_keep(
+        static_cast<int>(o.pes.size() * o.sweeps.size() * o.skip_pes.size() * o.orders.size()) + 2);
     for (const Loaded& L : vols)
       for (const int64_t size : o.sizes)
         for (const int64_t order : o.orders)
-          for (const Comp& c : comps)
+          for (const Comp& c : comps) {
+            std::vector<Harness::Running> group;
             for (const int64_t pes : o.pes)
               for (const int64_t sweeps : o.sweeps)
                 for (const bool skip_pes : o.skip_pes)
-                  h.run_case(L, static_cast<int>(size), static_cast<int>(order), c, pes,
-                             static_cast<int>(sweeps), skip_pes);
+                  group.push_back(h.start_case(L, static_cast<int>(size), static_cast<int>(order),
+                                               c, pes, static_cast<int>(sweeps), skip_pes));
+            for (int r = 0; r < o.repeat; ++r)
+              for (Harness::Running& run : group) h.frame(run);
+            for (Harness::Running& run : group) h.finish_case(run);
+          }
+
     std::printf(
         "(first: the warm-up frame, with fresh buffers and any program builds; util: mean / max "
         "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B (the JSON adds "

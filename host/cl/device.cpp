@@ -297,6 +297,7 @@ struct Device::Pool {
   };
   std::mutex mutex;
   int depth = 0;  // open scopes
+  int keep = 2;   // closed scopes a released buffer waits to be handed out again
   std::vector<Entry> entries;
 };
 
@@ -604,10 +605,17 @@ Device::ReuseScope::~ReuseScope() {
     cl_uint refs = 0;
     if (e.buffer.getInfo(CL_MEM_REFERENCE_COUNT, &refs) != CL_SUCCESS) continue;  // drop it
     e.busy = refs > 1;
-    if (!e.busy && ++e.idle > 2) continue;  // not used lately: release it
+    if (!e.busy && ++e.idle > pool.keep) continue;  // not used lately: release it
     kept.push_back(std::move(e));
   }
   pool.entries = std::move(kept);
+}
+
+void Device::set_reuse_keep(int scopes) {
+  if (scopes < 0) throw ArgumentError("scopes", "must not be negative");
+  if (!pool_) throw ArgumentError("device", "was moved from");
+  std::lock_guard<std::mutex> lock(pool_->mutex);
+  pool_->keep = scopes;
 }
 
 std::size_t Device::pooled_bytes() const {

@@ -449,6 +449,36 @@ TEST(DeviceTest, ReuseScopeRecyclesOnlyReleasedBuffers) {
   EXPECT_EQ(d.pooled_bytes(), 0u);
 }
 
+// Device::set_reuse_keep: a released buffer can be handed out in that many
+// scopes after the one it was used in, then it is released.
+TEST(DeviceTest, ReuseKeepSetsHowLongReleasedBuffersWait) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  EXPECT_THROW(d.set_reuse_keep(-1), ArgumentError);
+  d.set_reuse_keep(4);
+  cl_mem first = nullptr;
+  {
+    Device::ReuseScope scope(d);
+    first = d.buffer(CL_MEM_READ_WRITE, 1 << 20, nullptr, "a")();
+  }
+  for (int i = 0; i < 3; ++i) {
+    Device::ReuseScope idle(d);
+  }
+  EXPECT_EQ(d.pooled_bytes(), 1u << 20);  // three scopes without it: still there
+  {
+    Device::ReuseScope scope(d);  // the fourth: handed out
+    EXPECT_EQ(d.buffer(CL_MEM_READ_WRITE, 1 << 20, nullptr, "a")(), first);
+  }
+  for (int i = 0; i < 3; ++i) {
+    Device::ReuseScope idle(d);
+  }
+  EXPECT_EQ(d.pooled_bytes(), 1u << 20);
+  {
+    Device::ReuseScope idle(d);
+  }
+  EXPECT_EQ(d.pooled_bytes(), 0u);  // four without it: released
+}
+
 // The pool prefers the buffer last handed out for the same `what`, so
 // requests whose sizes drift keep their own buffers: without the
 // preference, "y" would take "x"'s smaller buffer and "x" would get none.

@@ -225,7 +225,7 @@ class Device {
   /// records what it hands out; when the outermost scope closes it waits for
   /// the queue and keeps the buffers that nobody else holds any more (their
   /// reference count is 1: only the pool's), for the next scope. A kept
-  /// buffer not handed out again in the next two scopes is released. Buffers
+  /// buffer not handed out again in the next two scopes (set_reuse_keep) is released. Buffers
   /// still held by the caller (a RenderEngine's persistent cells, say) are
   /// never handed out twice. For one thread's frames (RenderEngine::render
   /// opens one per frame).
@@ -239,6 +239,12 @@ class Device {
    private:
     Device* device_;
   };
+  /// A buffer released in one scope can be handed out in the next `scopes`
+  /// scopes (default 2); not handed out in those, it is released. A program
+  /// that renders with k engines in turn on one device (the bench harness,
+  /// which interleaves the frames of its cases) keeps them for k or more,
+  /// or each engine's frame finds its buffers gone. ArgumentError if < 0.
+  void set_reuse_keep(int scopes);
   /// Bytes of buffers the pool holds (handed out or free), for tests.
   std::size_t pooled_bytes() const;
 
