@@ -22,7 +22,8 @@
 // mcNsub (per sub-ray, ch. 7.4). Per case a fresh RenderEngine renders one
 // warm-up frame (timed as "first": page faults of fresh buffers, program
 // builds not yet cached) and R timed frames; the cases of one volume, size,
-// order and compositing (every P, sweeps and skip-pes) take their timed
+// order and compositing (every P, sweeps and skip-pes; as many at once as
+// their voxel buffers fit in half the device's memory) take their timed
 // frames in turn, one each per round, so that a busy spell of the shared
 // machine falls on all of them alike and their ratios hold; per stage the
 // profiling-event
@@ -86,6 +87,7 @@
 #include "simdvol/pe_array.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
+#include "simdvol/stages.hpp"
 #include "simdvol/swap.hpp"
 #ifdef SIMDVOL_BENCH_VOLPACK
 #include "volpack_peer.hpp"
@@ -1032,21 +1034,47 @@ int main(int argc, char** argv) {
     // frames.
     dev.set_reuse_keep(
         static_cast<int>(o.pes.size() * o.sweeps.size() * o.skip_pes.size() * o.orders.size()) + 2);
+    // Engines alive at once: their voxel buffers (cells with halo, RGBA
+    // voxel cells) within half the device's memory; a larger group takes
+    // its turns in parts (one case alone, if need be, as before).
+    const std::uint64_t budget = std::max<std::uint64_t>(dev.info().global_mem_bytes / 2, 1);
+    struct Variant {
+      int64_t pes;
+      int sweeps;
+      bool skip_pes;
+    };
     for (const Loaded& L : vols)
       for (const int64_t size : o.sizes)
         for (const int64_t order : o.orders)
           for (const Comp& c : comps) {
-            std::vector<Harness::Running> group;
+            std::vector<Variant> variants;
             for (const int64_t pes : o.pes)
               for (const int64_t sweeps : o.sweeps)
                 for (const bool skip_pes : o.skip_pes)
-                  group.push_back(h.start_case(L, static_cast<int>(size), static_cast<int>(order),
-                                               c, pes, static_cast<int>(sweeps), skip_pes));
-            for (int r = 0; r < o.repeat; ++r)
-              for (Harness::Running& run : group) h.frame(run);
-            for (Harness::Running& run : group) h.finish_case(run);
+                  variants.push_back({pes, static_cast<int>(sweeps), skip_pes});
+            std::size_t next = 0;
+            while (next < variants.size()) {
+              std::vector<Harness::Running> group;
+              std::uint64_t bytes = 0;
+              while (next < variants.size()) {
+                const Variant& v = variants[next];
+                std::uint64_t need = 0;
+                try {
+                  const CellLayout cl = make_cell_layout(L.vol->dims(), v.pes, 1);
+                  need = cl.bytes() + make_voxel_layout(cl).bytes();
+                } catch (const std::exception&) {  // start_case reports it
+                }
+                if (!group.empty() && bytes + need > budget) break;
+                bytes += need;
+                group.push_back(h.start_case(L, static_cast<int>(size), static_cast<int>(order), c,
+                                             v.pes, v.sweeps, v.skip_pes));
+                ++next;
+              }
+              for (int r = 0; r < o.repeat; ++r)
+                for (Harness::Running& run : group) h.frame(run);
+              for (Harness::Running& run : group) h.finish_case(run);
+            }
           }
-
     std::printf(
         "(first: the warm-up frame, with fresh buffers and any program builds; util: mean / max "
         "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B (the JSON adds "
