@@ -57,6 +57,17 @@ int64_t count_with_bit(const SwapRect& h, const PixelBit& bit, int b) {
   return (b ? set : along - set) * other;
 }
 
+// The values x = r (mod 2^l) of [lo, hi): first and count (count 0: first =
+// lo). x mod 2^l is x & (2^l - 1) for any x in two's complement.
+StridedRange pow2_range(int64_t lo, int64_t hi, int l, int64_t residue) {
+  const int64_t m = (int64_t(1) << l) - 1;
+  StridedRange r;
+  r.first = lo + (((residue & m) - (lo & m)) & m);
+  r.count = r.first < hi ? ((hi - 1 - r.first) >> l) + 1 : 0;
+  if (r.count == 0) r.first = lo;
+  return r;
+}
+
 }  // namespace
 
 SwapLayout parse_swap_layout(std::string_view s, const std::string& argument) {
@@ -83,19 +94,11 @@ bool SwapRect::contains(int64_t x, int64_t y) const {
 
 StridedRange strided_range(int64_t lo, int64_t hi, int64_t stride, int64_t residue) {
   if (stride < 1) throw ArgumentError("stride", "must be positive");
+  // A power of two (every stride of plan_swap): masks and shifts; the same
+  // results as the general path below (tested).
+  if ((stride & (stride - 1)) == 0)
+    return pow2_range(lo, hi, std::countr_zero(static_cast<uint64_t>(stride)), residue);
   StridedRange r;
-  if ((stride & (stride - 1)) == 0) {
-    // A power of two (every stride of plan_swap): x mod stride is x & m for
-    // any x in two's complement, and the divisions are shifts; the same
-    // results as the general path below (tested).
-    const int64_t m = stride - 1;
-    r.first = lo + (((residue & m) - (lo & m)) & m);
-    r.count = r.first < hi
-                  ? ((hi - 1 - r.first) >> std::countr_zero(static_cast<uint64_t>(stride))) + 1
-                  : 0;
-    if (r.count == 0) r.first = lo;
-    return r;
-  }
   const int64_t rr = ((residue % stride) + stride) % stride;
   const int64_t lm = ((lo % stride) + stride) % stride;
   r.first = lo + ((rr - lm) % stride + stride) % stride;
@@ -201,11 +204,9 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
     held.resize(static_cast<std::size_t>(P));
     off.resize(static_cast<std::size_t>(P + 1));
     off[0] = 0;
-    // Cut-and-stack: per axis the values x = v (mod 2^j) of [lo, hi), v <
-    // 2^j: the first is lo + ((v - lo) mod 2^j) (strided_range's power-of-two
-    // path). Hierarchical: the block [v, v + 2^(B - j)) clipped to [lo, hi).
+    // Cut-and-stack: per axis the values x = v (mod 2^j) of [lo, hi).
+    // Hierarchical: the block [v, v + 2^(B - j)) clipped to [lo, hi).
     const int32_t lx = cut ? j[0] : 0, ly = cut ? j[1] : 0;
-    const int64_t mx = (int64_t(1) << lx) - 1, my = (int64_t(1) << ly) - 1;
     const int64_t bx = cut ? 0 : int64_t(1) << (B[0] - j[0]);
     const int64_t by = cut ? 0 : int64_t(1) << (B[1] - j[1]);
     const int64_t* vx = v[0].data();
@@ -216,28 +217,22 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
     for (int64_t p = 0; p < P; ++p) {
       const Box2 f = F[static_cast<std::size_t>(p)];
       SwapRect r;
-      r.sx = static_cast<int32_t>(mx + 1);
-      r.sy = static_cast<int32_t>(my + 1);
+      r.sx = int32_t(1) << lx;
+      r.sy = int32_t(1) << ly;
       r.lx = lx;
       r.ly = ly;
       if (f.x0 < f.x1 && f.y0 < f.y1) {
-        int64_t x0, y0, nx, ny;
-        if (cut) {
-          x0 = f.x0 + ((vx[p] - f.x0) & mx);
-          y0 = f.y0 + ((vy[p] - f.y0) & my);
-          nx = x0 < f.x1 ? ((f.x1 - 1 - x0) >> lx) + 1 : 0;
-          ny = y0 < f.y1 ? ((f.y1 - 1 - y0) >> ly) + 1 : 0;
-        } else {
-          x0 = std::max(f.x0, vx[p]);
-          y0 = std::max(f.y0, vy[p]);
-          nx = std::max<int64_t>(0, std::min(f.x1, vx[p] + bx) - x0);
-          ny = std::max<int64_t>(0, std::min(f.y1, vy[p] + by) - y0);
-        }
-        if (nx > 0 && ny > 0) {
-          r.x0 = static_cast<int32_t>(x0);
-          r.y0 = static_cast<int32_t>(y0);
-          r.nx = static_cast<int32_t>(nx);
-          r.ny = static_cast<int32_t>(ny);
+        const StridedRange rx =
+            cut ? pow2_range(f.x0, f.x1, lx, vx[p])
+                : pow2_range(std::max(f.x0, vx[p]), std::min(f.x1, vx[p] + bx), 0, 0);
+        const StridedRange ry =
+            cut ? pow2_range(f.y0, f.y1, ly, vy[p])
+                : pow2_range(std::max(f.y0, vy[p]), std::min(f.y1, vy[p] + by), 0, 0);
+        if (rx.count > 0 && ry.count > 0) {
+          r.x0 = static_cast<int32_t>(rx.first);
+          r.y0 = static_cast<int32_t>(ry.first);
+          r.nx = static_cast<int32_t>(rx.count);
+          r.ny = static_cast<int32_t>(ry.count);
         }
       }
       h[p] = r;
