@@ -27,6 +27,15 @@ using namespace simdvol;
 
 namespace {
 
+// For the uint64_t options: CLI11 would wrap "-1" round to 2^64 - 1.
+const CLI::Validator kNotNegative(
+    [](std::string& v) {
+      const auto first = v.find_first_not_of(" \t");
+      return first != std::string::npos && v[first] == '-' ? "must not be negative (got " + v + ")"
+                                                           : std::string();
+    },
+    "", "not negative");
+
 std::vector<std::string> split(const std::string& s, char sep) {
   std::vector<std::string> out;
   std::stringstream ss(s);
@@ -86,7 +95,8 @@ struct VolumeArgs {
     app->add_option("--raw-endian", raw_endian, "raw volumes: little or big")
         ->capture_default_str();
     app->add_option("--raw-spacing", raw_spacing, "raw volumes: SX,SY,SZ (default 1,1,1)");
-    app->add_option("--raw-header", raw_header, "raw volumes: bytes to skip before the voxels");
+    app->add_option("--raw-header", raw_header, "raw volumes: bytes to skip before the voxels")
+        ->check(kNotNegative);
   }
 
   Volume load() const {
@@ -164,7 +174,9 @@ int main(int argc, char** argv) {
   render->add_option("--order", order, "interpolation order 0..3 (Aitken)")->capture_default_str();
   render->add_option("--composite", composite, "direct, adaptive or mc")->capture_default_str();
   render->add_option("--samples", samples, "Monte Carlo walks per ray")->capture_default_str();
-  render->add_option("--seed", seed, "Monte Carlo seed")->capture_default_str();
+  render->add_option("--seed", seed, "Monte Carlo seed")
+      ->check(kNotNegative)
+      ->capture_default_str();
   render->add_option("--streams", streams, "Monte Carlo random streams: per-ray or shared")
       ->capture_default_str();
   render->add_option("--threshold", threshold, "adaptive termination opacity")

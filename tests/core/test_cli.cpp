@@ -147,6 +147,9 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --layout spiral -o " + path("x.png"), "--layout"},
       {"render --balance-sweeps 65 -o " + path("x.png"), "--balance-sweeps"},
       {"render --balance-sweeps -1 -o " + path("x.png"), "--balance-sweeps"},
+      {"render --composite mc --seed -1 -o " + path("x.png"), "--seed"},
+      {"render " + path("vol.raw") + " --raw-dims 2,2,2 --raw-header -5 -o " + path("x.png"),
+       "--raw-header"},
       {"render --composite mc --allocate -o " + path("x.png"), "--allocate"},
       {"render --composite mc --mc-stratified -o " + path("x.png"), "--mc-stratified"},
       {"render --engine reference --composite mc --mc-scope subray -o " + path("x.png"),
@@ -160,6 +163,7 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"phantom shepp-logan --size 0 -o " + path("c.nrrd"), "--size"},
   };
   std::ofstream(dir_ / "vol.xyz") << "junk";
+  std::ofstream(dir_ / "vol.raw") << "12345678";
   for (const Case& c : cases) {
     const Result r = run(c.args);
     EXPECT_NE(r.code, 0) << c.args;
