@@ -2,14 +2,10 @@
 #include "bench_common.hpp"
 
 #include <algorithm>
-#include <charconv>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
-#include <sstream>
 #include <thread>
-
-#include "simdvol/error.hpp"
 
 namespace simdvol::bench {
 
@@ -71,46 +67,6 @@ HostInfo host_info(const Device& device) {
       h.platform_version = v.c_str();  // drop a trailing NUL
   }
   return h;
-}
-
-int64_t parse_int(const std::string& s, const std::string& option) {
-  int64_t v = 0;
-  const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
-  if (s.empty() || r.ec != std::errc() || r.ptr != s.data() + s.size())
-    throw ArgumentError(option, "'" + s + "' is not an integer");
-  return v;
-}
-
-double parse_double(const std::string& s, const std::string& option) {
-  char* end = nullptr;
-  const double v = std::strtod(s.c_str(), &end);
-  if (s.empty() || end != s.c_str() + s.size())
-    throw ArgumentError(option, "'" + s + "' is not a number");
-  return v;
-}
-
-std::vector<std::string> split_list(const std::string& s, const std::string& option) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string tok; std::getline(ss, tok, ',');) {
-    if (tok.empty()) throw ArgumentError(option, "empty item in '" + s + "'");
-    out.push_back(tok);
-  }
-  if (out.empty() || s.back() == ',') throw ArgumentError(option, "empty list '" + s + "'");
-  return out;
-}
-
-std::vector<int64_t> parse_int_list(const std::string& s, const std::string& option, int64_t lo,
-                                    int64_t hi) {
-  std::vector<int64_t> out;
-  for (const std::string& tok : split_list(s, option)) {
-    const int64_t v = parse_int(tok, option);
-    if (v < lo || v > hi)
-      throw ArgumentError(option, std::to_string(v) + " is outside " + std::to_string(lo) + ".." +
-                                      std::to_string(hi));
-    out.push_back(v);
-  }
-  return out;
 }
 
 }  // namespace simdvol::bench

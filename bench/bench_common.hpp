@@ -1,7 +1,7 @@
 // Pieces the benchmark tools share: wall-clock timing, median / min / max
 // over repeats, the host's triad bandwidth, what the machine is (CPU model,
-// OpenCL platform version, POCL_MAX_PTHREAD_COUNT) and strict parsing of
-// option values (ArgumentError naming the option).
+// OpenCL platform version, POCL_MAX_PTHREAD_COUNT) and, from bench_args.hpp,
+// strict parsing of option values (ArgumentError naming the option).
 #pragma once
 
 #include <chrono>
@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_args.hpp"
 #include "simdvol/device.hpp"
 
 namespace simdvol::bench {
@@ -41,15 +42,5 @@ struct HostInfo {
   std::string platform_version;        ///< CL_PLATFORM_VERSION of the device's platform
 };
 HostInfo host_info(const Device& device);
-
-/// Parses a whole decimal integer; ArgumentError(option, "'s' is not an integer").
-int64_t parse_int(const std::string& s, const std::string& option);
-/// Parses a whole number; ArgumentError(option, ...) otherwise.
-double parse_double(const std::string& s, const std::string& option);
-/// Splits a comma-separated list (empty items rejected: ArgumentError).
-std::vector<std::string> split_list(const std::string& s, const std::string& option);
-/// A comma-separated list of integers, each in [lo, hi].
-std::vector<int64_t> parse_int_list(const std::string& s, const std::string& option, int64_t lo,
-                                    int64_t hi);
 
 }  // namespace simdvol::bench

@@ -32,10 +32,10 @@
 #include <cstring>
 #include <filesystem>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <vector>
 
+#include "bench_args.hpp"
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/engine.hpp"
@@ -53,6 +53,8 @@
 #include "simdvol/view.hpp"
 
 using namespace simdvol;
+using simdvol::bench::Args;
+using simdvol::bench::argument_error;
 using Clock = std::chrono::steady_clock;
 
 namespace {
@@ -68,12 +70,55 @@ double ev_ms(const cl::Event& e) {
   return static_cast<double>(event_ns(e)) * 1e-6;
 }
 
-int usage(const char* msg) {
-  std::fprintf(stderr,
-               "%s\nusage: simdvol-bench-frame [--size N] [--pes P] [--order K] [--runs R] "
-               "[--views a,b,c] [--no-reference]\n",
-               msg);
-  return 2;
+constexpr const char* kProgram = "simdvol-bench-frame";
+constexpr const char* kUsage =
+    "usage: simdvol-bench-frame [--size N] [--pes P] [--order K] [--runs R] [--views a,b,c]\n"
+    "                           [--no-reference]\n"
+    "       simdvol-bench-frame --whole [--pes P] [--order K] [--runs R] [--brain PATH]\n"
+    "  N: 8..1024 (the N^3 phantom to N x N); P: a power of two in 1..1048576; K: 0..3;\n"
+    "  R: 1..1000; views: angles phi in -360..360 (degrees)\n";
+
+struct Options {
+  bool whole = false;
+  int size = 256, runs = 5, order = 1;
+  int64_t pes = 8192;
+  bool reference = true;
+  std::vector<double> views{0, 30, 45};
+  std::string brain = "data/brainsmall.den";
+};
+
+Options parse_args(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) o.whole = o.whole || !std::strcmp(argv[i], "--whole");
+  Args args(argc, argv);
+  while (args.next()) {
+    if (args.help()) {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else if (args.is("--whole")) {
+      // seen above: it decides which options apply
+    } else if (args.is("--pes")) {
+      o.pes = args.pes();
+    } else if (args.is("--order")) {
+      o.order = static_cast<int>(args.integer(0, 3));
+    } else if (args.is("--runs")) {
+      o.runs = static_cast<int>(args.integer(1, 1000));
+    } else if (args.is("--brain")) {
+      if (!o.whole) throw ArgumentError(args.option(), "only used with --whole");
+      o.brain = args.value();
+    } else if (args.is("--size") || args.is("--views") || args.is("--no-reference")) {
+      if (o.whole) throw ArgumentError(args.option(), "not used with --whole");
+      if (args.is("--size"))
+        o.size = static_cast<int>(args.integer(8, 1024));
+      else if (args.is("--views"))
+        o.views = args.number_list(-360, 360);
+      else
+        o.reference = false;
+    } else {
+      args.unknown();
+    }
+  }
+  return o;
 }
 
 }  // namespace
@@ -162,57 +207,17 @@ int whole_frames(int64_t pes, int order, int runs, const std::string& brain) {
 }
 
 int main(int argc, char** argv) try {
-  for (int i = 1; i < argc; ++i)
-    if (!std::strcmp(argv[i], "--whole")) {
-      int64_t pes = 8192;
-      int order = 1, runs = 5;
-      std::string brain = "data/brainsmall.den";
-      for (int j = 1; j < argc; ++j) {
-        if (j == i) continue;
-        if (j + 1 >= argc) return usage("bad arguments");
-        if (!std::strcmp(argv[j], "--pes"))
-          pes = std::atoll(argv[++j]);
-        else if (!std::strcmp(argv[j], "--order"))
-          order = std::atoi(argv[++j]);
-        else if (!std::strcmp(argv[j], "--runs"))
-          runs = std::atoi(argv[++j]);
-        else if (!std::strcmp(argv[j], "--brain"))
-          brain = argv[++j];
-        else
-          return usage(("unknown argument " + std::string(argv[j])).c_str());
-      }
-      if (runs < 1 || order < 0 || order > 3) return usage("bad value");
-      return whole_frames(pes, order, runs, brain);
-    }
-  int size = 256, runs = 5, order = 1;
-  int64_t pes = 8192;
-  bool reference = true;
-  std::vector<double> views{0, 30, 45};
-  for (int i = 1; i < argc; ++i) {
-    auto next = [&]() -> const char* {
-      if (i + 1 >= argc) throw ArgumentError(argv[i], "needs a value");
-      return argv[++i];
-    };
-    if (!std::strcmp(argv[i], "--size")) {
-      size = std::atoi(next());
-    } else if (!std::strcmp(argv[i], "--pes")) {
-      pes = std::atoll(next());
-    } else if (!std::strcmp(argv[i], "--order")) {
-      order = std::atoi(next());
-    } else if (!std::strcmp(argv[i], "--runs")) {
-      runs = std::atoi(next());
-    } else if (!std::strcmp(argv[i], "--views")) {
-      views.clear();
-      std::stringstream ss(next());
-      std::string tok;
-      while (std::getline(ss, tok, ',')) views.push_back(std::stod(tok));
-    } else if (!std::strcmp(argv[i], "--no-reference")) {
-      reference = false;
-    } else {
-      return usage(("unknown argument " + std::string(argv[i])).c_str());
-    }
+  Options o;
+  try {
+    o = parse_args(argc, argv);
+  } catch (const ArgumentError& e) {
+    return argument_error(kProgram, e, kUsage);
   }
-  if (size < 2 || runs < 1 || order < 0 || order > 3 || views.empty()) return usage("bad value");
+  if (o.whole) return whole_frames(o.pes, o.order, o.runs, o.brain);
+  const int size = o.size, runs = o.runs, order = o.order;
+  const int64_t pes = o.pes;
+  const bool reference = o.reference;
+  const std::vector<double>& views = o.views;
 
   Device device;
   std::printf("device: %s (%u compute units)\n", device.info().name.c_str(),
@@ -414,6 +419,6 @@ int main(int argc, char** argv) try {
       "rsloc' = occ + order + zero + the fused kernel on their segments; sum' = the three.\n");
   return 0;
 } catch (const std::exception& e) {
-  std::fprintf(stderr, "simdvol-bench-frame: %s\n", e.what());
+  std::fprintf(stderr, "%s: %s\n", kProgram, e.what());
   return 1;
 }

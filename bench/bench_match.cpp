@@ -8,14 +8,16 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
 #include <string>
 #include <vector>
 
+#include "bench_args.hpp"
+#include "simdvol/engine.hpp"
 #include "simdvol/match_cl.hpp"
 
 using namespace simdvol;
+using simdvol::bench::Args;
+using simdvol::bench::argument_error;
 
 namespace {
 
@@ -33,25 +35,36 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
+constexpr const char* kUsage =
+    "usage: simdvol-bench-match [--pes N] [--repeat R] [--sweeps S] [--no-table]\n"
+    "  N: a power of two in 1..1048576; R: 1..1000; S: 0..64 (balance sweeps)\n";
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int64_t pes = 8192;
   int repeat = 5, sweeps = kBalanceSweeps;
   bool table = true;
-  for (int a = 1; a < argc; ++a) {
-    if (!std::strcmp(argv[a], "--pes") && a + 1 < argc)
-      pes = std::atoll(argv[++a]);
-    else if (!std::strcmp(argv[a], "--repeat") && a + 1 < argc)
-      repeat = std::atoi(argv[++a]);
-    else if (!std::strcmp(argv[a], "--sweeps") && a + 1 < argc)
-      sweeps = std::atoi(argv[++a]);
-    else if (!std::strcmp(argv[a], "--no-table"))
-      table = false;
-    else {
-      std::fprintf(stderr, "usage: %s [--pes N] [--repeat R] [--sweeps S] [--no-table]\n", argv[0]);
-      return 2;
+  try {
+    Args args(argc, argv);
+    while (args.next()) {
+      if (args.help()) {
+        std::fputs(kUsage, stdout);
+        return 0;
+      } else if (args.is("--pes")) {
+        pes = args.pes();
+      } else if (args.is("--repeat")) {
+        repeat = static_cast<int>(args.integer(1, 1000));
+      } else if (args.is("--sweeps")) {
+        sweeps = static_cast<int>(args.integer(0, kMaxBalanceSweeps));
+      } else if (args.is("--no-table")) {
+        table = false;
+      } else {
+        args.unknown();
+      }
     }
+  } catch (const ArgumentError& e) {
+    return argument_error("simdvol-bench-match", e, kUsage);
   }
   try {
     Device dev;

@@ -75,44 +75,49 @@ Result time_variant(Device& dev, const std::string& name, int runs, double bytes
   return {name, median(d), median(w), bytes};
 }
 
+constexpr const char* kUsage =
+    "usage: simdvol-bench-shade [--size N] [--pes P] [--runs R] [--classifier NAME]\n"
+    "                           [--no-reference] [--sweep]\n"
+    "  N: 8..1024 (the N^3 phantom); P: a power of two in 1..1048576; R: 1..1000;\n"
+    "  NAME: a classifier preset or file\n";
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int size = 256, runs = 7;
   int64_t pes = 8192;
   std::string cname = "ct";
+  Classifier cls;
   bool reference = true, sweep = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", a.c_str());
-        std::exit(2);
+  try {
+    Args args(argc, argv);
+    while (args.next()) {
+      if (args.help()) {
+        std::fputs(kUsage, stdout);
+        return 0;
+      } else if (args.is("--size")) {
+        size = static_cast<int>(args.integer(8, 1024));
+      } else if (args.is("--pes")) {
+        pes = args.pes();
+      } else if (args.is("--runs")) {
+        runs = static_cast<int>(args.integer(1, 1000));
+      } else if (args.is("--classifier")) {
+        cname = args.value();
+      } else if (args.is("--no-reference")) {
+        reference = false;
+      } else if (args.is("--sweep")) {
+        sweep = true;
+      } else {
+        args.unknown();
       }
-      return argv[++i];
-    };
-    if (a == "--size")
-      size = std::atoi(next().c_str());
-    else if (a == "--pes")
-      pes = std::atoll(next().c_str());
-    else if (a == "--runs")
-      runs = std::atoi(next().c_str());
-    else if (a == "--classifier")
-      cname = next();
-    else if (a == "--no-reference")
-      reference = false;
-    else if (a == "--sweep")
-      sweep = true;
-    else {
-      std::fprintf(stderr,
-                   "usage: simdvol-bench-shade [--size N] [--pes P] [--runs R] "
-                   "[--classifier NAME] [--no-reference] [--sweep]\n");
-      return 2;
     }
-  }
-  if (size < 2 || runs < 1) {
-    std::fprintf(stderr, "bad --size or --runs\n");
-    return 2;
+    try {  // a preset or a file, loaded now rather than after the device starts
+      cls = classifier_from_spec(cname);
+    } catch (const std::exception& e) {
+      throw ArgumentError("--classifier", e.what());
+    }
+  } catch (const ArgumentError& e) {
+    return argument_error("simdvol-bench-shade", e, kUsage);
   }
   try {
     Device dev;
@@ -125,7 +130,6 @@ int main(int argc, char** argv) {
     const double voxels = static_cast<double>(vol.voxel_count());
     const ViewGeometry view = make_view(vol, {30, 45, 10}, size, size, Sampling::voxel);
     const ShadeParams shp{};
-    const Classifier cls = classifier_from_spec(cname);
     const sv_shade_params sp = shade_params(make_shade_frame(vol, view, shp), shp);
     const bool relative = cls.kind == Classifier::Kind::mixture && cls.mixture.relative;
     const sv_classify_params cp =

@@ -132,6 +132,12 @@ void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layo
   std::printf("\n");
 }
 
+constexpr const char* kUsage =
+    "usage: simdvol-bench-swap [--size N] [--pes P] [--order K] [--runs R]\n"
+    "                          [--layout cut-and-stack|hierarchical] [--brain PATH]\n"
+    "                          [--no-reference] [--comm-only] [--swap-only]\n"
+    "  N: 8..1024 (the N^3 phantom); P: a power of two in 1..1048576; K: 0..3; R: 1..1000\n";
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -140,39 +146,36 @@ int main(int argc, char** argv) {
   bool reference = true, comm_only = false, swap_only = false;
   SwapLayout layout = SwapLayout::cut_and_stack;
   std::string brain = std::string(SIMDVOL_BENCH_DATA_DIR) + "/brainsmall.den";
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "missing value for %s\n", a.c_str());
-        std::exit(2);
+  try {
+    Args args(argc, argv);
+    while (args.next()) {
+      if (args.help()) {
+        std::fputs(kUsage, stdout);
+        return 0;
+      } else if (args.is("--size")) {
+        size = static_cast<int>(args.integer(8, 1024));
+      } else if (args.is("--pes")) {
+        pes = args.pes();
+      } else if (args.is("--order")) {
+        order = static_cast<int>(args.integer(0, 3));
+      } else if (args.is("--runs")) {
+        runs = static_cast<int>(args.integer(1, 1000));
+      } else if (args.is("--layout")) {
+        layout = parse_swap_layout(args.value(), args.option());
+      } else if (args.is("--brain")) {
+        brain = args.value();
+      } else if (args.is("--no-reference")) {
+        reference = false;
+      } else if (args.is("--comm-only")) {
+        comm_only = true;
+      } else if (args.is("--swap-only")) {
+        swap_only = true;
+      } else {
+        args.unknown();
       }
-      return argv[++i];
-    };
-    if (a == "--size")
-      size = std::stoi(next());
-    else if (a == "--pes")
-      pes = std::stoll(next());
-    else if (a == "--order")
-      order = std::stoi(next());
-    else if (a == "--runs")
-      runs = std::stoi(next());
-    else if (a == "--layout")
-      layout = parse_swap_layout(next());
-    else if (a == "--brain")
-      brain = next();
-    else if (a == "--no-reference")
-      reference = false;
-    else if (a == "--comm-only")
-      comm_only = true;
-    else if (a == "--swap-only")
-      swap_only = true;
-    else {
-      std::fprintf(stderr,
-                   "usage: simdvol-bench-swap [--size N] [--pes P] [--order K] [--runs R] "
-                   "[--layout L] [--brain PATH] [--no-reference] [--comm-only] [--swap-only]\n");
-      return 2;
     }
+  } catch (const ArgumentError& e) {
+    return argument_error("simdvol-bench-swap", e, kUsage);
   }
   try {
     const auto tv = Clock::now();

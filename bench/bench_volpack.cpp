@@ -36,10 +36,10 @@
 #include <map>
 #include <memory>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <vector>
 
+#include "bench_args.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/engine.hpp"
 #include "simdvol/error.hpp"
@@ -49,6 +49,9 @@
 #include "volpack_peer.hpp"
 
 using namespace simdvol;
+using simdvol::bench::Args;
+using simdvol::bench::argument_error;
+using simdvol::bench::check_output_file;
 namespace vp = simdvol::volpack;
 using Clock = std::chrono::steady_clock;
 
@@ -88,14 +91,6 @@ double min_of(const std::vector<double>& v) {
   return v.empty() ? std::nan("") : *std::min_element(v.begin(), v.end());
 }
 
-std::vector<int> parse_ints(const std::string& s) {
-  std::vector<int> out;
-  std::stringstream ss(s);
-  std::string tok;
-  while (std::getline(ss, tok, ',')) out.push_back(std::atoi(tok.c_str()));
-  return out;
-}
-
 std::string json_num(double x) {
   if (!std::isfinite(x)) return "null";
   char b[64];
@@ -111,15 +106,13 @@ std::string json_str(const std::string& s) {
   return o + "\"";
 }
 
-int usage(const char* msg) {
-  std::fprintf(stderr,
-               "%s\nusage: simdvol-bench-volpack [--data FILE] [--sizes 256,512] [--runs N] "
-               "[--ref-runs N] [--bf-runs N] [--turntable F] [--order K] [--cl-order K] "
-               "[--pes P] [--no-opencl] [--no-brute-force] [--no-matched] [--pixel-centre C] "
-               "[--json FILE] [--write-images DIR] [--quick]\n",
-               msg);
-  return 2;
-}
+constexpr const char* kUsage =
+    "usage: simdvol-bench-volpack [--data FILE] [--sizes 256,512] [--runs N] [--ref-runs N]\n"
+    "                             [--bf-runs N] [--turntable F] [--order K] [--cl-order K]\n"
+    "                             [--pes P] [--no-opencl] [--no-brute-force] [--no-matched]\n"
+    "                             [--pixel-centre C] [--json FILE] [--write-images DIR] [--quick]\n"
+    "  sizes: 8..4096; runs: 0..1000 (0: the warm-up render only); F: 1..720 frames;\n"
+    "  K: 0..3; P: a power of two in 1..1048576; C: 0..1 (pixels)\n";
 
 // Times `render` (returning an image): one warm-up call (its time kept as
 // the cold time, its image returned), then `runs` timed calls.
@@ -147,58 +140,58 @@ int main(int argc, char** argv) try {
   bool opencl = true, brute = true, matched = true;
   double pixel_centre = 0.0;
   std::optional<std::filesystem::path> json, images;
-  for (int i = 1; i < argc; ++i) {
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw ArgumentError(argv[i], "needs a value");
-      return argv[++i];
-    };
-    const std::string a = argv[i];
-    if (a == "--data") {
-      data = next();
-    } else if (a == "--sizes") {
-      sizes = parse_ints(next());
-    } else if (a == "--runs") {
-      runs = std::atoi(next().c_str());
-    } else if (a == "--ref-runs") {
-      ref_runs = std::atoi(next().c_str());
-    } else if (a == "--bf-runs") {
-      bf_runs = std::atoi(next().c_str());
-    } else if (a == "--turntable") {
-      frames = std::atoi(next().c_str());
-    } else if (a == "--order") {
-      order = std::atoi(next().c_str());
-    } else if (a == "--cl-order") {
-      cl_order = std::atoi(next().c_str());
-    } else if (a == "--pes") {
-      pes = std::atoll(next().c_str());
-    } else if (a == "--no-opencl") {
-      opencl = false;
-    } else if (a == "--no-brute-force") {
-      brute = false;
-    } else if (a == "--no-matched") {
-      matched = false;
-    } else if (a == "--pixel-centre") {
-      pixel_centre = std::atof(next().c_str());
-    } else if (a == "--json") {
-      json = next();
-    } else if (a == "--write-images") {
-      images = next();
-    } else if (a == "--quick") {
-      sizes = {256};
-      runs = 2;
-      ref_runs = 1;
-      bf_runs = 1;
-    } else if (a == "--help" || a == "-h") {
-      return usage("simdvol-bench-volpack: VolPack beside simdvol on brainsmall.den");
-    } else {
-      return usage(("unknown argument " + a).c_str());
+  try {
+    Args args(argc, argv);
+    while (args.next()) {
+      if (args.help()) {
+        std::printf("simdvol-bench-volpack: VolPack beside simdvol on brainsmall.den\n%s", kUsage);
+        return 0;
+      } else if (args.is("--data")) {
+        data = args.value();
+        if (!std::filesystem::exists(data))
+          throw ArgumentError(args.option(), "'" + data.string() + "' does not exist");
+      } else if (args.is("--sizes")) {
+        sizes.clear();
+        for (int64_t v : args.int_list(8, 4096)) sizes.push_back(static_cast<int>(v));
+      } else if (args.is("--runs")) {
+        runs = static_cast<int>(args.integer(0, 1000));
+      } else if (args.is("--ref-runs")) {
+        ref_runs = static_cast<int>(args.integer(0, 1000));
+      } else if (args.is("--bf-runs")) {
+        bf_runs = static_cast<int>(args.integer(0, 1000));
+      } else if (args.is("--turntable")) {
+        frames = static_cast<int>(args.integer(1, 720));
+      } else if (args.is("--order")) {
+        order = static_cast<int>(args.integer(0, 3));
+      } else if (args.is("--cl-order")) {
+        cl_order = static_cast<int>(args.integer(0, 3));
+      } else if (args.is("--pes")) {
+        pes = args.pes();
+      } else if (args.is("--no-opencl")) {
+        opencl = false;
+      } else if (args.is("--no-brute-force")) {
+        brute = false;
+      } else if (args.is("--no-matched")) {
+        matched = false;
+      } else if (args.is("--pixel-centre")) {
+        pixel_centre = args.number(0, 1);
+      } else if (args.is("--json")) {
+        json = args.value();
+        check_output_file(*json, args.option());
+      } else if (args.is("--write-images")) {
+        images = args.value();
+      } else if (args.is("--quick")) {
+        sizes = {256};
+        runs = 2;
+        ref_runs = 1;
+        bf_runs = 1;
+      } else {
+        args.unknown();
+      }
     }
+  } catch (const ArgumentError& e) {
+    return argument_error("simdvol-bench-volpack", e, kUsage);
   }
-  if (sizes.empty() || runs < 0 || ref_runs < 0 || bf_runs < 0 || frames < 1 || order < 0 ||
-      order > 3 || cl_order < 0 || cl_order > 3)
-    return usage("bad value");
-  for (int s : sizes)
-    if (s < 8 || s > 4096) return usage("sizes must lie in 8..4096");
   if (images) std::filesystem::create_directories(*images);
 
   const Volume vol = load_volume(data);

@@ -35,10 +35,10 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <vector>
 
+#include "bench_args.hpp"
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/io.hpp"
@@ -59,6 +59,8 @@
 #endif
 
 using namespace simdvol;
+using simdvol::bench::Args;
+using simdvol::bench::argument_error;
 
 namespace {
 
@@ -169,13 +171,11 @@ void plot(const std::vector<Row>& rows, const std::vector<std::string>& datasets
   write_image(im, path);
 }
 
-int usage(const char* msg) {
-  std::fprintf(stderr,
-               "%s\nusage: simdvol-repro-fig7 --out DIR [--brain PATH] [--pes P] [--size N] "
-               "[--view theta,phi,varphi] [--seed S] [--order K]\n",
-               msg);
-  return 2;
-}
+constexpr const char* kUsage =
+    "usage: simdvol-repro-fig7 --out DIR [--brain PATH] [--pes P] [--size N]\n"
+    "                          [--view theta,phi,varphi] [--seed S] [--order K]\n"
+    "  P: a power of two in 1..1048576; N: 8..1024 (the N^3 phantom); view: three angles\n"
+    "  in -360..360 (degrees); S: 0..18446744073709551615; K: 0..3\n";
 
 }  // namespace
 
@@ -185,34 +185,39 @@ int main(int argc, char** argv) try {
   int size = 256, order = 1;
   uint64_t seed = 1;
   ViewAngles angles{20, 30, 0};
-  for (int i = 1; i < argc; ++i) {
-    auto next = [&]() -> const char* {
-      if (i + 1 >= argc) throw ArgumentError(argv[i], "needs a value");
-      return argv[++i];
-    };
-    if (!std::strcmp(argv[i], "--out")) {
-      out = next();
-    } else if (!std::strcmp(argv[i], "--brain")) {
-      brain = next();
-    } else if (!std::strcmp(argv[i], "--pes")) {
-      pes = std::atoll(next());
-    } else if (!std::strcmp(argv[i], "--size")) {
-      size = std::atoi(next());
-    } else if (!std::strcmp(argv[i], "--order")) {
-      order = std::atoi(next());
-    } else if (!std::strcmp(argv[i], "--seed")) {
-      seed = std::strtoull(next(), nullptr, 10);
-    } else if (!std::strcmp(argv[i], "--view")) {
-      std::stringstream ss(next());
-      char c1 = 0, c2 = 0;
-      ss >> angles.theta >> c1 >> angles.phi >> c2 >> angles.varphi;
-      if (!ss || c1 != ',' || c2 != ',') return usage("--view needs theta,phi,varphi");
-    } else {
-      return usage(("unknown argument " + std::string(argv[i])).c_str());
+  try {
+    Args args(argc, argv);
+    while (args.next()) {
+      if (args.help()) {
+        std::fputs(kUsage, stdout);
+        return 0;
+      } else if (args.is("--out")) {
+        out = args.value();
+      } else if (args.is("--brain")) {
+        brain = args.value();
+      } else if (args.is("--pes")) {
+        pes = args.pes();
+      } else if (args.is("--size")) {
+        size = static_cast<int>(args.integer(8, 1024));
+      } else if (args.is("--order")) {
+        order = static_cast<int>(args.integer(0, 3));
+      } else if (args.is("--seed")) {
+        seed = args.uint64();
+      } else if (args.is("--view")) {
+        const std::vector<double> v = args.number_list(-360, 360);
+        if (v.size() != 3)
+          throw ArgumentError(args.option(), "needs three angles theta,phi,varphi, got " +
+                                                 std::to_string(v.size()));
+        angles = {v[0], v[1], v[2]};
+      } else {
+        args.unknown();
+      }
     }
+    if (out.empty())
+      throw ArgumentError("--out", "the output directory (for fig7.csv and fig7.png) is required");
+  } catch (const ArgumentError& e) {
+    return argument_error("simdvol-repro-fig7", e, kUsage);
   }
-  if (out.empty()) return usage("--out is required");
-  if (size < 2 || order < 0 || order > 3) return usage("bad value");
   std::filesystem::create_directories(out);
 
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // progress lines when redirected

@@ -15,15 +15,18 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
+#include "bench_args.hpp"
 #include "simdvol/costmodel.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/mismatch.hpp"
 
 using namespace simdvol;
+using simdvol::bench::Args;
+using simdvol::bench::argument_error;
+using simdvol::bench::check_output_file;
 
 namespace {
 
@@ -102,13 +105,12 @@ std::string mark(int64_t computed, int64_t printed) {
   return computed == printed ? grouped(printed) : grouped(printed) + " **(slip)**";
 }
 
-int usage(const char* msg) {
-  std::fprintf(stderr,
-               "%s\nusage: simdvol-repro-tables [--size N] [--image N] [--pes P] [--order K] "
-               "[--sweeps S] [--views A,B,...] [--markdown FILE]\n",
-               msg);
-  return 2;
-}
+constexpr const char* kUsage =
+    "usage: simdvol-repro-tables [--size N] [--image N] [--pes P] [--order K] [--sweeps S]\n"
+    "                            [--views A,B,...] [--markdown FILE]\n"
+    "  size: 1..1024 (N^3 volume); image: 1..4096 (N x N); P: a power of two in\n"
+    "  1..1048576; K: 0..1 (the orders the cost model counts); S: 0..64 (balance sweeps);\n"
+    "  views: angles phi in -360..360 (degrees)\n";
 
 }  // namespace
 
@@ -117,51 +119,35 @@ int main(int argc, char** argv) try {
   int64_t pes = 8192;
   std::vector<double> views{0, 30, 45};
   std::string markdown;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw ArgumentError(a, "needs a value");
-      return argv[++i];
-    };
-    auto integer = [&](int lo, int hi) {
-      const std::string v = next();
-      char* end = nullptr;
-      const long n = std::strtol(v.c_str(), &end, 10);
-      if (v.empty() || *end || n < lo || n > hi)
-        throw ArgumentError(a, "expected an integer in [" + std::to_string(lo) + ", " +
-                                   std::to_string(hi) + "], got '" + v + "'");
-      return static_cast<int>(n);
-    };
-    if (a == "--size")
-      size = integer(1, 1024);
-    else if (a == "--image")
-      image = integer(1, 4096);
-    else if (a == "--pes")
-      pes = integer(1, 1 << 20);
-    else if (a == "--order")
-      order = integer(0, 1);
-    else if (a == "--sweeps")
-      sweeps = integer(0, 64);
-    else if (a == "--views") {
-      views.clear();
-      std::stringstream ss(next());
-      std::string item;
-      while (std::getline(ss, item, ',')) {
-        char* end = nullptr;
-        const double v = std::strtod(item.c_str(), &end);
-        if (item.empty() || *end || !std::isfinite(v))
-          throw ArgumentError("--views", "expected comma-separated angles, got '" + item + "'");
-        views.push_back(v);
+  try {
+    Args args(argc, argv);
+    while (args.next()) {
+      if (args.help()) {
+        std::printf("simdvol-repro-tables: thesis Tables 7.1, 7.2 and the frame cost model\n%s",
+                    kUsage);
+        return 0;
+      } else if (args.is("--size")) {
+        size = static_cast<int>(args.integer(1, 1024));
+      } else if (args.is("--image")) {
+        image = static_cast<int>(args.integer(1, 4096));
+      } else if (args.is("--pes")) {
+        pes = args.pes();
+      } else if (args.is("--order")) {
+        order = static_cast<int>(args.integer(0, 1));
+      } else if (args.is("--sweeps")) {
+        sweeps = static_cast<int>(args.integer(0, 64));  // kMaxBalanceSweeps (engine.hpp)
+      } else if (args.is("--views")) {
+        views = args.number_list(-360, 360);
+      } else if (args.is("--markdown")) {
+        markdown = args.value();
+        check_output_file(markdown, args.option());
+      } else {
+        args.unknown();
       }
-      if (views.empty()) throw ArgumentError("--views", "needs at least one angle");
-    } else if (a == "--markdown")
-      markdown = next();
-    else if (a == "--help" || a == "-h")
-      return usage("simdvol-repro-tables: thesis Tables 7.1, 7.2 and the frame cost model");
-    else
-      return usage(("unknown argument " + a).c_str());
+    }
+  } catch (const ArgumentError& e) {
+    return argument_error("simdvol-repro-tables", e, kUsage);
   }
-  pe_grid(pes, "--pes");  // validates
 
   const MachineModel m = decmpp12000();
   Doc doc;

@@ -1,0 +1,147 @@
+// Strict command-line parsing of the bench tools (bench_args.hpp).
+#include "bench_args.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "simdvol/pe_array.hpp"
+
+namespace simdvol::bench {
+
+namespace {
+
+std::string num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
+}
+
+}  // namespace
+
+int64_t parse_int(const std::string& s, const std::string& option) {
+  int64_t v = 0;
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (s.empty() || r.ec != std::errc() || r.ptr != s.data() + s.size())
+    throw ArgumentError(option, "'" + s + "' is not an integer");
+  return v;
+}
+
+int64_t parse_int(const std::string& s, const std::string& option, int64_t lo, int64_t hi) {
+  const int64_t v = parse_int(s, option);
+  if (v < lo || v > hi)
+    throw ArgumentError(option, std::to_string(v) + " is outside " + std::to_string(lo) + ".." +
+                                    std::to_string(hi));
+  return v;
+}
+
+uint64_t parse_uint64(const std::string& s, const std::string& option) {
+  uint64_t v = 0;
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (s.empty() || r.ec != std::errc() || r.ptr != s.data() + s.size())
+    throw ArgumentError(
+        option, "'" + s + "' is not an integer in 0.." + std::to_string(static_cast<uint64_t>(-1)));
+  return v;
+}
+
+double parse_double(const std::string& s, const std::string& option) {
+  double v = 0;
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (s.empty() || r.ec != std::errc() || r.ptr != s.data() + s.size() || !std::isfinite(v))
+    throw ArgumentError(option, "'" + s + "' is not a finite number");
+  return v;
+}
+
+double parse_double(const std::string& s, const std::string& option, double lo, double hi) {
+  const double v = parse_double(s, option);
+  if (!(v >= lo && v <= hi))
+    throw ArgumentError(option, s + " is outside " + num(lo) + ".." + num(hi));
+  return v;
+}
+
+std::vector<std::string> split_list(const std::string& s, const std::string& option) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  for (std::string tok; std::getline(ss, tok, ',');) {
+    if (tok.empty()) throw ArgumentError(option, "empty item in '" + s + "'");
+    out.push_back(tok);
+  }
+  if (out.empty() || s.back() == ',') throw ArgumentError(option, "empty list '" + s + "'");
+  return out;
+}
+
+std::vector<int64_t> parse_int_list(const std::string& s, const std::string& option, int64_t lo,
+                                    int64_t hi) {
+  std::vector<int64_t> out;
+  for (const std::string& tok : split_list(s, option))
+    out.push_back(parse_int(tok, option, lo, hi));
+  return out;
+}
+
+std::vector<double> parse_double_list(const std::string& s, const std::string& option, double lo,
+                                      double hi) {
+  std::vector<double> out;
+  for (const std::string& tok : split_list(s, option))
+    out.push_back(parse_double(tok, option, lo, hi));
+  return out;
+}
+
+int64_t parse_pes(const std::string& s, const std::string& option) {
+  const int64_t v = parse_int(s, option);
+  pe_grid(v, option);  // ArgumentError unless a power of two in 1..kMaxPes
+  return v;
+}
+
+void check_output_file(const std::filesystem::path& file, const std::string& option) {
+  const std::filesystem::path dir = file.has_parent_path() ? file.parent_path() : ".";
+  if (!std::filesystem::is_directory(dir))
+    throw ArgumentError(
+        option, "directory '" + dir.string() + "' of '" + file.string() + "' does not exist");
+}
+
+bool Args::next() {
+  if (++i_ >= argc_) return false;
+  option_ = argv_[i_];
+  return true;
+}
+
+std::string Args::value() {
+  if (i_ + 1 >= argc_) throw ArgumentError(option_, "needs a value");
+  return argv_[++i_];
+}
+
+int64_t Args::integer(int64_t lo, int64_t hi) {
+  return parse_int(value(), option_, lo, hi);
+}
+
+int64_t Args::pes() {
+  return parse_pes(value(), option_);
+}
+
+uint64_t Args::uint64() {
+  return parse_uint64(value(), option_);
+}
+
+double Args::number(double lo, double hi) {
+  return parse_double(value(), option_, lo, hi);
+}
+
+std::vector<int64_t> Args::int_list(int64_t lo, int64_t hi) {
+  return parse_int_list(value(), option_, lo, hi);
+}
+
+std::vector<double> Args::number_list(double lo, double hi) {
+  return parse_double_list(value(), option_, lo, hi);
+}
+
+void Args::unknown() const {
+  throw ArgumentError(option_, "unknown option");
+}
+
+int argument_error(const char* program, const ArgumentError& e, const char* usage) {
+  std::fprintf(stderr, "%s: %s\n%s", program, e.what(), usage);
+  return 2;
+}
+
+}  // namespace simdvol::bench

@@ -1,0 +1,72 @@
+# ctest simdvol_bench_args: every bench tool refuses a bad command line
+# before any device work. Each tool (its path in -D<TOOL>=..., a tool not
+# passed is skipped, as simdvol-bench-volpack is without VolPack) runs with
+# bad arguments: a value out of range, not a number, a trailing garbage
+# integer, a bad list item, a missing value, an unknown option. Each must
+# exit 2 with "<tool>: <option>: <problem>" and the usage line on stderr and
+# nothing on stdout (no device was opened, nothing was measured).
+set(checked 0)
+
+# expect_bad(TOOL OPTION ARG...): runs ${TOOL} ARG... and checks the refusal
+# names OPTION.
+function(expect_bad tool option)
+  if(NOT DEFINED ${tool})
+    return()
+  endif()
+  set(exe ${${tool}})
+  get_filename_component(name ${exe} NAME)
+  execute_process(COMMAND ${exe} ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out
+                  ERROR_VARIABLE err TIMEOUT 30)
+  string(JOIN " " call ${name} ${ARGN})
+  if(NOT rc STREQUAL "2")
+    message(FATAL_ERROR "${call}: exit ${rc}, expected 2\nstdout: ${out}\nstderr: ${err}")
+  endif()
+  string(FIND "${err}" "${name}: ${option}: " at)
+  if(NOT at EQUAL 0)
+    message(FATAL_ERROR "${call}: stderr does not begin with '${name}: ${option}: ':\n${err}")
+  endif()
+  string(FIND "${err}" "usage: ${name}" at)
+  if(at LESS 0)
+    message(FATAL_ERROR "${call}: no usage line on stderr:\n${err}")
+  endif()
+  if(NOT out STREQUAL "")
+    message(FATAL_ERROR "${call}: printed on stdout (work started?):\n${out}")
+  endif()
+  math(EXPR n "${checked} + 1")
+  set(checked ${n} PARENT_SCOPE)
+endfunction()
+
+expect_bad(FRAME --runs --runs 0)
+expect_bad(FRAME --size --size 12abc)
+expect_bad(FRAME --views --views 0,,30)
+expect_bad(FRAME --pes --whole --pes 1000)
+expect_bad(FRAME --frob --frob)
+
+expect_bad(MATCH --repeat --repeat -1)
+expect_bad(MATCH --sweeps --sweeps 65)
+expect_bad(MATCH --pes --pes)
+
+expect_bad(SHADE --runs --runs abc)
+expect_bad(SHADE --size --size 4)
+expect_bad(SHADE --classifier --classifier no-such-classifier)
+
+expect_bad(SWAP --size --size garbage)
+expect_bad(SWAP --order --order 4)
+expect_bad(SWAP --layout --layout diagonal)
+
+expect_bad(VOLPACK --sizes --sizes 256,x)
+expect_bad(VOLPACK --pixel-centre --pixel-centre 1e999)
+expect_bad(VOLPACK --turntable --turntable 0)
+
+expect_bad(FIG7 --seed --out . --seed -3)
+expect_bad(FIG7 --view --out . --view 1,2)
+expect_bad(FIG7 --out --size 64)
+
+expect_bad(TABLES --order --order 2)
+expect_bad(TABLES --views --views 0,nan)
+expect_bad(TABLES --markdown --markdown ${CMAKE_CURRENT_LIST_DIR}/no-such-dir/t.md)
+
+if(checked LESS 20)
+  message(FATAL_ERROR "only ${checked} refusals checked: a tool path is missing")
+endif()
+message(STATUS "${checked} bad command lines refused")
