@@ -1,6 +1,7 @@
 # ctest simdvol_bench_args: every bench tool refuses a bad command line
 # before any device work. Each tool (its path in -D<TOOL>=..., a tool not
-# passed is skipped, as simdvol-bench-volpack is without VolPack) runs with
+# passed is skipped, as simdvol-bench-volpack is without VolPack and
+# simdvol-bench without nlohmann-json) runs with
 # bad arguments: a value out of range, not a number, a trailing garbage
 # integer, a bad list item, a missing value, an unknown option. Each must
 # exit 2 with "<tool>: <option>: <problem>" and the usage line on stderr and
@@ -65,6 +66,10 @@ expect_bad(FIG7 --out --size 64)
 expect_bad(TABLES --order --order 2)
 expect_bad(TABLES --views --views 0,nan)
 expect_bad(TABLES --markdown --markdown ${CMAKE_CURRENT_LIST_DIR}/no-such-dir/t.md)
+
+expect_bad(BENCH --repeat --repeat 3,4)
+expect_bad(BENCH --turntable --turntable 721)
+expect_bad(BENCH --sizes --sizes 256,0)
 
 if(checked LESS 20)
   message(FATAL_ERROR "only ${checked} refusals checked: a tool path is missing")

@@ -239,15 +239,15 @@ Options parse_args(int argc, char** argv) {
       else
         throw ArgumentError(a, "'" + v + "' is not voxel or pixel");
     } else if (a == "--repeat") {
-      repeat = static_cast<int>(parse_int_list(next(), a, 1, 1000)[0]);
+      repeat = static_cast<int>(parse_int(next(), a, 1, 1000));
     } else if (a == "--turntable") {
-      turntable = static_cast<int>(parse_int_list(next(), a, 0, 720)[0]);
+      turntable = static_cast<int>(parse_int(next(), a, 0, 720));
     } else if (a == "--no-reference") {
       o.reference = false;
     } else if (a == "--no-volpack") {
       o.volpack = false;
     } else if (a == "--volpack-runs") {
-      o.volpack_runs = static_cast<int>(parse_int_list(next(), a, 1, 100)[0]);
+      o.volpack_runs = static_cast<int>(parse_int(next(), a, 1, 100));
     } else if (a == "--scaling") {
       o.scaling = parse_int_list(next(), a, 1, 256);
     } else if (a == "--data") {
