@@ -7,6 +7,8 @@
 #include <cmath>
 #include <numbers>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include "simdvol/error.hpp"
 
@@ -107,6 +109,28 @@ void index_range(double centre, double half, int n, int& lo, int& hi) {
   hi = static_cast<int>(std::clamp(f_hi, 0.0, static_cast<double>(n - 1)));
 }
 
+// Runs fn(k0, k1) over slabs [k0, k1) of the z planes 0 .. n - 1, one per
+// thread (up to the hardware's threads, and only for volumes of at least
+// 64^3 voxels: the threads' start costs more below). Each voxel belongs to
+// one slab and sees the same operations in the same order as in one pass,
+// so the volume is the same bit for bit.
+template <class Fn>
+void for_each_slab(int n, Fn fn) {
+  const int threads =
+      n < 64 ? 1 : static_cast<int>(std::clamp(std::thread::hardware_concurrency(), 1u, 16u));
+  if (threads == 1) {
+    fn(0, n);
+    return;
+  }
+  std::vector<std::thread> pool;
+  pool.reserve(static_cast<std::size_t>(threads - 1));
+  for (int t = 1; t < threads; ++t)
+    pool.emplace_back(fn, static_cast<int>(int64_t(n) * t / threads),
+                      static_cast<int>(int64_t(n) * (t + 1) / threads));
+  fn(0, static_cast<int>(n / threads));
+  for (std::thread& th : pool) th.join();
+}
+
 void check_n(int n, const char* what) {
   if (n < 1) throw ArgumentError(what, "grid size must be positive, got " + std::to_string(n));
   checked_voxel_count({n, n, n}, what);
@@ -133,17 +157,19 @@ void add_centre_samples(Volume& vol, int n) {
 
   // Each ellipsoid adds its value over its bounding box only. All values are
   // integers far below 2^24, so float accumulation is exact.
-  for (const Prepared& p : prepared()) {
-    int x0, x1, y0, y1, z0, z1;
-    index_range(p.e.cx, p.half_x, n, x0, x1);
-    index_range(p.e.cy, p.half_y, n, y0, y1);
-    index_range(p.e.cz, p.e.c, n, z0, z1);
-    const float add = static_cast<float>(p.e.add_hu);
-    for (int k = z0; k <= z1; ++k)
-      for (int j = y0; j <= y1; ++j)
-        for (int i = x0; i <= x1; ++i)
-          if (inside(p, coord[i], coord[j], coord[k])) d[vol.index(i, j, k)] += add;
-  }
+  for_each_slab(n, [&](int kb, int ke) {
+    for (const Prepared& p : prepared()) {
+      int x0, x1, y0, y1, z0, z1;
+      index_range(p.e.cx, p.half_x, n, x0, x1);
+      index_range(p.e.cy, p.half_y, n, y0, y1);
+      index_range(p.e.cz, p.e.c, n, z0, z1);
+      const float add = static_cast<float>(p.e.add_hu);
+      for (int k = std::max(z0, kb); k <= std::min(z1, ke - 1); ++k)
+        for (int j = y0; j <= y1; ++j)
+          for (int i = x0; i <= x1; ++i)
+            if (inside(p, coord[i], coord[j], coord[k])) d[vol.index(i, j, k)] += add;
+    }
+  });
 }
 
 // supersample = s > 1: each voxel first accumulates the exact integer
@@ -173,47 +199,54 @@ void add_sub_samples(Volume& vol, int n, int s) {
   const double h = n <= 1 ? 2.0 : 2.0 / (n - 1);
   const double delta = 0.5 * std::sqrt(3.0) * h;
 
-  for (const Prepared& p : prepared()) {
-    int x0, x1, y0, y1, z0, z1;
-    index_range(p.e.cx, p.half_x, n, x0, x1);
-    index_range(p.e.cy, p.half_y, n, y0, y1);
-    index_range(p.e.cz, p.e.c, n, z0, z1);
-    const double t = delta / std::min({p.e.a, p.e.b, p.e.c}) * (1.0 + 1e-9) + 1e-9;
-    const double all_in = t < 1.0 ? (1.0 - t) * (1.0 - t) : -1.0;  // r^2 below: all inside
-    const double all_out = (1.0 + t) * (1.0 + t);                  // r^2 above: none inside
-    const float add = static_cast<float>(p.e.add_hu);
-    const float add_all = static_cast<float>(p.e.add_hu * s3);
-    const double ia = 1.0 / p.e.a, ib = 1.0 / p.e.b, ic = 1.0 / p.e.c;
-    for (int k = z0; k <= z1; ++k) {
-      const double qw = (coord[k] - p.e.cz) * ic;
-      for (int j = y0; j <= y1; ++j) {
-        const double dy = coord[j] - p.e.cy;
-        for (int i = x0; i <= x1; ++i) {
-          const double dx = coord[i] - p.e.cx;
-          const double qu = (p.cos_t * dx + p.sin_t * dy) * ia;
-          const double qv = (-p.sin_t * dx + p.cos_t * dy) * ib;
-          const double r2 = qu * qu + qv * qv + qw * qw;
-          if (r2 > all_out) continue;
-          float& v = d[vol.index(i, j, k)];
-          if (r2 < all_in) {
-            v += add_all;
-            continue;
-          }
-          int count = 0;
-          for (int mz = 0; mz < s; ++mz) {
-            const double z = sub[static_cast<std::size_t>(k) * s + mz];
-            for (int my = 0; my < s; ++my) {
-              const double y = sub[static_cast<std::size_t>(j) * s + my];
-              for (int mx = 0; mx < s; ++mx)
-                count += inside(p, sub[static_cast<std::size_t>(i) * s + mx], y, z);
+  for_each_slab(n, [&](int kb, int ke) {
+    for (const Prepared& p : prepared()) {
+      int x0, x1, y0, y1, z0, z1;
+      index_range(p.e.cx, p.half_x, n, x0, x1);
+      index_range(p.e.cy, p.half_y, n, y0, y1);
+      index_range(p.e.cz, p.e.c, n, z0, z1);
+      z0 = std::max(z0, kb);
+      z1 = std::min(z1, ke - 1);
+      const double t = delta / std::min({p.e.a, p.e.b, p.e.c}) * (1.0 + 1e-9) + 1e-9;
+      const double all_in = t < 1.0 ? (1.0 - t) * (1.0 - t) : -1.0;  // r^2 below: all inside
+      const double all_out = (1.0 + t) * (1.0 + t);                  // r^2 above: none inside
+      const float add = static_cast<float>(p.e.add_hu);
+      const float add_all = static_cast<float>(p.e.add_hu * s3);
+      const double ia = 1.0 / p.e.a, ib = 1.0 / p.e.b, ic = 1.0 / p.e.c;
+      for (int k = z0; k <= z1; ++k) {
+        const double qw = (coord[k] - p.e.cz) * ic;
+        for (int j = y0; j <= y1; ++j) {
+          const double dy = coord[j] - p.e.cy;
+          for (int i = x0; i <= x1; ++i) {
+            const double dx = coord[i] - p.e.cx;
+            const double qu = (p.cos_t * dx + p.sin_t * dy) * ia;
+            const double qv = (-p.sin_t * dx + p.cos_t * dy) * ib;
+            const double r2 = qu * qu + qv * qv + qw * qw;
+            if (r2 > all_out) continue;
+            float& v = d[vol.index(i, j, k)];
+            if (r2 < all_in) {
+              v += add_all;
+              continue;
             }
+            int count = 0;
+            for (int mz = 0; mz < s; ++mz) {
+              const double z = sub[static_cast<std::size_t>(k) * s + mz];
+              for (int my = 0; my < s; ++my) {
+                const double y = sub[static_cast<std::size_t>(j) * s + my];
+                for (int mx = 0; mx < s; ++mx)
+                  count += inside(p, sub[static_cast<std::size_t>(i) * s + mx], y, z);
+              }
+            }
+            v += add * static_cast<float>(count);
           }
-          v += add * static_cast<float>(count);
         }
       }
     }
-  }
-  for (float& v : d) v = static_cast<float>(std::round(static_cast<double>(v) / s3));
+    const std::size_t plane = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
+    for (std::size_t e = plane * static_cast<std::size_t>(kb);
+         e < plane * static_cast<std::size_t>(ke); ++e)
+      d[e] = static_cast<float>(std::round(static_cast<double>(d[e]) / s3));
+  });
 }
 
 }  // namespace
