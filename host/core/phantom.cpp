@@ -5,8 +5,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <new>
 #include <numbers>
 #include <string>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -113,21 +115,23 @@ void index_range(double centre, double half, int n, int& lo, int& hi) {
 // thread (up to the hardware's threads, and only for volumes of at least
 // 64^3 voxels: the threads' start costs more below). Each voxel belongs to
 // one slab and sees the same operations in the same order as in one pass,
-// so the volume is the same bit for bit.
+// so the volume is the same bit for bit. A thread that cannot be started
+// leaves its slab to the calling thread.
 template <class Fn>
 void for_each_slab(int n, Fn fn) {
   const int threads =
       n < 64 ? 1 : static_cast<int>(std::clamp(std::thread::hardware_concurrency(), 1u, 16u));
-  if (threads == 1) {
-    fn(0, n);
-    return;
-  }
+  const auto bound = [&](int t) { return static_cast<int>(int64_t(n) * t / threads); };
   std::vector<std::thread> pool;
-  pool.reserve(static_cast<std::size_t>(threads - 1));
-  for (int t = 1; t < threads; ++t)
-    pool.emplace_back(fn, static_cast<int>(int64_t(n) * t / threads),
-                      static_cast<int>(int64_t(n) * (t + 1) / threads));
-  fn(0, static_cast<int>(n / threads));
+  int started = 1;  // slabs 1 .. started - 1 run on their own threads
+  try {
+    pool.reserve(static_cast<std::size_t>(threads - 1));
+    for (; started < threads; ++started) pool.emplace_back(fn, bound(started), bound(started + 1));
+  } catch (const std::system_error&) {  // no more threads: the rest run here
+  } catch (const std::bad_alloc&) {
+  }
+  fn(0, bound(1));
+  for (int t = started; t < threads; ++t) fn(bound(t), bound(t + 1));
   for (std::thread& th : pool) th.join();
 }
 
