@@ -280,14 +280,17 @@ Volume marschner_lobb(int n) {
   check_n(n, "marschner_lobb size");
   Volume vol({n, n, n}, VoxelType::f32);
   std::vector<float>& d = vol.data();
-  for (int k = 0; k < n; ++k) {
-    const double z = phantom_coord(k, n);
-    for (int j = 0; j < n; ++j) {
-      const double y = phantom_coord(j, n);
-      for (int i = 0; i < n; ++i)
-        d[vol.index(i, j, k)] = static_cast<float>(marschner_lobb_value(phantom_coord(i, n), y, z));
+  for_each_slab(n, [&](int kb, int ke) {
+    for (int k = kb; k < ke; ++k) {
+      const double z = phantom_coord(k, n);
+      for (int j = 0; j < n; ++j) {
+        const double y = phantom_coord(j, n);
+        for (int i = 0; i < n; ++i)
+          d[vol.index(i, j, k)] =
+              static_cast<float>(marschner_lobb_value(phantom_coord(i, n), y, z));
+      }
     }
-  }
+  });
   return vol;
 }
 
