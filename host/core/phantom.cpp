@@ -135,6 +135,22 @@ void for_each_slab(int n, Fn fn) {
   for (std::thread& th : pool) th.join();
 }
 
+// The voxel index ranges [x0, x1] x [y0, y1] x [z0, z1] of ellipsoid p's
+// bounding box on the n^3 grid, z cut to the slab [kb, ke) (empty when
+// z0 > z1).
+struct IndexBox {
+  int x0, x1, y0, y1, z0, z1;
+};
+IndexBox index_box(const Prepared& p, int n, int kb, int ke) {
+  IndexBox b{};
+  index_range(p.e.cx, p.half_x, n, b.x0, b.x1);
+  index_range(p.e.cy, p.half_y, n, b.y0, b.y1);
+  index_range(p.e.cz, p.e.c, n, b.z0, b.z1);
+  b.z0 = std::max(b.z0, kb);
+  b.z1 = std::min(b.z1, ke - 1);
+  return b;
+}
+
 void check_n(int n, const char* what) {
   if (n < 1) throw ArgumentError(what, "grid size must be positive, got " + std::to_string(n));
   checked_voxel_count({n, n, n}, what);
@@ -163,12 +179,9 @@ void add_centre_samples(Volume& vol, int n) {
   // integers far below 2^24, so float accumulation is exact.
   for_each_slab(n, [&](int kb, int ke) {
     for (const Prepared& p : prepared()) {
-      int x0, x1, y0, y1, z0, z1;
-      index_range(p.e.cx, p.half_x, n, x0, x1);
-      index_range(p.e.cy, p.half_y, n, y0, y1);
-      index_range(p.e.cz, p.e.c, n, z0, z1);
+      const auto [x0, x1, y0, y1, z0, z1] = index_box(p, n, kb, ke);
       const float add = static_cast<float>(p.e.add_hu);
-      for (int k = std::max(z0, kb); k <= std::min(z1, ke - 1); ++k)
+      for (int k = z0; k <= z1; ++k)
         for (int j = y0; j <= y1; ++j)
           for (int i = x0; i <= x1; ++i)
             if (inside(p, coord[i], coord[j], coord[k])) d[vol.index(i, j, k)] += add;
@@ -205,12 +218,7 @@ void add_sub_samples(Volume& vol, int n, int s) {
 
   for_each_slab(n, [&](int kb, int ke) {
     for (const Prepared& p : prepared()) {
-      int x0, x1, y0, y1, z0, z1;
-      index_range(p.e.cx, p.half_x, n, x0, x1);
-      index_range(p.e.cy, p.half_y, n, y0, y1);
-      index_range(p.e.cz, p.e.c, n, z0, z1);
-      z0 = std::max(z0, kb);
-      z1 = std::min(z1, ke - 1);
+      const auto [x0, x1, y0, y1, z0, z1] = index_box(p, n, kb, ke);
       const double t = delta / std::min({p.e.a, p.e.b, p.e.c}) * (1.0 + 1e-9) + 1e-9;
       const double all_in = t < 1.0 ? (1.0 - t) * (1.0 - t) : -1.0;  // r^2 below: all inside
       const double all_out = (1.0 + t) * (1.0 + t);                  // r^2 above: none inside
