@@ -34,8 +34,12 @@ cl::Buffer float4_buffer(Device& device, int64_t n, const std::string& what) {
                        nullptr, what);
 }
 
+// swap.cl takes no define, but the host builds it in one program with
+// layout.cl and match.cl (stage_program_source), whose callers define WGS:
+// the same defines here, so that a frame builds that program once.
 cl::Kernel swap_kernel(Device& device, const std::string& name) {
-  return device.kernel("swap", name);
+  static const Defines d{{"WGS", "64"}};
+  return device.kernel("swap", name, d);
 }
 
 }  // namespace

@@ -197,6 +197,42 @@ TEST(DeviceTest, ProgramCacheKeyedBySourceAndOptions) {
   EXPECT_EQ(dev.cached_programs(), 3u);
 }
 
+// layout, match and swap are one program (stage_program_source): the three
+// files in that order after shared and common, the defines once; a frame's
+// kernels of the three stages build it once. Other stages are their own.
+TEST(DeviceTest, FrameStagesShareOneProgram) {
+  SIMDVOL_REQUIRE_OPENCL();
+  EnvGuard env("SIMDVOL_CL_OPTIONS");
+  unsetenv("SIMDVOL_CL_OPTIONS");
+  const Defines d{{"WGS", "64"}};
+  const std::string src = stage_program_source("match", d);
+  EXPECT_EQ(stage_program_source("layout", d), src);
+  EXPECT_EQ(stage_program_source("swap", d), src);
+  EXPECT_EQ(src.rfind(program_source("layout", d), 0), 0u);  // starts with layout's program
+  const std::size_t m = src.find("#line 1 \"match.cl\"\n"), w = src.find("#line 1 \"swap.cl\"\n");
+  ASSERT_NE(m, std::string::npos);
+  ASSERT_NE(w, std::string::npos);
+  EXPECT_LT(m, w);  // swap.cl last: its FP_CONTRACT OFF reaches only itself
+  const auto count = [](const std::string& text, const std::string& what) {
+    std::size_t n = 0;
+    for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1))
+      ++n;
+    return n;
+  };
+  // The defines once (common.cl's #ifndef default is the other WGS line).
+  EXPECT_EQ(count(src, "#define WGS 64"), count(program_source("layout", d), "#define WGS 64"));
+  EXPECT_EQ(count(src, "#line 1 \"common.cl\""), 1u);
+  EXPECT_EQ(stage_program_source("balance", d), program_source("balance", d));
+  EXPECT_EQ(stage_program_source("mc"), program_source("mc"));
+  Device dev;
+  dev.kernel("layout", "simdvol_layout", d);
+  dev.kernel("match", "simdvol_match_rows", d);
+  dev.kernel("swap", "simdvol_swap_stage", d);
+  EXPECT_EQ(dev.cached_programs(), 1u);
+  dev.kernel("balance", "simdvol_balance_round", d);
+  EXPECT_EQ(dev.cached_programs(), 2u);
+}
+
 TEST(DeviceTest, BuildErrorCarriesTheLog) {
   SIMDVOL_REQUIRE_OPENCL();
   Device dev;
@@ -473,9 +509,7 @@ TEST(DeviceTest, ReuseKeepSetsHowLongReleasedBuffersWait) {
     Device::ReuseScope idle(d);
   }
   EXPECT_EQ(d.pooled_bytes(), 1u << 20);
-  {
-    Device::ReuseScope idle(d);
-  }
+  { Device::ReuseScope idle(d); }
   EXPECT_EQ(d.pooled_bytes(), 0u);  // four without it: released
 }
 

@@ -151,6 +151,25 @@ TEST(RenderEngine, OptionsChecked) {
   EXPECT_THROW(render_opencl(dev, vol, opt, eo), ArgumentError);
 }
 
+// A direct frame with the fused shade + classify (as `simdvol render` runs
+// it) builds four programs: layout + match + swap (one program,
+// stage_program_source), shade + classify, balance, resample + local. Each
+// program build costs PoCL about 50 ms, most of a one-shot render's time.
+TEST(RenderEngine, DirectFrameBuildsFourPrograms) {
+  SIMDVOL_TEST_DEVICE(shared);
+  Device dev;  // a fresh program cache (the shared device has the others')
+  const Volume vol = shepp_logan(16, 1);
+  RenderOptions opt;
+  opt.width = opt.height = 16;
+  opt.view = {20, 35, 10};
+  opt.classifier = classifier_preset("ct");
+  EngineOptions eo;
+  eo.pes = 64;
+  eo.fused = true;
+  render_opencl(dev, vol, opt, eo);
+  EXPECT_EQ(dev.cached_programs(), 4u);
+}
+
 TEST(RenderEngine, TurntableEqualsOneShotRenders) {
   SIMDVOL_TEST_DEVICE(dev);
   const Volume vol = shepp_logan(32, 2);

@@ -143,6 +143,13 @@ std::vector<std::string> kernel_files();
 /// common.cl and <stage>.cl, each part preceded by a #line directive naming
 /// its file so that build logs point into the right file.
 std::string program_source(std::string_view stage, const Defines& defines = {});
+/// What Device::program builds for a stage: program_source(stage, defines),
+/// except that layout, match and swap are built together, one program of
+/// program_source("layout", defines) followed by match.cl and swap.cl (each
+/// with its #line directive): a program build costs PoCL about the same
+/// whatever its size, and a frame uses all three. Each file also builds on
+/// its own (program_source).
+std::string stage_program_source(std::string_view stage, const Defines& defines = {});
 
 /// Where Device::build keeps program binaries: $SIMDVOL_CACHE_DIR; nullopt
 /// (not kept) when it is unset, empty or "off". Files are named by a hash
@@ -192,7 +199,7 @@ class Device {
   /// binary on disk (program_cache_dir()). Throws BuildError with the build
   /// log on failure.
   cl::Program build(const std::string& source, const std::string& options = "");
-  /// build(program_source(stage, defines), options).
+  /// build(stage_program_source(stage, defines), options).
   cl::Program program(std::string_view stage, const Defines& defines = {},
                       const std::string& options = "");
   /// A fresh kernel `name` from program(stage, defines, options).
