@@ -280,8 +280,8 @@ std::string program_source(std::string_view stage, const Defines& defines) {
 namespace {
 // Stages the host builds as one program: PoCL spends 40-60 ms on each
 // program build, its cache warm or not and whatever the program's size
-// (these three took 65-69 ms together against 140-190 ms apart, warm), and
-// a frame uses all three. swap.cl last: its FP_CONTRACT OFF pragma holds to
+// (these three and balance.cl took 65-69 ms as one source against 183-205
+// ms apart, warm), and a frame uses all three. swap.cl last: its FP_CONTRACT OFF pragma holds to
 // the end of the program, and layout.cl and match.cl keep the default.
 constexpr std::array<std::string_view, 3> kFrameGroup{"layout", "match", "swap"};
 }  // namespace
