@@ -259,21 +259,26 @@ std::vector<std::string> kernel_files() {
   return names;
 }
 
+namespace {
+// Appends one file of a program: a #line directive naming it, its text, and a
+// final newline if the text lacks one.
+void append_part(std::string& s, std::string_view file, std::string_view text) {
+  s += "#line 1 \"";
+  s += file;
+  s += "\"\n";
+  s += text;
+  if (!text.empty() && text.back() != '\n') s += '\n';
+}
+}  // namespace
+
 std::string program_source(std::string_view stage, const Defines& defines) {
   std::string stage_file = std::string(stage) + ".cl";
   std::string_view stage_text = kernel_file(stage_file);  // throws first if missing
   std::string s;
   for (const auto& [name, value] : defines) s += "#define " + name + " " + value + "\n";
-  auto part = [&](std::string_view file, std::string_view text) {
-    s += "#line 1 \"";
-    s += file;
-    s += "\"\n";
-    s += text;
-    if (!text.empty() && text.back() != '\n') s += '\n';
-  };
-  part("simdvol_shared.h", kernel_file("simdvol_shared.h"));
-  if (stage != "common") part("common.cl", kernel_file("common.cl"));
-  part(stage_file, stage_text);
+  append_part(s, "simdvol_shared.h", kernel_file("simdvol_shared.h"));
+  if (stage != "common") append_part(s, "common.cl", kernel_file("common.cl"));
+  append_part(s, stage_file, stage_text);
   return s;
 }
 
@@ -281,8 +286,9 @@ namespace {
 // Stages the host builds as one program: PoCL spends 40-60 ms on each
 // program build, its cache warm or not and whatever the program's size
 // (these three and balance.cl took 65-69 ms as one source against 183-205
-// ms apart, warm), and a frame uses all three. swap.cl last: its FP_CONTRACT OFF pragma holds to
-// the end of the program, and layout.cl and match.cl keep the default.
+// ms apart, warm), and a frame uses all three. swap.cl last: its
+// FP_CONTRACT OFF pragma holds to the end of the program, and layout.cl and
+// match.cl keep the default.
 constexpr std::array<std::string_view, 3> kFrameGroup{"layout", "match", "swap"};
 }  // namespace
 
@@ -292,10 +298,7 @@ std::string stage_program_source(std::string_view stage, const Defines& defines)
   std::string s = program_source(kFrameGroup[0], defines);
   for (std::size_t i = 1; i < kFrameGroup.size(); ++i) {
     const std::string file = std::string(kFrameGroup[i]) + ".cl";
-    const std::string_view text = kernel_file(file);
-    s += "#line 1 \"" + file + "\"\n";
-    s += text;
-    if (!text.empty() && text.back() != '\n') s += '\n';
+    append_part(s, file, kernel_file(file));
   }
   return s;
 }
