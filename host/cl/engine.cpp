@@ -287,7 +287,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   }
 
   double plan_ms = 0;
-  std::optional<SwapPlan> stats_plan;  // kept for `stats` only
+  bool swapped = false;  // the frame's plan is S.swap_plan.plan (for `stats`)
   std::vector<double> swap_stage_ms;
   cl::Event e_display, e_warp;
   cl::Buffer intermediate, output;
@@ -310,7 +310,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       out = read_device_image(device, output, view.out_width, view.out_height);  // blocking
     }
     for (const cl::Event& e : run.stages) swap_stage_ms.push_back(ms(e));
-    if (stats) stats_plan = plan.plan;
+    swapped = true;
   } else {
     const cl::Buffer& image = S.image.buffer;
     if (view.sampling == Sampling::pixel) {
@@ -351,8 +351,8 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     stats->loads.assign(loads.begin(), loads.end());
     for (int64_t l : stats->loads) stats->samples += l;
     stats->segments = segs.count;
-    stats->swapped = stats_plan.has_value();
-    if (stats_plan) stats->swap = swap_cost(*stats_plan, split, view, grid);
+    stats->swapped = swapped;
+    if (swapped) stats->swap = swap_cost(S.swap_plan.plan, split, view, grid);
   }
   return out;
 }
