@@ -167,8 +167,7 @@ int main(int argc, char** argv) {
                                  const_cast<sv_classify_params*>(&cp), "classify parameters");
     cl::Buffer sbuf = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof sp,
                                  const_cast<sv_shade_params*>(&sp), "shade parameters");
-    const std::string fused_src = program_source("shade", defs) + "\n#line 1 \"classify.cl\"\n" +
-                                  std::string(kernel_file("classify.cl"));
+    const std::string fused_src = program_source("shade", defs, {"classify"});
     cl::Program fused_prog = dev.build(fused_src);
     cl::Kernel k_flat_fused(fused_prog, "simdvol_shade_classify_flat");
     cl::Kernel k_flat_fused16(fused_prog, "simdvol_shade_classify_flat16");

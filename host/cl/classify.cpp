@@ -45,9 +45,7 @@ cl::Buffer params_buffer(Device& device, const void* p, std::size_t bytes, const
 // The fused program: shade.cl followed by classify.cl (which then also
 // compiles simdvol_shade_classify), with the classifier's specialisation.
 cl::Kernel fused_kernel(Device& device, const std::string& name, const Defines& defines) {
-  const std::string source = program_source("shade", defines) + "\n#line 1 \"classify.cl\"\n" +
-                             std::string(kernel_file("classify.cl"));
-  cl::Program program = device.build(source);
+  cl::Program program = device.build(program_source("shade", defines, {"classify"}));
   cl_int err = CL_SUCCESS;
   cl::Kernel k(program, name.c_str(), &err);
   if (err != CL_SUCCESS) throw CLError("clCreateKernel(" + name + ")", err);

@@ -282,6 +282,16 @@ std::string program_source(std::string_view stage, const Defines& defines) {
   return s;
 }
 
+std::string program_source(std::string_view stage, const Defines& defines,
+                           std::initializer_list<std::string_view> then) {
+  std::string s = program_source(stage, defines);
+  for (std::string_view next : then) {
+    const std::string file = std::string(next) + ".cl";
+    append_part(s, file, kernel_file(file));
+  }
+  return s;
+}
+
 namespace {
 // Stages the host builds as one program: PoCL spends 40-60 ms on each
 // program build, its cache warm or not and whatever the program's size
@@ -295,12 +305,7 @@ constexpr std::array<std::string_view, 3> kFrameGroup{"layout", "match", "swap"}
 std::string stage_program_source(std::string_view stage, const Defines& defines) {
   if (std::find(kFrameGroup.begin(), kFrameGroup.end(), stage) == kFrameGroup.end())
     return program_source(stage, defines);
-  std::string s = program_source(kFrameGroup[0], defines);
-  for (std::size_t i = 1; i < kFrameGroup.size(); ++i) {
-    const std::string file = std::string(kFrameGroup[i]) + ".cl";
-    append_part(s, file, kernel_file(file));
-  }
-  return s;
+  return program_source(kFrameGroup[0], defines, {kFrameGroup[1], kFrameGroup[2]});
 }
 
 void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what) {

@@ -29,9 +29,8 @@ cl::Kernel stage_kernel(Device& device, const std::string& name, int order) {
   if (order < 0 || order > kMaxOrder)
     throw ArgumentError("order", "interpolation order " + std::to_string(order) +
                                      " is outside 0.." + std::to_string(kMaxOrder));
-  const std::string source = program_source("resample", {{"ORDER", std::to_string(order)}}) +
-                             "\n#line 1 \"local.cl\"\n" + std::string(kernel_file("local.cl"));
-  cl::Program program = device.build(source);
+  cl::Program program =
+      device.build(program_source("resample", {{"ORDER", std::to_string(order)}}, {"local"}));
   cl_int err = CL_SUCCESS;
   cl::Kernel k(program, name.c_str(), &err);
   if (err != CL_SUCCESS) throw CLError("clCreateKernel(" + name + ")", err);

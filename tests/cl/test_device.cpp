@@ -170,6 +170,23 @@ TEST(KernelFiles, ProgramSourceIsDefinesSharedCommonStage) {
   EXPECT_THROW(program_source("no_such_stage"), ArgumentError);
 }
 
+// Several stages as one program: the first stage's program, then each
+// further file exactly, after its #line directive; a missing one throws.
+TEST(KernelFiles, ProgramSourceOfSeveralStages) {
+  const Defines d{{"ORDER", "2"}};
+  const std::string first = program_source("resample", d);
+  EXPECT_EQ(program_source("resample", d, {}), first);
+  std::string want = first;
+  if (want.back() != '\n') want += '\n';
+  want += "#line 1 \"local.cl\"\n" + std::string(kernel_file("local.cl"));
+  if (want.back() != '\n') want += '\n';
+  EXPECT_EQ(program_source("resample", d, {"local"}), want);
+  const std::string three = program_source("layout", {}, {"match", "swap"});
+  EXPECT_LT(three.find("#line 1 \"match.cl\"\n"), three.find("#line 1 \"swap.cl\"\n"));
+  EXPECT_NE(three.find(std::string(kernel_file("swap.cl"))), std::string::npos);
+  EXPECT_THROW(program_source("resample", d, {"local", "no_such_stage"}), ArgumentError);
+}
+
 TEST(DeviceTest, EveryKernelFileCompilesOnItsOwn) {
   SIMDVOL_REQUIRE_OPENCL();
   Device dev;

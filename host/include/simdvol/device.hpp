@@ -46,6 +46,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <initializer_list>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -143,6 +144,12 @@ std::vector<std::string> kernel_files();
 /// common.cl and <stage>.cl, each part preceded by a #line directive naming
 /// its file so that build logs point into the right file.
 std::string program_source(std::string_view stage, const Defines& defines = {});
+/// One program of several stages: program_source(stage, defines) followed by
+/// the files <then[0]>.cl, <then[1]>.cl, ... each with its #line directive
+/// (they see the first stage's defines, and simdvol_shared.h and common.cl
+/// once). Throws ArgumentError if a file is missing.
+std::string program_source(std::string_view stage, const Defines& defines,
+                           std::initializer_list<std::string_view> then);
 /// What Device::program builds for a stage: program_source(stage, defines),
 /// except that layout, match and swap are built together, one program of
 /// program_source("layout", defines) followed by match.cl and swap.cl (each
