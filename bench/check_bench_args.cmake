@@ -64,6 +64,7 @@ expect_bad(FIG7 --view --out . --view 1,2)
 expect_bad(FIG7 --out --size 64)
 
 expect_bad(TABLES --order --order 2)
+expect_bad(TABLES --sweeps --sweeps 65)
 expect_bad(TABLES --views --views 0,nan)
 expect_bad(TABLES --markdown --markdown ${CMAKE_CURRENT_LIST_DIR}/no-such-dir/t.md)
 

@@ -21,6 +21,7 @@
 #include "bench_args.hpp"
 #include "simdvol/costmodel.hpp"
 #include "simdvol/error.hpp"
+#include "simdvol/match.hpp"
 #include "simdvol/mismatch.hpp"
 
 using namespace simdvol;
@@ -111,6 +112,7 @@ constexpr const char* kUsage =
     "  size: 1..1024 (N^3 volume); image: 1..4096 (N x N); P: a power of two in\n"
     "  1..1048576; K: 0..1 (the orders the cost model counts); S: 0..64 (balance sweeps);\n"
     "  views: angles phi in -360..360 (degrees)\n";
+static_assert(kMaxBalanceSweeps == 64, "kUsage gives S: 0..64");
 
 }  // namespace
 
@@ -135,7 +137,7 @@ int main(int argc, char** argv) try {
       } else if (args.is("--order")) {
         order = static_cast<int>(args.integer(0, 1));
       } else if (args.is("--sweeps")) {
-        sweeps = static_cast<int>(args.integer(0, 64));  // kMaxBalanceSweeps (engine.hpp)
+        sweeps = static_cast<int>(args.integer(0, kMaxBalanceSweeps));
       } else if (args.is("--views")) {
         views = args.number_list(-360, 360);
       } else if (args.is("--markdown")) {

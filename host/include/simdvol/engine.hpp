@@ -151,9 +151,6 @@ struct EngineOptions {
   int balance_sweeps = kBalanceSweeps;
 };
 
-/// The largest EngineOptions::balance_sweeps (each sweep is 6 launches).
-inline constexpr int kMaxBalanceSweeps = 64;
-
 /// Checks the options against each other and `opt`; ArgumentError naming
 /// the CLI option.
 void validate(const EngineOptions& eo, const RenderOptions& opt);

@@ -103,6 +103,9 @@ std::vector<uint8_t> match_active_reference(const KdSplit& split,
 
 /// Default number of balancing sweeps.
 inline constexpr int kBalanceSweeps = 8;
+/// The largest number of balancing sweeps the engine and the bench tools
+/// take (EngineOptions::balance_sweeps; each sweep is 6 launches).
+inline constexpr int kMaxBalanceSweeps = 64;
 
 /// The link of every segment s (same order as m.segments): -1, or
 /// next * 4 + axis where `next` is the index in m.segments of the segment of
