@@ -62,11 +62,20 @@ int64_t parse_int(const std::string& s, const std::string& arg) {
   return static_cast<int64_t>(v);
 }
 
-ViewAngles parse_view(const std::string& s) {
+// N comma-separated numbers for `arg` ("expected FORM").
+std::vector<double> parse_numbers(const std::string& s, std::size_t n, const std::string& arg,
+                                  const std::string& form) {
   const auto parts = split(s, ',');
-  if (parts.size() != 3) throw ArgumentError("--view", "expected THETA,PHI,VARPHI in degrees");
-  return {parse_number(parts[0], "--view"), parse_number(parts[1], "--view"),
-          parse_number(parts[2], "--view")};
+  if (parts.size() != n || (!s.empty() && s.back() == ','))
+    throw ArgumentError(arg, "expected " + form + ", not '" + s + "'");
+  std::vector<double> v;
+  for (const auto& p : parts) v.push_back(parse_number(p, arg));
+  return v;
+}
+
+ViewAngles parse_view(const std::string& s) {
+  const auto a = parse_numbers(s, 3, "--view", "THETA,PHI,VARPHI in degrees");
+  return {a[0], a[1], a[2]};
 }
 
 std::array<int, 2> parse_size(const std::string& s) {
@@ -161,6 +170,18 @@ int main(int argc, char** argv) {
   uint64_t seed = 1;
   double step = 5.0;
   float threshold = 0.95f;
+  std::string light, phong, depth_cue;
+  {
+    const ShadeParams d;
+    const auto num = [](double v) {
+      std::ostringstream o;
+      o << v;
+      return o.str();
+    };
+    light = num(d.light[0]) + "," + num(d.light[1]) + "," + num(d.light[2]);
+    phong = num(d.ka) + "," + num(d.kd) + "," + num(d.ks) + "," + num(d.shininess);
+    depth_cue = num(d.k1) + "," + num(d.k2);
+  }
   bool no_shade = false, no_skip_empty = false, no_skip_pes = false, show_times = false,
        exact_opacity = false, allocate = false;
   bool stratified = false;
@@ -187,6 +208,21 @@ int main(int argc, char** argv) {
                    "Hounsfield data, mri otherwise")
       ->capture_default_str();
   render->add_flag("--no-shade", no_shade, "skip lighting (colour = material colour)");
+  render
+      ->add_option("--light", light,
+                   "X,Y,Z: direction towards the light in viewing space (x right, y down the "
+                   "image, z into the scene); two-sided Phong lighting")
+      ->capture_default_str();
+  render
+      ->add_option("--phong", phong,
+                   "KA,KD,KS,N: ambient, diffuse, specular coefficients and the specular "
+                   "exponent (thesis eq 4.2)")
+      ->capture_default_str();
+  render
+      ->add_option("--depth-cue", depth_cue,
+                   "K1,K2: diffuse and specular light times 1 / (K1 + K2 d), d = 0 at the "
+                   "volume's front, 1 at its back (1,0: no cueing)")
+      ->capture_default_str();
   render->add_flag("--no-skip-empty", no_skip_empty,
                    "opencl: resample every sample, also those whose stencil reads only "
                    "transparent voxels (the same image; for timing comparisons)");
@@ -306,6 +342,17 @@ int main(int argc, char** argv) {
       else
         throw ArgumentError("--streams", "expected per-ray or shared, not '" + streams + "'");
       opt.shade.enabled = !no_shade;
+      const auto l = parse_numbers(light, 3, "--light", "X,Y,Z");
+      opt.shade.light = {l[0], l[1], l[2]};
+      const auto ph = parse_numbers(phong, 4, "--phong", "KA,KD,KS,N");
+      opt.shade.ka = ph[0];
+      opt.shade.kd = ph[1];
+      opt.shade.ks = ph[2];
+      opt.shade.shininess = ph[3];
+      const auto dc = parse_numbers(depth_cue, 2, "--depth-cue", "K1,K2");
+      opt.shade.k1 = dc[0];
+      opt.shade.k2 = dc[1];
+      validate(opt.shade);
       if (frames < 1 || frames > 100000)
         throw ArgumentError("--frames", std::to_string(frames) + " is outside 1..100000");
       if (!std::isfinite(step)) throw ArgumentError("--step", "must be finite");

@@ -30,6 +30,7 @@ void validate(const RenderOptions& opt) {
     throw ArgumentError("--mc-stratified", "needs exact opacity (--exact-opacity)");
   for (double a : {opt.view.theta, opt.view.phi, opt.view.varphi})
     if (!std::isfinite(a)) throw ArgumentError("--view", "angles must be finite");
+  validate(opt.shade);
 }
 
 Image warp_to_output(const Image& im, const ViewGeometry& view) {

@@ -74,30 +74,26 @@ bool finite3(const Vec3& v) {
   return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
 }
 
-void check_params(const ShadeParams& p) {
-  const auto need_finite = [](double v, const char* name) {
+}  // namespace
+
+void validate(const ShadeParams& p) {
+  const auto need_finite = [](double v, const char* option) {
     if (!std::isfinite(v))
-      throw ArgumentError(std::string("shade.") + name,
-                          "must be finite (got " + std::to_string(v) + ")");
+      throw ArgumentError(option, "must be finite (got " + std::to_string(v) + ")");
   };
-  need_finite(p.ka, "ka");
-  need_finite(p.kd, "kd");
-  need_finite(p.ks, "ks");
-  need_finite(p.shininess, "shininess");
-  need_finite(p.k1, "k1");
-  need_finite(p.k2, "k2");
-  if (!finite3(p.light)) throw ArgumentError("shade.light", "must be finite");
-  if (dot3(p.light, p.light) <= 0.0)
-    throw ArgumentError("shade.light", "must be a non-zero direction");
-  if (p.ka < 0 || p.kd < 0 || p.ks < 0) throw ArgumentError("shade", "ka, kd and ks must be >= 0");
-  if (p.shininess < 0) throw ArgumentError("shade.shininess", "must be >= 0");
+  for (double v : {p.ka, p.kd, p.ks, p.shininess}) need_finite(v, "--phong");
+  for (double v : {p.k1, p.k2}) need_finite(v, "--depth-cue");
+  if (!finite3(p.light)) throw ArgumentError("--light", "must be finite");
+  if (dot3(p.light, p.light) <= 0.0) throw ArgumentError("--light", "must be a non-zero direction");
+  if (p.ka < 0 || p.kd < 0 || p.ks < 0)
+    throw ArgumentError("--phong", "ka, kd and ks must be >= 0");
+  if (p.shininess < 0) throw ArgumentError("--phong", "the exponent n must be >= 0");
   // The cue's denominator k1 + k2 d must stay positive for every d in [0, 1].
   if (p.k1 <= 0 || p.k1 + p.k2 <= 0)
-    throw ArgumentError("shade", "depth cue k1 + k2 * d must be > 0 for d in [0, 1] (k1 = " +
-                                     std::to_string(p.k1) + ", k2 = " + std::to_string(p.k2) + ")");
+    throw ArgumentError("--depth-cue",
+                        "k1 + k2 * d must be > 0 for d in [0, 1] (k1 = " + std::to_string(p.k1) +
+                            ", k2 = " + std::to_string(p.k2) + ")");
 }
-
-}  // namespace
 
 Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& grad_scale) {
   const std::array<int64_t, 3> i{x, y, z};
@@ -114,7 +110,7 @@ Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& gr
 }
 
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p) {
-  check_params(p);
+  validate(p);
   if (!(view.radius > 0) || !std::isfinite(view.radius))
     throw ArgumentError("view.radius",
                         "must be positive (got " + std::to_string(view.radius) + ")");

@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -12,6 +14,7 @@
 #include "simdvol/image.hpp"
 #include "simdvol/io.hpp"
 #include "simdvol/phantom.hpp"
+#include "simdvol/render.hpp"
 #include "testing.hpp"
 
 namespace fs = std::filesystem;
@@ -130,6 +133,54 @@ TEST_F(Cli, SkipPesLeavesPesOutWithTheSameImage) {
   EXPECT_GT(sum, 1.0);
 }
 
+// --light, --phong and --depth-cue reach the shading of both engines: each
+// engine's PNG equals the reference rendered here with those ShadeParams
+// set field by field (to the PNG's 8-bit rounding), and differs from the
+// default lighting's image.
+TEST_F(Cli, LightingOptionsReachBothEngines) {
+  const std::string common =
+      "render --phantom-size 24 --size 32x32 --view 20,35,10 --light 0.3,-0.2,-1 "
+      "--phong 0.1,0.8,0.5,8 --depth-cue 1,0.3 -o ";
+  const Result a = run(common + path("cl.png"));
+  const Result b = run(common + path("ref.png") + " --engine reference");
+  const Result d =
+      run("render --phantom-size 24 --size 32x32 --view 20,35,10 -o " + path("default.png"));
+  ASSERT_EQ(a.code, 0) << a.output;
+  ASSERT_EQ(b.code, 0) << b.output;
+  ASSERT_EQ(d.code, 0) << d.output;
+  simdvol::RenderOptions opt;
+  opt.view = {20, 35, 10};
+  opt.width = opt.height = 32;
+  opt.classifier = simdvol::classifier_preset("ct");  // auto: Hounsfield data
+  opt.shade.light = {0.3, -0.2, -1.0};
+  opt.shade.ka = 0.1;
+  opt.shade.kd = 0.8;
+  opt.shade.ks = 0.5;
+  opt.shade.shininess = 8;
+  opt.shade.k1 = 1.0;
+  opt.shade.k2 = 0.3;
+  const simdvol::Image want = simdvol::render_reference(simdvol::shepp_logan(24, 4), opt);
+  const simdvol::Image dflt = simdvol::read_image(path("default.png"));
+  for (const char* f : {"cl.png", "ref.png"}) {
+    SCOPED_TRACE(f);
+    const simdvol::Image got = simdvol::read_image(path(f));
+    ASSERT_EQ(got.pixels().size(), want.pixels().size());
+    double worst = 0, changed = 0;
+    for (std::size_t k = 0; k < got.pixels().size(); ++k) {
+      const auto& g = got.pixels()[k];
+      const auto& w = want.pixels()[k];
+      const float gc[3] = {g.r, g.g, g.b}, wc[3] = {w.r, w.g, w.b};
+      const float dc[3] = {dflt.pixels()[k].r, dflt.pixels()[k].g, dflt.pixels()[k].b};
+      for (int c = 0; c < 3; ++c) {
+        worst = std::max(worst, std::fabs(double(gc[c]) - std::clamp(double(wc[c]), 0.0, 1.0)));
+        changed = std::max(changed, std::fabs(double(gc[c]) - double(dc[c])));
+      }
+    }
+    EXPECT_LE(worst, 0.5 / 255 + 1e-5);
+    EXPECT_GT(changed, 0.05);
+  }
+}
+
 TEST_F(Cli, BadArgumentsFailClearly) {
   struct Case {
     std::string args, needle;
@@ -159,6 +210,15 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render " + path("missing.nrrd") + " -o " + path("x.png"), "missing.nrrd"},
       {"render " + path("vol.xyz") + " -o " + path("x.png"), "vol.xyz"},
       {"info " + path("missing.den"), "missing.den"},
+      {"render --light 0,0,0 -o " + path("x.png"), "--light"},
+      {"render --light 1,2 -o " + path("x.png"), "--light"},
+      {"render --light 1,2,3, -o " + path("x.png"), "--light"},
+      {"render --phong 0.2,0.7,0.3 -o " + path("x.png"), "--phong"},
+      {"render --phong 0.2,-0.7,0.3,8 -o " + path("x.png"), "--phong"},
+      {"render --phong 0.2,0.7,0.3,nan -o " + path("x.png"), "--phong"},
+      {"render --depth-cue 0,1 -o " + path("x.png"), "--depth-cue"},
+      {"render --depth-cue 1,-1 -o " + path("x.png"), "--depth-cue"},
+      {"render --view 1,2,3, -o " + path("x.png"), "--view"},
       {"phantom cube --size 8 -o " + path("c.nrrd"), "cube"},
       {"phantom shepp-logan --size 0 -o " + path("c.nrrd"), "--size"},
   };

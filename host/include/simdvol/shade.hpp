@@ -12,13 +12,13 @@
 namespace simdvol {
 
 struct ShadeParams {
-  bool enabled = true;       ///< false: Id = 1, Is = 0 everywhere (unlit)
+  bool enabled = true;           ///< false: Id = 1, Is = 0 everywhere (unlit)
   Vec3 light{-0.4, -0.5, -1.0};  ///< direction towards the light, viewing space (normalised)
-  double ka = 0.25;          ///< ambient
-  double kd = 0.75;          ///< diffuse
-  double ks = 0.35;          ///< specular
-  double shininess = 24.0;   ///< Phong exponent n
-  double k1 = 1.0;           ///< depth cue 1 / (k1 + k2 * d), d in [0, 1] front to back
+  double ka = 0.25;              ///< ambient
+  double kd = 0.75;              ///< diffuse
+  double ks = 0.35;              ///< specular
+  double shininess = 24.0;       ///< Phong exponent n
+  double k1 = 1.0;               ///< depth cue 1 / (k1 + k2 * d), d in [0, 1] front to back
   double k2 = 0.6;
 };
 
@@ -33,10 +33,17 @@ struct ShadeSample {
 /// Quantities derived once per view, in object (index-aligned) space.
 struct ShadeFrame {
   Vec3 light_obj{}, halfway_obj{};  ///< unit L and H in object space
-  Vec3 depth_dir{};                 ///< viewing z in object index units: d = dot(depth_dir, x) + depth_offset
+  Vec3 depth_dir{};  ///< viewing z in object index units: d = dot(depth_dir, x) + depth_offset
   double depth_offset = 0;
-  Vec3 grad_scale{};                ///< multiply index-space differences by this (min spacing / spacing)
+  Vec3 grad_scale{};  ///< multiply index-space differences by this (min spacing / spacing)
 };
+
+/// Checks the parameters (finite; a non-zero light; ka, kd, ks, n >= 0; k1 > 0
+/// and k1 + k2 > 0); ArgumentError naming the render option (--light,
+/// --phong KA,KD,KS,N or --depth-cue K1,K2).
+void validate(const ShadeParams& p);
+
+/// Throws as validate(p) first.
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p);
 
 /// Central-difference gradient at voxel (x, y, z), neighbours clamped at the
