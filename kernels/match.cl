@@ -19,6 +19,16 @@
  *   simdvol_match_active per PE: active[p] = some brick with reach meets
  *                        the PE's cell (empty-space skipping, below)
  *
+ *   simdvol_match_rows_nolinks, simdvol_match_fill_nolinks: the same
+ *                        without the links (no balancing to follow): rowlk
+ *                        0, links and llist not written; the segments,
+ *                        rects and loads are the same.
+ * The links were about a third of the matching's time (SIMDVOL_CL_OPTIONS
+ * switch, `simdvol render --view 20,35,10 --frames 6 --step 0
+ * --balance-sweeps 0 --times`, alternated twice: the 256^3 phantom
+ * 16.6-22.4 -> 9.8-11.6 ms, brainsmall 6.8-7.1 -> 4.5 ms). A run-time flag
+ * instead gained nothing: the link test inside sv_row8_eval ran anyway.
+ *
  * A row's columns: the row j cuts the projection of the PE's cell (a
  * zonogon, the intersection of three strips |n_a . (p - centre)| <= h_a)
  * in an interval of i (computed in float with a generous pad, so a superset
@@ -389,11 +399,17 @@ SV_FN void sv_link_targets(__constant sv_view* view, int4 ci, int4 splits,
   }
 }
 
-__kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_rows(
-    __constant sv_view* view, __constant float* geo, __constant long* stepc,
-    global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,
-    global const int* pe_of, global const uchar* active, int pes, int H, global int4* rowsum,
-    global int4* rowlk) {
+/* The kernels' bodies take make_links as a constant (always inlined), so
+ * that the _nolinks kernels leave the link test of sv_row8_eval out
+ * altogether. */
+#define SV_MATCH_FN static inline __attribute__((always_inline))
+
+SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
+                               __constant long* stepc, global const sv_rect* cand,
+                               global const int4* cidx, int4 cell, int4 splits,
+                               global const int* pe_of, global const uchar* active, int pes,
+                               int H, global int4* rowsum, global int4* rowlk,
+                               const int make_links) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
@@ -401,8 +417,9 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_row
   const int4 ci = cidx[p];
   long lo[3], hi[3];
   const int box = active[p] && sv_pe_box(view, ci, cell, lo, hi);
-  int qa[3]; /* a link along axis a needs an active neighbour */
+  int qa[3]; /* a link along axis a needs an active neighbour (and links made) */
   sv_link_targets(view, ci, splits, pe_of, active, qa);
+  if (!make_links) qa[0] = qa[1] = qa[2] = -1;
   int ia[8], ib[8], jj[8], on[8];
   int i0 = INT_MAX, i1 = INT_MIN;
   for (int l = 0; l < 8; ++l) {
@@ -431,7 +448,7 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_row
       last = select(last, (int8)(i), act);
 #pragma unroll
       for (int a = 0; a < 3; ++a)
-        if (qa[a] >= 0) lk[a] -= lnk & (ea == (int8)(a));
+        if (make_links && qa[a] >= 0) lk[a] -= lnk & (ea == (int8)(a));
       sv_row8_step(&st, view, stepc);
     }
   }
@@ -449,12 +466,14 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_row
   }
 }
 
-__kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fill(
-    __constant sv_view* view, __constant float* geo, __constant long* stepc,
-    global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,
-    global const int* pe_of, global const uchar* active, int pes, int H,
-    global const int4* rowsum, global const int4* rowoff, global const int* seg_offset, global const int4* lofs,
-    global sv_segment* segments, global int* links, global int2* llist) {
+SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
+                               __constant long* stepc, global const sv_rect* cand,
+                               global const int4* cidx, int4 cell, int4 splits,
+                               global const int* pe_of, global const uchar* active, int pes,
+                               int H, global const int4* rowsum, global const int4* rowoff,
+                               global const int* seg_offset, global const int4* lofs,
+                               global sv_segment* segments, global int* links,
+                               global int2* llist, const int make_links) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
@@ -495,6 +514,7 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
 #define SV_HOLES INT_MIN
   int nq[3], t0[3][8], hb[3][8], hc[3][8], hn[3][8];
   sv_link_targets(view, ci, splits, pe_of, active, nq);
+  if (!make_links) nq[0] = nq[1] = nq[2] = -1;
   for (int e = 0; e < 3; ++e)
     for (int l = 0; l < 8; ++l) t0[e][l] = SV_UNSET;
   sv_row8 st;
@@ -519,7 +539,7 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
         sg.k1 = K1[l];
         segments[at[l]] = sg;
         int link = -1;
-        if (LK[l] && nq[E[l]] >= 0) {
+        if (make_links && LK[l] && nq[E[l]] >= 0) {
           const int e = E[l], q = nq[e];
           if (t0[e][l] == SV_UNSET) {
             const int gq = q * H + (jj[l] - cand[q].j0);
@@ -548,7 +568,7 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
           link = t * 4 + e;
           llist[la[e][l]++] = (int2)(at[l], t);
         }
-        links[at[l]] = link;
+        if (make_links) links[at[l]] = link;
         ++at[l];
       }
     }
@@ -557,6 +577,32 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_fil
 #undef SV_UNSET
 #undef SV_HOLES
 }
+
+#define SV_MATCH_ROWS_KERNEL(NAME, LINKS)                                                      \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void NAME(                         \
+      __constant sv_view* view, __constant float* geo, __constant long* stepc,                 \
+      global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,             \
+      global const int* pe_of, global const uchar* active, int pes, int H, global int4* rowsum, \
+      global int4* rowlk) {                                                                    \
+    sv_match_rows(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum,   \
+                  rowlk, LINKS);                                                               \
+  }
+SV_MATCH_ROWS_KERNEL(simdvol_match_rows, 1)
+SV_MATCH_ROWS_KERNEL(simdvol_match_rows_nolinks, 0)
+
+#define SV_MATCH_FILL_KERNEL(NAME, LINKS)                                                     \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void NAME(                        \
+      __constant sv_view* view, __constant float* geo, __constant long* stepc,                \
+      global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,            \
+      global const int* pe_of, global const uchar* active, int pes, int H,                    \
+      global const int4* rowsum, global const int4* rowoff, global const int* seg_offset,     \
+      global const int4* lofs, global sv_segment* segments, global int* links,                \
+      global int2* llist) {                                                                   \
+    sv_match_fill(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum,  \
+                  rowoff, seg_offset, lofs, segments, links, llist, LINKS);                   \
+  }
+SV_MATCH_FILL_KERNEL(simdvol_match_fill, 1)
+SV_MATCH_FILL_KERNEL(simdvol_match_fill_nolinks, 0)
 
 /* ---- simdvol_match_active: the PEs that take part (empty-space skipping) ----
  * One work-item per PE: active[p] = 1 if some brick b with reach[b] != 0

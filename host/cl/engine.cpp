@@ -191,9 +191,12 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   }
   // Match and balance on the PE array.
   const KdSplit& split = S.cells->layout().split;
-  DeviceMatching dm = mask_pes ? enqueue_match(device, view, split,
-                                               BrickReach{&occupancy->reach, occupancy->bricks})
-                               : enqueue_match(device, view, split);
+  // The balance links only where balancing follows (a third of the matching).
+  const MatchLinks links = eo.balance_sweeps > 0 ? MatchLinks::make : MatchLinks::skip;
+  DeviceMatching dm = mask_pes
+                          ? enqueue_match(device, view, split,
+                                          BrickReach{&occupancy->reach, occupancy->bricks}, links)
+                          : enqueue_match(device, view, split, links);
   enqueue_balance(device, dm, view, split, eo.balance_sweeps);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
   const ResampleTables tables = make_resample_tables(device, S.rgba->layout(), view);

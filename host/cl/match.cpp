@@ -111,7 +111,7 @@ namespace {
 // The matching with the PE mask `active` (cl_uchar[P]) already enqueued and
 // the PE tables uploaded (upload_pe_tables).
 DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, const KdSplit& split,
-                                    DeviceMatching m);
+                                    DeviceMatching m, MatchLinks links);
 
 // m.cidx (cell index of each PE) and m.pe_of (PE of each cell).
 void upload_pe_tables(Device& device, const KdSplit& split, DeviceMatching& m) {
@@ -131,12 +131,13 @@ void upload_pe_tables(Device& device, const KdSplit& split, DeviceMatching& m) {
 
 }  // namespace
 
-DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split) {
-  return enqueue_match(device, view, split, std::vector<uint8_t>{});
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             MatchLinks links) {
+  return enqueue_match(device, view, split, std::vector<uint8_t>{}, links);
 }
 
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
-                             const std::vector<uint8_t>& active) {
+                             const std::vector<uint8_t>& active, MatchLinks links) {
   const int64_t pes = split.pes();
   if (!active.empty() && static_cast<int64_t>(active.size()) != pes)
     throw ArgumentError(
@@ -148,11 +149,11 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   m.active =
       device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, flags.size(), flags.data(), "PE mask");
   upload_pe_tables(device, split, m);
-  return enqueue_match_masked(device, view, split, std::move(m));
+  return enqueue_match_masked(device, view, split, std::move(m), links);
 }
 
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
-                             const BrickReach& reach) {
+                             const BrickReach& reach, MatchLinks links) {
   if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
   for (int a = 0; a < 3; ++a)
     if (reach.bricks[a] != (split.dims[a] + (1 << SV_BRICK_LOG2) - 1) >> SV_BRICK_LOG2)
@@ -172,13 +173,13 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   m.match_events.push_back(
       {"match_active", device.run(k, "simdvol_match_active",
                                   cl::NDRange(static_cast<std::size_t>(pes)), cl::NDRange(kWgs))});
-  return enqueue_match_masked(device, view, split, std::move(m));
+  return enqueue_match_masked(device, view, split, std::move(m), links);
 }
 
 namespace {
 
 DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, const KdSplit& split,
-                                    DeviceMatching m) {
+                                    DeviceMatching m, MatchLinks links) {
   const std::vector<sv_rect> cand = match_candidates(view, split);  // validates the split
   const int64_t pes = split.pes();
   if (pes > INT_MAX / 2) throw ArgumentError("split", "too many PEs");
@@ -221,19 +222,24 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   m.segments = device.scratch_buffer(rw, C * sizeof(sv_segment), "segments");
   m.rects = device.buffer(rw, P * sizeof(sv_rect), nullptr, "footprint rects");
   m.loads = device.buffer(rw, P * sizeof(cl_int), nullptr, "loads");
-  m.links = device.scratch_buffer(rw, C * sizeof(cl_int), "balance links");
+  m.linked = links == MatchLinks::make;
+  // Without links the kernels write neither buffer (a placeholder each).
+  const std::size_t LC = m.linked ? C : 1;
+  m.links = device.scratch_buffer(rw, LC * sizeof(cl_int), "balance links");
   m.link_offset = device.buffer(rw, (P + 1) * sizeof(cl_int4), nullptr, "link offsets");
-  m.link_list = device.scratch_buffer(rw, C * sizeof(cl_int2), "link lists");
+  m.link_list = device.scratch_buffer(rw, LC * sizeof(cl_int2), "link lists");
+  const std::string rows_name = m.linked ? "simdvol_match_rows" : "simdvol_match_rows_nolinks";
+  const std::string fill_name = m.linked ? "simdvol_match_fill" : "simdvol_match_fill_nolinks";
 
   const cl_int4 cell = int4(split.cell[0], split.cell[1], split.cell[2], 0);
   const cl_int4 splits = int4(sp[0], sp[1], sp[2], 0);
   const cl_int npes = static_cast<cl_int>(pes), H = static_cast<cl_int>(rows);
 
-  cl::Kernel k_rows = device.kernel("match", "simdvol_match_rows", match_defines());
-  set_args(k_rows, "simdvol_match_rows", m.view, m.geometry, m.steps, m.candidates, m.cidx, cell,
-           splits, m.pe_of, m.active, npes, H, m.rowsum, m.rowlinks);
-  m.match_events.push_back({"match_rows", device.run(k_rows, "simdvol_match_rows",
-                                                     cl::NDRange(R / 8), cl::NDRange(kWgs))});
+  cl::Kernel k_rows = device.kernel("match", rows_name, match_defines());
+  set_args(k_rows, rows_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
+           m.pe_of, m.active, npes, H, m.rowsum, m.rowlinks);
+  m.match_events.push_back(
+      {"match_rows", device.run(k_rows, rows_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
   cl::Kernel k_pe = device.kernel("match", "simdvol_match_pe", match_defines());
   set_args(k_pe, "simdvol_match_pe", m.candidates, npes, H, m.rowsum, m.rowlinks, m.rowoff, m.petot,
            m.counts, m.rects, m.loads);
@@ -243,12 +249,12 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   set_args(k_scan, "simdvol_match_scan", m.petot, npes, m.seg_offset, m.link_offset);
   m.match_events.push_back({"match_scan", device.run(k_scan, "simdvol_match_scan",
                                                      cl::NDRange(kWgs), cl::NDRange(kWgs))});
-  cl::Kernel k_fill = device.kernel("match", "simdvol_match_fill", match_defines());
-  set_args(k_fill, "simdvol_match_fill", m.view, m.geometry, m.steps, m.candidates, m.cidx, cell,
-           splits, m.pe_of, m.active, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset,
-           m.segments, m.links, m.link_list);
-  m.match_events.push_back({"match_fill", device.run(k_fill, "simdvol_match_fill",
-                                                     cl::NDRange(R / 8), cl::NDRange(kWgs))});
+  cl::Kernel k_fill = device.kernel("match", fill_name, match_defines());
+  set_args(k_fill, fill_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
+           m.pe_of, m.active, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset, m.segments,
+           m.links, m.link_list);
+  m.match_events.push_back(
+      {"match_fill", device.run(k_fill, fill_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
   return m;
 }
 
@@ -262,6 +268,9 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
                      const KdSplit& split, int sweeps, BalanceBounds bounds) {
   if (sweeps < 0) throw ArgumentError("sweeps", "must be >= 0");
   if (m.pes != split.pes()) throw ArgumentError("matching", "made for another PE count");
+  if (sweeps > 0 && !m.linked)
+    throw ArgumentError("matching",
+                        "made without balance links (MatchLinks::skip): balancing needs them");
   const std::size_t P = static_cast<std::size_t>(m.pes);
   const Dims3 sp = split.splits();
   const cl_int4 splits = int4(sp[0], sp[1], sp[2], 0);
@@ -333,6 +342,7 @@ Matching DeviceMatching::read(Device& device) const {
 }
 
 std::vector<int32_t> DeviceMatching::read_links(Device& device) const {
+  if (!linked) throw ArgumentError("matching", "made without balance links (MatchLinks::skip)");
   cl_int n = 0;
   cl_check(
       device.queue().enqueueReadBuffer(

@@ -195,6 +195,31 @@ std::vector<uint8_t> random_mask(int64_t pes, double p_on, std::mt19937& rng) {
 
 }  // namespace
 
+// Without the balance links (MatchLinks::skip, the engine's matching when
+// no balancing follows): the same segments, rects and loads as the
+// reference, with and without a mask; balancing and reading the links are
+// refused, sweeps 0 is not.
+TEST(MatchCl, WithoutLinksSameMatching) {
+  SIMDVOL_TEST_DEVICE(dev);
+  std::mt19937 rng(23);
+  const Dims3 dims{93, 57, 31};
+  for (int n = 0; n < 12; ++n) {
+    const ViewAngles va = n < 4 ? kViews[n] : random_view(rng);
+    const int64_t pes = int64_t(1) << (n + 2) % 14;
+    const ViewGeometry v = geometry(dims, va, 96, 96);
+    const KdSplit split = kd_split(dims, pes);
+    const std::vector<uint8_t> mask = n % 2 ? random_mask(pes, 0.6, rng) : std::vector<uint8_t>{};
+    DeviceMatching dm = enqueue_match(dev, v, split, mask, MatchLinks::skip);
+    EXPECT_FALSE(dm.linked);
+    expect_same(dm.read(dev), match_reference(v, split, mask), name(va, pes) + " without links");
+    EXPECT_THROW(dm.read_links(dev), ArgumentError);
+    EXPECT_NO_THROW(enqueue_balance(dev, dm, v, split, 0));
+    EXPECT_THROW(enqueue_balance(dev, dm, v, split, 1), ArgumentError);
+  }
+  const ViewGeometry v = geometry(dims, kViews[2], 96, 96);
+  EXPECT_TRUE(enqueue_match(dev, v, kd_split(dims, 8)).linked);
+}
+
 TEST(MatchCl, MaskedEqualsReference) {
   // Random masks: the device's segments, links and balance equal the
   // reference's with the same mask exactly; the mask removes whole PEs and

@@ -14,6 +14,8 @@
 //                          offsets (a serial scan of P entries: microseconds)
 //   4. simdvol_match_fill  the segments again, written in place, with their
 //                          balance links and the per-(PE, axis) link lists
+// (with MatchLinks::skip, simdvol_match_rows_nolinks and _fill_nolinks: the
+// same without the links, their test compiled out)
 // With a PE mask (enqueue_match's `active`, or its `reach`: first
 //   0. simdvol_match_active  one work-item per PE: the mask from the brick
 //                            reach, as match_active_reference)
@@ -48,7 +50,8 @@
 //   rects       sv_rect[P]       footprint = bbox of the PE's rays (not changed
 //               by balancing)
 //   loads       cl_int[P]        sum of k1 - k0 (updated by balancing)
-//   links       cl_int[capacity] balance_links() (written by enqueue_match)
+//   links       cl_int[capacity] balance_links() (written by enqueue_match with
+//               MatchLinks::make, the default; with skip, no link buffers)
 #pragma once
 
 #include <array>
@@ -61,6 +64,12 @@
 #include "simdvol/match.hpp"
 
 namespace simdvol {
+
+/// Whether enqueue_match makes the balance links (links, link_offset,
+/// link_list): balancing needs them; without balancing (sweeps 0) they can
+/// be left out, about a third of the matching's time. The segments, rects
+/// and loads are the same either way.
+enum class MatchLinks { make, skip };
 
 /// A named profiling event of one enqueued kernel.
 struct StageEvent {
@@ -96,23 +105,26 @@ struct DeviceMatching {
   cl::Buffer link_list;    ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE)
   cl::Buffer active;       ///< cl_uchar[P]: the PE mask (all 1 without one)
   bool masked = false;     ///< made with a mask (read() then returns it in Matching::active)
+  bool linked = true;      ///< made with MatchLinks::make (links, link lists written)
   std::vector<StageEvent> match_events;    ///< (active,) rows, pe, scan, fill
   std::vector<StageEvent> balance_events;  ///< pack, every round, unpack
 
   /// Blocking read-back as a Matching (loads as int64).
   Matching read(Device& device) const;
   /// Blocking read-back of the links (seg_offset[P] entries; written by
-  /// enqueue_match).
+  /// enqueue_match). ArgumentError if made with MatchLinks::skip.
   std::vector<int32_t> read_links(Device& device) const;
 };
 
 /// Enqueues the matching. Throws ArgumentError if the split does not fit the
 /// view or the sizes exceed 32-bit indexing.
-DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split);
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             MatchLinks links = MatchLinks::make);
 /// The matching of the PEs flagged in `active` (P flags, uploaded; see the
 /// file comment); ArgumentError if it has another size.
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
-                             const std::vector<uint8_t>& active);
+                             const std::vector<uint8_t>& active,
+                             MatchLinks links = MatchLinks::make);
 /// The brick reach of empty-space skipping (local_cl.hpp: DeviceOccupancy):
 /// cl_uchar per brick, `bricks` per axis.
 struct BrickReach {
@@ -124,7 +136,7 @@ struct BrickReach {
 /// match_active_reference). ArgumentError if the bricks do not tile the
 /// split's volume.
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
-                             const BrickReach& reach);
+                             const BrickReach& reach, MatchLinks links = MatchLinks::make);
 
 /// The width of the bounds the balance rounds move: 16-bit where every k of
 /// the grid fits (automatic: balance_bounds16), or as asked.
@@ -133,8 +145,9 @@ enum class BalanceBounds { automatic, narrow, wide };
 bool balance_bounds16(int64_t depth);
 
 /// Enqueues `sweeps` sweeps of balancing on `m` (made by enqueue_match with
-/// the same view and split). Throws ArgumentError for sweeps < 0, or for
-/// BalanceBounds::narrow where the grid is too deep for it.
+/// the same view and split). Throws ArgumentError for sweeps < 0, for
+/// BalanceBounds::narrow where the grid is too deep for it, or for sweeps > 0
+/// on a matching made with MatchLinks::skip.
 void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view,
                      const KdSplit& split, int sweeps = kBalanceSweeps,
                      BalanceBounds bounds = BalanceBounds::automatic);
