@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <future>
 #include <iostream>
 #include <optional>
 #include <sstream>
@@ -409,6 +410,11 @@ int main(int argc, char** argv) {
         gpu.emplace(*device, eo);
       }
       const double phi0 = opt.view.phi;
+      // A turntable writes frame f while frame f + 1 renders (one write in
+      // flight): get() waits for it and rethrows its error; on an error
+      // elsewhere the future's destructor waits for the write to finish, so
+      // no temporary file is left behind.
+      std::future<void> writing;
       for (int f = 0; f < frames; ++f) {
         opt.view.phi = phi0 + f * step;
         Image img;
@@ -442,11 +448,17 @@ int main(int argc, char** argv) {
                       << t.classify_ms << " ms, resample+composite " << t.resample_composite_ms
                       << " ms, warp " << t.warp_ms << " ms\n";
         }
-        const fs::path p = numbered(outp, f, frames);
-        write_image(img, p);
-        if (frames == 1) std::cout << "wrote " << fs::absolute(p).string() << "\n";
-        progress(f + 1, frames);
+        if (writing.valid()) {
+          writing.get();
+          progress(f, frames);
+        }
+        writing = std::async(
+            std::launch::async,
+            [im = std::move(img), p = numbered(outp, f, frames)] { write_image(im, p); });
       }
+      writing.get();
+      progress(frames, frames);
+      if (frames == 1) std::cout << "wrote " << fs::absolute(outp).string() << "\n";
       if (frames > 1)
         std::cout << "wrote " << frames << " frames: " << fs::absolute(numbered(outp, 0, frames))
                   << " .. " << numbered(outp, frames - 1, frames).filename().string() << "\n";

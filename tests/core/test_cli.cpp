@@ -119,6 +119,22 @@ TEST_F(Cli, TurntableWritesNumberedFrames) {
     EXPECT_TRUE(fs::exists(dir_ / f)) << f;
 }
 
+// A turntable writes each frame while the next renders: a frame that cannot
+// be written (its name taken by a directory) stops the run with an error
+// naming it, after the frames before it; no temporary file is left.
+TEST_F(Cli, TurntableStopsAtAFrameItCannotWrite) {
+  fs::create_directories(dir_ / "t_0002.png");
+  const Result r =
+      run("render --phantom-size 16 --size 16x16 --frames 5 --step 5 -o " + path("t.png"));
+  EXPECT_NE(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("t_0002.png"), std::string::npos) << r.output;
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"t_0000.png", "t_0001.png", "t_0002.png"}));
+  EXPECT_TRUE(fs::is_directory(dir_ / "t_0002.png"));
+  EXPECT_EQ(simdvol::read_image(path("t_0001.png")).width(), 16);
+}
+
 TEST_F(Cli, SkipPesLeavesPesOutWithTheSameImage) {
   // --times reports the PEs that got samples: fewer by default (the PEs with
   // nothing in reach take no part) than with --no-skip-pes, and without
