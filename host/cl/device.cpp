@@ -295,17 +295,18 @@ std::string program_source(std::string_view stage, const Defines& defines,
 namespace {
 // Stages the host builds as one program: PoCL spends 40-60 ms on each
 // program build, its cache warm or not and whatever the program's size
-// (these three and balance.cl took 65-69 ms as one source against 183-205
-// ms apart, warm), and a frame uses all three. swap.cl last: its
-// FP_CONTRACT OFF pragma holds to the end of the program, and layout.cl and
-// match.cl keep the default.
-constexpr std::array<std::string_view, 3> kFrameGroup{"layout", "match", "swap"};
+// (these four took 65-69 ms as one source against 183-205 ms apart, warm),
+// and a frame uses them all (balance.cl with balancing; it holds its
+// kernels for both widths of the bounds, so no define of its own keeps it
+// apart). swap.cl last: its FP_CONTRACT OFF pragma holds to the end of the
+// program, and the others keep the default.
+constexpr std::array<std::string_view, 4> kFrameGroup{"layout", "match", "balance", "swap"};
 }  // namespace
 
 std::string stage_program_source(std::string_view stage, const Defines& defines) {
   if (std::find(kFrameGroup.begin(), kFrameGroup.end(), stage) == kFrameGroup.end())
     return program_source(stage, defines);
-  return program_source(kFrameGroup[0], defines, {kFrameGroup[1], kFrameGroup[2]});
+  return program_source(kFrameGroup[0], defines, {kFrameGroup[1], kFrameGroup[2], kFrameGroup[3]});
 }
 
 void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what) {

@@ -293,25 +293,30 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
     }
   if (rounds.empty()) return;
   // The rounds move the bounds (k0, k1) in a compact copy (balance.cl).
-  const Defines defs{{"WGS", std::to_string(kWgs)}, {"BOUNDS16", narrow ? "1" : "0"}};
+  // The frame's program (stage_program_source): both widths' kernels in it.
+  const Defines& defs = match_defines();
+  const std::string sfx = narrow ? "16" : "";
+  const std::string pack_name = "simdvol_balance_pack" + sfx,
+                    round_name = "simdvol_balance_round" + sfx,
+                    unpack_name = "simdvol_balance_unpack" + sfx;
   const std::size_t slots = static_cast<std::size_t>(m.capacity);  // Device::run rounds up
   const cl::Buffer kk = device.scratch_buffer(
       CL_MEM_READ_WRITE, static_cast<std::size_t>(m.capacity) * (narrow ? 4 : 8), "balance bounds");
-  cl::Kernel pack = device.kernel("balance", "simdvol_balance_pack", defs);
-  set_args(pack, "simdvol_balance_pack", m.seg_offset, npes, m.segments, kk);
-  m.balance_events.push_back({"balance_pack", device.run(pack, "simdvol_balance_pack",
-                                                         cl::NDRange(slots), cl::NDRange(kWgs))});
+  cl::Kernel pack = device.kernel("balance", pack_name, defs);
+  set_args(pack, pack_name, m.seg_offset, npes, m.segments, kk);
+  m.balance_events.push_back(
+      {"balance_pack", device.run(pack, pack_name, cl::NDRange(slots), cl::NDRange(kWgs))});
   for (const Round& r : rounds) {
-    cl::Kernel round = device.kernel("balance", "simdvol_balance_round", defs);
-    set_args(round, "simdvol_balance_round", m.cidx, m.pe_of, splits, npes, cl_int(r.axis),
-             cl_int(r.par), cl_int(r.dir), m.link_offset, m.link_list, kk, m.loads);
-    m.balance_events.push_back({"balance_round", device.run(round, "simdvol_balance_round",
-                                                            cl::NDRange(P), cl::NDRange(kWgs))});
+    cl::Kernel round = device.kernel("balance", round_name, defs);
+    set_args(round, round_name, m.cidx, m.pe_of, splits, npes, cl_int(r.axis), cl_int(r.par),
+             cl_int(r.dir), m.link_offset, m.link_list, kk, m.loads);
+    m.balance_events.push_back(
+        {"balance_round", device.run(round, round_name, cl::NDRange(P), cl::NDRange(kWgs))});
   }
-  cl::Kernel unpack = device.kernel("balance", "simdvol_balance_unpack", defs);
-  set_args(unpack, "simdvol_balance_unpack", m.seg_offset, npes, kk, m.segments);
-  m.balance_events.push_back({"balance_unpack", device.run(unpack, "simdvol_balance_unpack",
-                                                           cl::NDRange(slots), cl::NDRange(kWgs))});
+  cl::Kernel unpack = device.kernel("balance", unpack_name, defs);
+  set_args(unpack, unpack_name, m.seg_offset, npes, kk, m.segments);
+  m.balance_events.push_back(
+      {"balance_unpack", device.run(unpack, unpack_name, cl::NDRange(slots), cl::NDRange(kWgs))});
 }
 
 Matching DeviceMatching::read(Device& device) const {

@@ -214,9 +214,10 @@ TEST(DeviceTest, ProgramCacheKeyedBySourceAndOptions) {
   EXPECT_EQ(dev.cached_programs(), 3u);
 }
 
-// layout, match and swap are one program (stage_program_source): the three
-// files in that order after shared and common, the defines once; a frame's
-// kernels of the three stages build it once. Other stages are their own.
+// layout, match, balance and swap are one program (stage_program_source):
+// the four files in that order after shared and common, the defines once; a
+// frame's kernels of the four stages (both widths of the balance bounds)
+// build it once. Other stages are their own.
 TEST(DeviceTest, FrameStagesShareOneProgram) {
   SIMDVOL_REQUIRE_OPENCL();
   EnvGuard env("SIMDVOL_CL_OPTIONS");
@@ -226,10 +227,14 @@ TEST(DeviceTest, FrameStagesShareOneProgram) {
   EXPECT_EQ(stage_program_source("layout", d), src);
   EXPECT_EQ(stage_program_source("swap", d), src);
   EXPECT_EQ(src.rfind(program_source("layout", d), 0), 0u);  // starts with layout's program
-  const std::size_t m = src.find("#line 1 \"match.cl\"\n"), w = src.find("#line 1 \"swap.cl\"\n");
+  EXPECT_EQ(stage_program_source("balance", d), src);
+  const std::size_t m = src.find("#line 1 \"match.cl\"\n"),
+                    b = src.find("#line 1 \"balance.cl\"\n"), w = src.find("#line 1 \"swap.cl\"\n");
   ASSERT_NE(m, std::string::npos);
+  ASSERT_NE(b, std::string::npos);
   ASSERT_NE(w, std::string::npos);
-  EXPECT_LT(m, w);  // swap.cl last: its FP_CONTRACT OFF reaches only itself
+  EXPECT_LT(m, b);
+  EXPECT_LT(b, w);  // swap.cl last: its FP_CONTRACT OFF reaches only itself
   const auto count = [](const std::string& text, const std::string& what) {
     std::size_t n = 0;
     for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1))
@@ -239,14 +244,16 @@ TEST(DeviceTest, FrameStagesShareOneProgram) {
   // The defines once (common.cl's #ifndef default is the other WGS line).
   EXPECT_EQ(count(src, "#define WGS 64"), count(program_source("layout", d), "#define WGS 64"));
   EXPECT_EQ(count(src, "#line 1 \"common.cl\""), 1u);
-  EXPECT_EQ(stage_program_source("balance", d), program_source("balance", d));
   EXPECT_EQ(stage_program_source("mc"), program_source("mc"));
+  EXPECT_EQ(stage_program_source("resample", d), program_source("resample", d));
   Device dev;
   dev.kernel("layout", "simdvol_layout", d);
   dev.kernel("match", "simdvol_match_rows", d);
   dev.kernel("swap", "simdvol_swap_stage", d);
-  EXPECT_EQ(dev.cached_programs(), 1u);
   dev.kernel("balance", "simdvol_balance_round", d);
+  dev.kernel("balance", "simdvol_balance_round16", d);
+  EXPECT_EQ(dev.cached_programs(), 1u);
+  dev.kernel("mc", "simdvol_mc_whole");
   EXPECT_EQ(dev.cached_programs(), 2u);
 }
 

@@ -35,7 +35,8 @@
 // the front PE's link list along the axis), between simdvol_balance_pack and
 // simdvol_balance_unpack. The rounds move the bounds (k0, k1) of the
 // segments in a compact copy, 16-bit when the grid depth allows
-// (balance_bounds16) and 32-bit otherwise, and update loads in place; the
+// (balance_bounds16; the kernels named ...16) and 32-bit otherwise, and
+// update loads in place; the
 // unpack writes the bounds back into segments. The rounds are bound by
 // streaming the segments they touch: 4-byte bounds instead of 16-byte
 // segments keep 2 M segments' bounds in the L3 (simdvol-bench-match,
