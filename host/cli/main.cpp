@@ -124,9 +124,8 @@ struct VolumeArgs {
       else
         throw ArgumentError("--raw-endian", "expected little or big, not '" + raw_endian + "'");
       if (!raw_spacing.empty()) {
-        const auto s = split(raw_spacing, ',');
-        if (s.size() != 3) throw ArgumentError("--raw-spacing", "expected SX,SY,SZ");
-        for (int a = 0; a < 3; ++a) l.spacing[a] = parse_number(s[a], "--raw-spacing");
+        const auto sp = parse_numbers(raw_spacing, 3, "--raw-spacing", "SX,SY,SZ");
+        for (int a = 0; a < 3; ++a) l.spacing[a] = sp[a];
       }
       l.header_bytes = raw_header;
       raw = l;
