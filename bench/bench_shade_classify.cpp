@@ -1,9 +1,10 @@
 // simdvol-bench-shade: the shade and classify stages on the PE array.
 //
-//   simdvol-bench-shade [--size N] [--pes P] [--runs R] [--classifier NAME]
-//                       [--no-reference] [--sweep]
+//   simdvol-bench-shade [--size N | --volume FILE] [--pes P] [--runs R]
+//                       [--classifier NAME] [--no-reference] [--sweep]
 //
-// The N^3 Shepp-Logan CT phantom (default 256) on P PEs (default 8192), laid
+// The N^3 Shepp-Logan CT phantom (default 256), or a volume file (e.g.
+// brainsmall.den with --classifier volpack), on P PEs (default 8192), laid
 // out once; then, after a warm-up launch of every kernel (the first launch of
 // each local size compiles), R runs (default 7) of each variant, interleaved,
 // reporting the median device time (profiling events) and the median wall
@@ -28,6 +29,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <functional>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -35,6 +37,7 @@
 #include "bench_common.hpp"
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
+#include "simdvol/io.hpp"
 #include "simdvol/layout.hpp"
 #include "simdvol/local_cl.hpp"
 #include "simdvol/phantom.hpp"
@@ -76,10 +79,11 @@ Result time_variant(Device& dev, const std::string& name, int runs, double bytes
 }
 
 constexpr const char* kUsage =
-    "usage: simdvol-bench-shade [--size N] [--pes P] [--runs R] [--classifier NAME]\n"
-    "                           [--no-reference] [--sweep]\n"
-    "  N: 8..1024 (the N^3 phantom); P: a power of two in 1..1048576; R: 1..1000;\n"
-    "  NAME: a classifier preset or file\n";
+    "usage: simdvol-bench-shade [--size N | --volume FILE] [--pes P] [--runs R]\n"
+    "                           [--classifier NAME] [--no-reference] [--sweep]\n"
+    "  N: 8..1024 (the N^3 phantom); FILE: a volume (.den, .nrrd, .nhdr, .nii, .nii.gz)\n"
+    "  instead of the phantom; P: a power of two in 1..1048576; R: 1..1000;\n"
+    "  NAME: a classifier preset or file (default ct)\n";
 
 }  // namespace
 
@@ -87,7 +91,10 @@ int main(int argc, char** argv) {
   int size = 256, runs = 7;
   int64_t pes = 8192;
   std::string cname = "ct";
+  std::string volume_file;
+  bool size_given = false;
   Classifier cls;
+  std::optional<Volume> loaded;
   bool reference = true, sweep = false;
   try {
     Args args(argc, argv);
@@ -97,6 +104,9 @@ int main(int argc, char** argv) {
         return 0;
       } else if (args.is("--size")) {
         size = static_cast<int>(args.integer(8, 1024));
+        size_given = true;
+      } else if (args.is("--volume")) {
+        volume_file = args.value();
       } else if (args.is("--pes")) {
         pes = args.pes();
       } else if (args.is("--runs")) {
@@ -116,6 +126,15 @@ int main(int argc, char** argv) {
     } catch (const std::exception& e) {
       throw ArgumentError("--classifier", e.what());
     }
+    if (!volume_file.empty()) {
+      if (size_given) throw ArgumentError("--volume", "give either --size or --volume, not both");
+      try {
+        loaded.emplace(load_volume(volume_file));
+      } catch (const std::exception& e) {
+        throw ArgumentError("--volume", e.what());
+      }
+      if (loaded->voxel_count() == 0) throw ArgumentError("--volume", volume_file + " is empty");
+    }
   } catch (const ArgumentError& e) {
     return argument_error("simdvol-bench-shade", e, kUsage);
   }
@@ -124,11 +143,17 @@ int main(int argc, char** argv) {
     std::printf("device: %s (%s), %u compute units\n", dev.info().name.c_str(),
                 dev.info().version.c_str(), dev.info().compute_units);
     auto t0 = Clock::now();
-    const Volume vol = shepp_logan(size);
-    std::printf("volume: Shepp-Logan %d^3 (%.0f ms to build), %lld PEs, classifier %s\n", size,
-                ms_since(t0), static_cast<long long>(pes), cname.c_str());
+    const Volume vol = loaded ? std::move(*loaded) : shepp_logan(size);
+    if (loaded)
+      std::printf("volume: %s, %lld x %lld x %lld, %lld PEs, classifier %s\n", volume_file.c_str(),
+                  static_cast<long long>(vol.nx()), static_cast<long long>(vol.ny()),
+                  static_cast<long long>(vol.nz()), static_cast<long long>(pes), cname.c_str());
+    else
+      std::printf("volume: Shepp-Logan %d^3 (%.0f ms to build), %lld PEs, classifier %s\n", size,
+                  ms_since(t0), static_cast<long long>(pes), cname.c_str());
     const double voxels = static_cast<double>(vol.voxel_count());
-    const ViewGeometry view = make_view(vol, {30, 45, 10}, size, size, Sampling::voxel);
+    const int image = static_cast<int>(std::max({vol.nx(), vol.ny(), vol.nz()}));
+    const ViewGeometry view = make_view(vol, {30, 45, 10}, image, image, Sampling::voxel);
     const ShadeParams shp{};
     const sv_shade_params sp = shade_params(make_shade_frame(vol, view, shp), shp);
     const bool relative = cls.kind == Classifier::Kind::mixture && cls.mixture.relative;
