@@ -259,16 +259,24 @@ SV_FN float16 sv_pow16(float16 x, float y) {
 /* sv_shade_voxel on 16 lanes: neighbours x-/x+, y-/y+, z-/z+ and global
  * voxel coordinates (ix, iy, iz). The same float operations in the same
  * order. */
-SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 xp, float16 ym,
-                      float16 yp, float16 zm, float16 zp, float16 ix, float16 iy, float16 iz,
-                      float16* id, float16* is, float16* mag) {
-  const float16 gx = 0.5f * (xp - xm) * sp->grad_scale[0];
-  const float16 gy = 0.5f * (yp - ym) * sp->grad_scale[1];
-  const float16 gz = 0.5f * (zp - zm) * sp->grad_scale[2];
-  float16 g2 = gx * gx + gy * gy + gz * gz;
-  g2 = select((float16)(0.0f), g2, isfinite(g2)); /* a NaN/inf neighbour: no surface */
-  const float16 m = sqrt(g2);
-  *mag = m;
+/* Its first half, the gradient: (gx, gy, gz), g2 = |g|^2 (0 for a NaN/inf
+ * neighbour) and mag = |g|. */
+SV_FN void sv_grad16(__constant const sv_shade_params* sp, float16 xm, float16 xp, float16 ym,
+                     float16 yp, float16 zm, float16 zp, float16* gx, float16* gy, float16* gz,
+                     float16* g2, float16* mag) {
+  *gx = 0.5f * (xp - xm) * sp->grad_scale[0];
+  *gy = 0.5f * (yp - ym) * sp->grad_scale[1];
+  *gz = 0.5f * (zp - zm) * sp->grad_scale[2];
+  const float16 q = *gx * *gx + *gy * *gy + *gz * *gz;
+  *g2 = select((float16)(0.0f), q, isfinite(q)); /* a NaN/inf neighbour: no surface */
+  *mag = sqrt(*g2);
+}
+
+/* Its second half, the lighting (Id, Is) from sv_grad16's results at global
+ * voxel coordinates (ix, iy, iz). */
+SV_FN void sv_light16(__constant const sv_shade_params* sp, float16 gx, float16 gy, float16 gz,
+                      float16 g2, float16 m, float16 ix, float16 iy, float16 iz, float16* id,
+                      float16* is) {
   const float16 d =
       sp->depth_dir[0] * ix + sp->depth_dir[1] * iy + sp->depth_dir[2] * iz + sp->depth_offset;
   const float16 cue = 1.0f / (sp->k1 + sp->k2 * d);
@@ -280,6 +288,14 @@ SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 
       select((float16)(0.0f), cue * sp->ks * sv_pow16(nh, sp->shininess), surface);
   *id = sp->enabled ? lit_d : (float16)(1.0f);
   *is = sp->enabled ? lit_s : (float16)(0.0f);
+}
+
+SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 xp, float16 ym,
+                      float16 yp, float16 zm, float16 zp, float16 ix, float16 iy, float16 iz,
+                      float16* id, float16* is, float16* mag) {
+  float16 gx, gy, gz, g2;
+  sv_grad16(sp, xm, xp, ym, yp, zm, zp, &gx, &gy, &gz, &g2, mag);
+  sv_light16(sp, gx, gy, gz, g2, *mag, ix, iy, iz, id, is);
 }
 
 #ifdef SV_RW
@@ -372,6 +388,28 @@ SV_FN void sv_chunk_rows(__global const int4* origins, int4 cell, int4 block, in
     ok[r] = row0 + r < rows ? 1.0f : 0.0f;
   }
 #endif /* SV_RW == 1 */
+}
+
+/* The gradient of the chunk given by sv_chunk_rows (sv_grad16); c = the
+ * start of the PE's block. */
+SV_FN void sv_grad_rows(__constant const sv_shade_params* sp, __global const float* c, int4 block,
+                        const int* rb, float16* gx, float16* gy, float16* gz, float16* g2,
+                        float16* mag) {
+  const int bx = block.x, bxy = block.x * block.y;
+  sv_grad16(sp, SV_LD16(c, rb, -1), SV_LD16(c, rb, 1), SV_LD16(c, rb, -bx), SV_LD16(c, rb, bx),
+            SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), gx, gy, gz, g2, mag);
+}
+
+/* The lighting of that chunk from its gradient (sv_light16). */
+SV_FN void sv_light_rows(__constant const sv_shade_params* sp, const float* fx, const float* fy,
+                         const float* fz, float16 gx, float16 gy, float16 gz, float16 g2,
+                         float16 mag, float16* id, float16* is) {
+#if SV_RW == 1
+  const float16 x = SV_ROWS16(fx);
+#else
+  const float16 x = fx[0] + SV_IOTA16;
+#endif
+  sv_light16(sp, gx, gy, gz, g2, mag, x, SV_ROWS16(fy), SV_ROWS16(fz), id, is);
 }
 
 /* Shades the chunk given by sv_chunk_rows; c = the start of the PE's block. */
