@@ -416,15 +416,9 @@ SV_FN void sv_light_rows(__constant const sv_shade_params* sp, const float* fx, 
 SV_FN void sv_shade_rows(__constant const sv_shade_params* sp, __global const float* c, int4 block,
                          const int* rb, const float* fx, const float* fy, const float* fz,
                          float16* id, float16* is, float16* mag) {
-  const int bx = block.x, bxy = block.x * block.y;
-#if SV_RW == 1
-  const float16 x = SV_ROWS16(fx);
-#else
-  const float16 x = fx[0] + SV_IOTA16;
-#endif
-  sv_shade16(sp, SV_LD16(c, rb, -1), SV_LD16(c, rb, 1), SV_LD16(c, rb, -bx), SV_LD16(c, rb, bx),
-             SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), x, SV_ROWS16(fy), SV_ROWS16(fz), id, is,
-             mag);
+  float16 gx, gy, gz, g2;
+  sv_grad_rows(sp, c, block, rb, &gx, &gy, &gz, &g2, mag);
+  sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, *mag, id, is);
 }
 
 /* Shades the chunk of 16 positions from e0 of PE p's cell (sv_chunk_rows);
