@@ -4,10 +4,17 @@
 // before and after balancing. Only the dims and the view matter, so no voxel
 // data is made.
 //
-//   simdvol-bench-match [--pes N] [--repeat R] [--sweeps S] [--no-table]
+// The table is printed for both framings (render --fit longest, the
+// default, whose 258^2 grid clips an oblique view's corners, and --fit
+// diagonal, whose 446^2 grid holds the whole volume), with the smallest
+// figures over --random V views (three angles uniform in [-180, 180)
+// degrees, seed 5; default 200, about a minute and a half on 2 cores).
+//
+//   simdvol-bench-match [--pes N] [--repeat R] [--sweeps S] [--random V] [--no-table]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -36,14 +43,15 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }
 
 constexpr const char* kUsage =
-    "usage: simdvol-bench-match [--pes N] [--repeat R] [--sweeps S] [--no-table]\n"
-    "  N: a power of two in 1..1048576; R: 1..1000; S: 0..64 (balance sweeps)\n";
+    "usage: simdvol-bench-match [--pes N] [--repeat R] [--sweeps S] [--random V] [--no-table]\n"
+    "  N: a power of two in 1..1048576; R: 1..1000; S: 0..64 (balance sweeps);\n"
+    "  V: 0..10000 random views in the utilisation table (default 200)\n";
 
 }  // namespace
 
 int main(int argc, char** argv) {
   int64_t pes = 8192;
-  int repeat = 5, sweeps = kBalanceSweeps;
+  int repeat = 5, sweeps = kBalanceSweeps, nrandom = 200;
   bool table = true;
   try {
     Args args(argc, argv);
@@ -57,6 +65,8 @@ int main(int argc, char** argv) {
         repeat = static_cast<int>(args.integer(1, 1000));
       } else if (args.is("--sweeps")) {
         sweeps = static_cast<int>(args.integer(0, kMaxBalanceSweeps));
+      } else if (args.is("--random")) {
+        nrandom = static_cast<int>(args.integer(0, 10000));
       } else if (args.is("--no-table")) {
         table = false;
       } else {
@@ -113,29 +123,69 @@ int main(int argc, char** argv) {
     const NamedView views[] = {{"0", {0, 0, 0}},           {"90", {0, 90, 0}},
                                {"45", {0, 45, 0}},         {"30", {0, 30, 0}},
                                {"30,30,30", {30, 30, 30}}, {"random", {37.3, 112.9, -61.4}}};
-    std::printf(
-        "\nSIMD utilisation (mean load / max load), before -> after %d sweeps;\n"
-        "active = fraction of PEs with any sample (an upper bound: balancing never\n"
-        "creates segments, and the 258^2 viewing grid clips the rotated volume)\n",
-        sweeps);
-    std::printf("%-9s", "view");
-    for (int64_t p = 512; p <= 8192; p *= 2) std::printf(" %22lld", static_cast<long long>(p));
-    std::printf("\n");
-    for (const NamedView& nv : views) {
-      const ViewGeometry v = make_view(dims, spacing, nv.angles, 256, 256, Sampling::voxel);
-      std::printf("%-9s", nv.name);
-      for (int64_t p = 512; p <= 8192; p *= 2) {
-        const KdSplit s = kd_split(dims, p);
-        DeviceMatching dm = enqueue_match(dev, v, s);
-        const Matching before = dm.read(dev);
-        enqueue_balance(dev, dm, v, s, sweeps);
-        const Matching after = dm.read(dev);
-        int64_t active = 0;
-        for (int64_t l : before.loads) active += l > 0;
-        std::printf("  %.3f->%.3f (%.3f)", before.utilisation(), after.utilisation(),
-                    static_cast<double>(active) / static_cast<double>(p));
+    // The random views: three angles uniform in [-180, 180) degrees, one
+    // fixed seed, the same views for both framings.
+    std::vector<ViewAngles> randoms;
+    {
+      std::mt19937 rng(5);
+      std::uniform_real_distribution<double> ang(-180.0, 180.0);
+      for (int n = 0; n < nrandom; ++n) {
+        const double t = ang(rng), ph = ang(rng);
+        randoms.push_back({t, ph, ang(rng)});
       }
+    }
+    struct Util {
+      double before, after, active;
+    };
+    const auto utilisation = [&](const ViewGeometry& v, int64_t p) {
+      const KdSplit s = kd_split(dims, p);
+      DeviceMatching dm = enqueue_match(dev, v, s);
+      const Matching before = dm.read(dev);
+      enqueue_balance(dev, dm, v, s, sweeps);
+      const Matching after = dm.read(dev);
+      int64_t active = 0;
+      for (int64_t l : before.loads) active += l > 0;
+      return Util{before.utilisation(), after.utilisation(),
+                  static_cast<double>(active) / static_cast<double>(p)};
+    };
+    for (const Framing framing : {Framing::longest, Framing::diagonal}) {
+      const bool whole = framing == Framing::diagonal;
+      std::printf(
+          "\nSIMD utilisation (mean load / max load), before -> after %d sweeps, %s;\n"
+          "active = fraction of PEs with any sample (an upper bound: balancing never\n"
+          "creates segments%s)\n",
+          sweeps,
+          whole ? "--fit diagonal (the whole volume in the 446^2 viewing grid)"
+                : "--fit longest (the default framing: a 258^2 viewing grid)",
+          whole ? "" : ", and this grid clips the rotated volume's corners");
+      std::printf("%-9s", "view");
+      for (int64_t p = 512; p <= 8192; p *= 2) std::printf(" %22lld", static_cast<long long>(p));
       std::printf("\n");
+      for (const NamedView& nv : views) {
+        const ViewGeometry v =
+            make_view(dims, spacing, nv.angles, 256, 256, Sampling::voxel, framing);
+        std::printf("%-9s", nv.name);
+        for (int64_t p = 512; p <= 8192; p *= 2) {
+          const Util u = utilisation(v, p);
+          std::printf("  %.3f->%.3f (%.3f)", u.before, u.after, u.active);
+        }
+        std::printf("\n");
+      }
+      if (randoms.empty()) continue;
+      // The random views: the smallest before, after and active over all.
+      std::printf("%-9s", (std::to_string(randoms.size()) + " rnd").c_str());
+      for (int64_t p = 512; p <= 8192; p *= 2) {
+        Util lo{1.0, 1.0, 1.0};
+        for (const ViewAngles& a : randoms) {
+          const Util u =
+              utilisation(make_view(dims, spacing, a, 256, 256, Sampling::voxel, framing), p);
+          lo = {std::min(lo.before, u.before), std::min(lo.after, u.after),
+                std::min(lo.active, u.active)};
+        }
+        std::printf("  %.3f->%.3f (%.3f)", lo.before, lo.after, lo.active);
+      }
+      std::printf("\n(%s: the smallest of each figure over the random views)\n",
+                  (std::to_string(randoms.size()) + " rnd").c_str());
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "simdvol-bench-match: %s\n", e.what());

@@ -46,6 +46,7 @@ expect_bad(FRAME --frob --frob)
 expect_bad(MATCH --repeat --repeat -1)
 expect_bad(MATCH --sweeps --sweeps 65)
 expect_bad(MATCH --pes --pes)
+expect_bad(MATCH --random --random -1)
 
 expect_bad(SHADE --runs --runs abc)
 expect_bad(SHADE --size --size 4)

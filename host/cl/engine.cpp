@@ -110,7 +110,8 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   validate(eo, opt);
   if (vol.voxel_count() == 0) throw ArgumentError("volume", "is empty");
   const PeGrid grid = S.array->grid();
-  const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
+  const ViewGeometry view =
+      make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
   // Parameters first: every argument error is thrown before anything runs.
   const sv_shade_params sp = shade_params(make_shade_frame(vol, view, opt.shade), opt.shade);
   const bool need_range =

@@ -164,8 +164,9 @@ int main(int argc, char** argv) {
   // render
   auto* render = app.add_subcommand("render", "render a volume (the built-in CT phantom if none)");
   VolumeArgs rv;
-  std::string view = "0,0,0", size = "256x256", sampling = "voxel", composite = "direct",
-              streams = "per-ray", classify = "auto", engine = "opencl", out = "simdvol.png";
+  std::string view = "0,0,0", size = "256x256", sampling = "voxel", fit = "longest",
+              composite = "direct", streams = "per-ray", classify = "auto", engine = "opencl",
+              out = "simdvol.png";
   int order = 1, samples = 32, frames = 1, phantom_size = 256, balance_sweeps = kBalanceSweeps;
   uint64_t seed = 1;
   double step = 5.0;
@@ -192,6 +193,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render->add_option("--size", size, "output WxH")->capture_default_str();
   render->add_option("--sampling", sampling, "voxel or pixel")->capture_default_str();
+  render
+      ->add_option("--fit", fit,
+                   "longest: the volume's longest side spans the image (VolPack's framing; "
+                   "an oblique view loses the corners); diagonal: its diagonal does (the whole "
+                   "volume at every view)")
+      ->capture_default_str();
   render->add_option("--order", order, "interpolation order 0..3 (Aitken)")->capture_default_str();
   render->add_option("--composite", composite, "direct, adaptive or mc")->capture_default_str();
   render->add_option("--samples", samples, "Monte Carlo walks per ray")->capture_default_str();
@@ -322,6 +329,12 @@ int main(int argc, char** argv) {
         opt.sampling = Sampling::pixel;
       else
         throw ArgumentError("--sampling", "expected voxel or pixel, not '" + sampling + "'");
+      if (fit == "longest")
+        opt.framing = Framing::longest;
+      else if (fit == "diagonal")
+        opt.framing = Framing::diagonal;
+      else
+        throw ArgumentError("--fit", "expected longest or diagonal, not '" + fit + "'");
       opt.order = order;
       if (composite == "direct")
         opt.composite.mode = CompositeMode::direct;

@@ -339,7 +339,8 @@ FramePrediction predict_frame(const FrameConfig& c, const MachineModel& machine)
   const MachineModel& m = f.machine;
   const bool nar = c.narrow;
 
-  const ViewGeometry view = make_view(c.dims, c.spacing, c.view, c.width, c.height, c.sampling);
+  const ViewGeometry view =
+      make_view(c.dims, c.spacing, c.view, c.width, c.height, c.sampling, c.framing);
   const KdSplit split = kd_split(c.dims, c.pes);
   f.cell = split.cell;
   f.image_width = view.width();

@@ -107,7 +107,8 @@ Image render_classified(const std::vector<Rgba>& voxels, const Volume& vol,
 Image render_reference(const Volume& vol, const RenderOptions& opt, RenderTimes* times,
                        Image* intermediate) {
   validate(opt);
-  const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
+  const ViewGeometry view =
+      make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
   auto t0 = Clock::now();
   const std::vector<ShadeSample> shading = shade(vol, view, opt.shade);
   if (times) times->shade_ms = ms_since(t0);

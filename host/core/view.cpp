@@ -100,9 +100,9 @@ std::array<int64_t, 2> ViewGeometry::ray_range(int64_t i, int64_t j) const {
 
 std::array<double, 2> ViewGeometry::output_to_intermediate(int x, int y) const {
   if (sampling == Sampling::pixel) return {double(x), double(y)};
-  // Output pixel centres in viewing units (the longest side spans
+  // Output pixel centres in viewing units (the framing's span covers
   // min(out_width, out_height) pixels), then intermediate pixel coordinates.
-  const double scale = std::min(out_width, out_height) / longest;  // pixels per unit
+  const double scale = std::min(out_width, out_height) / span;  // pixels per unit
   const double u = (x + 0.5 - 0.5 * out_width) / scale;
   const double v = (y + 0.5 - 0.5 * out_height) / scale;
   return {u / step + 0.5 * width() - 0.5, v / step + 0.5 * height() - 0.5};
@@ -127,12 +127,13 @@ Mat3 inverse_viewing_map(const ViewGeometry& view, Vec3& origin) {
 }
 
 ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int out_height,
-                       Sampling sampling) {
-  return make_view(vol.dims(), vol.spacing(), angles, out_width, out_height, sampling);
+                       Sampling sampling, Framing framing) {
+  return make_view(vol.dims(), vol.spacing(), angles, out_width, out_height, sampling, framing);
 }
 
 ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<double, 3>& sp,
-                       ViewAngles angles, int out_width, int out_height, Sampling sampling) {
+                       ViewAngles angles, int out_width, int out_height, Sampling sampling,
+                       Framing framing) {
   if (out_width <= 0 || out_height <= 0)
     throw ArgumentError("--size", "image size " + std::to_string(out_width) + "x" +
                                       std::to_string(out_height) + " must be positive");
@@ -161,13 +162,15 @@ ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<doub
     g.longest = std::max(g.longest, extent[a]);
   }
   g.radius = 0.5 * std::sqrt(diag2);
+  g.framing = framing;
+  g.span = framing == Framing::diagonal ? 2.0 * g.radius : g.longest;
 
   int wi = out_width, hi = out_height;
   if (sampling == Sampling::pixel) {
-    g.step = g.longest / std::min(out_width, out_height);
+    g.step = g.span / std::min(out_width, out_height);
   } else {
     g.step = 1.0;
-    const double scale = std::min(out_width, out_height) / g.longest;
+    const double scale = std::min(out_width, out_height) / g.span;
     wi = static_cast<int>(std::ceil(out_width / scale)) + 2;
     hi = static_cast<int>(std::ceil(out_height / scale)) + 2;
   }

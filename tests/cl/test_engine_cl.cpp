@@ -46,7 +46,8 @@ float max_diff(const Image& a, const Image& b) {
 // The per-sub-ray reference: the serial pipeline up to the samples, then
 // mc_sub_reference, composite_segments and the warp.
 Image subray_reference(const Volume& vol, const RenderOptions& opt, int64_t pes, bool allocate) {
-  const ViewGeometry view = make_view(vol, opt.view, opt.width, opt.height, opt.sampling);
+  const ViewGeometry view =
+      make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
   const std::vector<Rgba> voxels =
       classify(vol, shade(vol, view, opt.shade), opt.classifier, view.step);
   const KdSplit split = kd_split(vol.dims(), pes);

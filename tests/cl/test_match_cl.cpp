@@ -182,6 +182,40 @@ TEST(MatchCl, UtilisationAfterBalancing256) {
   }
 }
 
+TEST(MatchCl, UtilisationGoalWithTheWholeVolumeInView) {
+  // The same 256^3 volume framed by its diagonal (render --fit diagonal):
+  // the viewing grid holds the whole rotated volume, every PE has samples,
+  // and 8 sweeps reach the goal (>= 0.95) for every view. Measured (the
+  // device kernels, 200 random views plus 45, 30 and (30, 30, 30) deg, P =
+  // 512, 2048, 8192): at least 0.991 after balancing; before it 0.932 at
+  // 8192 PEs.
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 dims{256, 256, 256};
+  std::vector<ViewAngles> views = {{0, 0, 0},  {0, 90, 0},   {0, 45, 0},
+                                   {0, 30, 0}, {30, 30, 30}, {37.3, 112.9, -61.4}};
+  std::mt19937 rng(11);
+  for (int n = 0; n < 4; ++n) views.push_back(random_view(rng));
+  for (const int64_t pes : {int64_t{512}, int64_t{8192}}) {
+    const KdSplit split = kd_split(dims, pes);
+    for (const ViewAngles& va : views) {
+      const ViewGeometry v = geometry(dims, va, 256, 256, Sampling::voxel, Framing::diagonal);
+      DeviceMatching dm = enqueue_match(dev, v, split);
+      const Matching before = dm.read(dev);
+      enqueue_balance(dev, dm, v, split);
+      const Matching after = dm.read(dev);
+      int64_t idle = 0;
+      for (const int64_t l : before.loads) idle += l == 0;
+      EXPECT_EQ(idle, 0) << name(va, pes);
+      EXPECT_GE(after.utilisation(), 0.95) << name(va, pes);
+      EXPECT_EQ(after.total_load(), before.total_load()) << name(va, pes);
+      // Balancing does the work: 45 deg at 8,192 PEs starts below the goal.
+      if (pes == 8192 && va.theta == 0 && va.phi == 45) {
+        EXPECT_LT(before.utilisation(), 0.95) << name(va, pes);
+      }
+    }
+  }
+}
+
 // ---- the PE mask (empty-space skipping of whole PEs) ----
 
 namespace {

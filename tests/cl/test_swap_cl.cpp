@@ -322,3 +322,25 @@ TEST(RenderOpenClSwap, LargerFrame) {
     EXPECT_EQ(t.swap_stage_ms.size(), 13u);
   }
 }
+
+// --fit diagonal: the whole volume in the image at an oblique view, both
+// samplings, against the reference; and the framing changes the image (the
+// volume is smaller in it), so the option reaches both renderers.
+TEST(RenderOpenClSwap, DiagonalFramingEqualsReference) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(48, 1);
+  RenderOptions opt;
+  opt.width = opt.height = 64;
+  opt.view = {0, 45, 30};
+  opt.classifier = classifier_preset("ct");
+  for (const Sampling s : {Sampling::voxel, Sampling::pixel}) {
+    opt.sampling = s;
+    opt.framing = Framing::diagonal;
+    const Image ref = render_reference(vol, opt);
+    const Image img = render_opencl(dev, vol, opt, nullptr, 8192, true, SwapLayout::cut_and_stack);
+    EXPECT_GE(psnr(ref, img), 80.0);
+    EXPECT_LE(max_abs_diff(ref, img), 1e-4f);
+    opt.framing = Framing::longest;
+    EXPECT_GT(max_abs_diff(ref, render_reference(vol, opt)), 0.05f);
+  }
+}

@@ -16,8 +16,8 @@
 namespace simdvol::testing {
 
 inline ViewGeometry geometry(const Dims3& dims, ViewAngles v, int w, int h,
-                             Sampling s = Sampling::voxel) {
-  return make_view(dims, {1.0, 1.0, 1.0}, v, w, h, s);
+                             Sampling s = Sampling::voxel, Framing f = Framing::longest) {
+  return make_view(dims, {1.0, 1.0, 1.0}, v, w, h, s, f);
 }
 
 /// CSR shape, (j, i) order, rects = bbox of the rays, loads = sums; every

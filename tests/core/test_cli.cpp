@@ -223,6 +223,7 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --size 0x10 -o " + path("x.png"), "--size"},
       {"render --size abc -o " + path("x.png"), "--size"},
       {"render --sampling warp -o " + path("x.png"), "--sampling"},
+      {"render --fit tight -o " + path("x.png"), "--fit"},
       {"render --composite fancy -o " + path("x.png"), "--composite"},
       {"render --classify nosuchpreset -o " + path("x.png"), "nosuchpreset"},
       {"render --engine gpu -o " + path("x.png"), "--engine"},

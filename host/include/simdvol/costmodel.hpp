@@ -190,6 +190,7 @@ struct FrameConfig {
   ViewAngles view{};
   int width = 256, height = 256;
   Sampling sampling = Sampling::voxel;
+  Framing framing = Framing::longest;
   int order = 1;        ///< 0 or 1 (the orders ch. 5.7.2 counts)
   int64_t pes = 8192;   ///< power of two; the mesh is pe_grid(pes)
   int sweeps = 8;       ///< balancing sweeps (0: no balancing)

@@ -18,7 +18,8 @@ struct RenderOptions {
   ViewAngles view{};
   int width = 256, height = 256;
   Sampling sampling = Sampling::voxel;
-  int order = 1;  ///< 0..3
+  Framing framing = Framing::longest;  ///< what spans the image: the longest side or the diagonal
+  int order = 1;                       ///< 0..3
   CompositeParams composite{};
   ShadeParams shade{};
   Classifier classifier{};
@@ -40,9 +41,9 @@ Image render_reference(const Volume& vol, const RenderOptions& opt, RenderTimes*
 /// The stages after classification (match, resample, composite, warp), from
 /// classified premultiplied RGBA voxels (x fastest, the volume's dims). The
 /// OpenCL engine uses this while its own later stages are being built.
-Image render_classified(const std::vector<Rgba>& voxels, const Volume& vol, const ViewGeometry& view,
-                        const RenderOptions& opt, RenderTimes* times = nullptr,
-                        Image* intermediate = nullptr);
+Image render_classified(const std::vector<Rgba>& voxels, const Volume& vol,
+                        const ViewGeometry& view, const RenderOptions& opt,
+                        RenderTimes* times = nullptr, Image* intermediate = nullptr);
 
 /// Bilinear 2-D scale of the intermediate image to the output size (the
 /// final warp of voxel sampling); outside the intermediate image is

@@ -33,14 +33,26 @@ enum class Sampling {
   pixel,  ///< viewing space sampled at pixel spacing (affine map with scaling)
 };
 
+/// How the volume fills the image (`render --fit`).
+enum class Framing {
+  longest,   ///< its longest side spans min(width, height), centred (VolPack's
+             ///< example); an oblique view loses the corners that stick out
+  diagonal,  ///< its diagonal spans min(width, height), centred: the whole
+             ///< volume is in the image at every view, at one scale (VTK's
+             ///< ResetCamera fits the bounding sphere the same way)
+};
+
 /// Everything about where samples go, for one view of one volume at one
-/// output size. The volume fits the image as in VolPack's example: its
-/// longest side spans min(width, height), centred.
+/// output size. The volume fits the image by its longest side (VolPack's
+/// example) or by its diagonal (Framing): that length spans min(width,
+/// height), centred.
 struct ViewGeometry {
   Mat3 rot{};            ///< T (object -> viewing), physical units
   double step = 1.0;     ///< viewing-grid spacing in units of the smallest voxel spacing
   double radius = 0.0;   ///< half the volume's diagonal, same units
   double longest = 0.0;  ///< longest side, same units
+  Framing framing = Framing::longest;
+  double span = 0.0;  ///< the length that spans min(out_width, out_height): longest or 2 radius
   int out_width = 0, out_height = 0;  ///< final image
   sv_view grid{};                     ///< fixed-point map from (i, j, k) to voxel coordinates
   /// The samples' direction of travel (viewing +z) in object index space,
@@ -74,12 +86,13 @@ Mat3 inverse_viewing_map(const ViewGeometry& view, Vec3& origin);
 
 /// Builds the geometry. Throws ArgumentError for non-positive sizes.
 ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int out_height,
-                       Sampling sampling);
+                       Sampling sampling, Framing framing = Framing::longest);
 /// The same from the volume's dims and spacing alone (no voxel data needed:
 /// the geometry depends on nothing else). Throws ArgumentError for
 /// non-positive dims or spacing.
 ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
-                       ViewAngles angles, int out_width, int out_height, Sampling sampling);
+                       ViewAngles angles, int out_width, int out_height, Sampling sampling,
+                       Framing framing = Framing::longest);
 
 /// Splits a fixed-point coordinate into floor and fraction in [0, 1).
 inline int64_t fixed_floor(int64_t x) {
