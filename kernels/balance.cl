@@ -59,75 +59,73 @@ SV_FN int sv_list_start(int4 o, int axis) {
  * _pack: before the first round, the bounds out of the segments (one
  * work-item per segment slot; slots past seg_offset[pes] hold nothing).
  * _unpack: after the last round, the bounds back into the segments. */
-#define SV_BALANCE_KERNELS(SFX, BT, B1)                                                        \
-  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_round##SFX(   \
-      global const int4* cidx, global const int* pe_of, int4 splits, int pes, int axis,       \
-      int par, int dir, global const int4* lofs, global const int2* llist, global BT* kk,     \
-      global int* loads) {                                                                   \
-    const int p = (int)get_global_id(0);                                                     \
-    if (p >= pes) return;                                                                    \
-    int4 c = cidx[p];                                                                        \
-    const int sa = axis == 0 ? splits.x : (axis == 1 ? splits.y : splits.z);                 \
-    int ca = axis == 0 ? c.x : (axis == 1 ? c.y : c.z);                                      \
-    if ((ca & 1) != par || ca + 1 >= sa) return;                                             \
-    if (axis == 0)                                                                           \
-      c.x += 1;                                                                              \
-    else if (axis == 1)                                                                      \
-      c.y += 1;                                                                              \
-    else                                                                                     \
-      c.z += 1;                                                                              \
-    const int q = pe_of[(c.z * splits.y + c.y) * splits.x + c.x];                            \
-    const int F = dir > 0 ? p : q, B = dir > 0 ? q : p;                                      \
-    const int diff = loads[F] - loads[B];                                                    \
-    const int t = diff / 2; /* truncates towards 0 */                                        \
-    if (t == 0) return;                                                                      \
-    const int front_gives = t > 0;                                                           \
-    const int want = front_gives ? t : -t;                                                   \
-    const int e0 = sv_list_start(lofs[F], axis), e1 = sv_list_start(lofs[F + 1], axis);      \
-    long cap = 0;                                                                            \
-    for (int e = e0; e < e1; ++e) {                                                          \
-      const int2 st = llist[e];                                                              \
-      const BT g = kk[front_gives ? st.x : st.y];                                            \
-      cap += g.y - g.x;                                                                      \
-    }                                                                                        \
-    const long moved = min(cap, (long)want);                                                 \
-    if (moved == 0) return;                                                                  \
-    /* Cumulative shares: floor(moved C_r / cap) - floor(moved C_{r-1} / cap). */            \
-    const double inv = 1.0 / (double)cap;                                                    \
-    long cum = 0, prev = 0;                                                                  \
-    for (int e = e0; e < e1; ++e) {                                                          \
-      const int2 st = llist[e];                                                              \
-      const BT g = kk[front_gives ? st.x : st.y];                                            \
-      cum += g.y - g.x;                                                                      \
-      const long f = sv_floor_div(moved * cum, cap, inv);                                    \
-      const int give = (int)(f - prev);                                                      \
-      prev = f;                                                                              \
-      if (give == 0) continue;                                                               \
-      const int shift = front_gives ? -give : give;                                          \
-      kk[st.x].y = (B1)(kk[st.x].y + shift);                                                 \
-      kk[st.y].x = (B1)(kk[st.y].x + shift);                                                 \
-    }                                                                                        \
-    loads[F] -= front_gives ? (int)moved : -(int)moved;                                      \
-    loads[B] += front_gives ? (int)moved : -(int)moved;                                      \
-  }                                                                                          \
-                                                                                             \
-  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_pack##SFX(    \
-      global const int* seg_offset, int pes, global const sv_segment* segments,               \
-      global BT* kk) {                                                                       \
-    const int s = (int)get_global_id(0);                                                     \
-    if (s >= seg_offset[pes]) return;                                                        \
-    const sv_segment g = segments[s];                                                        \
-    kk[s] = (BT)((B1)g.k0, (B1)g.k1);                                                        \
-  }                                                                                          \
-                                                                                             \
-  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_unpack##SFX(  \
-      global const int* seg_offset, int pes, global const BT* kk,                            \
-      global sv_segment* segments) {                                                         \
-    const int s = (int)get_global_id(0);                                                     \
-    if (s >= seg_offset[pes]) return;                                                        \
-    const BT g = kk[s];                                                                      \
-    segments[s].k0 = g.x;                                                                    \
-    segments[s].k1 = g.y;                                                                    \
+#define SV_BALANCE_KERNELS(SFX, BT, B1)                                                          \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_round##SFX(     \
+      global const int4* cidx, global const int* pe_of, int4 splits, int pes, int axis, int par, \
+      int dir, global const int4* lofs, global const int2* llist, global BT* kk,                 \
+      global int* loads) {                                                                       \
+    const int p = (int)get_global_id(0);                                                         \
+    if (p >= pes) return;                                                                        \
+    int4 c = cidx[p];                                                                            \
+    const int sa = axis == 0 ? splits.x : (axis == 1 ? splits.y : splits.z);                     \
+    int ca = axis == 0 ? c.x : (axis == 1 ? c.y : c.z);                                          \
+    if ((ca & 1) != par || ca + 1 >= sa) return;                                                 \
+    if (axis == 0)                                                                               \
+      c.x += 1;                                                                                  \
+    else if (axis == 1)                                                                          \
+      c.y += 1;                                                                                  \
+    else                                                                                         \
+      c.z += 1;                                                                                  \
+    const int q = pe_of[(c.z * splits.y + c.y) * splits.x + c.x];                                \
+    const int F = dir > 0 ? p : q, B = dir > 0 ? q : p;                                          \
+    const int diff = loads[F] - loads[B];                                                        \
+    const int t = diff / 2; /* truncates towards 0 */                                            \
+    if (t == 0) return;                                                                          \
+    const int front_gives = t > 0;                                                               \
+    const int want = front_gives ? t : -t;                                                       \
+    const int e0 = sv_list_start(lofs[F], axis), e1 = sv_list_start(lofs[F + 1], axis);          \
+    long cap = 0;                                                                                \
+    for (int e = e0; e < e1; ++e) {                                                              \
+      const int2 st = llist[e];                                                                  \
+      const BT g = kk[front_gives ? st.x : st.y];                                                \
+      cap += g.y - g.x;                                                                          \
+    }                                                                                            \
+    const long moved = min(cap, (long)want);                                                     \
+    if (moved == 0) return;                                                                      \
+    /* Cumulative shares: floor(moved C_r / cap) - floor(moved C_{r-1} / cap). */                \
+    const double inv = 1.0 / (double)cap;                                                        \
+    long cum = 0, prev = 0;                                                                      \
+    for (int e = e0; e < e1; ++e) {                                                              \
+      const int2 st = llist[e];                                                                  \
+      const BT g = kk[front_gives ? st.x : st.y];                                                \
+      cum += g.y - g.x;                                                                          \
+      const long f = sv_floor_div(moved * cum, cap, inv);                                        \
+      const int give = (int)(f - prev);                                                          \
+      prev = f;                                                                                  \
+      if (give == 0) continue;                                                                   \
+      const int shift = front_gives ? -give : give;                                              \
+      kk[st.x].y = (B1)(kk[st.x].y + shift);                                                     \
+      kk[st.y].x = (B1)(kk[st.y].x + shift);                                                     \
+    }                                                                                            \
+    loads[F] -= front_gives ? (int)moved : -(int)moved;                                          \
+    loads[B] += front_gives ? (int)moved : -(int)moved;                                          \
+  }                                                                                              \
+                                                                                                 \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_pack##SFX(      \
+      global const int* seg_offset, int pes, global const sv_segment* segments, global BT* kk) { \
+    const int s = (int)get_global_id(0);                                                         \
+    if (s >= seg_offset[pes]) return;                                                            \
+    const sv_segment g = segments[s];                                                            \
+    kk[s] = (BT)((B1)g.k0, (B1)g.k1);                                                            \
+  }                                                                                              \
+                                                                                                 \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_unpack##SFX(    \
+      global const int* seg_offset, int pes, global const BT* kk, global sv_segment* segments) { \
+    const int s = (int)get_global_id(0);                                                         \
+    if (s >= seg_offset[pes]) return;                                                            \
+    const BT g = kk[s];                                                                          \
+    segments[s].k0 = g.x;                                                                        \
+    segments[s].k1 = g.y;                                                                        \
   }
 
 SV_BALANCE_KERNELS(, int2, int)

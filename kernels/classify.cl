@@ -107,8 +107,8 @@ SV_FN float sv_ramp_eval(__constant const sv_ramp* r, const int n, float v) {
 
 /* Material mixture of the (at most two) materials bracketing I; returns
  * alpha, (*cr, *cg, *cb) = premultiplied material colour. */
-SV_FN float sv_mixture(__constant const sv_classify_params* cp, const int n, float v,
-                       float* cr, float* cg, float* cb) {
+SV_FN float sv_mixture(__constant const sv_classify_params* cp, const int n, float v, float* cr,
+                       float* cg, float* cb) {
   __constant const sv_materials* m = &cp->materials;
   float I = v;
   if (cp->relative) I = cp->range_scale > 0.0f ? (v - cp->range_min) * cp->range_scale : 0.0f;
@@ -175,7 +175,6 @@ SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float 
   return a;
 }
 
-
 /* The opacity for a sampling step s: a' = 1 - (1 - a)^s. Below 2^-8 the
  * binomial series s a (1 - (s - 1) a / 2 (1 - (s - 2) a / 3)) (truncation
  * below (s - 1)(s - 2)(s - 3) a^3 / 24 relative): 1 - a would round to 1
@@ -185,7 +184,8 @@ SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float 
 SV_FN float sv_step_alpha(float a, float s) {
   const float om = 1.0f - a;
   const float big = om < FLT_MIN ? 1.0f : 1.0f - sv_exp(s * sv_log(om));
-  const float small = s * a * (1.0f - 0.5f * (s - 1.0f) * a * (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a));
+  const float small =
+      s * a * (1.0f - 0.5f * (s - 1.0f) * a * (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a));
   return a < 0.00390625f ? small : big;
 }
 
@@ -193,9 +193,9 @@ SV_FN float sv_step_alpha(float a, float s) {
 SV_FN void sv_classify_voxel(__constant const sv_classify_params* cp, float id, float is,
                              float gmag, float v, float* r, float* g, float* b, float* alpha) {
   float cr, cg, cb;
-  const float a = SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER ? sv_transfer(cp, v, gmag, &cr, &cg, &cb)
-                                                         : sv_mixture(cp, SV_NMAT_OF(cp), v, &cr,
-                                                                      &cg, &cb);
+  const float a = SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER
+                      ? sv_transfer(cp, v, gmag, &cr, &cg, &cb)
+                      : sv_mixture(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
 #ifdef SV_STEP_ONE
   const float a1 = a;
 #else
@@ -247,7 +247,7 @@ SV_FN float16 sv_ramp_eval16(__constant const sv_ramp* r, const int n, float16 v
 #if defined(__clang__) && defined(__AVX2__) && !defined(SV_NO_PERMUTE) && defined(SV_NMAT) && \
     SV_NMAT >= 3 && SV_NMAT <= 8
 #define SV_MIX_PERMUTE 1
-#define SV_PERM16(t, i)                                               \
+#define SV_PERM16(t, i) \
   ((float16)(__builtin_ia32_permvarsf256((t), (i).lo), __builtin_ia32_permvarsf256((t), (i).hi)))
 #endif
 
@@ -347,8 +347,8 @@ SV_FN float16 sv_transfer16_d(__constant const sv_classify_params* cp, float16 d
 
 SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, float16 gmag,
                             float16* cr, float16* cg, float16* cb) {
-  return sv_transfer16_d(cp, sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v), v, gmag, cr,
-                         cg, cb);
+  return sv_transfer16_d(cp, sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v), v, gmag, cr, cg,
+                         cb);
 }
 
 /* sv_step_alpha on 16 voxels (the same operations lane by lane). */
@@ -364,8 +364,8 @@ SV_FN float16 sv_step_alpha16(float16 a, float s) {
  * and premultiplied material colour (cr, cg, cb) (sv_classify16's second
  * half). */
 SV_FN void sv_classify16_lit(__constant const sv_classify_params* cp, float16 a, float16 cr,
-                             float16 cg, float16 cb, float16 id, float16 is, float16 v,
-                             float16* r, float16* g, float16* b, float16* alpha) {
+                             float16 cg, float16 cb, float16 id, float16 is, float16 v, float16* r,
+                             float16* g, float16* b, float16* alpha) {
 #ifdef SV_STEP_ONE
   const float16 a1 = a;
 #else
@@ -467,9 +467,8 @@ SV_FN void sv_classify_position(__global const float* shading, __global float* o
 
 /* simdvol_classify: see the file comment. 2-D range (element of a plane,
  * PE) = (vstride rounded up to the local size, pes). */
-__kernel void simdvol_classify(__global const float* restrict shading,
-                               __global float* restrict out, int vstride, int pes,
-                               __constant const sv_classify_params* cp) {
+__kernel void simdvol_classify(__global const float* restrict shading, __global float* restrict out,
+                               int vstride, int pes, __constant const sv_classify_params* cp) {
   const int e = (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (e >= vstride || p >= pes) return;
@@ -559,19 +558,16 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
   const size_t i = sv_flat_index(dims, x, y, z);
   const int sy = dims.x, sz = dims.x * dims.y;
   const float v = volume[i];
-  const float gx =
-      0.5f * (volume[i + (x + 1 < dims.x)] - volume[i - (x > 0)]) * sp->grad_scale[0];
-  const float gy = 0.5f *
-                   (volume[i + (y + 1 < dims.y ? sy : 0)] - volume[i - (y > 0 ? sy : 0)]) *
+  const float gx = 0.5f * (volume[i + (x + 1 < dims.x)] - volume[i - (x > 0)]) * sp->grad_scale[0];
+  const float gy = 0.5f * (volume[i + (y + 1 < dims.y ? sy : 0)] - volume[i - (y > 0 ? sy : 0)]) *
                    sp->grad_scale[1];
-  const float gz = 0.5f *
-                   (volume[i + (z + 1 < dims.z ? sz : 0)] - volume[i - (z > 0 ? sz : 0)]) *
+  const float gz = 0.5f * (volume[i + (z + 1 < dims.z ? sz : 0)] - volume[i - (z > 0 ? sz : 0)]) *
                    sp->grad_scale[2];
   float g2 = gx * gx + gy * gy + gz * gz;
   g2 = isfinite(g2) ? g2 : 0.0f;
   const float m = sqrt(g2);
-  const float d = sp->depth_dir[0] * x + sp->depth_dir[1] * y + sp->depth_dir[2] * z +
-                  sp->depth_offset;
+  const float d =
+      sp->depth_dir[0] * x + sp->depth_dir[1] * y + sp->depth_dir[2] * z + sp->depth_offset;
   const float cue = 1.0f / (sp->k1 + sp->k2 * d);
   const float nl = fabs(gx * sp->light[0] + gy * sp->light[1] + gz * sp->light[2]) / m;
   const float nh = fabs(gx * sp->halfway[0] + gy * sp->halfway[1] + gz * sp->halfway[2]) / m;
@@ -594,14 +590,11 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
 /* simdvol_shade_classify16: the fused kernel on 16-position chunks
  * (simdvol_shade16 then simdvol_classify16 without the voxel cells in
  * between); range and arguments as simdvol_shade16 plus cp. */
-__kernel void simdvol_shade_classify16(__global const float* restrict cells,
-                                       __global float* restrict out,
-                                       __global const int4* restrict origins, int4 dims,
-                                       int4 cell, int4 block, int pes, int vstride,
-                                       __constant const sv_shade_params* sp,
-                                       __constant const sv_classify_params* cp,
-                                       __global volatile uint* occ, const int nbx, const int nby,
-                                       const int mark) {
+__kernel void simdvol_shade_classify16(
+    __global const float* restrict cells, __global float* restrict out,
+    __global const int4* restrict origins, int4 dims, int4 cell, int4 block, int pes, int vstride,
+    __constant const sv_shade_params* sp, __constant const sv_classify_params* cp,
+    __global volatile uint* occ, const int nbx, const int nby, const int mark) {
   const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (p >= pes || e0 >= vstride) return;
@@ -714,12 +707,15 @@ __kernel void simdvol_shade_classify_flat16(__global const float* restrict volum
   __global const float* c = volume + i;
   const float16 v = vload16(0, c);
   /* x neighbours clamped at the row's ends (lane 0 / 15 reuse themselves) */
-  const float16 xm = x0 > 0 ? vload16(0, c - 1)
-                            : (float16)(v.s0, v.s0, v.s1, v.s23, v.s4567, v.s89ab, v.scde);
-  const float16 xp = x0 + 16 < dims.x ? vload16(0, c + 1)
-                                      : (float16)(v.s1, v.s23, v.s4567, v.s89ab, v.scde, v.sf, v.sf);
-  const float16 ym = vload16(0, c - (y > 0 ? sy : 0)), yp = vload16(0, c + (y + 1 < dims.y ? sy : 0));
-  const float16 zm = vload16(0, c - (z > 0 ? sz : 0)), zp = vload16(0, c + (z + 1 < dims.z ? sz : 0));
+  const float16 xm =
+      x0 > 0 ? vload16(0, c - 1) : (float16)(v.s0, v.s0, v.s1, v.s23, v.s4567, v.s89ab, v.scde);
+  const float16 xp = x0 + 16 < dims.x
+                         ? vload16(0, c + 1)
+                         : (float16)(v.s1, v.s23, v.s4567, v.s89ab, v.scde, v.sf, v.sf);
+  const float16 ym = vload16(0, c - (y > 0 ? sy : 0)),
+                yp = vload16(0, c + (y + 1 < dims.y ? sy : 0));
+  const float16 zm = vload16(0, c - (z > 0 ? sz : 0)),
+                zp = vload16(0, c + (z + 1 < dims.z ? sz : 0));
   const float16 iota = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
   const size_t n = (size_t)dims.x * (size_t)dims.y * (size_t)dims.z;
   const float16 zero = 0.0f;

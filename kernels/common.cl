@@ -85,12 +85,10 @@ SV_FN float sv_exp(float x) {
   const float kf = floor(xc * 1.44269504f + 0.5f);
   const float r = (xc - kf * 0.693145751953125f) - kf * 1.42860682e-6f;
   const float p =
-      1.0f +
-      r * (1.0f +
-           r * (0.5f +
-                r * (0.166666667f +
-                     r * (0.0416666667f +
-                          r * (0.00833333333f + r * (0.00138888889f + r * 0.000198412698f))))));
+      1.0f + r * (1.0f + r * (0.5f + r * (0.166666667f +
+                                          r * (0.0416666667f +
+                                               r * (0.00833333333f +
+                                                    r * (0.00138888889f + r * 0.000198412698f))))));
   const float y = p * as_float(((int)kf + 127) << 23);
   return x < -87.3f ? 0.0f : (x > 88.0f ? INFINITY : y);
 }
@@ -119,12 +117,10 @@ SV_FN float16 sv_exp16(float16 x) {
   const float16 kf = floor(xc * 1.44269504f + 0.5f);
   const float16 r = (xc - kf * 0.693145751953125f) - kf * 1.42860682e-6f;
   const float16 p =
-      1.0f +
-      r * (1.0f +
-           r * (0.5f +
-                r * (0.166666667f +
-                     r * (0.0416666667f +
-                          r * (0.00833333333f + r * (0.00138888889f + r * 0.000198412698f))))));
+      1.0f + r * (1.0f + r * (0.5f + r * (0.166666667f +
+                                          r * (0.0416666667f +
+                                               r * (0.00833333333f +
+                                                    r * (0.00138888889f + r * 0.000198412698f))))));
   const float16 y = p * as_float16((convert_int16(kf) + 127) << 23);
   return select(select(y, (float16)(INFINITY), x > 88.0f), (float16)(0.0f), x < -87.3f);
 }

@@ -93,11 +93,10 @@ __kernel void simdvol_resample_local_v8(__global const sv_segment* segs, const i
                                         __global const int* seg_off, const int log2p,
                                         __global const sv_view* view, __global const int* table,
                                         __global const float* vox, const int cs,
-                                        __global const sv_rect* rects,
-                                        __global const int* rect_off, __global float4* foot,
-                                        __global const uchar* reach, const int nbx, const int nby,
-                                        const int skip, __global const int* order,
-                                        const int ordered) {
+                                        __global const sv_rect* rects, __global const int* rect_off,
+                                        __global float4* foot, __global const uchar* reach,
+                                        const int nbx, const int nby, const int skip,
+                                        __global const int* order, const int ordered) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8];

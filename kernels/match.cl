@@ -193,9 +193,9 @@ SV_FN void sv_row_init(__constant sv_view* view, __constant long* stepc, const l
 }
 
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_pe(
-    global const sv_rect* cand, int pes, int H, global const int4* rowsum,
-    global const int4* rowlk, global int4* rowoff, global int4* petot, global int* counts,
-    global sv_rect* rects, global int* loads) {
+    global const sv_rect* cand, int pes, int H, global const int4* rowsum, global const int4* rowlk,
+    global int4* rowoff, global int4* petot, global int* counts, global sv_rect* rects,
+    global int* loads) {
   const int p = (int)get_global_id(0);
   if (p >= pes) return;
   const int h = cand[p].h;
@@ -321,9 +321,9 @@ SV_FN void sv_row8_init(__constant sv_view* view, __constant long* stepc, const 
  * segment inside [ia, ib]; lnk = those whose segment has a balance link
  * (one exit axis, k1 < D, the neighbour cell inside the volume), exit axis
  * in ea. */
-SV_FN void sv_row8_eval(const sv_row8* st, __constant sv_view* view, const long* L,
-                        const long* Hb, int4 cell, int i, int8 ia, int8 ib, int8* k0, int8* k1,
-                        int8* act, int8* lnk, int8* ea) {
+SV_FN void sv_row8_eval(const sv_row8* st, __constant sv_view* view, const long* L, const long* Hb,
+                        int4 cell, int i, int8 ia, int8 ib, int8* k0, int8* k1, int8* act,
+                        int8* lnk, int8* ea) {
   const int D = view->grid[2];
   long8 lo = (long8)(0), hi = (long8)(D);
 #pragma unroll
@@ -361,7 +361,8 @@ SV_FN void sv_row8_eval(const sv_row8* st, __constant sv_view* view, const long*
      * 7.5-8.3 ms on brainsmall and 21.0-21.9 to 18.4-20.9 ms on the 256^3
      * phantom (three alternations each). */
     const long cb = (long)c[a] << SV_FRAC_BITS;
-    const long bound = d > 0 ? min(cb, ((long)view->dims[a] << SV_FRAC_BITS) - Hb[a]) : min(cb, L[a]);
+    const long bound =
+        d > 0 ? min(cb, ((long)view->dims[a] << SV_FRAC_BITS) - Hb[a]) : min(cb, L[a]);
     ok = select(ok, st->rhi[a] < (long8)(bound), ex);
   }
   *lnk = *act & (*k1 < (int8)(D)) & convert_int8((n == (long8)(1)) & ok);
@@ -387,8 +388,8 @@ SV_FN void sv_row8_step(sv_row8* st, __constant sv_view* view, __constant long* 
 
 /* The face neighbour along each axis that the rays pass into (the sign of
  * the depth step), if it exists and is active: nq[a] = its PE, else -1. */
-SV_FN void sv_link_targets(__constant sv_view* view, int4 ci, int4 splits,
-                           global const int* pe_of, global const uchar* active, int* nq) {
+SV_FN void sv_link_targets(__constant sv_view* view, int4 ci, int4 splits, global const int* pe_of,
+                           global const uchar* active, int* nq) {
   for (int e = 0; e < 3; ++e) {
     int idx[3] = {ci.x, ci.y, ci.z};
     const int sa = e == 0 ? splits.x : (e == 1 ? splits.y : splits.z);
@@ -407,9 +408,8 @@ SV_FN void sv_link_targets(__constant sv_view* view, int4 ci, int4 splits,
 SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
                                __constant long* stepc, global const sv_rect* cand,
                                global const int4* cidx, int4 cell, int4 splits,
-                               global const int* pe_of, global const uchar* active, int pes,
-                               int H, global int4* rowsum, global int4* rowlk,
-                               const int make_links) {
+                               global const int* pe_of, global const uchar* active, int pes, int H,
+                               global int4* rowsum, global int4* rowlk, const int make_links) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
@@ -469,11 +469,11 @@ SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
 SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
                                __constant long* stepc, global const sv_rect* cand,
                                global const int4* cidx, int4 cell, int4 splits,
-                               global const int* pe_of, global const uchar* active, int pes,
-                               int H, global const int4* rowsum, global const int4* rowoff,
+                               global const int* pe_of, global const uchar* active, int pes, int H,
+                               global const int4* rowsum, global const int4* rowoff,
                                global const int* seg_offset, global const int4* lofs,
-                               global sv_segment* segments, global int* links,
-                               global int2* llist, const int make_links) {
+                               global sv_segment* segments, global int* links, global int2* llist,
+                               const int make_links) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
@@ -502,14 +502,14 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
     }
   }
   if (i0 > i1) return;
-  /* A link along axis e goes to the face neighbour nq[e] (one per axis for
-   * the whole work-item), into the same row j. Per (axis, lane), set at its
-   * first link: t0 = the index its row's segment at column 0 would have, or
-   * SV_HOLES if the row has holes; then hb = the index of the row's first
-   * segment, and a cursor (hc, hn): hn segments in columns before hc,
-   * advanced with sv_box_ray as the lane's columns grow, so a row's holes
-   * are counted once, not from the row's start at every link. SV_UNSET
-   * before. */
+    /* A link along axis e goes to the face neighbour nq[e] (one per axis for
+     * the whole work-item), into the same row j. Per (axis, lane), set at its
+     * first link: t0 = the index its row's segment at column 0 would have, or
+     * SV_HOLES if the row has holes; then hb = the index of the row's first
+     * segment, and a cursor (hc, hn): hn segments in columns before hc,
+     * advanced with sv_box_ray as the lane's columns grow, so a row's holes
+     * are counted once, not from the row's start at every link. SV_UNSET
+     * before. */
 #define SV_UNSET INT_MAX
 #define SV_HOLES INT_MIN
   int nq[3], t0[3][8], hb[3][8], hc[3][8], hn[3][8];
@@ -578,28 +578,28 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
 #undef SV_HOLES
 }
 
-#define SV_MATCH_ROWS_KERNEL(NAME, LINKS)                                                      \
-  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void NAME(                         \
-      __constant sv_view* view, __constant float* geo, __constant long* stepc,                 \
-      global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,             \
+#define SV_MATCH_ROWS_KERNEL(NAME, LINKS)                                                       \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void NAME(                          \
+      __constant sv_view* view, __constant float* geo, __constant long* stepc,                  \
+      global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,              \
       global const int* pe_of, global const uchar* active, int pes, int H, global int4* rowsum, \
-      global int4* rowlk) {                                                                    \
-    sv_match_rows(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum,   \
-                  rowlk, LINKS);                                                               \
+      global int4* rowlk) {                                                                     \
+    sv_match_rows(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum,    \
+                  rowlk, LINKS);                                                                \
   }
 SV_MATCH_ROWS_KERNEL(simdvol_match_rows, 1)
 SV_MATCH_ROWS_KERNEL(simdvol_match_rows_nolinks, 0)
 
-#define SV_MATCH_FILL_KERNEL(NAME, LINKS)                                                     \
-  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void NAME(                        \
-      __constant sv_view* view, __constant float* geo, __constant long* stepc,                \
-      global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,            \
-      global const int* pe_of, global const uchar* active, int pes, int H,                    \
-      global const int4* rowsum, global const int4* rowoff, global const int* seg_offset,     \
-      global const int4* lofs, global sv_segment* segments, global int* links,                \
-      global int2* llist) {                                                                   \
-    sv_match_fill(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum,  \
-                  rowoff, seg_offset, lofs, segments, links, llist, LINKS);                   \
+#define SV_MATCH_FILL_KERNEL(NAME, LINKS)                                                    \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void NAME(                       \
+      __constant sv_view* view, __constant float* geo, __constant long* stepc,               \
+      global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,           \
+      global const int* pe_of, global const uchar* active, int pes, int H,                   \
+      global const int4* rowsum, global const int4* rowoff, global const int* seg_offset,    \
+      global const int4* lofs, global sv_segment* segments, global int* links,               \
+      global int2* llist) {                                                                  \
+    sv_match_fill(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum, \
+                  rowoff, seg_offset, lofs, segments, links, llist, LINKS);                  \
   }
 SV_MATCH_FILL_KERNEL(simdvol_match_fill, 1)
 SV_MATCH_FILL_KERNEL(simdvol_match_fill_nolinks, 0)
@@ -612,8 +612,8 @@ SV_MATCH_FILL_KERNEL(simdvol_match_fill_nolinks, 0)
  * brick; where none has reach, every sample of p is +-0 in every channel
  * (the fused kernel would skip them all) and p's footprint stays 0. */
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_active(
-    global const int4* cidx, int4 cell, int4 dims, int pes, global const uchar* reach,
-    int4 bricks, global uchar* active) {
+    global const int4* cidx, int4 cell, int4 dims, int pes, global const uchar* reach, int4 bricks,
+    global uchar* active) {
   const int p = (int)get_global_id(0);
   if (p >= pes) return;
   const int4 ci = cidx[p];

@@ -58,9 +58,8 @@
 #define STATS 0
 #endif
 
-__kernel void simdvol_mc_ray_count(__global const sv_segment* segs, const int nseg,
-                                   const int width, const int height,
-                                   volatile __global int* counts) {
+__kernel void simdvol_mc_ray_count(__global const sv_segment* segs, const int nseg, const int width,
+                                   const int height, volatile __global int* counts) {
   const int s = (int)get_global_id(0);
   if (s >= nseg) return;
   const sv_segment g = segs[s];
@@ -79,8 +78,8 @@ __kernel void simdvol_mc_ray_scan(__global int* counts, const int n, __global in
   off[n] = acc;
 }
 
-__kernel void simdvol_mc_ray_fill(__global const sv_segment* segs, const int nseg,
-                                  const int width, const int height, __global const int* off,
+__kernel void simdvol_mc_ray_fill(__global const sv_segment* segs, const int nseg, const int width,
+                                  const int height, __global const int* off,
                                   volatile __global int* cursor, __global int* items) {
   const int s = (int)get_global_id(0);
   if (s >= nseg) return;
@@ -175,8 +174,8 @@ SV_FN void sv_uniform8x4(const sv_philox_ray* R, const uint q0, const uint kb, f
  * first segment's k0 if none), which keys the exact-opacity draws
  * (composite.cpp: first_opaque_step). */
 SV_FN float sv_mc_alpha(__global const sv_segment* segs, __global const int* sample_off,
-                        __global const float4* samples, __global const int* items,
-                        const int first, const int count, int* k_first) {
+                        __global const float4* samples, __global const int* items, const int first,
+                        const int count, int* k_first) {
   float acc = 0.0f;
   int found = 0;
   for (int t = 0; t < count; ++t) {
@@ -417,8 +416,8 @@ __kernel void simdvol_mc_whole(__global const sv_segment* segs, __global const i
   const uint key = SHARED ? SV_SHARED_RAY : (uint)q; /* q = j * width + i */
   int4 st;
   const int b = ray_off[q];
-  image[q] = sv_mc_estimate(segs, sample_off, samples, ray_items, b, ray_off[q + 1] - b, key,
-                            walks, seed, &st);
+  image[q] = sv_mc_estimate(segs, sample_off, samples, ray_items, b, ray_off[q + 1] - b, key, walks,
+                            seed, &st);
 #if STATS
   stats[q] = st;
 #endif

@@ -72,11 +72,13 @@ SV_FN void sv_neville(float* q, const int R, const float* d, const int low) {
       if (c == 3 || c == -3) {
         const float den = low ? (float)c : (float)(-c);
 #pragma unroll
-        for (int r = 0; r < R; ++r) q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) / den;
+        for (int r = 0; r < R; ++r)
+          q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) / den;
       } else {
         const float rc = low ? 1.0f / (float)c : -1.0f / (float)c; /* exact: c = +-1, +-2 */
 #pragma unroll
-        for (int r = 0; r < R; ++r) q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) * rc;
+        for (int r = 0; r < R; ++r)
+          q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) * rc;
       }
     }
   }
@@ -103,7 +105,8 @@ SV_FN float4 sv_sample(long X0, long X1, long X2, int4 dims, __global const int*
       for (int a = 0; a < SV_M; ++a) {
         const int o = row + ax[a];
 #pragma unroll
-        for (int ch = 0; ch < 4; ++ch) v[a * R + ch * SV_M * SV_M + c * SV_M + b] = vox[o + ch * cs];
+        for (int ch = 0; ch < 4; ++ch)
+          v[a * R + ch * SV_M * SV_M + c * SV_M + b] = vox[o + ch * cs];
       }
     }
   sv_neville(v, R, dx, lx); /* v[ch * M * M + c * M + b] along x */
@@ -127,8 +130,7 @@ SV_FN float4 sv_sample(long X0, long X1, long X2, int4 dims, __global const int*
 
 /* Position of sample k of ray (i, j), per axis. */
 SV_FN long sv_pos(__global const sv_view* v, int a, int i, int j, int k) {
-  return v->origin[a] + (long)i * v->step[a][0] + (long)j * v->step[a][1] +
-         (long)k * v->step[a][2];
+  return v->origin[a] + (long)i * v->step[a][0] + (long)j * v->step[a][1] + (long)k * v->step[a][2];
 }
 
 __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
@@ -168,12 +170,12 @@ __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
 #ifdef __clang__
 #pragma clang diagnostic ignored "-Wpsabi"
 #endif
-#define SV_G8(p, ix)                                                                  \
-  ((float8)((p)[(ix).s0], (p)[(ix).s1], (p)[(ix).s2], (p)[(ix).s3], (p)[(ix).s4],     \
-            (p)[(ix).s5], (p)[(ix).s6], (p)[(ix).s7]))
-#define SV_GI8(p, ix)                                                                 \
-  ((int8)((p)[(ix).s0], (p)[(ix).s1], (p)[(ix).s2], (p)[(ix).s3], (p)[(ix).s4],       \
-          (p)[(ix).s5], (p)[(ix).s6], (p)[(ix).s7]))
+#define SV_G8(p, ix)                                                                            \
+  ((float8)((p)[(ix).s0], (p)[(ix).s1], (p)[(ix).s2], (p)[(ix).s3], (p)[(ix).s4], (p)[(ix).s5], \
+            (p)[(ix).s6], (p)[(ix).s7]))
+#define SV_GI8(p, ix)                                                                         \
+  ((int8)((p)[(ix).s0], (p)[(ix).s1], (p)[(ix).s2], (p)[(ix).s3], (p)[(ix).s4], (p)[(ix).s5], \
+          (p)[(ix).s6], (p)[(ix).s7]))
 /* (AVX2 gathers, __builtin_ia32_gatherd_ps256 in place of these, gave the
  * same times on the 2-core EPYC (simdvol-bench-frame), so the portable form
  * stays.) */
@@ -202,11 +204,13 @@ SV_FN void sv_neville8(float8* q, const int R, const float8* d, const int8 low) 
       if (c == 3 || c == -3) {
         const float8 den = select((float8)((float)(-c)), (float8)((float)c), low);
 #pragma unroll
-        for (int r = 0; r < R; ++r) q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) / den;
+        for (int r = 0; r < R; ++r)
+          q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) / den;
       } else {
         const float8 rc = select((float8)(-1.0f / (float)c), (float8)(1.0f / (float)c), low);
 #pragma unroll
-        for (int r = 0; r < R; ++r) q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) * rc;
+        for (int r = 0; r < R; ++r)
+          q[i * R + r] = (di * q[(i + 1) * R + r] - dk * q[i * R + r]) * rc;
       }
     }
   }
@@ -373,8 +377,8 @@ SV_FN int8 sv_reach8(const long8* X, int nx, int ny, int nz, int nbx, int nby,
   const int8 fx = clamp(convert_int8(X[0] >> SV_FRAC_BITS), (int8)(0), (int8)(nx - 1));
   const int8 fy = clamp(convert_int8(X[1] >> SV_FRAC_BITS), (int8)(0), (int8)(ny - 1));
   const int8 fz = clamp(convert_int8(X[2] >> SV_FRAC_BITS), (int8)(0), (int8)(nz - 1));
-  const int8 b = (fx >> SV_BRICK_LOG2) +
-                 nbx * ((fy >> SV_BRICK_LOG2) + nby * (fz >> SV_BRICK_LOG2));
+  const int8 b =
+      (fx >> SV_BRICK_LOG2) + nbx * ((fy >> SV_BRICK_LOG2) + nby * (fz >> SV_BRICK_LOG2));
   return (SV_GI8(reach, b) != 0) & on;
 }
 

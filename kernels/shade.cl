@@ -66,19 +66,19 @@
 /* r = x^n (type T: float or float16) for a whole n >= 1 by repeated
  * squaring: 5 multiplications for the default Phong exponent 24, within a
  * few ulp of the reference's std::pow. */
-#define SV_POWN(T, x, n, r)               \
-  do {                                    \
-    T b_ = (x);                           \
-    int n_ = (n);                         \
-    while (!(n_ & 1)) {                   \
-      b_ = b_ * b_;                       \
-      n_ >>= 1;                           \
-    }                                     \
-    (r) = b_;                             \
-    for (n_ >>= 1; n_; n_ >>= 1) {        \
-      b_ = b_ * b_;                       \
-      if (n_ & 1) (r) = (r)*b_;           \
-    }                                     \
+#define SV_POWN(T, x, n, r)        \
+  do {                             \
+    T b_ = (x);                    \
+    int n_ = (n);                  \
+    while (!(n_ & 1)) {            \
+      b_ = b_ * b_;                \
+      n_ >>= 1;                    \
+    }                              \
+    (r) = b_;                      \
+    for (n_ >>= 1; n_; n_ >>= 1) { \
+      b_ = b_ * b_;                \
+      if (n_ & 1) (r) = (r)*b_;    \
+    }                              \
   } while (0)
 
 /* x^y for x >= 0, y >= 0 as C's pow (0^0 = 1); x below FLT_MIN counts as 0.
@@ -97,8 +97,7 @@ SV_FN float sv_pow(float x, float y) {
  * bx and slice pitch bxy), at global voxel index (ix, iy, iz). Scalar code
  * only: PoCL's loop vectoriser does not take vector types (float3/float4). */
 SV_FN void sv_shade_voxel(__constant const sv_shade_params* sp, __global const float* c, int bx,
-                          int bxy, float ix, float iy, float iz, float* id, float* is,
-                          float* mag) {
+                          int bxy, float ix, float iy, float iz, float* id, float* is, float* mag) {
   const float gx = 0.5f * (c[1] - c[-1]) * sp->grad_scale[0];
   const float gy = 0.5f * (c[bx] - c[-bx]) * sp->grad_scale[1];
   const float gz = 0.5f * (c[bxy] - c[-bxy]) * sp->grad_scale[2];
@@ -129,9 +128,8 @@ SV_FN void sv_store4(__global float* blk, int vstride, int e, float a, float b, 
 /* simdvol_shade: see the file comment. cells: input blocks (halo >= 1);
  * out: voxel cells; vstride: floats per plane of a PE block of out. */
 __kernel void simdvol_shade(__global const float* restrict cells, __global float* restrict out,
-                            __global const int4* restrict origins, int4 dims, int4 cell,
-                            int4 block, int pes, int vstride,
-                            __constant const sv_shade_params* sp) {
+                            __global const int4* restrict origins, int4 dims, int4 cell, int4 block,
+                            int pes, int vstride, __constant const sv_shade_params* sp) {
   const int lx = (int)get_global_id(0);
   const int row = (int)get_global_id(1);
   const int p = (int)get_global_id(2);
@@ -189,8 +187,7 @@ __kernel void simdvol_shade_voxel(__global const float* restrict cells,
 /* simdvol_shade_rows: the other alternative, one work-item per (PE, row)
  * looping over the row's cx voxels (2-D range (cy * cz, pes)). Kept for
  * benchmarking. */
-__kernel void simdvol_shade_rows(__global const float* restrict cells,
-                                 __global float* restrict out,
+__kernel void simdvol_shade_rows(__global const float* restrict cells, __global float* restrict out,
                                  __global const int4* restrict origins, int4 dims, int4 cell,
                                  int4 block, int pes, int vstride,
                                  __constant const sv_shade_params* sp) {
@@ -312,7 +309,7 @@ SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 
 #define SV_IOTA16 ((float16)(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7))
 #elif SV_RW == 4
 #define SV_NR 4
-#define SV_LD16(c, rb, off)                                                           \
+#define SV_LD16(c, rb, off)                                                      \
   ((float16)(vload4(0, (c) + (rb)[0] + (off)), vload4(0, (c) + (rb)[1] + (off)), \
              vload4(0, (c) + (rb)[2] + (off)), vload4(0, (c) + (rb)[3] + (off))))
 #define SV_ROWS16(a) \
@@ -320,14 +317,14 @@ SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 
 #define SV_IOTA16 ((float16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3))
 #elif SV_RW == 1
 #define SV_NR 16
-#define SV_LD16(c, rb, off)                                                             \
-  ((float16)((c)[(rb)[0] + (off)], (c)[(rb)[1] + (off)], (c)[(rb)[2] + (off)],          \
-             (c)[(rb)[3] + (off)], (c)[(rb)[4] + (off)], (c)[(rb)[5] + (off)],          \
-             (c)[(rb)[6] + (off)], (c)[(rb)[7] + (off)], (c)[(rb)[8] + (off)],          \
-             (c)[(rb)[9] + (off)], (c)[(rb)[10] + (off)], (c)[(rb)[11] + (off)],        \
-             (c)[(rb)[12] + (off)], (c)[(rb)[13] + (off)], (c)[(rb)[14] + (off)],       \
+#define SV_LD16(c, rb, off)                                                       \
+  ((float16)((c)[(rb)[0] + (off)], (c)[(rb)[1] + (off)], (c)[(rb)[2] + (off)],    \
+             (c)[(rb)[3] + (off)], (c)[(rb)[4] + (off)], (c)[(rb)[5] + (off)],    \
+             (c)[(rb)[6] + (off)], (c)[(rb)[7] + (off)], (c)[(rb)[8] + (off)],    \
+             (c)[(rb)[9] + (off)], (c)[(rb)[10] + (off)], (c)[(rb)[11] + (off)],  \
+             (c)[(rb)[12] + (off)], (c)[(rb)[13] + (off)], (c)[(rb)[14] + (off)], \
              (c)[(rb)[15] + (off)]))
-#define SV_ROWS16(a)                                                                      \
+#define SV_ROWS16(a)                                                                         \
   ((float16)((a)[0], (a)[1], (a)[2], (a)[3], (a)[4], (a)[5], (a)[6], (a)[7], (a)[8], (a)[9], \
              (a)[10], (a)[11], (a)[12], (a)[13], (a)[14], (a)[15]))
 #else

@@ -159,7 +159,6 @@ typedef struct sv_classify_params {
   sv_ramp density, gradient, red, green, blue;
 } sv_classify_params;
 
-
 /* ---- match, balance, resample, local (kernels/match.cl ... local.cl) ----
  * A segment: the samples [k0, k1) of ray (i, j) that one PE resamples. A PE's
  * segments are stored contiguously (CSR: seg_offset[p] .. seg_offset[p+1]),

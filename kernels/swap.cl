@@ -78,10 +78,10 @@ __kernel void simdvol_swap_stage(__global const float4* in, __global const int8*
       const int m = min(o.s2 - col, n - i);
       const int dxp = x - rp.s0, dyp = y - rp.s1, dxq = x - rq.s0, dyq = y - rq.s1;
       const int bp = dyp >> rp.s7, bq = dyq >> rq.s7;
-      const bool okp = dyp >= 0 && (dyp & (rp.s5 - 1)) == 0 && bp < rp.s3 &&
-                       (dxp & (rp.s4 - 1)) == 0;
-      const bool okq = dyq >= 0 && (dyq & (rq.s5 - 1)) == 0 && bq < rq.s3 &&
-                       (dxq & (rq.s4 - 1)) == 0;
+      const bool okp =
+          dyp >= 0 && (dyp & (rp.s5 - 1)) == 0 && bp < rp.s3 && (dxp & (rp.s4 - 1)) == 0;
+      const bool okq =
+          dyq >= 0 && (dyq & (rq.s5 - 1)) == 0 && bq < rq.s3 && (dxq & (rq.s4 - 1)) == 0;
       int ap = dxp >> rp.s6, aq = dxq >> rq.s6;
       __global const float4* rowp = inp + bp * rp.s2;
       __global const float4* rowq = inq + bq * rq.s2;
@@ -130,9 +130,9 @@ SV_FN float4 sv_warp_px(__global const float4* im, const int w, const int h, con
 }
 
 __kernel void simdvol_warp(__global const float4* im, const int w, const int h,
-                           __global const int* ix, __global const float* tx,
-                           __global const int* iy, __global const float* ty, const int ow,
-                           const int oh, __global float4* out) {
+                           __global const int* ix, __global const float* tx, __global const int* iy,
+                           __global const float* ty, const int ow, const int oh,
+                           __global float4* out) {
   const int x = (int)get_global_id(0), y = (int)get_global_id(1);
   if (x >= ow || y >= oh) return;
   const int x0 = ix[x], y0 = iy[y];
