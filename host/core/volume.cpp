@@ -10,10 +10,14 @@ namespace simdvol {
 
 std::string_view to_string(VoxelType t) {
   switch (t) {
-    case VoxelType::u8: return "u8";
-    case VoxelType::u16: return "u16";
-    case VoxelType::i16: return "i16";
-    case VoxelType::f32: return "f32";
+    case VoxelType::u8:
+      return "u8";
+    case VoxelType::u16:
+      return "u16";
+    case VoxelType::i16:
+      return "i16";
+    case VoxelType::f32:
+      return "f32";
   }
   return "?";
 }
@@ -23,16 +27,19 @@ VoxelType parse_voxel_type(std::string_view s, const std::string& argument) {
   if (s == "u16" || s == "uint16" || s == "ushort") return VoxelType::u16;
   if (s == "i16" || s == "int16" || s == "short") return VoxelType::i16;
   if (s == "f32" || s == "float" || s == "float32") return VoxelType::f32;
-  throw ArgumentError(argument, "unknown voxel type '" + std::string(s) +
-                                    "' (expected u8, u16, i16 or f32)");
+  throw ArgumentError(argument,
+                      "unknown voxel type '" + std::string(s) + "' (expected u8, u16, i16 or f32)");
 }
 
 std::size_t voxel_bytes(VoxelType t) {
   switch (t) {
-    case VoxelType::u8: return 1;
+    case VoxelType::u8:
+      return 1;
     case VoxelType::u16:
-    case VoxelType::i16: return 2;
-    case VoxelType::f32: return 4;
+    case VoxelType::i16:
+      return 2;
+    case VoxelType::f32:
+      return 4;
   }
   return 0;
 }
@@ -67,9 +74,8 @@ Volume::Volume(std::array<int64_t, 3> dims, VoxelType type, std::array<double, 3
 void Volume::set_spacing(std::array<double, 3> s) {
   for (int a = 0; a < 3; ++a)
     if (!(s[a] > 0.0) || !std::isfinite(s[a]))
-      throw ArgumentError("spacing", "voxel spacing " + std::to_string(s[a]) +
-                                         " along axis " + std::to_string(a) +
-                                         " must be positive and finite");
+      throw ArgumentError("spacing", "voxel spacing " + std::to_string(s[a]) + " along axis " +
+                                         std::to_string(a) + " must be positive and finite");
   spacing_ = s;
 }
 
