@@ -162,7 +162,6 @@ ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<doub
     g.longest = std::max(g.longest, extent[a]);
   }
   g.radius = 0.5 * std::sqrt(diag2);
-  g.framing = framing;
   g.span = framing == Framing::diagonal ? 2.0 * g.radius : g.longest;
 
   int wi = out_width, hi = out_height;

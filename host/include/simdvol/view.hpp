@@ -51,8 +51,7 @@ struct ViewGeometry {
   double step = 1.0;     ///< viewing-grid spacing in units of the smallest voxel spacing
   double radius = 0.0;   ///< half the volume's diagonal, same units
   double longest = 0.0;  ///< longest side, same units
-  Framing framing = Framing::longest;
-  double span = 0.0;  ///< the length that spans min(out_width, out_height): longest or 2 radius
+  double span = 0.0;     ///< the length that spans min(out_width, out_height): longest or 2 radius
   int out_width = 0, out_height = 0;  ///< final image
   sv_view grid{};                     ///< fixed-point map from (i, j, k) to voxel coordinates
   /// The samples' direction of travel (viewing +z) in object index space,
