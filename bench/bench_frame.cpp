@@ -229,6 +229,10 @@ int main(int argc, char** argv) try {
   CellBuffer cells = array.layout(vol, 1);
   const VoxelLayout L = make_voxel_layout(cells.layout());
   VoxelBuffer rgba(device, L);
+  // The engine's fused path writes interleaved cells (stages.hpp): column
+  // `ordered4`, the same voxels in that layout.
+  const VoxelLayout L4 = make_voxel_layout(cells.layout(), true);
+  VoxelBuffer rgba4(device, L4);
   std::vector<Rgba> flat;
   std::printf(
       "volume %d^3 Shepp-Logan (s = 4), preset ct, %lld PEs, cell %lldx%lldx%lld, order %d, "
@@ -236,11 +240,11 @@ int main(int argc, char** argv) try {
       size, static_cast<long long>(pes), static_cast<long long>(L.cell()[0]),
       static_cast<long long>(L.cell()[1]), static_cast<long long>(L.cell()[2]), order, runs);
   std::printf(
-      "%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s | "
+      "%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s | "
       "%7s %8s %8s %8s | %8s %8s\n",
       "view", "samples", "segments", "util", "match", "balance", "resample", "local", "zero",
-      "fused", "fused1", "occ", "skip", "ordered", "ref m+b", "ref r+l", "ref/dev", "Gld/s",
-      "xnet rd", "xnet max", "active", "match'", "balance'", "rsloc'", "sum", "sum'");
+      "fused", "fused1", "occ", "skip", "ordered", "ordered4", "ref m+b", "ref r+l", "ref/dev",
+      "Gld/s", "xnet rd", "xnet max", "active", "match'", "balance'", "rsloc'", "sum", "sum'");
   for (const double phi : views) {
     const ViewAngles angles{0.0, phi, 0.0};
     const ViewGeometry view = make_view(vol, angles, size, size, Sampling::voxel);
@@ -249,6 +253,7 @@ int main(int argc, char** argv) try {
       const sv_shade_params sp = shade_params(make_shade_frame(vol, view, shp), shp);
       const sv_classify_params cp = classify_params(cls, ValueRange{}, view.step);
       enqueue_shade_classify(device, cells, sp, cp, rgba);
+      enqueue_shade_classify(device, cells, sp, cp, rgba4);
       flat.resize(vol.voxel_count());
       gather_rgba(device, rgba, flat.data());
     }
@@ -277,6 +282,7 @@ int main(int argc, char** argv) try {
     }
     const LocalSegments segs = upload_segments(device, m);
     const ResampleTables tables = make_resample_tables(device, L, view);
+    const ResampleTables tables4 = make_resample_tables(device, L4, view);
     const cl::Buffer soff = upload_sample_offsets(device, m);
     const int64_t nsamples = sample_offsets(m).back();
     cl::Buffer samples = device.buffer(
@@ -315,8 +321,16 @@ int main(int argc, char** argv) try {
           std::memcmp(ordered.pixels.data(), plain.pixels.data(),
                       plain.pixels.size() * sizeof(Rgba)) != 0)
         throw Error("the lane order changed the footprints");
+      enqueue_zero_footprints(device, fp);
+      enqueue_resample_local(device, segs, tables4, rgba4, order, fp, LocalKernel::vector8, &occ,
+                             &lanes);
+      const Footprints il = read_footprints(device, fp);
+      if (il.pixels.size() != plain.pixels.size() ||
+          std::memcmp(il.pixels.data(), plain.pixels.data(), plain.pixels.size() * sizeof(Rgba)) !=
+              0)
+        throw Error("the interleaved cells changed the footprints");
     }
-    std::vector<double> t_res, t_loc, t_zero, t_fused, t_fused1, t_occ, t_skip, t_ord;
+    std::vector<double> t_res, t_loc, t_zero, t_fused, t_fused1, t_occ, t_skip, t_ord, t_ord4;
     for (int r = 0; r < runs; ++r) {
       const cl::Event ez = enqueue_zero_footprints(device, fp);
       const cl::Event er = enqueue_resample(device, segs, soff, tables, rgba, order, samples);
@@ -331,8 +345,11 @@ int main(int argc, char** argv) try {
       const SegmentOrder lanes = enqueue_segment_order(device, segs);
       const cl::Event eo = enqueue_resample_local(device, segs, tables, rgba, order, fp,
                                                   LocalKernel::vector8, &occ, &lanes);
+      const cl::Event eo4 = enqueue_resample_local(device, segs, tables4, rgba4, order, fp,
+                                                   LocalKernel::vector8, &occ, &lanes);
       device.finish();
       t_ord.push_back(ev_ms(lanes.event) + ev_ms(eo));
+      t_ord4.push_back(ev_ms(lanes.event) + ev_ms(eo4));
       double occ_ms = 0;
       for (const cl::Event& e : occ.events) occ_ms += ev_ms(e);
       t_occ.push_back(occ_ms);
@@ -356,7 +373,7 @@ int main(int argc, char** argv) try {
       const SegmentOrder lanes = enqueue_segment_order(device, ls);
       DeviceFootprints fp2 = make_footprints(device, ls.host_rects);
       const cl::Event ez = enqueue_zero_footprints(device, fp2);
-      const cl::Event eo = enqueue_resample_local(device, ls, tables, rgba, order, fp2,
+      const cl::Event eo = enqueue_resample_local(device, ls, tables4, rgba4, order, fp2,
                                                   LocalKernel::vector8, &occ, &lanes);
       device.finish();
       if (r == 0) {
@@ -386,7 +403,8 @@ int main(int argc, char** argv) try {
     const double loads = static_cast<double>(nsamples) * M * M * M * 4;
     const double fused = median(t_fused) + median(t_zero);
     std::printf(
-        "%5.0f %9lld %9lld %7.3f | %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f | "
+        "%5.0f %9lld %9lld %7.3f | %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f "
+        "%8.2f | "
         "%9.1f "
         "%9.1f %9.1f "
         "%7.2f "
@@ -395,11 +413,11 @@ int main(int argc, char** argv) try {
         phi, static_cast<long long>(nsamples), static_cast<long long>(m.segments.size()),
         m.utilisation(), median(t_match), median(t_bal), median(t_res), median(t_loc),
         median(t_zero), median(t_fused), median(t_fused1), median(t_occ), median(t_skip),
-        median(t_ord), ref_match + ref_balance, ref_rl, reference ? ref_rl / fused : 0.0,
-        loads / (median(t_fused) * 1e6), static_cast<double>(x.total_reads()),
-        static_cast<long long>(x.max_voxels()), active, median(t_match2), median(t_bal2),
-        median(t_rl2),
-        median(t_match) + median(t_bal) + median(t_occ) + median(t_ord) + median(t_zero),
+        median(t_ord), median(t_ord4), ref_match + ref_balance, ref_rl,
+        reference ? ref_rl / fused : 0.0, loads / (median(t_fused) * 1e6),
+        static_cast<double>(x.total_reads()), static_cast<long long>(x.max_voxels()), active,
+        median(t_match2), median(t_bal2), median(t_rl2),
+        median(t_match) + median(t_bal) + median(t_occ) + median(t_ord4) + median(t_zero),
         median(t_match2) + median(t_bal2) + median(t_rl2));
   }
   std::printf(
@@ -409,11 +427,13 @@ int main(int argc, char** argv) try {
       "composite); ref/dev: against fused + zero. fused: 8 segments per work-item in float8 lanes "
       "without skipping; fused1: one segment per work-item; occ: the brick occupancy; skip: fused "
       "skipping samples of empty bricks; ordered: skip with the lanes' segment order (the frame "
-      "path: simdvol_segment_order + the fused kernel; the same footprints, checked). Gld/s: "
+      "path until the cells were interleaved: simdvol_segment_order + the fused kernel; the same "
+      "footprints, checked); ordered4: the same on interleaved cells, the frame's path now "
+      "(simdvol_resample_local_v8_il; the same footprints, checked). Gld/s: "
       "gather loads of the fused "
       "kernel per "
       "second. xnet rd: remote stencil reads in all; xnet max: distinct remote voxels of the "
-      "busiest PE. The frame path, every PE matched: sum = match + balance + occ + ordered + "
+      "busiest PE. The frame path, every PE matched: sum = match + balance + occ + ordered4 + "
       "zero. With EngineOptions::skip_pes (the frame's default): active = the fraction of PEs "
       "whose cell has something in reach; match', balance' = their matching and balancing; "
       "rsloc' = occ + order + zero + the fused kernel on their segments; sum' = the three.\n");

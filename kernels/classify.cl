@@ -487,10 +487,9 @@ __kernel void simdvol_classify_in_place(__global float* voxels, int vstride, int
 /* simdvol_gather_voxels: the in-volume voxels of voxel cells to a flat
  * array of four floats per voxel (x fastest). Same 3-D range and local size
  * as simdvol_shade. */
-__kernel void simdvol_gather_voxels(__global const float* restrict voxels,
-                                    __global float* restrict flat,
-                                    __global const int4* restrict origins, int4 dims, int4 cell,
-                                    int pes, int vstride) {
+SV_FN void sv_gather_voxels(__global const float* restrict voxels, __global float* restrict flat,
+                            __global const int4* restrict origins, int4 dims, int4 cell, int pes,
+                            int vstride, const int il) {
   const int lx = (int)get_global_id(0);
   const int row = (int)get_global_id(1);
   const int p = (int)get_global_id(2);
@@ -498,13 +497,30 @@ __kernel void simdvol_gather_voxels(__global const float* restrict voxels,
   const int4 o = origins[p];
   const int x = o.x + lx, y = o.y + row % cell.y, z = o.z + row / cell.y;
   if (x >= dims.x || y >= dims.y || z >= dims.z) return;
-  __global const float* s =
-      voxels + (size_t)p * 4 * (size_t)vstride + (size_t)row * (size_t)cell.x + (size_t)lx;
+  const size_t e = (size_t)row * (size_t)cell.x + (size_t)lx;
+  /* planar: channel c at c * vstride + e; interleaved: at 4 * e + c */
+  const size_t cs = il ? 1 : (size_t)vstride;
+  __global const float* s = voxels + (size_t)p * 4 * (size_t)vstride + (il ? 4 * e : e);
   __global float* d = flat + 4 * sv_flat_index(dims, x, y, z);
   d[0] = s[0];
-  d[1] = s[vstride];
-  d[2] = s[2 * vstride];
-  d[3] = s[3 * vstride];
+  d[1] = s[cs];
+  d[2] = s[2 * cs];
+  d[3] = s[3 * cs];
+}
+
+__kernel void simdvol_gather_voxels(__global const float* restrict voxels,
+                                    __global float* restrict flat,
+                                    __global const int4* restrict origins, int4 dims, int4 cell,
+                                    int pes, int vstride) {
+  sv_gather_voxels(voxels, flat, origins, dims, cell, pes, vstride, 0);
+}
+
+/* simdvol_gather_voxels_il: the same from interleaved voxel cells. */
+__kernel void simdvol_gather_voxels_il(__global const float* restrict voxels,
+                                       __global float* restrict flat,
+                                       __global const int4* restrict origins, int4 dims, int4 cell,
+                                       int pes, int vstride) {
+  sv_gather_voxels(voxels, flat, origins, dims, cell, pes, vstride, 1);
 }
 
 #ifdef SIMDVOL_SHADE_CL
@@ -587,14 +603,43 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
 #endif /* SIMDVOL_SHADE_CL */
 
 #if defined(SIMDVOL_SHADE_CL) && defined(SV_RW)
+/* Stores 16 lanes of (r, g, b, a) at positions e0 .. e0 + 15 of a PE's
+ * interleaved block (channel c of position e at float 4 * e + c): the 4 x 16
+ * transpose as two rounds of two-source shuffles, then 64 consecutive floats. */
+SV_FN void sv_store16_il(__global float* blk, int e0, float16 r, float16 g, float16 b, float16 a) {
+  const uint16 lo = (uint16)(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+  const uint16 hi = lo + 8u;
+  const float16 rg0 = shuffle2(r, g, lo), rg1 = shuffle2(r, g, hi);
+  const float16 ba0 = shuffle2(b, a, lo), ba1 = shuffle2(b, a, hi);
+  const uint16 q0 = (uint16)(0, 1, 16, 17, 2, 3, 18, 19, 4, 5, 20, 21, 6, 7, 22, 23);
+  const uint16 q1 = q0 + 8u;
+  __global float* o = blk + 4 * e0;
+  SV_VSTORE16(shuffle2(rg0, ba0, q0), o);
+  SV_VSTORE16(shuffle2(rg0, ba0, q1), o + 16);
+  SV_VSTORE16(shuffle2(rg1, ba1, q0), o + 32);
+  SV_VSTORE16(shuffle2(rg1, ba1, q1), o + 48);
+}
+
+/* The classified chunk into planar (il = 0) or interleaved (il = 1) cells. */
+SV_FN void sv_store16_rgba(__global float* blk, int vstride, int e0, float16 r, float16 g,
+                           float16 b, float16 a, const int il) {
+  if (il)
+    sv_store16_il(blk, e0, r, g, b, a);
+  else
+    sv_store16(blk, vstride, e0, r, g, b, a);
+}
+
 /* simdvol_shade_classify16: the fused kernel on 16-position chunks
  * (simdvol_shade16 then simdvol_classify16 without the voxel cells in
- * between); range and arguments as simdvol_shade16 plus cp. */
-__kernel void simdvol_shade_classify16(
-    __global const float* restrict cells, __global float* restrict out,
-    __global const int4* restrict origins, int4 dims, int4 cell, int4 block, int pes, int vstride,
-    __constant const sv_shade_params* sp, __constant const sv_classify_params* cp,
-    __global volatile uint* occ, const int nbx, const int nby, const int mark) {
+ * between); range and arguments as simdvol_shade16 plus cp.
+ * simdvol_shade_classify16_il: the same into interleaved voxel cells (the
+ * float4 RGBA of each position together; stages.hpp), the same values. */
+SV_FN void sv_shade_classify16(__global const float* restrict cells, __global float* restrict out,
+                               __global const int4* restrict origins, int4 dims, int4 cell,
+                               int4 block, int pes, int vstride,
+                               __constant const sv_shade_params* sp,
+                               __constant const sv_classify_params* cp, __global volatile uint* occ,
+                               const int nbx, const int nby, const int mark, const int il) {
   const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (p >= pes || e0 >= vstride) return;
@@ -615,7 +660,7 @@ __kernel void simdvol_shade_classify16(
   if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
     const float16 d = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v);
     if (!any((d != 0.0f) & ~isnan(v) & in)) {
-      sv_store16(dst, vstride, e0, z, z, z, z);
+      sv_store16_rgba(dst, vstride, e0, z, z, z, z, il);
       return;
     }
     /* The alpha needs only the gradient's magnitude: a chunk whose alpha is
@@ -631,7 +676,7 @@ __kernel void simdvol_shade_classify16(
     const float16 a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
 #ifndef SV_NO_EARLY_ALPHA
     if (!any((a0 >= FLT_MIN) & ~isnan(v) & in)) {
-      sv_store16(dst, vstride, e0, z, z, z, z);
+      sv_store16_rgba(dst, vstride, e0, z, z, z, z, il);
       return;
     }
 #endif
@@ -640,20 +685,20 @@ __kernel void simdvol_shade_classify16(
   } else {
     /* A chunk whose alpha is 0 without the mixture (sv_mixture_zero16). */
     if (!any(in & ~sv_mixture_zero16(cp, v))) {
-      sv_store16(dst, vstride, e0, z, z, z, z);
+      sv_store16_rgba(dst, vstride, e0, z, z, z, z, il);
       return;
     }
     float16 cr, cg, cb;
     const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
     if (!any((a0 > 0.0f) & ~isnan(v) & in)) {
-      sv_store16(dst, vstride, e0, z, z, z, z);
+      sv_store16_rgba(dst, vstride, e0, z, z, z, z, il);
       return;
     }
     sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
     sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
   }
-  sv_store16(dst, vstride, e0, select(z, r, in), select(z, g, in), select(z, b, in),
-             select(z, a, in));
+  sv_store16_rgba(dst, vstride, e0, select(z, r, in), select(z, g, in), select(z, b, in),
+                  select(z, a, in), il);
   /* The brick occupancy of resample.cl's simdvol_occupancy, marked here
    * from the values just stored (so no pass reads them again): each voxel
    * of the cell inside the volume with a channel that is not +-0 sets its
@@ -686,6 +731,24 @@ __kernel void simdvol_shade_classify16(
       left = select(left, (int16)(INT_MAX), left == brick);
     }
   }
+}
+
+__kernel void simdvol_shade_classify16(
+    __global const float* restrict cells, __global float* restrict out,
+    __global const int4* restrict origins, int4 dims, int4 cell, int4 block, int pes, int vstride,
+    __constant const sv_shade_params* sp, __constant const sv_classify_params* cp,
+    __global volatile uint* occ, const int nbx, const int nby, const int mark) {
+  sv_shade_classify16(cells, out, origins, dims, cell, block, pes, vstride, sp, cp, occ, nbx, nby,
+                      mark, 0);
+}
+
+__kernel void simdvol_shade_classify16_il(
+    __global const float* restrict cells, __global float* restrict out,
+    __global const int4* restrict origins, int4 dims, int4 cell, int4 block, int pes, int vstride,
+    __constant const sv_shade_params* sp, __constant const sv_classify_params* cp,
+    __global volatile uint* occ, const int nbx, const int nby, const int mark) {
+  sv_shade_classify16(cells, out, origins, dims, cell, block, pes, vstride, sp, cp, occ, nbx, nby,
+                      mark, 1);
 }
 #endif
 

@@ -164,6 +164,161 @@ __kernel void simdvol_resample_local_v8(__global const sv_segment* segs, const i
 }
 #endif
 
+#ifdef SIMDVOL_RESAMPLE_CL
+/* ---- simdvol_resample_local_v8_il: the fused kernel on interleaved cells ----
+ * simdvol_resample_local_v8 (the same lanes, trim, skipping and writes) on
+ * interleaved voxel cells (stages.hpp: the RGBA of a position in 16
+ * consecutive bytes; the address table gives the float index of channel 0,
+ * cs = 1). A corner's four channels are one 16-byte load instead of four
+ * lane gathers, and lanes 0-3 and 4-7 are computed as two float16 of
+ * (lane, channel), 4 x RGBA: each axis's x - x_e and stencil side per lane
+ * spread over its 4 channels (sv_spread4), Neville on float16 with the same
+ * element-wise operations as sv_neville8 (so the samples, and the
+ * footprints, are those of simdvol_resample_local_v8 bit for bit; tested).
+ * The lanes' x, y, z arithmetic is sv_axis8's. On the 2-core Zen 5 EPYC
+ * (AVX-512; PoCL's skylake-avx512 target), the 256^3 phantom at 8,192 PEs,
+ * simdvol-bench-frame (columns `ordered` and `ordered4`, the frame path with
+ * the lane order and skipping): see docs/PERFORMANCE.md. */
+SV_FN float16 sv_spread4(const float8 v, const uint base) {
+  const uint16 k = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3) + base;
+  return shuffle(v, k);
+}
+
+/* sv_neville8 on (lane, channel) float16 values; low = -1 bits in the
+ * lanes whose stencil is on the low side. */
+SV_FN void sv_neville16(float16* q, const float16* d, const int16 low) {
+#pragma unroll
+  for (int k = 1; k <= ORDER; ++k) {
+#pragma unroll
+    for (int i = k - 1; i >= 0; --i) {
+      const int c = SV_LOWPOS(k) - SV_LOWPOS(i);
+      if (c == 3 || c == -3) {
+        const float16 den = select((float16)((float)(-c)), (float16)((float)c), low);
+        q[i] = (d[i] * q[i + 1] - d[k] * q[i]) / den;
+      } else {
+        const float16 rc = select((float16)(-1.0f / (float)c), (float16)(1.0f / (float)c), low);
+        q[i] = (d[i] * q[i + 1] - d[k] * q[i]) * rc;
+      }
+    }
+  }
+}
+
+/* The samples of 8 lanes at X[0..2]: u[h] = lanes 4h .. 4h + 3, each its
+ * premultiplied RGBA (sv_sample8's values, as (lane, channel)). */
+SV_FN void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const int* table,
+                         __global const float* vox, float16* u) {
+  int8 ax[SV_M], ay[SV_M], az[SV_M];
+  float8 dx[SV_M], dy[SV_M], dz[SV_M];
+  int8 lx, ly, lz;
+  sv_axis8(X[0], nx, table, ax, dx, &lx);
+  sv_axis8(X[1], ny, table + nx, ay, dy, &ly);
+  sv_axis8(X[2], nz, table + nx + ny, az, dz, &lz);
+#pragma unroll
+  for (int h = 0; h < 2; ++h) {
+    const uint base = 4 * h;
+    float16 wx[SV_M], wy[SV_M], wz[SV_M];
+#pragma unroll
+    for (int e = 0; e < SV_M; ++e) {
+      wx[e] = sv_spread4(dx[e], base);
+      wy[e] = sv_spread4(dy[e], base);
+      wz[e] = sv_spread4(dz[e], base);
+    }
+    const int16 mx = as_int16(sv_spread4(as_float8(lx), base));
+    const int16 my = as_int16(sv_spread4(as_float8(ly), base));
+    const int16 mz = as_int16(sv_spread4(as_float8(lz), base));
+    /* z outermost, as sv_sample8 (few values live) */
+    float16 qz[SV_M];
+#pragma unroll
+    for (int c = 0; c < SV_M; ++c) {
+      float16 qy[SV_M];
+#pragma unroll
+      for (int b = 0; b < SV_M; ++b) {
+        const int8 row = ay[b] + az[c];
+        float16 qx[SV_M];
+#pragma unroll
+        for (int a = 0; a < SV_M; ++a) {
+          const int8 o8 = row + ax[a];
+          const int4 o = h ? o8.hi : o8.lo;
+          qx[a] = (float16)(vload4(0, vox + o.s0), vload4(0, vox + o.s1), vload4(0, vox + o.s2),
+                            vload4(0, vox + o.s3));
+        }
+        sv_neville16(qx, wx, mx);
+        qy[b] = qx[0];
+      }
+      sv_neville16(qy, wy, my);
+      qz[c] = qy[0];
+    }
+    sv_neville16(qz, wz, mz);
+    u[h] = qz[0];
+  }
+}
+
+__kernel void simdvol_resample_local_v8_il(
+    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
+    __global const sv_view* view, __global const int* table, __global const float* vox,
+    const int cs, __global const sv_rect* rects, __global const int* rect_off,
+    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
+    const int skip, __global const int* order, const int ordered) {
+  (void)cs; /* 1: interleaved */
+  const int s0 = (int)get_global_id(0) * 8;
+  if (s0 >= nseg) return;
+  int li[8], lj[8], lk[8], ln[8];
+  long8 X[3];
+  int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X);
+  int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
+  const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
+  const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
+  if (skip) { /* as simdvol_resample_local_v8 */
+    const int8 on = N > 0;
+    const long8 n1 = convert_long8(max(N - 1, (int8)(0)));
+    const long8 Y[3] = {X[0] + n1 * s_0, X[1] + n1 * s_1, X[2] + n1 * s_2};
+    const int8 ends = sv_reach8(X, nx, ny, nz, nbx, nby, reach, on) &
+                      sv_reach8(Y, nx, ny, nz, nbx, nby, reach, on);
+    if (any(on & ~ends)) T = sv_trim8(X, &N, T, s_0, s_1, s_2, nx, ny, nz, nbx, nby, reach);
+  }
+  /* acc[h]: the composites of lanes 4h .. 4h + 3 as (lane, channel) */
+  float16 acc[2] = {(float16)(0.0f), (float16)(0.0f)};
+  const uint16 alpha = (uint16)(3, 3, 3, 3, 7, 7, 7, 7, 11, 11, 11, 11, 15, 15, 15, 15);
+  for (int t = 0; t < T; ++t) {
+    const int8 on = (int8)(t) < N;
+    if (skip && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, on))) {
+      X[0] += s_0;
+      X[1] += s_1;
+      X[2] += s_2;
+      continue;
+    }
+    float16 u[2];
+    sv_sample8_il(X, nx, ny, nz, table, vox, u);
+#pragma unroll
+    for (int h = 0; h < 2; ++h) {
+      const int16 onh = as_int16(sv_spread4(as_float8(on), 4 * h));
+      acc[h] = select(acc[h], acc[h] + (1.0f - shuffle(acc[h], alpha)) * u[h], onh);
+    }
+    X[0] += s_0;
+    X[1] += s_1;
+    X[2] += s_2;
+  }
+  float4 res[8];
+  res[0] = acc[0].s0123;
+  res[1] = acc[0].s4567;
+  res[2] = acc[0].s89ab;
+  res[3] = acc[0].scdef;
+  res[4] = acc[1].s0123;
+  res[5] = acc[1].s4567;
+  res[6] = acc[1].s89ab;
+  res[7] = acc[1].scdef;
+  int p = sv_pe_of_segment(seg_off, log2p, s0);
+#pragma unroll
+  for (int l = 0; l < 8; ++l) {
+    if (s0 + l < nseg) {
+      while (seg_off[p + 1] <= s0 + l) ++p;
+      const sv_segment g = {li[l], lj[l], lk[l], lk[l] + ln[l]};
+      foot[sv_footprint_index(rects, rect_off, p, g)] = res[l];
+    }
+  }
+}
+#endif
+
 /* ---- simdvol_segment_order: the fused kernel's lane order ----
  * One work-item per block of SV_ORDER_BLOCK consecutive positions
  * (simdvol_shared.h), cut at the PEs' boundaries: each piece [b0, b1) of

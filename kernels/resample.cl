@@ -325,9 +325,9 @@ SV_FN int sv_lanes8(__global const sv_segment* segs, __global const int* order, 
  * p * 4 * stride + c * stride + (lz * cy + ly) * cx + lx; sets occ[b] |= 1
  * (atomically: bricks straddle cells) for each brick b holding a voxel with
  * a channel that is not +-0. occ must be zero before. */
-__kernel void simdvol_occupancy(__global const float* vox, const int stride, const int4 cell,
-                                __global const int4* origins, const int4 dims, const int nbx,
-                                const int nby, __global volatile uint* occ) {
+SV_FN void sv_occupancy(__global const float* vox, const int stride, const int4 cell,
+                        __global const int4* origins, const int4 dims, const int nbx, const int nby,
+                        __global volatile uint* occ, const int il) {
   const int lz = (int)get_global_id(0), p = (int)get_global_id(1);
   if (lz >= cell.z) return;
   const int4 o = origins[p];
@@ -349,11 +349,30 @@ __kernel void simdvol_occupancy(__global const float* vox, const int stride, con
         any = 0;
       }
       const int e = row + lx;
-      any |= as_uint(v[e]) | as_uint(v[stride + e]) | as_uint(v[2 * stride + e]) |
-             as_uint(v[3 * stride + e]);
+      if (il) {
+        const uint4 q = as_uint4(vload4(0, v + 3 * (size_t)lz * cell.y * cell.x + 4 * e));
+        any |= q.x | q.y | q.z | q.w;
+      } else {
+        any |= as_uint(v[e]) | as_uint(v[stride + e]) | as_uint(v[2 * stride + e]) |
+               as_uint(v[3 * stride + e]);
+      }
     }
     if (any & 0x7fffffffu) atomic_or(&occ[by + b], 1u);
   }
+}
+
+__kernel void simdvol_occupancy(__global const float* vox, const int stride, const int4 cell,
+                                __global const int4* origins, const int4 dims, const int nbx,
+                                const int nby, __global volatile uint* occ) {
+  sv_occupancy(vox, stride, cell, origins, dims, nbx, nby, occ, 0);
+}
+
+/* simdvol_occupancy_il: the same on interleaved voxel cells (channel c of
+ * position e at p * 4 * stride + 4 * e + c). */
+__kernel void simdvol_occupancy_il(__global const float* vox, const int stride, const int4 cell,
+                                   __global const int4* origins, const int4 dims, const int nbx,
+                                   const int nby, __global volatile uint* occ) {
+  sv_occupancy(vox, stride, cell, origins, dims, nbx, nby, occ, 1);
 }
 
 /* One work-item per brick: reach[b] from occ (lo, hi as above). */

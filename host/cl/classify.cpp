@@ -130,6 +130,10 @@ namespace {
 // `shading` into `out`, or in place (in `out`) without `shading`.
 cl::Event run_classify(Device& device, const sv_classify_params& params, ClassifyKernel variant,
                        const VoxelLayout& V, const cl::Buffer* shading, const cl::Buffer& out) {
+  if (V.interleaved)
+    throw ArgumentError("classify output",
+                        "classify writes planar voxel cells; interleaved ones come from the fused "
+                        "shade + classify (enqueue_shade_classify, ShadeKernel::vec16)");
   cl::Buffer pbuf = params_buffer(device, &params, sizeof params, "classify parameters");
   const bool vec = variant == ClassifyKernel::vec16;
   const std::string name =
@@ -177,7 +181,12 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
   cl::Buffer cbuf = params_buffer(device, &classify, sizeof classify, "classify parameters");
   const int rw = detail::shade_row_width(V.cell()[0]);
   const bool vec = variant == ShadeKernel::vec16;  // every cx has a float16 form
-  const std::string name = vec ? "simdvol_shade_classify16" : "simdvol_shade_classify";
+  if (V.interleaved && !vec)
+    throw ArgumentError("shade_classify output",
+                        "only the float16 fused kernel writes interleaved voxel cells");
+  const std::string name =
+      vec ? (V.interleaved ? "simdvol_shade_classify16_il" : "simdvol_shade_classify16")
+          : "simdvol_shade_classify";
   Defines defines = classify_defines(classify);
   if (vec) defines.emplace_back("SV_RW", std::to_string(rw));
   if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
@@ -217,7 +226,7 @@ cl::Event enqueue_gather_voxels(Device& device, const VoxelBuffer& voxels, const
   cl::Buffer obuf =
       device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, origins.size() * sizeof(cl_int4),
                     origins.data(), "PE origin table");
-  const std::string name = "simdvol_gather_voxels";
+  const std::string name = V.interleaved ? "simdvol_gather_voxels_il" : "simdvol_gather_voxels";
   cl::Kernel k = device.kernel("classify", name);
   const cl_int4 dims{{static_cast<cl_int>(V.dims()[0]), static_cast<cl_int>(V.dims()[1]),
                       static_cast<cl_int>(V.dims()[2]), 0}};

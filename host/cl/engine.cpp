@@ -130,7 +130,10 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.rgba.reset();
     S.laid_out = nullptr;
     const CellLayout cl_layout = S.array->cell_layout(vol.dims(), 1);
-    const VoxelLayout vl = make_voxel_layout(cl_layout);
+    // The fused shade + classify writes interleaved cells (a corner's RGBA
+    // in one 16-byte load for the resample); the two-launch path classifies
+    // the planar shading in place.
+    const VoxelLayout vl = make_voxel_layout(cl_layout, eo.fused);
     check_allocation(vl.bytes(), device.info().max_alloc_bytes, "volume (voxel cells)");
     S.cells.emplace(device, cl_layout);
     S.rgba.emplace(device, vl);

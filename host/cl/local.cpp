@@ -12,10 +12,6 @@ static_assert(sizeof(sv_view) == 160, "sv_view must have the same layout in Open
 
 namespace {
 
-// Voxel cells are planar within each PE block (stages.hpp): channel c of
-// position e of PE p is float (p * 4 + c) * stride + e.
-constexpr bool kPlanarCells = true;
-
 constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
 
 int log2_exact(int64_t p) {
@@ -56,7 +52,7 @@ cl::NDRange segment_range(int64_t count) {
 
 void check_tables(const LocalSegments& segs, const ResampleTables& t, const VoxelBuffer& voxels) {
   const VoxelLayout& L = voxels.layout();
-  if (L.dims() != t.dims || L.pes() != t.pes)
+  if (L.dims() != t.dims || L.pes() != t.pes || L.interleaved != t.interleaved)
     throw ArgumentError("resample tables", "were made for another voxel layout");
   if (segs.pes != t.pes) throw ArgumentError("segments", "PE count differs from the voxels'");
 }
@@ -120,7 +116,9 @@ std::vector<cl_int> resample_address_table(const VoxelLayout& L, cl_int* channel
   if (L.pes() * block > kInt32Max)
     throw ArgumentError("volume", "voxel cells exceed int32 float indexing in the resample stage");
   const OwnerTables t = owner_tables(L.cells.split);
-  const int64_t vm = kPlanarCells ? 1 : 4;
+  // Planar cells (stages.hpp): channel c of position e of PE p is float
+  // (p * 4 + c) * stride + e; interleaved: p * 4 * stride + 4 * e + c.
+  const int64_t vm = L.interleaved ? 4 : 1;
   const Dims3& n = L.dims();
   const int64_t mult[3] = {vm, vm * L.cell()[0], vm * L.cell()[0] * L.cell()[1]};
   std::vector<cl_int> table;
@@ -129,7 +127,7 @@ std::vector<cl_int> resample_address_table(const VoxelLayout& L, cl_int* channel
     for (int64_t g = 0; g < n[a]; ++g)
       table.push_back(static_cast<cl_int>(t.bits[a][static_cast<std::size_t>(g)] * block +
                                           t.local[a][static_cast<std::size_t>(g)] * mult[a]));
-  if (channel_stride) *channel_stride = static_cast<cl_int>(kPlanarCells ? L.stride : 1);
+  if (channel_stride) *channel_stride = static_cast<cl_int>(L.interleaved ? 1 : L.stride);
   return table;
 }
 
@@ -141,6 +139,7 @@ ResampleTables make_resample_tables(Device& device, const VoxelLayout& L,
   ResampleTables t;
   t.dims = L.dims();
   t.pes = L.pes();
+  t.interleaved = L.interleaved;
   const std::vector<cl_int> table = resample_address_table(L, &t.channel_stride);
   t.table = upload(device, table, "resample address table");
   std::vector<sv_view> v{view.grid};
@@ -266,7 +265,7 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
                          static_cast<cl_int>(o.dims[2]), 0}};
   const cl_int4 cell = {{static_cast<cl_int>(L.cell()[0]), static_cast<cl_int>(L.cell()[1]),
                          static_cast<cl_int>(L.cell()[2]), 0}};
-  const std::string name = "simdvol_occupancy";
+  const std::string name = L.interleaved ? "simdvol_occupancy_il" : "simdvol_occupancy";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, voxels.buffer(), static_cast<cl_int>(L.stride), cell, org, dims, o.bricks[0],
            o.bricks[1], o.occupied);
@@ -304,7 +303,9 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   if (lanes && lanes->count != segs.count)
     throw ArgumentError("segment order", "was made for other segments");
   const bool v8 = variant == LocalKernel::vector8;
-  const std::string name = v8 ? "simdvol_resample_local_v8" : "simdvol_resample_local";
+  const std::string name = !v8                           ? "simdvol_resample_local"
+                           : voxels.layout().interleaved ? "simdvol_resample_local_v8_il"
+                                                         : "simdvol_resample_local_v8";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
            static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),

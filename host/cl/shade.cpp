@@ -34,9 +34,10 @@ bool VoxelLayout::same_cells(const VoxelLayout& o) const {
   return dims() == o.dims() && pes() == o.pes() && cell() == o.cell() && stride == o.stride;
 }
 
-VoxelLayout make_voxel_layout(const CellLayout& cells) {
+VoxelLayout make_voxel_layout(const CellLayout& cells, bool interleaved) {
   VoxelLayout L;
   L.cells = cells;
+  L.interleaved = interleaved;
   const int64_t n = cells.cell()[0] * cells.cell()[1] * cells.cell()[2];
   L.stride = (n + 15) / 16 * 16;
   if (L.stride > INT_MAX) throw ArgumentError("volume", "cell too large for 32-bit kernel indices");
@@ -62,8 +63,14 @@ VoxelBuffer::VoxelBuffer(const VoxelLayout& layout, cl::Buffer buffer) : layout_
 }
 
 // Host elements are (PE, position)-ordered 4-float records; the device
-// buffer is planar per PE block.
+// buffer is planar per PE block, or those records themselves if interleaved.
 void VoxelBuffer::read_raw(Device& device, void* out) const {
+  if (layout_.interleaved) {
+    cl_check(device.queue().enqueueReadBuffer(buffer_, CL_TRUE, 0,
+                                              static_cast<std::size_t>(layout_.bytes()), out),
+             "clEnqueueReadBuffer(voxel cells)");
+    return;
+  }
   std::vector<float> planar(static_cast<std::size_t>(layout_.elements()) * 4);
   cl_check(device.queue().enqueueReadBuffer(
                buffer_, CL_TRUE, 0, static_cast<std::size_t>(layout_.bytes()), planar.data()),
@@ -76,6 +83,12 @@ void VoxelBuffer::read_raw(Device& device, void* out) const {
 }
 
 void VoxelBuffer::write_raw(Device& device, const void* in) {
+  if (layout_.interleaved) {
+    cl_check(device.queue().enqueueWriteBuffer(buffer_, CL_TRUE, 0,
+                                               static_cast<std::size_t>(layout_.bytes()), in),
+             "clEnqueueWriteBuffer(voxel cells)");
+    return;
+  }
   std::vector<float> planar(static_cast<std::size_t>(layout_.elements()) * 4);
   const float* i = static_cast<const float*>(in);
   const std::size_t st = static_cast<std::size_t>(layout_.stride);
@@ -112,6 +125,8 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
   const VoxelLayout& V = out.layout();
   if (C.halo < 1) throw ArgumentError("cells", "the shade stage needs a halo of at least 1");
   check_same_cells(C, V, "shade output");
+  if (V.interleaved)
+    throw ArgumentError("shade output", "the shading is planar voxel cells, not interleaved");
   cl::Buffer pbuf = device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof params,
                                   const_cast<sv_shade_params*>(&params), "shade parameters");
   const int rw = detail::shade_row_width(V.cell()[0]);  // every cx has a float16 form

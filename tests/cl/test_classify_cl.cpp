@@ -190,6 +190,40 @@ void check_case(const Case& k) {
   const double d_fused = max_diff(staged, voxels_from_cells(fused.read<Rgba>(dev), L));
   EXPECT_EQ(d_fused, 0.0) << "fused vs staged";
 
+  // 3b. fused into interleaved cells (the engine's fused path): every
+  // position of every block the same bits as the planar cells (block tails
+  // aside: unspecified), the same marked and scanned occupancy, the same
+  // gather; the other kernels refuse interleaved cells.
+  {
+    const VoxelLayout L4 = make_voxel_layout(cells.layout(), true);
+    VoxelBuffer il(dev, L4);
+    DeviceOccupancy marked4 = make_occupancy(dev, L4, 1);
+    enqueue_shade_classify(dev, cells, sp, cp, il, ShadeKernel::vec16, &marked4);
+    const DeviceOccupancy scanned4 = enqueue_occupancy(dev, il, 1);
+    dev.finish();
+    const std::vector<Rgba> a = voxels_from_cells(fused.read<Rgba>(dev), L);
+    const std::vector<Rgba> b = voxels_from_cells(il.read<Rgba>(dev), L4);
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(Rgba)), 0) << "interleaved";
+    const auto n = static_cast<std::size_t>(marked.count());
+    std::vector<cl_uint> m0(n), m4(n), s4(n);
+    cl_check(dev.queue().enqueueReadBuffer(marked.occupied, CL_TRUE, 0, n * 4, m0.data()), "read");
+    cl_check(dev.queue().enqueueReadBuffer(marked4.occupied, CL_TRUE, 0, n * 4, m4.data()), "read");
+    cl_check(dev.queue().enqueueReadBuffer(scanned4.occupied, CL_TRUE, 0, n * 4, s4.data()),
+             "read");
+    EXPECT_EQ(m0, m4) << "marked occupancy, interleaved";
+    EXPECT_EQ(m0, s4) << "scanned occupancy, interleaved";
+    std::vector<Rgba> g4(vol.voxel_count());
+    gather_rgba(dev, il, g4.data());
+    EXPECT_EQ(std::memcmp(g4.data(), staged.data(), g4.size() * sizeof(Rgba)), 0)
+        << "gather, interleaved";
+    EXPECT_THROW(enqueue_classify(dev, shade_buf, cp, il), ArgumentError);
+    EXPECT_THROW(enqueue_classify_in_place(dev, il, cp), ArgumentError);
+    EXPECT_THROW(enqueue_shade(dev, cells, sp, il), ArgumentError);
+    EXPECT_THROW(enqueue_shade_classify(dev, cells, sp, cp, il, ShadeKernel::range3d),
+                 ArgumentError);
+  }
+
   // 4. the scalar fused kernel (3-D range) and the scalar stages.
   enqueue_shade_classify(dev, cells, sp, cp, fused, ShadeKernel::range3d);
   dev.finish();

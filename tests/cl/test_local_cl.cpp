@@ -447,6 +447,94 @@ TEST(LocalCl, SkippingEmptyBricksKeepsEveryBit) {
                ArgumentError);  // made for another order
 }
 
+// Interleaved voxel cells (the engine's fused path): the same samples and
+// footprints as planar cells, bit for bit, from every resample kernel
+// (simdvol_resample_local_v8_il for the fused float8 lanes; the others
+// through the address table and channel stride), with and without skipping
+// and the lane order, NaN and inf voxels included; the occupancy scan the
+// same; tables made for the other layout refused.
+TEST(LocalCl, InterleavedCellsGiveTheSameBits) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Dims3 dims{41, 35, 29};
+  const Volume vol(dims, VoxelType::f32);
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<double> ang(-180.0, 180.0);
+  std::vector<ViewAngles> views = {{0, 0, 0}, {0, 30, 0}, {45, 45, 0}};
+  for (int k = 0; k < 2; ++k) views.push_back({ang(rng), ang(rng), ang(rng)});
+  int coloured = 0;
+  for (int64_t pes : {int64_t(1), int64_t(64), int64_t(8192)}) {
+    std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes + 5));
+    v[v.size() / 3].b = std::numeric_limits<float>::quiet_NaN();
+    v[v.size() / 2].a = std::numeric_limits<float>::infinity();
+    const CellLayout C = make_cell_layout(dims, pes, 1);
+    const VoxelLayout L = make_voxel_layout(C), L4 = make_voxel_layout(C, true);
+    VoxelBuffer vb(dev, L), vb4(dev, L4);
+    vb.write(dev, voxels_to_cells(v, L));
+    vb4.write(dev, voxels_to_cells(v, L4));
+    {
+      const std::vector<Rgba> back = voxels_from_cells(vb4.read<Rgba>(dev), L4);
+      EXPECT_EQ(std::memcmp(back.data(), v.data(), v.size() * sizeof(Rgba)), 0);
+    }
+    const KdSplit split = kd_split(dims, pes);
+    for (int order = 0; order <= 3; ++order) {
+      const DeviceOccupancy occ = enqueue_occupancy(dev, vb, order);
+      const DeviceOccupancy occ4 = enqueue_occupancy(dev, vb4, order);
+      EXPECT_EQ(read_all<cl_uint>(dev, occ.occupied, static_cast<std::size_t>(occ.count())),
+                read_all<cl_uint>(dev, occ4.occupied, static_cast<std::size_t>(occ4.count())));
+      for (const ViewAngles& a : views) {
+        SCOPED_TRACE("P " + std::to_string(pes) + " order " + std::to_string(order) + " view " +
+                     std::to_string(a.theta) + "," + std::to_string(a.phi) + "," +
+                     std::to_string(a.varphi));
+        const ViewGeometry view = make_view(vol, a, 48, 40, Sampling::voxel);
+        const Matching m = balance_reference(match_reference(view, split), view, split);
+        const LocalSegments segs = upload_segments(dev, m);
+        const ResampleTables t = make_resample_tables(dev, L, view);
+        const ResampleTables t4 = make_resample_tables(dev, L4, view);
+        const SegmentOrder lanes = enqueue_segment_order(dev, segs);
+        DeviceFootprints fp = make_footprints(dev, m.rects);
+        enqueue_zero_footprints(dev, fp);
+        enqueue_resample_local(dev, segs, t, vb, order, fp);
+        const Footprints want = read_footprints(dev, fp);
+        // The one-segment kernel against itself on planar cells (it can
+        // differ from the float8 kernel in the sign of a NaN).
+        enqueue_zero_footprints(dev, fp);
+        enqueue_resample_local(dev, segs, t, vb, order, fp, LocalKernel::segment);
+        const Footprints want1 = read_footprints(dev, fp);
+        coloured += std::any_of(want.pixels.begin(), want.pixels.end(),
+                                [](const Rgba& c) { return c.a != 0; });
+        for (int variant = 0; variant < 4; ++variant) {
+          enqueue_zero_footprints(dev, fp);
+          enqueue_resample_local(dev, segs, t4, vb4, order, fp,
+                                 variant == 3 ? LocalKernel::segment : LocalKernel::vector8,
+                                 variant == 1 || variant == 2 ? &occ4 : nullptr,
+                                 variant == 2 ? &lanes : nullptr);
+          EXPECT_TRUE(same_bits(variant == 3 ? want1 : want, read_footprints(dev, fp)))
+              << "variant " << variant;
+        }
+        // The stored samples (adaptive and Monte Carlo compositing).
+        const cl::Buffer soff = upload_sample_offsets(dev, m);
+        const std::size_t ns = static_cast<std::size_t>(sample_offsets(m).back());
+        cl::Buffer s0 =
+            dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
+        cl::Buffer s4 =
+            dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
+        enqueue_resample(dev, segs, soff, t, vb, order, s0, LocalKernel::vector8, &lanes);
+        enqueue_resample(dev, segs, soff, t4, vb4, order, s4, LocalKernel::vector8, &lanes);
+        if (ns > 0) {
+          const std::vector<Rgba> a0 = read_all<Rgba>(dev, s0, ns);
+          const std::vector<Rgba> a4 = read_all<Rgba>(dev, s4, ns);
+          EXPECT_EQ(std::memcmp(a0.data(), a4.data(), ns * sizeof(Rgba)), 0) << "stored samples";
+        }
+        EXPECT_THROW(enqueue_resample_local(dev, segs, t, vb4, order, fp), ArgumentError);
+        EXPECT_THROW(enqueue_resample_local(dev, segs, t4, vb, order, fp), ArgumentError);
+      }
+    }
+  }
+  EXPECT_GT(coloured, 40);  // the footprints compared are not all empty
+}
+
 // The lanes' order: in each block of SV_ORDER_BLOCK positions cut at the PEs'
 // boundaries, the segments stably sorted by min(k1 - k0, 63), longest first
 // (a host sort of the same keys), so each segment stays in its PE's range.

@@ -60,6 +60,7 @@ struct ResampleTables {
   cl::Buffer view;   ///< one sv_view
   cl::Buffer table;  ///< cl_int[nx + ny + nz]
   cl_int channel_stride = 0;
+  bool interleaved = false;  ///< made for interleaved voxel cells (stages.hpp)
 };
 /// ArgumentError if the voxel buffer exceeds int32 float indexing or `view`
 /// was made for other dims.

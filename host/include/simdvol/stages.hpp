@@ -13,6 +13,11 @@
 // (classify). Interior positions past the volume's far faces (padding) hold
 // the result for the edge-replicated value there; gathers skip them. With
 // one PE the buffer is the flat volume, planar.
+// Interleaved voxel cells (VoxelLayout::interleaved; classified voxels of the
+// fused shade + classify only): the same blocks of 4 * stride floats, but
+// the four quantities of a position together, quantity c of position e at
+// float 4 * e + c of the block (a 16-byte element per position), so that
+// the resample reads a corner's RGBA in one load (docs/PERFORMANCE.md).
 // On the host, VoxelBuffer::read/write and voxels_to_cells/voxels_from_cells
 // use one 16-byte element per voxel position in (PE, position) order instead
 // (element index = p * stride + position), converting to and from planar.
@@ -46,6 +51,7 @@ namespace simdvol {
 struct VoxelLayout {
   CellLayout cells;    ///< the cell geometry it was derived from (its halo is irrelevant here)
   int64_t stride = 0;  ///< voxel positions per PE block (floats per plane)
+  bool interleaved = false;  ///< RGBA of a position together instead of planar (file comment)
 
   int64_t pes() const { return cells.pes(); }
   const Dims3& dims() const { return cells.dims(); }
@@ -61,8 +67,8 @@ struct VoxelLayout {
   bool same_cells(const VoxelLayout& o) const;
 };
 
-/// The voxel layout of `cells`' interiors.
-VoxelLayout make_voxel_layout(const CellLayout& cells);
+/// The voxel layout of `cells`' interiors, planar or interleaved.
+VoxelLayout make_voxel_layout(const CellLayout& cells, bool interleaved = false);
 
 /// Serial reference of the voxel-cells layout for any 16-byte element type
 /// (ShadeSample, Rgba, cl_float4): a flat x-fastest array to voxel cells (pad
