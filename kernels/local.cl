@@ -239,8 +239,13 @@ SV_FN void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const 
         for (int a = 0; a < SV_M; ++a) {
           const int8 o8 = row + ax[a];
           const int4 o = h ? o8.hi : o8.lo;
-          qx[a] = (float16)(vload4(0, vox + o.s0), vload4(0, vox + o.s1), vload4(0, vox + o.s2),
-                            vload4(0, vox + o.s3));
+          /* two float8 halves, then the float16: written as one float16 of
+           * four float4, LLVM 15 split half of the 16-byte loads into two
+           * 8-byte loads and a permute (64 vmovsd, 32 vpermpd in the kernel);
+           * this way each is one vmovups or vinsertf128 from memory. */
+          const float8 lo = (float8)(vload4(0, vox + o.s0), vload4(0, vox + o.s1));
+          const float8 hi = (float8)(vload4(0, vox + o.s2), vload4(0, vox + o.s3));
+          qx[a] = (float16)(lo, hi);
         }
         sv_neville16(qx, wx, mx);
         qy[b] = qx[0];
