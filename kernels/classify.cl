@@ -412,7 +412,7 @@ SV_FN void sv_classify16_chunk(__global const float* shading, __global float* ou
    * stored as zeros without reading the lighting planes or evaluating the
    * mixture: the same bits. */
   if (SV_KIND_OF(cp) == SV_CLASSIFY_MIXTURE &&
-      all(sv_mixture_zero16(cp, vload16(0, s + 3 * vstride)))) {
+      all(sv_mixture_zero16(cp, SV_VLOAD16(s + 3 * vstride)))) {
     const float16 z = 0.0f;
     SV_VSTORE16(z, o);
     SV_VSTORE16(z, o + vstride);
@@ -420,8 +420,8 @@ SV_FN void sv_classify16_chunk(__global const float* shading, __global float* ou
     SV_VSTORE16(z, o + 3 * vstride);
     return;
   }
-  sv_classify16(cp, vload16(0, s), vload16(0, s + vstride), vload16(0, s + 2 * vstride),
-                vload16(0, s + 3 * vstride), &r, &g, &b, &a);
+  sv_classify16(cp, SV_VLOAD16(s), SV_VLOAD16(s + vstride), SV_VLOAD16(s + 2 * vstride),
+                SV_VLOAD16(s + 3 * vstride), &r, &g, &b, &a);
   SV_VSTORE16(r, o);
   SV_VSTORE16(g, o + vstride);
   SV_VSTORE16(b, o + 2 * vstride);
@@ -768,17 +768,17 @@ __kernel void simdvol_shade_classify_flat16(__global const float* restrict volum
   const size_t i = sv_flat_index(dims, x0, y, z);
   const int sy = dims.x, sz = dims.x * dims.y;
   __global const float* c = volume + i;
-  const float16 v = vload16(0, c);
+  const float16 v = SV_VLOAD16(c);
   /* x neighbours clamped at the row's ends (lane 0 / 15 reuse themselves) */
   const float16 xm =
-      x0 > 0 ? vload16(0, c - 1) : (float16)(v.s0, v.s0, v.s1, v.s23, v.s4567, v.s89ab, v.scde);
+      x0 > 0 ? SV_VLOAD16(c - 1) : (float16)(v.s0, v.s0, v.s1, v.s23, v.s4567, v.s89ab, v.scde);
   const float16 xp = x0 + 16 < dims.x
-                         ? vload16(0, c + 1)
+                         ? SV_VLOAD16(c + 1)
                          : (float16)(v.s1, v.s23, v.s4567, v.s89ab, v.scde, v.sf, v.sf);
-  const float16 ym = vload16(0, c - (y > 0 ? sy : 0)),
-                yp = vload16(0, c + (y + 1 < dims.y ? sy : 0));
-  const float16 zm = vload16(0, c - (z > 0 ? sz : 0)),
-                zp = vload16(0, c + (z + 1 < dims.z ? sz : 0));
+  const float16 ym = SV_VLOAD16(c - (y > 0 ? sy : 0)),
+                yp = SV_VLOAD16(c + (y + 1 < dims.y ? sy : 0));
+  const float16 zm = SV_VLOAD16(c - (z > 0 ? sz : 0)),
+                zp = SV_VLOAD16(c + (z + 1 < dims.z ? sz : 0));
   const float16 iota = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
   const size_t n = (size_t)dims.x * (size_t)dims.y * (size_t)dims.z;
   const float16 zero = 0.0f;

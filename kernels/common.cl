@@ -24,6 +24,20 @@
 #include "simdvol_shared.h"
 #endif
 
+/* Unaligned vector loads of 8 and 16 floats: the vector types with 4-byte
+ * alignment, loaded through a pointer cast (one vmovups). PoCL 3.1's
+ * vload8 / vload16 on these machines became 8-byte loads combined into
+ * 2-lane arithmetic (vmovsd, vmovlhps) in the float16 shade kernels. */
+#ifndef SV_VLOAD_BUILTIN
+typedef float8 sv_float8u __attribute__((aligned(4)));
+typedef float16 sv_float16u __attribute__((aligned(4)));
+#define SV_VLOAD8(p) (*(__global const sv_float8u*)(p))
+#define SV_VLOAD16(p) (*(__global const sv_float16u*)(p))
+#else
+#define SV_VLOAD8(p) vload8(0, (p))
+#define SV_VLOAD16(p) vload16(0, (p))
+#endif
+
 /* Work-group size of 1-D kernels; the host passes the same value as the
  * local size. */
 #ifndef WGS

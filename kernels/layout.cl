@@ -59,7 +59,7 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_layout(
     if (x0 >= 0 && x0 + block.x <= dims.x) {
       __global const float* s = src + x0;
       int i = 0;
-      for (; i + 8 <= block.x; i += 8) vstore8(vload8(0, s + i), 0, dst + i);
+      for (; i + 8 <= block.x; i += 8) vstore8(SV_VLOAD8(s + i), 0, dst + i);
       for (; i < block.x; ++i) dst[i] = s[i];
     } else {
       for (int i = 0; i < block.x; ++i) dst[i] = src[clamp(x0 + i, 0, dims.x - 1)];

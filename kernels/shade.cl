@@ -298,13 +298,13 @@ SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 
 #ifdef SV_RW
 #if SV_RW == 16
 #define SV_NR 1
-#define SV_LD16(c, rb, off) vload16(0, (c) + (rb)[0] + (off))
+#define SV_LD16(c, rb, off) SV_VLOAD16((c) + (rb)[0] + (off))
 #define SV_ROWS16(a) ((float16)((a)[0]))
 #define SV_IOTA16 ((float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
 #elif SV_RW == 8
 #define SV_NR 2
 #define SV_LD16(c, rb, off) \
-  ((float16)(vload8(0, (c) + (rb)[0] + (off)), vload8(0, (c) + (rb)[1] + (off))))
+  ((float16)(SV_VLOAD8((c) + (rb)[0] + (off)), SV_VLOAD8((c) + (rb)[1] + (off))))
 #define SV_ROWS16(a) ((float16)((float8)((a)[0]), (float8)((a)[1])))
 #define SV_IOTA16 ((float16)(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7))
 #elif SV_RW == 4
