@@ -513,19 +513,25 @@ TEST(LocalCl, InterleavedCellsGiveTheSameBits) {
           EXPECT_TRUE(same_bits(variant == 3 ? want1 : want, read_footprints(dev, fp)))
               << "variant " << variant;
         }
-        // The stored samples (adaptive and Monte Carlo compositing).
+        // The stored samples (adaptive and Monte Carlo compositing), with
+        // and without skipping.
         const cl::Buffer soff = upload_sample_offsets(dev, m);
         const std::size_t ns = static_cast<std::size_t>(sample_offsets(m).back());
-        cl::Buffer s0 =
-            dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
-        cl::Buffer s4 =
-            dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
-        enqueue_resample(dev, segs, soff, t, vb, order, s0, LocalKernel::vector8, &lanes);
-        enqueue_resample(dev, segs, soff, t4, vb4, order, s4, LocalKernel::vector8, &lanes);
-        if (ns > 0) {
-          const std::vector<Rgba> a0 = read_all<Rgba>(dev, s0, ns);
-          const std::vector<Rgba> a4 = read_all<Rgba>(dev, s4, ns);
-          EXPECT_EQ(std::memcmp(a0.data(), a4.data(), ns * sizeof(Rgba)), 0) << "stored samples";
+        for (int skip = 0; skip < 2; ++skip) {
+          cl::Buffer s0 =
+              dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
+          cl::Buffer s4 =
+              dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
+          enqueue_resample(dev, segs, soff, t, vb, order, s0, LocalKernel::vector8, &lanes,
+                           skip ? &occ : nullptr);
+          enqueue_resample(dev, segs, soff, t4, vb4, order, s4, LocalKernel::vector8, &lanes,
+                           skip ? &occ4 : nullptr);
+          if (ns > 0) {
+            const std::vector<Rgba> a0 = read_all<Rgba>(dev, s0, ns);
+            const std::vector<Rgba> a4 = read_all<Rgba>(dev, s4, ns);
+            EXPECT_EQ(std::memcmp(a0.data(), a4.data(), ns * sizeof(Rgba)), 0)
+                << "stored samples, skip " << skip;
+          }
         }
         EXPECT_THROW(enqueue_resample_local(dev, segs, t, vb4, order, fp), ArgumentError);
         EXPECT_THROW(enqueue_resample_local(dev, segs, t4, vb, order, fp), ArgumentError);
