@@ -86,85 +86,6 @@ __kernel void simdvol_resample_local(__global const sv_segment* segs, const int 
 #endif
 
 #ifdef SIMDVOL_RESAMPLE_CL
-/* ---- simdvol_resample_local_v8: the fused kernel with explicit vectors ----
- * (resample.cl's simdvol_resample_v8 with over instead of stores; the lanes
- * and sv_sample8 are described there). */
-__kernel void simdvol_resample_local_v8(__global const sv_segment* segs, const int nseg,
-                                        __global const int* seg_off, const int log2p,
-                                        __global const sv_view* view, __global const int* table,
-                                        __global const float* vox, const int cs,
-                                        __global const sv_rect* rects, __global const int* rect_off,
-                                        __global float4* foot, __global const uchar* reach,
-                                        const int nbx, const int nby, const int skip,
-                                        __global const int* order, const int ordered) {
-  const int s0 = (int)get_global_id(0) * 8;
-  if (s0 >= nseg) return;
-  int li[8], lj[8], lk[8], ln[8];
-  long8 X[3];
-  int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X);
-  int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
-  const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
-  const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
-  if (skip) {
-    /* The trim cuts a lane only before its first and after its last sample
-     * in reach: a lane whose first and last samples are both in reach keeps
-     * every sample, and where every lane's are, the walk over all T steps
-     * is not needed (about three work-items in four on the phantom,
-     * brainsmall and ch2 at view (20, 35, 10)). Skipping the trim changes
-     * no bit: a sample out of reach adds +-0, which leaves the composite as
-     * it was (resample.cl, empty-space skipping). resample + local,
-     * `simdvol render --view 20,35,10 --frames 6 --step 0 --times`, three
-     * alternations: the 256^3 phantom 130.8-136.0 -> 127.7-130.1 ms,
-     * brainsmall 15.1-16.7 -> 15.1-15.9 ms, ch2 102.8-120.9 -> 99.9-107.6
-     * ms. */
-    const int8 on = N > 0;
-    const long8 n1 = convert_long8(max(N - 1, (int8)(0)));
-    const long8 Y[3] = {X[0] + n1 * s_0, X[1] + n1 * s_1, X[2] + n1 * s_2};
-    const int8 ends = sv_reach8(X, nx, ny, nz, nbx, nby, reach, on) &
-                      sv_reach8(Y, nx, ny, nz, nbx, nby, reach, on);
-    if (any(on & ~ends)) T = sv_trim8(X, &N, T, s_0, s_1, s_2, nx, ny, nz, nbx, nby, reach);
-  }
-  float8 ar = (float8)(0.0f), ag = ar, ab = ar, aa = ar;
-  for (int t = 0; t < T; ++t) {
-    const int8 on = (int8)(t) < N;
-    if (skip && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, on))) {
-      X[0] += s_0; /* every stepping lane's sample is +-0: over keeps the composite */
-      X[1] += s_1;
-      X[2] += s_2;
-      continue;
-    }
-    float8 u[4];
-    sv_sample8(X, nx, ny, nz, table, vox, cs, u);
-    const float8 tr = 1.0f - aa;
-    ar = select(ar, ar + tr * u[0], on);
-    ag = select(ag, ag + tr * u[1], on);
-    ab = select(ab, ab + tr * u[2], on);
-    aa = select(aa, aa + tr * u[3], on);
-    X[0] += s_0;
-    X[1] += s_1;
-    X[2] += s_2;
-  }
-  float rr[8], gg[8], bb[8], al[8];
-  vstore8(ar, 0, rr);
-  vstore8(ag, 0, gg);
-  vstore8(ab, 0, bb);
-  vstore8(aa, 0, al);
-  /* The lanes' PEs: one binary search, then forward (the 8 positions are
-   * consecutive, so their PEs ascend; `order` keeps each segment in its
-   * PE's range of positions). */
-  int p = sv_pe_of_segment(seg_off, log2p, s0);
-#pragma unroll
-  for (int l = 0; l < 8; ++l) {
-    if (s0 + l < nseg) {
-      while (seg_off[p + 1] <= s0 + l) ++p;
-      const sv_segment g = {li[l], lj[l], lk[l], lk[l] + ln[l]};
-      foot[sv_footprint_index(rects, rect_off, p, g)] = (float4)(rr[l], gg[l], bb[l], al[l]);
-    }
-  }
-}
-#endif
-
-#ifdef SIMDVOL_RESAMPLE_CL
 /* ---- simdvol_resample_local_v8_il: the fused kernel on interleaved cells ----
  * simdvol_resample_local_v8 (the same lanes, trim, skipping and writes) on
  * interleaved voxel cells (stages.hpp: the RGBA of a position in 16
@@ -207,12 +128,7 @@ SV_FN void sv_neville16(float16* q, const float16* d, const int16 low) {
  * premultiplied RGBA (sv_sample8's values, as (lane, channel)). */
 SV_FN void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const int* table,
                          __global const float* vox, float16* u) {
-  int8 ax[SV_M], ay[SV_M], az[SV_M];
-  float8 dx[SV_M], dy[SV_M], dz[SV_M];
-  int8 lx, ly, lz;
-  sv_axis8(X[0], nx, table, ax, dx, &lx);
-  sv_axis8(X[1], ny, table + nx, ay, dy, &ly);
-  sv_axis8(X[2], nz, table + nx + ny, az, dz, &lz);
+  SV_AXES8(X, nx, ny, nz, table);
 #pragma unroll
   for (int h = 0; h < 2; ++h) {
     const uint base = 4 * h;
@@ -258,13 +174,19 @@ SV_FN void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const 
   }
 }
 
-__kernel void simdvol_resample_local_v8_il(
-    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
-    __global const sv_view* view, __global const int* table, __global const float* vox,
-    const int cs, __global const sv_rect* rects, __global const int* rect_off,
-    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
-    const int skip, __global const int* order, const int ordered) {
-  (void)cs; /* 1: interleaved */
+/* ---- simdvol_resample_local_v8: the fused kernel with explicit vectors ----
+ * (resample.cl's simdvol_resample_v8 with over instead of stores; the lanes
+ * and sv_sample8 are described there). */
+/* simdvol_resample_local_v8 (planar cells, il = 0) and _v8_il (interleaved
+ * cells, il = 1; cs is 1 there): one body, the layout a constant. */
+SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
+                              __global const int* seg_off, const int log2p,
+                              __global const sv_view* view, __global const int* table,
+                              __global const float* vox, const int cs,
+                              __global const sv_rect* rects, __global const int* rect_off,
+                              __global float4* foot, __global const uchar* reach, const int nbx,
+                              const int nby, const int skip, __global const int* order,
+                              const int ordered, const int il) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8];
@@ -273,7 +195,18 @@ __kernel void simdvol_resample_local_v8_il(
   int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
   const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
-  if (skip) { /* as simdvol_resample_local_v8 */
+  if (skip) {
+    /* The trim cuts a lane only before its first and after its last sample
+     * in reach: a lane whose first and last samples are both in reach keeps
+     * every sample, and where every lane's are, the walk over all T steps
+     * is not needed (about three work-items in four on the phantom,
+     * brainsmall and ch2 at view (20, 35, 10)). Skipping the trim changes
+     * no bit: a sample out of reach adds +-0, which leaves the composite as
+     * it was (resample.cl, empty-space skipping). resample + local,
+     * `simdvol render --view 20,35,10 --frames 6 --step 0 --times`, three
+     * alternations: the 256^3 phantom 130.8-136.0 -> 127.7-130.1 ms,
+     * brainsmall 15.1-16.7 -> 15.1-15.9 ms, ch2 102.8-120.9 -> 99.9-107.6
+     * ms. */
     const int8 on = N > 0;
     const long8 n1 = convert_long8(max(N - 1, (int8)(0)));
     const long8 Y[3] = {X[0] + n1 * s_0, X[1] + n1 * s_1, X[2] + n1 * s_2};
@@ -281,37 +214,60 @@ __kernel void simdvol_resample_local_v8_il(
                       sv_reach8(Y, nx, ny, nz, nbx, nby, reach, on);
     if (any(on & ~ends)) T = sv_trim8(X, &N, T, s_0, s_1, s_2, nx, ny, nz, nbx, nby, reach);
   }
-  /* acc[h]: the composites of lanes 4h .. 4h + 3 as (lane, channel) */
-  float16 acc[2] = {(float16)(0.0f), (float16)(0.0f)};
+  float8 ar = (float8)(0.0f), ag = ar, ab = ar, aa = ar; /* planar: by channel */
+  float16 acc[2] = {(float16)(0.0f), (float16)(0.0f)};   /* interleaved: (lane, channel) */
   const uint16 alpha = (uint16)(3, 3, 3, 3, 7, 7, 7, 7, 11, 11, 11, 11, 15, 15, 15, 15);
   for (int t = 0; t < T; ++t) {
     const int8 on = (int8)(t) < N;
     if (skip && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, on))) {
-      X[0] += s_0;
+      X[0] += s_0; /* every stepping lane's sample is +-0: over keeps the composite */
       X[1] += s_1;
       X[2] += s_2;
       continue;
     }
-    float16 u[2];
-    sv_sample8_il(X, nx, ny, nz, table, vox, u);
+    if (il) {
+      float16 u[2];
+      sv_sample8_il(X, nx, ny, nz, table, vox, u);
 #pragma unroll
-    for (int h = 0; h < 2; ++h) {
-      const int16 onh = as_int16(sv_spread4(as_float8(on), 4 * h));
-      acc[h] = select(acc[h], acc[h] + (1.0f - shuffle(acc[h], alpha)) * u[h], onh);
+      for (int h = 0; h < 2; ++h) {
+        const int16 onh = as_int16(sv_spread4(as_float8(on), 4 * h));
+        acc[h] = select(acc[h], acc[h] + (1.0f - shuffle(acc[h], alpha)) * u[h], onh);
+      }
+    } else {
+      float8 u[4];
+      sv_sample8(X, nx, ny, nz, table, vox, cs, u);
+      const float8 tr = 1.0f - aa;
+      ar = select(ar, ar + tr * u[0], on);
+      ag = select(ag, ag + tr * u[1], on);
+      ab = select(ab, ab + tr * u[2], on);
+      aa = select(aa, aa + tr * u[3], on);
     }
     X[0] += s_0;
     X[1] += s_1;
     X[2] += s_2;
   }
   float4 res[8];
-  res[0] = acc[0].s0123;
-  res[1] = acc[0].s4567;
-  res[2] = acc[0].s89ab;
-  res[3] = acc[0].scdef;
-  res[4] = acc[1].s0123;
-  res[5] = acc[1].s4567;
-  res[6] = acc[1].s89ab;
-  res[7] = acc[1].scdef;
+  if (il) {
+    res[0] = acc[0].s0123;
+    res[1] = acc[0].s4567;
+    res[2] = acc[0].s89ab;
+    res[3] = acc[0].scdef;
+    res[4] = acc[1].s0123;
+    res[5] = acc[1].s4567;
+    res[6] = acc[1].s89ab;
+    res[7] = acc[1].scdef;
+  } else {
+    float rr[8], gg[8], bb[8], al[8];
+    vstore8(ar, 0, rr);
+    vstore8(ag, 0, gg);
+    vstore8(ab, 0, bb);
+    vstore8(aa, 0, al);
+#pragma unroll
+    for (int l = 0; l < 8; ++l) res[l] = (float4)(rr[l], gg[l], bb[l], al[l]);
+  }
+  /* The lanes' PEs: one binary search, then forward (the 8 positions are
+   * consecutive, so their PEs ascend; `order` keeps each segment in its
+   * PE's range of positions). */
   int p = sv_pe_of_segment(seg_off, log2p, s0);
 #pragma unroll
   for (int l = 0; l < 8; ++l) {
@@ -321,6 +277,28 @@ __kernel void simdvol_resample_local_v8_il(
       foot[sv_footprint_index(rects, rect_off, p, g)] = res[l];
     }
   }
+}
+
+__kernel void simdvol_resample_local_v8(__global const sv_segment* segs, const int nseg,
+                                        __global const int* seg_off, const int log2p,
+                                        __global const sv_view* view, __global const int* table,
+                                        __global const float* vox, const int cs,
+                                        __global const sv_rect* rects, __global const int* rect_off,
+                                        __global float4* foot, __global const uchar* reach,
+                                        const int nbx, const int nby, const int skip,
+                                        __global const int* order, const int ordered) {
+  sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
+                     nbx, nby, skip, order, ordered, 0);
+}
+
+__kernel void simdvol_resample_local_v8_il(
+    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
+    __global const sv_view* view, __global const int* table, __global const float* vox,
+    const int cs, __global const sv_rect* rects, __global const int* rect_off,
+    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
+    const int skip, __global const int* order, const int ordered) {
+  sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
+                     nbx, nby, skip, order, ordered, 1);
 }
 #endif
 

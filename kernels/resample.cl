@@ -216,16 +216,20 @@ SV_FN void sv_neville8(float8* q, const int R, const float8* d, const int8 low) 
   }
 }
 
+/* sv_axis8 for the three axes of 8 lanes at X[0..2]. */
+#define SV_AXES8(X, nx, ny, nz, table)                 \
+  int8 ax[SV_M], ay[SV_M], az[SV_M];                   \
+  float8 dx[SV_M], dy[SV_M], dz[SV_M];                 \
+  int8 lx, ly, lz;                                     \
+  sv_axis8((X)[0], (nx), (table), ax, dx, &lx);        \
+  sv_axis8((X)[1], (ny), (table) + (nx), ay, dy, &ly); \
+  sv_axis8((X)[2], (nz), (table) + (nx) + (ny), az, dz, &lz)
+
 /* The samples at the fixed-point positions X[0..2] of 8 lanes: u[ch] =
  * channel ch of each lane's sample (sv_sample per lane). */
 SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int* table,
                       __global const float* vox, int cs, float8* u) {
-  int8 ax[SV_M], ay[SV_M], az[SV_M];
-  float8 dx[SV_M], dy[SV_M], dz[SV_M];
-  int8 lx, ly, lz;
-  sv_axis8(X[0], nx, table, ax, dx, &lx);
-  sv_axis8(X[1], ny, table + nx, ay, dy, &ly);
-  sv_axis8(X[2], nz, table + nx + ny, az, dz, &lz);
+  SV_AXES8(X, nx, ny, nz, table);
   /* z outermost: the x pass of a row (b, c) runs as soon as its SV_M
    * corners are loaded, the y pass of a plane c as soon as its rows are
    * done, so about 4 * (SV_M + 2) float8 values are live instead of the
