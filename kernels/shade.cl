@@ -342,10 +342,40 @@ SV_FN void sv_chunk_rows(__global const int4* origins, int4 cell, int4 block, in
   const int rows = cell.y * cell.z;
   const int4 o = origins[p];
 #if SV_RW == 1
+  const int cvox = rows * cell.x;
+#ifndef SV_RW1_SCALAR
+  if (cvox <= (1 << 22)) {
+    /* Lane l is position q = e0 + l (lanes past the cell's voxels take the
+     * last voxel and are reported as not in the cell), 16 lanes at once:
+     * row = q / cx and lz = row / cy from a float estimate, within 1 for
+     * q <= 2^22 (q exact in float, two roundings of 2^-24), then corrected
+     * by the remainder; lx = q - row * cx, ly = row - lz * cy. The same
+     * offsets and coordinates as the lane-by-lane steps below (used for
+     * larger cells, and with SV_RW1_SCALAR), which took 48 scalar
+     * conversions and 48 inserts per chunk. */
+    const int16 pos = (int16)(e0) + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int16 q = min(pos, (int16)(cvox - 1));
+    /* (comparisons give -1 where true) */
+    int16 row = convert_int16(convert_float16(q) * (1.0f / (float)cell.x));
+    int16 qx = q - row * cell.x;
+    row = row - (qx >= cell.x) + (qx < 0);
+    qx = q - row * cell.x;
+    int16 qz = convert_int16(convert_float16(row) * (1.0f / (float)cell.y));
+    int16 qy = row - qz * cell.y;
+    qz = qz - (qy >= cell.y) + (qy < 0);
+    qy = row - qz * cell.y;
+    const int h = cell.w;
+    vstore16(((qz + h) * block.y + (qy + h)) * block.x + qx + h, 0, rb);
+    vstore16(convert_float16(qx + o.x), 0, fx);
+    vstore16(convert_float16(qy + o.y), 0, fy);
+    vstore16(convert_float16(qz + o.z), 0, fz);
+    vstore16(select((float16)(0.0f), (float16)(1.0f), pos < cvox), 0, ok);
+    return;
+  }
+#endif
   /* Lane l is position e0 + l: (lx, row) stepped from e0's without a
    * division per lane; lanes past the cell's voxels repeat the last voxel
    * and are reported as not in the cell. */
-  const int cvox = rows * cell.x;
   int row = e0 / cell.x;
   int lx = e0 - row * cell.x;
   int ly = row % cell.y, lz = row / cell.y;

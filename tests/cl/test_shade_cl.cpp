@@ -221,7 +221,13 @@ TEST(ShadeKernel, Float16RowWidths) {
                           {{24, 5, 3}, 2, 12, 180},
                           // SV_RW 1 (per-lane positions): chunks across rows and planes
                           {{22, 9, 7}, 1, 22, 1386},
-                          {{5, 7, 3}, 1, 5, 105}};
+                          {{5, 7, 3}, 1, 5, 105},
+                          // (lx, ly, lz) from float estimates of q / cx and row / cy
+                          // that are one short from the first row (plane) on for cx
+                          // (cy) = 41, 47, 61: the correction by the remainder
+                          {{41, 41, 5}, 1, 41, 8405},
+                          {{47, 23, 3}, 1, 47, 3243},
+                          {{61, 5, 41}, 1, 61, 12505}};
   for (const Shape& sh : shapes) {
     SCOPED_TRACE("dims " + std::to_string(sh.dims[0]) + "x" + std::to_string(sh.dims[1]) + "x" +
                  std::to_string(sh.dims[2]) + " pes " + std::to_string(sh.pes));
