@@ -620,9 +620,12 @@ SV_FN void sv_store16_il(__global float* blk, int e0, float16 r, float16 g, floa
   SV_VSTORE16(shuffle2(rg1, ba1, q1), o + 48);
 }
 
-/* The classified chunk into planar (il = 0) or interleaved (il = 1) cells. */
-SV_FN void sv_store16_rgba(__global float* blk, int vstride, int e0, float16 r, float16 g,
-                           float16 b, float16 a, const int il) {
+/* The classified chunk into planar (il = 0) or interleaved (il = 1) cells
+ * (always inlined: LLVM kept it a call, its four float16 through memory). */
+static inline __attribute__((always_inline)) void sv_store16_rgba(__global float* blk, int vstride,
+                                                                  int e0, float16 r, float16 g,
+                                                                  float16 b, float16 a,
+                                                                  const int il) {
   if (il)
     sv_store16_il(blk, e0, r, g, b, a);
   else
