@@ -646,7 +646,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (p >= pes || e0 >= vstride) return;
-  int rb[SV_NR];
+  int rb[SV_NRB];
   float fx[SV_NR], fy[SV_NR], fz[SV_NR], ok[SV_NR];
   sv_chunk_rows(origins, cell, block, p, e0, rb, fx, fy, fz, ok);
   __global const float* c = cells + sv_block_start(block, p);

@@ -317,18 +317,43 @@ SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 
 #define SV_IOTA16 ((float16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3))
 #elif SV_RW == 1
 #define SV_NR 16
-#define SV_LD16(c, rb, off)                                                       \
-  ((float16)((c)[(rb)[0] + (off)], (c)[(rb)[1] + (off)], (c)[(rb)[2] + (off)],    \
-             (c)[(rb)[3] + (off)], (c)[(rb)[4] + (off)], (c)[(rb)[5] + (off)],    \
-             (c)[(rb)[6] + (off)], (c)[(rb)[7] + (off)], (c)[(rb)[8] + (off)],    \
-             (c)[(rb)[9] + (off)], (c)[(rb)[10] + (off)], (c)[(rb)[11] + (off)],  \
-             (c)[(rb)[12] + (off)], (c)[(rb)[13] + (off)], (c)[(rb)[14] + (off)], \
-             (c)[(rb)[15] + (off)]))
+/* rb for SV_RW 1 (sv_chunk_rows): [0, 16) each lane's block offset; [16]
+ * the number n of cell rows the chunk's lanes lie in; [17] 1 if the loads
+ * below stay inside the PE's block; [18 + 2j], [19 + 2j] (j < n): row j's
+ * block offset minus its first lane, and that first lane. */
+#define SV_NRB 50
+#define SV_LD16(c, rb, off) sv_ld16_rows((c), (rb), (off))
+
+/* The 16 lanes' values at block offset rb[l] + off. A row's lanes are
+ * consecutive voxels, so each row is one 16-float load from its offset
+ * minus its first lane, its lanes taken by a select: n loads and n - 1
+ * selects (n <= 4 for cx >= 5) instead of a 16-lane gather, which spent
+ * more than half of the float16 shade kernel's time on ch2's 6-wide cells
+ * (perf annotate). Where a load could leave the PE's block (chunks at its
+ * first and last rows), and with SV_RW1_GATHER, the gather. */
+SV_FN float16 sv_ld16_rows(__global const float* c, const int* rb, const int off) {
+#ifndef SV_RW1_GATHER
+  if (rb[17]) {
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    float16 v = SV_VLOAD16(c + rb[18] + off);
+    for (int j = 1; j < rb[16]; ++j)
+      v = select(v, SV_VLOAD16(c + rb[18 + 2 * j] + off), lane >= (int16)(rb[19 + 2 * j]));
+    return v;
+  }
+#endif
+  return (float16)(c[rb[0] + off], c[rb[1] + off], c[rb[2] + off], c[rb[3] + off], c[rb[4] + off],
+                   c[rb[5] + off], c[rb[6] + off], c[rb[7] + off], c[rb[8] + off], c[rb[9] + off],
+                   c[rb[10] + off], c[rb[11] + off], c[rb[12] + off], c[rb[13] + off],
+                   c[rb[14] + off], c[rb[15] + off]);
+}
 #define SV_ROWS16(a)                                                                         \
   ((float16)((a)[0], (a)[1], (a)[2], (a)[3], (a)[4], (a)[5], (a)[6], (a)[7], (a)[8], (a)[9], \
              (a)[10], (a)[11], (a)[12], (a)[13], (a)[14], (a)[15]))
 #else
 #error "SV_RW must be 16, 8, 4 or 1"
+#endif
+#ifndef SV_NRB
+#define SV_NRB SV_NR /* the length of rb */
 #endif
 
 /* The chunk of 16 positions from e0 (a multiple of 16) of PE p's cell, in
@@ -365,11 +390,34 @@ SV_FN void sv_chunk_rows(__global const int4* origins, int4 cell, int4 block, in
     qz = qz - (qy >= cell.y) + (qy < 0);
     qy = row - qz * cell.y;
     const int h = cell.w;
-    vstore16(((qz + h) * block.y + (qy + h)) * block.x + qx + h, 0, rb);
+    const int16 off = ((qz + h) * block.y + (qy + h)) * block.x + qx + h;
+    vstore16(off, 0, rb);
     vstore16(convert_float16(qx + o.x), 0, fx);
     vstore16(convert_float16(qy + o.y), 0, fy);
     vstore16(convert_float16(qz + o.z), 0, fz);
     vstore16(select((float16)(0.0f), (float16)(1.0f), pos < cvox), 0, ok);
+    /* The rows the lanes lie in (sv_ld16_rows): row 0 from lane 0, then a
+     * row per cx lanes, up to the cell's last row; each row's offset minus
+     * its first lane, and whether every load (offsets -bxy .. +bxy, 16
+     * floats) stays in the block. */
+    const int bxy = block.x * block.y;
+    int base = off.s0, a = 0, n = 0, inside = 1;
+    int ly = qy.s0, lz = qz.s0, r = row.s0;
+    for (;;) {
+      rb[18 + 2 * n] = base - a;
+      rb[19 + 2 * n] = a;
+      inside &= base - a - bxy >= 0 && base - a + bxy + 16 <= block.w;
+      ++n;
+      a += n == 1 ? cell.x - qx.s0 : cell.x;
+      if (a >= 16 || ++r >= rows) break;
+      if (++ly == cell.y) {
+        ly = 0;
+        ++lz;
+      }
+      base = ((lz + h) * block.y + (ly + h)) * block.x + h;
+    }
+    rb[16] = n;
+    rb[17] = inside;
     return;
   }
 #endif
@@ -396,6 +444,8 @@ SV_FN void sv_chunk_rows(__global const int4* origins, int4 cell, int4 block, in
       }
     }
   }
+  rb[16] = 0;
+  rb[17] = 0; /* sv_ld16_rows gathers */
 #else
 #if SV_RW == 16
   const int row0 = e0 / cell.x;
@@ -454,7 +504,7 @@ SV_FN void sv_shade_rows(__constant const sv_shade_params* sp, __global const fl
 SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const float* cells,
                            __global const int4* origins, int4 cell, int4 block, int p, int e0,
                            float16* id, float16* is, float16* mag, float16* v) {
-  int rb[SV_NR];
+  int rb[SV_NRB];
   float fx[SV_NR], fy[SV_NR], fz[SV_NR], ok[SV_NR];
   sv_chunk_rows(origins, cell, block, p, e0, rb, fx, fy, fz, ok);
   __global const float* c = cells + sv_block_start(block, p);
