@@ -224,10 +224,11 @@ __kernel void simdvol_shade_rows(__global const float* restrict cells, __global 
  * start: unaligned and contiguous. Chunk positions past the cell's voxels
  * (the plane's tail, whole rows since cx divides 16) are written as zeros.
  * SV_RW 1 serves every other cx (e.g. 12, or 6 for non-power-of-two
- * volumes): each lane finds its own (lx, ly, lz) by stepping from the
- * chunk's first position (no divisions per lane) and the loads are 16
- * scalar loads each; the arithmetic stays float16 (the scalar kernels,
- * which PoCL leaves unvectorised, ran 3-5 times slower per voxel). */
+ * volumes): the lanes' (lx, ly, lz) come from float estimates of the
+ * divisions, corrected (sv_chunk_rows), and each load is one 16-float load
+ * per cell row the lanes lie in, merged by selects (sv_ld16_rows); the
+ * arithmetic stays float16 (the scalar kernels, which PoCL leaves
+ * unvectorised, ran 3-5 times slower per voxel). */
 #ifndef SV_VSTORE16
 /* Store of 16 floats at p (64-byte aligned: planes and chunks start on
  * multiples of 16 floats). With SV_NT, a non-temporal store (no
