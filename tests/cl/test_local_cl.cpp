@@ -301,6 +301,15 @@ bool same_bits(const Footprints& a, const Footprints& b) {
          std::memcmp(a.pixels.data(), b.pixels.data(), a.pixels.size() * sizeof(Rgba)) == 0;
 }
 
+// Axis-aligned, 30 deg, (45, 45, 0) and two random views (seed).
+std::vector<ViewAngles> skip_test_views(unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> ang(-180.0, 180.0);
+  std::vector<ViewAngles> views = {{0, 0, 0}, {0, 30, 0}, {45, 45, 0}};
+  for (int k = 0; k < 2; ++k) views.push_back({ang(rng), ang(rng), ang(rng)});
+  return views;
+}
+
 }  // namespace
 
 TEST(LocalCl, OccupancyEqualsBruteForce) {
@@ -346,10 +355,7 @@ TEST(LocalCl, SkippingEmptyBricksKeepsEveryBit) {
   Device& dev = *dp;
   const Dims3 dims{41, 35, 29};
   const Volume vol(dims, VoxelType::f32);
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> ang(-180.0, 180.0);
-  std::vector<ViewAngles> views = {{0, 0, 0}, {0, 30, 0}, {45, 45, 0}};
-  for (int k = 0; k < 2; ++k) views.push_back({ang(rng), ang(rng), ang(rng)});
+  const std::vector<ViewAngles> views = skip_test_views(11);
   int skipped_cases = 0;
   for (int64_t pes : {int64_t(1), int64_t(64), int64_t(8192)}) {
     std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes));
@@ -459,10 +465,7 @@ TEST(LocalCl, InterleavedCellsGiveTheSameBits) {
   Device& dev = *dp;
   const Dims3 dims{41, 35, 29};
   const Volume vol(dims, VoxelType::f32);
-  std::mt19937 rng(23);
-  std::uniform_real_distribution<double> ang(-180.0, 180.0);
-  std::vector<ViewAngles> views = {{0, 0, 0}, {0, 30, 0}, {45, 45, 0}};
-  for (int k = 0; k < 2; ++k) views.push_back({ang(rng), ang(rng), ang(rng)});
+  const std::vector<ViewAngles> views = skip_test_views(23);
   int coloured = 0;
   for (int64_t pes : {int64_t(1), int64_t(64), int64_t(8192)}) {
     std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes + 5));
