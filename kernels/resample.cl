@@ -274,6 +274,95 @@ SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int
   for (int ch = 0; ch < 4; ++ch) u[ch] = qz[ch];
 }
 
+/* ---- interleaved voxel cells: sv_sample8_il (simdvol_resample_v8_il and
+ * local.cl's simdvol_resample_local_v8_il) ----
+ * The float8 lanes' kernels (the same lanes, trim, skipping and writes) on
+ * interleaved voxel cells (stages.hpp: the RGBA of a position in 16
+ * consecutive bytes; the address table gives the float index of channel 0,
+ * cs = 1). A corner's four channels are one 16-byte load instead of four
+ * lane gathers, and lanes 0-3 and 4-7 are computed as two float16 of
+ * (lane, channel), 4 x RGBA: each axis's x - x_e and stencil side per lane
+ * spread over its 4 channels (sv_spread4), Neville on float16 with the same
+ * element-wise operations as sv_neville8 (so the samples, and the
+ * footprints, are those of simdvol_resample_local_v8 bit for bit; tested).
+ * The lanes' x, y, z arithmetic is sv_axis8's. On the 2-core Zen 5 EPYC
+ * (AVX-512; PoCL's skylake-avx512 target), the 256^3 phantom at 8,192 PEs,
+ * simdvol-bench-frame (columns `ordered` and `ordered4`, the frame path with
+ * the lane order and skipping): see docs/PERFORMANCE.md. */
+SV_FN float16 sv_spread4(const float8 v, const uint base) {
+  const uint16 k = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3) + base;
+  return shuffle(v, k);
+}
+
+/* sv_neville8 on (lane, channel) float16 values; low = -1 bits in the
+ * lanes whose stencil is on the low side. */
+SV_FN void sv_neville16(float16* q, const float16* d, const int16 low) {
+#pragma unroll
+  for (int k = 1; k <= ORDER; ++k) {
+#pragma unroll
+    for (int i = k - 1; i >= 0; --i) {
+      const int c = SV_LOWPOS(k) - SV_LOWPOS(i);
+      if (c == 3 || c == -3) {
+        const float16 den = select((float16)((float)(-c)), (float16)((float)c), low);
+        q[i] = (d[i] * q[i + 1] - d[k] * q[i]) / den;
+      } else {
+        const float16 rc = select((float16)(-1.0f / (float)c), (float16)(1.0f / (float)c), low);
+        q[i] = (d[i] * q[i + 1] - d[k] * q[i]) * rc;
+      }
+    }
+  }
+}
+
+/* The samples of 8 lanes at X[0..2]: u[h] = lanes 4h .. 4h + 3, each its
+ * premultiplied RGBA (sv_sample8's values, as (lane, channel)). */
+SV_FN void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const int* table,
+                         __global const float* vox, float16* u) {
+  SV_AXES8(X, nx, ny, nz, table);
+#pragma unroll
+  for (int h = 0; h < 2; ++h) {
+    const uint base = 4 * h;
+    float16 wx[SV_M], wy[SV_M], wz[SV_M];
+#pragma unroll
+    for (int e = 0; e < SV_M; ++e) {
+      wx[e] = sv_spread4(dx[e], base);
+      wy[e] = sv_spread4(dy[e], base);
+      wz[e] = sv_spread4(dz[e], base);
+    }
+    const int16 mx = as_int16(sv_spread4(as_float8(lx), base));
+    const int16 my = as_int16(sv_spread4(as_float8(ly), base));
+    const int16 mz = as_int16(sv_spread4(as_float8(lz), base));
+    /* z outermost, as sv_sample8 (few values live) */
+    float16 qz[SV_M];
+#pragma unroll
+    for (int c = 0; c < SV_M; ++c) {
+      float16 qy[SV_M];
+#pragma unroll
+      for (int b = 0; b < SV_M; ++b) {
+        const int8 row = ay[b] + az[c];
+        float16 qx[SV_M];
+#pragma unroll
+        for (int a = 0; a < SV_M; ++a) {
+          const int8 o8 = row + ax[a];
+          const int4 o = h ? o8.hi : o8.lo;
+          /* two float8 halves, then the float16: written as one float16 of
+           * four float4, LLVM 15 split half of the 16-byte loads into two
+           * 8-byte loads and a permute (64 vmovsd, 32 vpermpd in the kernel);
+           * this way each is one vmovups or vinsertf128 from memory. */
+          const float8 lo = (float8)(vload4(0, vox + o.s0), vload4(0, vox + o.s1));
+          const float8 hi = (float8)(vload4(0, vox + o.s2), vload4(0, vox + o.s3));
+          qx[a] = (float16)(lo, hi);
+        }
+        sv_neville16(qx, wx, mx);
+        qy[b] = qx[0];
+      }
+      sv_neville16(qy, wy, my);
+      qz[c] = qy[0];
+    }
+    sv_neville16(qz, wz, mz);
+    u[h] = qz[0];
+  }
+}
+
 /* Lanes of the segments at positions s0 .. s0 + 7 (those past nseg repeat
  * the last with length 0): segment order[position] if `ordered`, else the
  * position itself. (i, j, k0) and length per lane, and X[a] = the
@@ -443,12 +532,15 @@ SV_FN int sv_trim8(long8* X, int8* N, const int T, const long s0, const long s1,
  * a zero, which neither over, nor adaptive compositing, nor a Monte Carlo
  * walk can tell (a walk stops where a draw is below alpha, and no draw in
  * [0, 1) is below +-0). */
-__kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nseg,
-                                  __global const int* sample_off, __global const sv_view* view,
-                                  __global const int* table, __global const float* vox,
-                                  const int cs, __global float4* out, __global const int* order,
-                                  const int ordered, __global const uchar* reach, const int nbx,
-                                  const int nby, const int skip) {
+/* simdvol_resample_v8 (planar cells, il = 0) and simdvol_resample_v8_il
+ * (interleaved cells, il = 1: sv_sample8_il; the same samples bit for bit):
+ * one body, the layout a constant. */
+SV_FN void sv_resample8(__global const sv_segment* segs, const int nseg,
+                        __global const int* sample_off, __global const sv_view* view,
+                        __global const int* table, __global const float* vox, const int cs,
+                        __global float4* out, __global const int* order, const int ordered,
+                        __global const uchar* reach, const int nbx, const int nby, const int skip,
+                        const int il) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8], lo[8];
@@ -472,20 +564,56 @@ __kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nse
       X[2] += s_2;
       continue;
     }
-    float8 u[4];
-    sv_sample8(X, nx, ny, nz, table, vox, cs, u);
-    float r[8], g[8], b[8], a[8];
-    vstore8(u[0], 0, r);
-    vstore8(u[1], 0, g);
-    vstore8(u[2], 0, b);
-    vstore8(u[3], 0, a);
+    float4 res[8];
+    if (il) {
+      float16 u[2];
+      sv_sample8_il(X, nx, ny, nz, table, vox, u);
+      res[0] = u[0].s0123;
+      res[1] = u[0].s4567;
+      res[2] = u[0].s89ab;
+      res[3] = u[0].scdef;
+      res[4] = u[1].s0123;
+      res[5] = u[1].s4567;
+      res[6] = u[1].s89ab;
+      res[7] = u[1].scdef;
+    } else {
+      float8 u[4];
+      sv_sample8(X, nx, ny, nz, table, vox, cs, u);
+      float r[8], g[8], b[8], a[8];
+      vstore8(u[0], 0, r);
+      vstore8(u[1], 0, g);
+      vstore8(u[2], 0, b);
+      vstore8(u[3], 0, a);
+#pragma unroll
+      for (int l = 0; l < 8; ++l) res[l] = (float4)(r[l], g[l], b[l], a[l]);
+    }
 #pragma unroll
     for (int l = 0; l < 8; ++l)
-      if (t < ln[l]) out[lo[l] + t] = (float4)(r[l], g[l], b[l], a[l]);
+      if (t < ln[l]) out[lo[l] + t] = res[l];
     X[0] += s_0;
     X[1] += s_1;
     X[2] += s_2;
   }
+}
+
+__kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nseg,
+                                  __global const int* sample_off, __global const sv_view* view,
+                                  __global const int* table, __global const float* vox,
+                                  const int cs, __global float4* out, __global const int* order,
+                                  const int ordered, __global const uchar* reach, const int nbx,
+                                  const int nby, const int skip) {
+  sv_resample8(segs, nseg, sample_off, view, table, vox, cs, out, order, ordered, reach, nbx, nby,
+               skip, 0);
+}
+
+__kernel void simdvol_resample_v8_il(__global const sv_segment* segs, const int nseg,
+                                     __global const int* sample_off, __global const sv_view* view,
+                                     __global const int* table, __global const float* vox,
+                                     const int cs, __global float4* out, __global const int* order,
+                                     const int ordered, __global const uchar* reach, const int nbx,
+                                     const int nby, const int skip) {
+  sv_resample8(segs, nseg, sample_off, view, table, vox, cs, out, order, ordered, reach, nbx, nby,
+               skip, 1);
 }
 
 __kernel void simdvol_zero4(__global float4* p, const int n) {

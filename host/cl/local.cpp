@@ -192,7 +192,9 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
   const bool v8 = variant == LocalKernel::vector8;
   if (skip && !v8) throw ArgumentError("occupancy", "only the vector8 resample kernel skips");
   check_occupancy(skip, voxels, order);
-  const std::string name = v8 ? "simdvol_resample_v8" : "simdvol_resample";
+  const std::string name = !v8                           ? "simdvol_resample"
+                           : voxels.layout().interleaved ? "simdvol_resample_v8_il"
+                                                         : "simdvol_resample_v8";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), sample_off, tables.view,
            tables.table, voxels.buffer(), tables.channel_stride, samples);
