@@ -455,10 +455,24 @@ SV_FN void sv_chunk_rows(__global const int4* origins, int4 cell, int4 block, in
   const int row0 = e0 / SV_RW; /* cell.x == SV_RW */
   const int lx0 = 0;
 #endif
+#ifdef SV_ROW_DIVS
 #pragma unroll
   for (int r = 0; r < SV_NR; ++r) {
     const int row = min(row0 + r, rows - 1);
     const int ly = row % cell.y, lz = row / cell.y;
+#else
+  /* One division for the chunk's first row, then a step per row (rows past
+   * the cell repeat its last): the (ly, lz) of min(row0 + r, rows - 1)
+   * without an integer division per row (SV_ROW_DIVS divides). */
+  const int rr0 = min(row0, rows - 1);
+  int ly = rr0 % cell.y, lz = rr0 / cell.y;
+#pragma unroll
+  for (int r = 0; r < SV_NR; ++r) {
+    if (r > 0 && row0 + r < rows && ++ly == cell.y) {
+      ly = 0;
+      ++lz;
+    }
+#endif
     rb[r] = (int)sv_block_offset(cell, block, lx0, ly, lz);
     fx[r] = (float)(o.x + lx0);
     fy[r] = (float)(o.y + ly);
