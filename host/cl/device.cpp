@@ -404,17 +404,23 @@ std::string Device::build_options(const std::string& options) {
 // ms. With SIMDVOL_CACHE_DIR set, build() keeps each program's binary in a
 // file named by a 64-bit hash of (the device's platform, name, version and
 // driver version, the options, the source), with a second, independent
-// 64-bit hash inside to check; a file that is missing, short, of another
-// hash, or that the device will not build is ignored and written again
-// from a source build. Off by default: asking PoCL for a binary compiles
-// every kernel of the program (not only those launched), about 0.7-4 s
-// per program the first time.
+// 64-bit hash inside to check and a hash of the binary's bytes; a file that
+// is missing, short, of another hash, whose bytes changed, or that the
+// device will not build is ignored and written again from a source build.
+// (The bytes' hash is what keeps a damaged file from the device: PoCL 3.1
+// parses a binary it is given without checking it, and aborted the process
+// on one whose bytes had been changed: pocl_binary.c, `len > 0'.) Off by default: asking PoCL for a
+// binary compiles every kernel of the program (not only those launched), about 0.7-4 s per program
+// the first time.
 
 namespace {
 
 namespace fs = std::filesystem;
 
-constexpr char kBinaryMagic[8] = {'S', 'V', 'C', 'L', 'B', 'I', 'N', '1'};
+// File: magic, check hash, size of the binary, FNV-1a of the binary's bytes,
+// the binary (the first version had no bytes' hash).
+constexpr char kBinaryMagic[8] = {'S', 'V', 'C', 'L', 'B', 'I', 'N', '2'};
+constexpr std::size_t kBinaryHeader = 32;
 
 std::uint64_t fnv1a(std::string_view s, std::uint64_t h) {
   for (unsigned char c : s) {
@@ -439,10 +445,13 @@ std::vector<unsigned char> load_binary(const fs::path& file, std::uint64_t check
   std::ifstream in(file, std::ios::binary);
   if (!in) return {};
   std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (data.size() < 24 || data.compare(0, 8, kBinaryMagic, 8) != 0 ||
-      get_u64(data.data() + 8) != check || get_u64(data.data() + 16) != data.size() - 24)
+  if (data.size() < kBinaryHeader || data.compare(0, 8, kBinaryMagic, 8) != 0 ||
+      get_u64(data.data() + 8) != check ||
+      get_u64(data.data() + 16) != data.size() - kBinaryHeader ||
+      get_u64(data.data() + 24) !=
+          fnv1a(std::string_view(data).substr(kBinaryHeader), 0xcbf29ce484222325ull))
     return {};
-  return std::vector<unsigned char>(data.begin() + 24, data.end());
+  return std::vector<unsigned char>(data.begin() + kBinaryHeader, data.end());
 }
 
 // Writes atomically (a temporary file renamed into place); any failure only
@@ -459,6 +468,8 @@ void store_binary(const fs::path& file, std::uint64_t check,
   std::string data(kBinaryMagic, 8);
   put_u64(data, check);
   put_u64(data, bin.size());
+  put_u64(data, fnv1a(std::string_view(reinterpret_cast<const char*>(bin.data()), bin.size()),
+                      0xcbf29ce484222325ull));
   data.append(bin.begin(), bin.end());
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
