@@ -16,6 +16,9 @@
  *                           = first sample of segment s).
  *   simdvol_resample_local  fused with resample.cl (when it precedes this
  *                           file in the program): samples are never stored.
+ *   simdvol_resample_local_v8, _v8_il  the same in float8 lanes, on planar
+ *                           or interleaved voxel cells (the frame's path).
+ *   simdvol_segment_order   the lanes' order for the float8 kernels.
  */
 #ifndef SIMDVOL_COMMON_CL
 #include "common.cl"

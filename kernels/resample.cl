@@ -25,6 +25,10 @@
  *                      out[sample_off[s] ...] (float4 premultiplied RGBA).
  *   simdvol_resample_v8  the same, 8 segments per work-item in float8 lanes
  *                      (the default; equal bit for bit).
+ *   simdvol_resample_v8_il  the same on interleaved voxel cells (stages.hpp;
+ *                      a corner's RGBA in one load; equal bit for bit).
+ *   simdvol_occupancy, simdvol_occupancy_il, simdvol_occupancy_reach  the
+ *                      brick occupancy and reach of empty-space skipping.
  *   simdvol_zero4      zero-fills n float4 (footprints before the local stage).
  * local.cl adds the local compositing kernels (and, with this file, the fused
  * resample + local kernel).
