@@ -162,24 +162,10 @@ SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
     X[2] += s_2;
   }
   float4 res[8];
-  if (il) {
-    res[0] = acc[0].s0123;
-    res[1] = acc[0].s4567;
-    res[2] = acc[0].s89ab;
-    res[3] = acc[0].scdef;
-    res[4] = acc[1].s0123;
-    res[5] = acc[1].s4567;
-    res[6] = acc[1].s89ab;
-    res[7] = acc[1].scdef;
-  } else {
-    float rr[8], gg[8], bb[8], al[8];
-    vstore8(ar, 0, rr);
-    vstore8(ag, 0, gg);
-    vstore8(ab, 0, bb);
-    vstore8(aa, 0, al);
-#pragma unroll
-    for (int l = 0; l < 8; ++l) res[l] = (float4)(rr[l], gg[l], bb[l], al[l]);
-  }
+  if (il)
+    sv_lanes_of16(acc, res);
+  else
+    sv_lanes_of8(ar, ag, ab, aa, res);
   /* The lanes' PEs: one binary search, then forward (the 8 positions are
    * consecutive, so their PEs ascend; `order` keeps each segment in its
    * PE's range of positions). */

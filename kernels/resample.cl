@@ -367,6 +367,28 @@ SV_FN void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const 
   }
 }
 
+/* The 8 lanes' float4 results: from two float16 of (lane, channel), lanes
+ * 0-3 and 4-7 (interleaved cells), or from the four channels' float8. */
+SV_FN void sv_lanes_of16(const float16* u, float4* res) {
+#pragma unroll
+  for (int h = 0; h < 2; ++h) {
+    res[4 * h] = u[h].s0123;
+    res[4 * h + 1] = u[h].s4567;
+    res[4 * h + 2] = u[h].s89ab;
+    res[4 * h + 3] = u[h].scdef;
+  }
+}
+SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const float8 a,
+                        float4* res) {
+  float rr[8], gg[8], bb[8], aa[8];
+  vstore8(r, 0, rr);
+  vstore8(g, 0, gg);
+  vstore8(b, 0, bb);
+  vstore8(a, 0, aa);
+#pragma unroll
+  for (int l = 0; l < 8; ++l) res[l] = (float4)(rr[l], gg[l], bb[l], aa[l]);
+}
+
 /* Lanes of the segments at positions s0 .. s0 + 7 (those past nseg repeat
  * the last with length 0): segment order[position] if `ordered`, else the
  * position itself. (i, j, k0) and length per lane, and X[a] = the
@@ -572,24 +594,11 @@ SV_FN void sv_resample8(__global const sv_segment* segs, const int nseg,
     if (il) {
       float16 u[2];
       sv_sample8_il(X, nx, ny, nz, table, vox, u);
-      res[0] = u[0].s0123;
-      res[1] = u[0].s4567;
-      res[2] = u[0].s89ab;
-      res[3] = u[0].scdef;
-      res[4] = u[1].s0123;
-      res[5] = u[1].s4567;
-      res[6] = u[1].s89ab;
-      res[7] = u[1].scdef;
+      sv_lanes_of16(u, res);
     } else {
       float8 u[4];
       sv_sample8(X, nx, ny, nz, table, vox, cs, u);
-      float r[8], g[8], b[8], a[8];
-      vstore8(u[0], 0, r);
-      vstore8(u[1], 0, g);
-      vstore8(u[2], 0, b);
-      vstore8(u[3], 0, a);
-#pragma unroll
-      for (int l = 0; l < 8; ++l) res[l] = (float4)(r[l], g[l], b[l], a[l]);
+      sv_lanes_of8(u[0], u[1], u[2], u[3], res);
     }
 #pragma unroll
     for (int l = 0; l < 8; ++l)

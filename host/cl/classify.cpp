@@ -185,8 +185,7 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
     throw ArgumentError("shade_classify output",
                         "only the float16 fused kernel writes interleaved voxel cells");
   const std::string name =
-      vec ? (V.interleaved ? "simdvol_shade_classify16_il" : "simdvol_shade_classify16")
-          : "simdvol_shade_classify";
+      vec ? detail::voxel_kernel("simdvol_shade_classify16", V) : "simdvol_shade_classify";
   Defines defines = classify_defines(classify);
   if (vec) defines.emplace_back("SV_RW", std::to_string(rw));
   if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
@@ -226,7 +225,7 @@ cl::Event enqueue_gather_voxels(Device& device, const VoxelBuffer& voxels, const
   cl::Buffer obuf =
       device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, origins.size() * sizeof(cl_int4),
                     origins.data(), "PE origin table");
-  const std::string name = V.interleaved ? "simdvol_gather_voxels_il" : "simdvol_gather_voxels";
+  const std::string name = detail::voxel_kernel("simdvol_gather_voxels", V);
   cl::Kernel k = device.kernel("classify", name);
   const cl_int4 dims{{static_cast<cl_int>(V.dims()[0]), static_cast<cl_int>(V.dims()[1]),
                       static_cast<cl_int>(V.dims()[2]), 0}};

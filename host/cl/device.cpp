@@ -409,9 +409,9 @@ std::string Device::build_options(const std::string& options) {
 // device will not build is ignored and written again from a source build.
 // (The bytes' hash is what keeps a damaged file from the device: PoCL 3.1
 // parses a binary it is given without checking it, and aborted the process
-// on one whose bytes had been changed: pocl_binary.c, `len > 0'.) Off by default: asking PoCL for a
-// binary compiles every kernel of the program (not only those launched), about 0.7-4 s per program
-// the first time.
+// on one whose bytes had been changed: pocl_binary.c, `len > 0'.) Off by
+// default: asking PoCL for a binary compiles every kernel of the program
+// (not only those launched), about 0.7-4 s per program the first time.
 
 namespace {
 
@@ -421,6 +421,7 @@ namespace fs = std::filesystem;
 // the binary (the first version had no bytes' hash).
 constexpr char kBinaryMagic[8] = {'S', 'V', 'C', 'L', 'B', 'I', 'N', '2'};
 constexpr std::size_t kBinaryHeader = 32;
+constexpr std::uint64_t kFnvOffset = 0xcbf29ce484222325ull;  // FNV-1a's offset basis
 
 std::uint64_t fnv1a(std::string_view s, std::uint64_t h) {
   for (unsigned char c : s) {
@@ -448,8 +449,7 @@ std::vector<unsigned char> load_binary(const fs::path& file, std::uint64_t check
   if (data.size() < kBinaryHeader || data.compare(0, 8, kBinaryMagic, 8) != 0 ||
       get_u64(data.data() + 8) != check ||
       get_u64(data.data() + 16) != data.size() - kBinaryHeader ||
-      get_u64(data.data() + 24) !=
-          fnv1a(std::string_view(data).substr(kBinaryHeader), 0xcbf29ce484222325ull))
+      get_u64(data.data() + 24) != fnv1a(std::string_view(data).substr(kBinaryHeader), kFnvOffset))
     return {};
   return std::vector<unsigned char>(data.begin() + kBinaryHeader, data.end());
 }
@@ -469,7 +469,7 @@ void store_binary(const fs::path& file, std::uint64_t check,
   put_u64(data, check);
   put_u64(data, bin.size());
   put_u64(data, fnv1a(std::string_view(reinterpret_cast<const char*>(bin.data()), bin.size()),
-                      0xcbf29ce484222325ull));
+                      kFnvOffset));
   data.append(bin.begin(), bin.end());
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
@@ -514,7 +514,7 @@ cl::Program Device::build(const std::string& source, const std::string& options)
     check = fnv1a(id, 0x9e3779b97f4a7c15ull);
     char name[32];
     std::snprintf(name, sizeof name, "%016llx.bin",
-                  static_cast<unsigned long long>(fnv1a(id, 0xcbf29ce484222325ull)));
+                  static_cast<unsigned long long>(fnv1a(id, kFnvOffset)));
     file = *dir / name;
     const std::vector<unsigned char> bin = load_binary(file, check);
     if (!bin.empty()) {

@@ -4,6 +4,7 @@
 
 #include "simdvol/local_cl.hpp"
 #include "simdvol/resample.hpp"
+#include "voxel_ranges.hpp"
 
 namespace simdvol {
 
@@ -192,9 +193,8 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
   const bool v8 = variant == LocalKernel::vector8;
   if (skip && !v8) throw ArgumentError("occupancy", "only the vector8 resample kernel skips");
   check_occupancy(skip, voxels, order);
-  const std::string name = !v8                           ? "simdvol_resample"
-                           : voxels.layout().interleaved ? "simdvol_resample_v8_il"
-                                                         : "simdvol_resample_v8";
+  const std::string name =
+      v8 ? detail::voxel_kernel("simdvol_resample_v8", voxels.layout()) : "simdvol_resample";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), sample_off, tables.view,
            tables.table, voxels.buffer(), tables.channel_stride, samples);
@@ -267,7 +267,7 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
                          static_cast<cl_int>(o.dims[2]), 0}};
   const cl_int4 cell = {{static_cast<cl_int>(L.cell()[0]), static_cast<cl_int>(L.cell()[1]),
                          static_cast<cl_int>(L.cell()[2]), 0}};
-  const std::string name = L.interleaved ? "simdvol_occupancy_il" : "simdvol_occupancy";
+  const std::string name = detail::voxel_kernel("simdvol_occupancy", L);
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, voxels.buffer(), static_cast<cl_int>(L.stride), cell, org, dims, o.bricks[0],
            o.bricks[1], o.occupied);
@@ -305,9 +305,8 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   if (lanes && lanes->count != segs.count)
     throw ArgumentError("segment order", "was made for other segments");
   const bool v8 = variant == LocalKernel::vector8;
-  const std::string name = !v8                           ? "simdvol_resample_local"
-                           : voxels.layout().interleaved ? "simdvol_resample_local_v8_il"
-                                                         : "simdvol_resample_local_v8";
+  const std::string name = v8 ? detail::voxel_kernel("simdvol_resample_local_v8", voxels.layout())
+                              : "simdvol_resample_local";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
            static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),

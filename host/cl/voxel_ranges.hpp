@@ -4,10 +4,17 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdlib>
+#include <string>
 
 #include "simdvol/stages.hpp"
 
 namespace simdvol::detail {
+
+/// The kernel `name` for voxel cells of layout `L`: its `_il` twin on
+/// interleaved cells (stages.hpp).
+inline std::string voxel_kernel(const std::string& name, const VoxelLayout& L) {
+  return L.interleaved ? name + "_il" : name;
+}
 
 /// Work-items per work-group of the per-voxel kernels. 64, 256 and 1024
 /// measured within noise of each other (PoCL 3.1, 2 cores, 256^3, 8192 PEs;
