@@ -395,7 +395,7 @@ SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, fl
 #if defined(SV_NT) && defined(__clang__)
 #define SV_VSTORE16(v, p) __builtin_nontemporal_store((v), (__global float16*)(p))
 #else
-#define SV_VSTORE16(v, p) vstore16((v), 0, (p))
+#define SV_VSTORE16(v, p) SV_STORE16((v), (p))
 #endif
 #endif
 
@@ -652,6 +652,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   __global const float* c = cells + sv_block_start(block, p);
   __global float* dst = out + (size_t)p * 4 * (size_t)vstride;
   const int16 in = SV_ROWS16(ok) != 0.0f;
+  sv_prefetch_ahead(c, rb);
   const float16 v = SV_LD16(c, rb, 0);
   const float16 z = 0.0f;
   float16 id, is, mag, r, g, b, a;

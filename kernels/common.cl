@@ -28,14 +28,25 @@
  * alignment, loaded through a pointer cast (one vmovups). PoCL 3.1's
  * vload8 / vload16 on these machines became 8-byte loads combined into
  * 2-lane arithmetic (vmovsd, vmovlhps) in the float16 shade kernels. */
-#ifndef SV_VLOAD_BUILTIN
 typedef float8 sv_float8u __attribute__((aligned(4)));
 typedef float16 sv_float16u __attribute__((aligned(4)));
+#ifndef SV_VLOAD_BUILTIN
 #define SV_VLOAD8(p) (*(__global const sv_float8u*)(p))
 #define SV_VLOAD16(p) (*(__global const sv_float16u*)(p))
 #else
 #define SV_VLOAD8(p) vload8(0, (p))
 #define SV_VLOAD16(p) vload16(0, (p))
+#endif
+
+/* The stores likewise: vstore16 became four 16-byte stores (vmovdqu xmm,
+ * vextractf32x4) in the float16 shade and classify kernels;
+ * SV_VSTORE_BUILTIN keeps vstore16 / vstore8 for comparison. */
+#ifndef SV_VSTORE_BUILTIN
+#define SV_STORE8(v, p) (*(__global sv_float8u*)(p) = (v))
+#define SV_STORE16(v, p) (*(__global sv_float16u*)(p) = (v))
+#else
+#define SV_STORE8(v, p) vstore8((v), 0, (p))
+#define SV_STORE16(v, p) vstore16((v), 0, (p))
 #endif
 
 /* Work-group size of 1-D kernels; the host passes the same value as the
