@@ -204,8 +204,10 @@ TEST(ShadeKernel, DecompositionsAgree) {
 }
 
 // The float16 kernel (the default) for each row width it has: cells whose x
-// extent is a multiple of 16, 8 or 4 (with plane tails for 8 and 4), against
-// the reference and the scalar rows kernel; other cells fall back to rows.
+// extent is a multiple of 16, 8 or 4 (with plane tails for 8 and 4), and any
+// other width (SV_RW 1: lanes from float estimates for cells up to 2^22
+// positions, stepped lane by lane above), against the reference and the
+// scalar rows kernel.
 TEST(ShadeKernel, Float16RowWidths) {
   SIMDVOL_TEST_DEVICE(dev);
   struct Shape {
@@ -227,7 +229,9 @@ TEST(ShadeKernel, Float16RowWidths) {
                           // (cy) = 41, 47, 61: the correction by the remainder
                           {{41, 41, 5}, 1, 41, 8405},
                           {{47, 23, 3}, 1, 47, 3243},
-                          {{61, 5, 41}, 1, 61, 12505}};
+                          {{61, 5, 41}, 1, 61, 12505},
+                          // a cell over 2^22 positions: the lane-by-lane steps
+                          {{131, 127, 253}, 1, 131, 4209161}};
   for (const Shape& sh : shapes) {
     SCOPED_TRACE("dims " + std::to_string(sh.dims[0]) + "x" + std::to_string(sh.dims[1]) + "x" +
                  std::to_string(sh.dims[2]) + " pes " + std::to_string(sh.pes));
