@@ -241,17 +241,18 @@ int main(int argc, char** argv) try {
       static_cast<long long>(L.cell()[1]), static_cast<long long>(L.cell()[2]), order, runs);
   std::printf(
       "%5s %9s %9s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s | %9s %9s %9s %7s | %8s %8s | "
-      "%7s %8s %8s %8s | %8s %8s\n",
+      "%7s %8s %8s %8s %8s | %8s %8s\n",
       "view", "samples", "segments", "util", "match", "balance", "resample", "local", "zero",
       "fused", "fused1", "occ", "skip", "ordered", "ordered4", "ref m+b", "ref r+l", "ref/dev",
-      "Gld/s", "xnet rd", "xnet max", "active", "match'", "balance'", "rsloc'", "sum", "sum'");
+      "Gld/s", "xnet rd", "xnet max", "occ'", "active", "match'", "balance'", "rsloc'", "sum",
+      "sum'");
   for (const double phi : views) {
     const ViewAngles angles{0.0, phi, 0.0};
     const ViewGeometry view = make_view(vol, angles, size, size, Sampling::voxel);
     // Classified voxels for this view (the shading depends on the view).
+    const sv_shade_params sp = shade_params(make_shade_frame(vol, view, shp), shp);
+    const sv_classify_params cp = classify_params(cls, ValueRange{}, view.step);
     {
-      const sv_shade_params sp = shade_params(make_shade_frame(vol, view, shp), shp);
-      const sv_classify_params cp = classify_params(cls, ValueRange{}, view.step);
       enqueue_shade_classify(device, cells, sp, cp, rgba);
       enqueue_shade_classify(device, cells, sp, cp, rgba4);
       flat.resize(vol.voxel_count());
@@ -363,10 +364,19 @@ int main(int argc, char** argv) try {
     // The frame path with EngineOptions::skip_pes: the brick reach before
     // the matching, the PEs with nothing in reach left out (checked against
     // the references with the device's mask, then timed).
-    std::vector<double> t_match2, t_bal2, t_rl2;
+    // The brick occupancy as the frame makes it (engine.cpp): marked by the
+    // fused shade + classify as it writes the interleaved voxels, then the
+    // reach kernel. occ' = what the marking adds to that kernel (the same
+    // kernel without marking runs just before it, each run) + the zero fill
+    // and the reach.
+    std::vector<double> t_match2, t_bal2, t_rl2, t_occ2;
     double active = 0;
     for (int r = 0; r <= runs; ++r) {
-      const DeviceOccupancy occ = enqueue_occupancy(device, rgba, order);
+      const cl::Event e_plain = enqueue_shade_classify(device, cells, sp, cp, rgba4);
+      DeviceOccupancy occ = make_occupancy(device, L4, order);
+      const cl::Event e_mark =
+          enqueue_shade_classify(device, cells, sp, cp, rgba4, ShadeKernel::vec16, &occ);
+      enqueue_occupancy_reach(device, occ);
       DeviceMatching dm = enqueue_match(device, view, split, BrickReach{&occ.reach, occ.bricks});
       enqueue_balance(device, dm, view, split);
       const LocalSegments ls = device_segments(device, dm);
@@ -390,7 +400,9 @@ int main(int argc, char** argv) try {
       for (const cl::Event& e : occ.events) occ_ms += ev_ms(e);
       t_match2.push_back(static_cast<double>(events_ns(dm.match_events)) * 1e-6);
       t_bal2.push_back(static_cast<double>(events_ns(dm.balance_events)) * 1e-6);
-      t_rl2.push_back(occ_ms + ev_ms(lanes.event) + ev_ms(ez) + ev_ms(eo));
+      const double occ2 = std::max(0.0, ev_ms(e_mark) - ev_ms(e_plain)) + occ_ms;
+      t_occ2.push_back(occ2);
+      t_rl2.push_back(occ2 + ev_ms(lanes.event) + ev_ms(ez) + ev_ms(eo));
     }
     double ref_rl = 0;
     if (reference) {
@@ -409,15 +421,15 @@ int main(int argc, char** argv) try {
         "%9.1f %9.1f "
         "%7.2f "
         "| "
-        "%8.3g %8lld | %7.3f %8.2f %8.2f %8.2f | %8.1f %8.1f\n",
+        "%8.3g %8lld | %7.2f %7.3f %8.2f %8.2f %8.2f | %8.1f %8.1f\n",
         phi, static_cast<long long>(nsamples), static_cast<long long>(m.segments.size()),
         m.utilisation(), median(t_match), median(t_bal), median(t_res), median(t_loc),
         median(t_zero), median(t_fused), median(t_fused1), median(t_occ), median(t_skip),
         median(t_ord), median(t_ord4), ref_match + ref_balance, ref_rl,
         reference ? ref_rl / fused : 0.0, loads / (median(t_fused) * 1e6),
-        static_cast<double>(x.total_reads()), static_cast<long long>(x.max_voxels()), active,
-        median(t_match2), median(t_bal2), median(t_rl2),
-        median(t_match) + median(t_bal) + median(t_occ) + median(t_ord4) + median(t_zero),
+        static_cast<double>(x.total_reads()), static_cast<long long>(x.max_voxels()),
+        median(t_occ2), active, median(t_match2), median(t_bal2), median(t_rl2),
+        median(t_match) + median(t_bal) + median(t_occ2) + median(t_ord4) + median(t_zero),
         median(t_match2) + median(t_bal2) + median(t_rl2));
   }
   std::printf(
@@ -425,7 +437,8 @@ int main(int argc, char** argv) try {
       "all their kernels); ref m+b: "
       "match_reference + balance_reference. ref r+l: serial local_reference (resample + sub-ray "
       "composite); ref/dev: against fused + zero. fused: 8 segments per work-item in float8 lanes "
-      "without skipping; fused1: one segment per work-item; occ: the brick occupancy; skip: fused "
+      "without skipping; fused1: one segment per work-item; occ: the brick occupancy by a scan "
+      "of the voxels (simdvol_occupancy); skip: fused "
       "skipping samples of empty bricks; ordered: skip with the lanes' segment order (the frame "
       "path until the cells were interleaved: simdvol_segment_order + the fused kernel; the same "
       "footprints, checked); ordered4: the same on interleaved cells, the frame's path now "
@@ -433,10 +446,13 @@ int main(int argc, char** argv) try {
       "gather loads of the fused "
       "kernel per "
       "second. xnet rd: remote stencil reads in all; xnet max: distinct remote voxels of the "
-      "busiest PE. The frame path, every PE matched: sum = match + balance + occ + ordered4 + "
-      "zero. With EngineOptions::skip_pes (the frame's default): active = the fraction of PEs "
-      "whose cell has something in reach; match', balance' = their matching and balancing; "
-      "rsloc' = occ + order + zero + the fused kernel on their segments; sum' = the three.\n");
+      "busiest PE. occ': the brick occupancy as the frame makes it: what marking adds to the "
+      "fused shade + classify (the kernel with marking minus the kernel without, run in turn), "
+      "the zero fill and simdvol_occupancy_reach. The frame path, every PE matched: sum = match + "
+      "balance + occ' + ordered4 + zero. With EngineOptions::skip_pes (the frame's default): "
+      "active = the fraction of PEs whose cell has something in reach; match', balance' = their "
+      "matching and balancing; rsloc' = occ' + order + zero + the fused kernel on their "
+      "segments; sum' = the three.\n");
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "%s: %s\n", kProgram, e.what());
