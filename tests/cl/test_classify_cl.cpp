@@ -29,6 +29,7 @@
 #include "simdvol/engine.hpp"
 #include "simdvol/io.hpp"
 #include "simdvol/local_cl.hpp"
+#include "simdvol/pe_array.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 #include "simdvol/stages.hpp"
@@ -295,10 +296,22 @@ TEST(ClassifyKernel, Float16CellShapes) {
   const Volume a = testing::random_volume({48, 7, 5}, -1100.0f, 1500.0f, {1, 1, 1}, 21);
   const Volume b = testing::random_volume({16, 3, 5}, -1100.0f, 1500.0f, {1, 1.5, 1}, 22);
   const Volume c = testing::random_volume({8, 3, 3}, -1100.0f, 1500.0f, {1, 1, 2}, 23);
+  // The volume's far x edge inside a quad of lanes (the brick marking takes
+  // 4 lanes at a time): cells 16, 8 and 4 wide whose last one sticks out by
+  // 1, 3 and 1 voxels.
+  const Volume d = testing::random_volume({31, 5, 6}, -1100.0f, 1500.0f, {1, 1, 1}, 24);
+  const Volume e = testing::random_volume({61, 9, 7}, -1100.0f, 1500.0f, {1, 1, 1}, 25);
+  const Volume f = testing::random_volume({15, 3, 3}, -1100.0f, 1500.0f, {1, 1, 1}, 26);
+  EXPECT_EQ(make_cell_layout(d.dims(), 2, 1).cell()[0], 16);
+  EXPECT_EQ(make_cell_layout(e.dims(), 8, 1).cell()[0], 8);
+  EXPECT_EQ(make_cell_layout(f.dims(), 4, 1).cell()[0], 4);
   for (const char* name : {"ct", "knots"}) {
     check_case({&a, name, kViews[1], 1});       // 48 x 7 x 5: row width 16
     check_case({&b, name, kViews[1], 2});       // 8 x 3 x 5, tail 8
     check_case({&c, name, kViews[2], 2, 0.5});  // 4 x 3 x 3, tail 12
+    check_case({&d, name, kViews[1], 2});       // 16 x 5 x 6
+    check_case({&e, name, kViews[1], 8});       // 8 x 9 x 7
+    check_case({&f, name, kViews[2], 4});       // 4 x 3 x 3
   }
 }
 
