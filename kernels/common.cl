@@ -49,6 +49,16 @@ typedef float16 sv_float16u __attribute__((aligned(4)));
 #define SV_STORE16(v, p) vstore16((v), 0, (p))
 #endif
 
+/* A software prefetch of the line at p, only on CPU targets (x86-64,
+ * AArch64), where it is a hint that never faults, so it may point past a
+ * buffer's end; elsewhere nothing (a GPU's prefetch may fault out of
+ * bounds). */
+#if defined(__clang__) && (defined(__x86_64__) || defined(__aarch64__))
+#define SV_PREFETCH(p) __builtin_prefetch(p)
+#else
+#define SV_PREFETCH(p) ((void)0)
+#endif
+
 /* Work-group size of 1-D kernels; the host passes the same value as the
  * local size. */
 #ifndef WGS

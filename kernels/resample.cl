@@ -406,9 +406,9 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
 SV_FN int sv_lanes8(__global const sv_segment* segs, __global const int* order, const int ordered,
                     const int nseg, const int s0, __global const sv_view* view, int* li, int* lj,
                     int* lk, int* ln, long8* X) {
-#if SV_SEG_PF > 0 && defined(__clang__)
-  __builtin_prefetch(segs + min(s0 + SV_SEG_PF, nseg - 1));
-  __builtin_prefetch(segs + min(s0 + SV_SEG_PF + 4, nseg - 1));
+#if SV_SEG_PF > 0
+  SV_PREFETCH(segs + min(s0 + SV_SEG_PF, nseg - 1));
+  SV_PREFETCH(segs + min(s0 + SV_SEG_PF + 4, nseg - 1));
 #endif
   int T = 0;
 #pragma unroll

@@ -518,8 +518,8 @@ SV_FN void sv_shade_rows(__constant const sv_shade_params* sp, __global const fl
  * PE's block (a few KiB of rows with their halo) and PoCL deals the
  * work-groups out to its threads, so the hardware's stream prefetch sees
  * short runs; the fused shade + classify kernel waited on its first loads
- * (perf annotate: a quarter of its samples behind them). x86's prefetch
- * does not fault, so past the buffer's end it does nothing.
+ * (perf annotate: a quarter of its samples behind them). SV_PREFETCH
+ * (common.cl): past the buffer's end it does nothing.
  * simdvol-bench-shade, 256^3 phantom, alternated three times: fused
  * 17.4 / 15.4 / 15.9 -> 13.9 / 14.1 / 15.7 ms, PE-major / flat 1.27-1.40
  * -> 1.07-1.23; the same in the flat kernel gained nothing. */
@@ -527,9 +527,9 @@ SV_FN void sv_shade_rows(__constant const sv_shade_params* sp, __global const fl
 #define SV_PF 1024
 #endif
 SV_FN void sv_prefetch_ahead(__global const float* c, const int* rb) {
-#if SV_PF > 0 && defined(__clang__)
-  __builtin_prefetch(c + rb[0] + SV_PF);
-  __builtin_prefetch(c + rb[0] + SV_PF + 16);
+#if SV_PF > 0
+  SV_PREFETCH(c + rb[0] + SV_PF);
+  SV_PREFETCH(c + rb[0] + SV_PF + 16);
 #endif
 }
 
