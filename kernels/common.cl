@@ -38,14 +38,12 @@ typedef float16 sv_float16u __attribute__((aligned(4)));
 #define SV_VLOAD16(p) vload16(0, (p))
 #endif
 
-/* The stores likewise: vstore16 became four 16-byte stores (vmovdqu xmm,
- * vextractf32x4) in the float16 shade and classify kernels;
- * SV_VSTORE_BUILTIN keeps vstore16 / vstore8 for comparison. */
+/* The 16-float store likewise: vstore16 became four 16-byte stores
+ * (vmovdqu xmm, vextractf32x4) in the float16 shade and classify kernels;
+ * SV_VSTORE_BUILTIN keeps vstore16 for comparison. */
 #ifndef SV_VSTORE_BUILTIN
-#define SV_STORE8(v, p) (*(__global sv_float8u*)(p) = (v))
 #define SV_STORE16(v, p) (*(__global sv_float16u*)(p) = (v))
 #else
-#define SV_STORE8(v, p) vstore8((v), 0, (p))
 #define SV_STORE16(v, p) vstore16((v), 0, (p))
 #endif
 

@@ -513,12 +513,12 @@ SV_FN void sv_shade_rows(__constant const sv_shade_params* sp, __global const fl
   sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, *mag, id, is);
 }
 
-/* A prefetch of the cell 128 bytes from SV_PF floats past the chunk's first
- * row (4 KiB by default; SV_PF 0: none). A work-group covers part of one
- * PE's block (a few KiB of rows with their halo) and PoCL deals the
- * work-groups out to its threads, so the hardware's stream prefetch sees
- * short runs; the fused shade + classify kernel waited on its first loads
- * (perf annotate: a quarter of its samples behind them). SV_PREFETCH
+/* Prefetches the two lines (128 bytes) SV_PF floats past the chunk's first
+ * row in the cells (4 KiB by default; SV_PF 0: none). A work-group covers
+ * part of one PE's block (a few KiB of rows with their halo) and PoCL deals
+ * the work-groups out to its threads, so the hardware's stream prefetch
+ * sees short runs; the fused shade + classify kernel waited on its first
+ * loads (perf annotate: a quarter of its samples behind them). SV_PREFETCH
  * (common.cl): past the buffer's end it does nothing.
  * simdvol-bench-shade, 256^3 phantom, alternated three times: fused
  * 17.4 / 15.4 / 15.9 -> 13.9 / 14.1 / 15.7 ms, PE-major / flat 1.27-1.40
