@@ -47,6 +47,15 @@ typedef float16 sv_float16u __attribute__((aligned(4)));
 #define SV_STORE16(v, p) vstore16((v), 0, (p))
 #endif
 
+/* A helper LLVM must inline: it kept some of the larger SV_FN helpers as
+ * calls, with their array arguments passed through memory (perf: the call
+ * to sv_ld16_rows took 8 % of ch2's shade + classify samples). */
+#ifndef SV_NO_FORCE_INLINE
+#define SV_FN_INLINE static inline __attribute__((always_inline))
+#else
+#define SV_FN_INLINE SV_FN
+#endif
+
 /* A software prefetch of the line at p, only on CPU targets (x86-64,
  * AArch64), where it is a hint that never faults, so it may point past a
  * buffer's end; elsewhere nothing (a GPU's prefetch may fault out of

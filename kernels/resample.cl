@@ -66,7 +66,7 @@ SV_FN void sv_axis(long X, int n, __global const int* table, int* addr, float* d
 
 /* Neville in insertion order on R rows at once (resample.cpp:
  * neville_rows): q[i * R + r] holds f_i of row r; on exit q[r] = P_{0..ORDER}. */
-SV_FN void sv_neville(float* q, const int R, const float* d, const int low) {
+SV_FN_INLINE void sv_neville(float* q, const int R, const float* d, const int low) {
 #pragma unroll
   for (int k = 1; k <= ORDER; ++k) {
 #pragma unroll
@@ -184,7 +184,8 @@ __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
  * same times on the 2-core EPYC (simdvol-bench-frame), so the portable form
  * stays.) */
 
-SV_FN void sv_axis8(long8 X, int n, __global const int* table, int8* addr, float8* d, int8* low) {
+SV_FN_INLINE void sv_axis8(long8 X, int n, __global const int* table, int8* addr, float8* d,
+                           int8* low) {
   const int8 f = convert_int8(X >> SV_FRAC_BITS);
   const float8 t = convert_float8(convert_uint8(X & 0xFFFFFFFFL)) * (1.0f / 4294967296.0f);
   const int8 lo = t <= 0.5f; /* -1 where low */
@@ -231,8 +232,8 @@ SV_FN void sv_neville8(float8* q, const int R, const float8* d, const int8 low) 
 
 /* The samples at the fixed-point positions X[0..2] of 8 lanes: u[ch] =
  * channel ch of each lane's sample (sv_sample per lane). */
-SV_FN void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int* table,
-                      __global const float* vox, int cs, float8* u) {
+SV_FN_INLINE void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int* table,
+                             __global const float* vox, int cs, float8* u) {
   SV_AXES8(X, nx, ny, nz, table);
   /* z outermost: the x pass of a row (b, c) runs as soon as its SV_M
    * corners are loaded, the y pass of a plane c as soon as its rows are
@@ -319,8 +320,8 @@ SV_FN void sv_neville16(float16* q, const float16* d, const int16 low) {
 
 /* The samples of 8 lanes at X[0..2]: u[h] = lanes 4h .. 4h + 3, each its
  * premultiplied RGBA (sv_sample8's values, as (lane, channel)). */
-SV_FN void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const int* table,
-                         __global const float* vox, float16* u) {
+SV_FN_INLINE void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const int* table,
+                                __global const float* vox, float16* u) {
   SV_AXES8(X, nx, ny, nz, table);
 #pragma unroll
   for (int h = 0; h < 2; ++h) {

@@ -332,7 +332,7 @@ SV_FN void sv_shade16(__constant const sv_shade_params* sp, float16 xm, float16 
  * more than half of the float16 shade kernel's time on ch2's 6-wide cells
  * (perf annotate). Where a load could leave the PE's block (chunks at its
  * first and last rows), and with SV_RW1_GATHER, the gather. */
-SV_FN float16 sv_ld16_rows(__global const float* c, const int* rb, const int off) {
+SV_FN_INLINE float16 sv_ld16_rows(__global const float* c, const int* rb, const int off) {
 #ifndef SV_RW1_GATHER
   if (rb[17]) {
     const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
