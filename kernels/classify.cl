@@ -391,14 +391,6 @@ SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, fl
   sv_classify16_lit(cp, a, cr, cg, cb, id, is, v, r, g, b, alpha);
 }
 
-#ifndef SV_VSTORE16 /* as in shade.cl */
-#if defined(SV_NT) && defined(__clang__)
-#define SV_VSTORE16(v, p) __builtin_nontemporal_store((v), (__global float16*)(p))
-#else
-#define SV_VSTORE16(v, p) SV_STORE16((v), (p))
-#endif
-#endif
-
 /* One chunk of 16 positions of PE p's planes from `shading` to `out`. The
  * pointers may be equal (simdvol_classify16_in_place): every plane a store
  * touches was loaded before it. */
@@ -622,10 +614,8 @@ SV_FN void sv_store16_il(__global float* blk, int e0, float16 r, float16 g, floa
 
 /* The classified chunk into planar (il = 0) or interleaved (il = 1) cells
  * (always inlined: LLVM kept it a call, its four float16 through memory). */
-static inline __attribute__((always_inline)) void sv_store16_rgba(__global float* blk, int vstride,
-                                                                  int e0, float16 r, float16 g,
-                                                                  float16 b, float16 a,
-                                                                  const int il) {
+SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, float16 r, float16 g,
+                                  float16 b, float16 a, const int il) {
   if (il)
     sv_store16_il(blk, e0, r, g, b, a);
   else
@@ -718,18 +708,13 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
     const int16 Z = convert_int16(SV_ROWS16(fz));
     const int16 nz = ((as_int16(r) | as_int16(g) | as_int16(b) | as_int16(a)) & 0x7fffffff) != 0;
     const int16 set = nz & in & (X < dims.x) & (Y < dims.y) & (Z < dims.z);
-    /* The distinct bricks of the set lanes, smallest first (usually one to
-     * four per chunk): one atomic each, no per-lane loop. Against a loop
-     * over the 16 lanes (an atomic where the brick changed), within each
-     * run of simdvol-bench-shade (fused with and without marking, three
-     * runs) the marking cost 7.5-7.9 ms that way and 4.2-5.8 ms this way. */
     const int16 bi =
         (X >> SV_BRICK_LOG2) + nbx * ((Y >> SV_BRICK_LOG2) + nby * (Z >> SV_BRICK_LOG2));
 #if SV_RW != 1 && SV_BRICK_LOG2 >= 2 && !defined(SV_MARK_LANES)
     /* Rows of 16, 8 or 4 start at x multiples of 4 (uniform cells of those
      * widths), so each quad of lanes 4k .. 4k + 3 lies in one row and one
      * brick: the quads' bricks, marked where a lane of the quad is set,
-     * each distinct one once (SV_MARK_LANES: the lanes' loop below).
+     * each distinct one once (SV_MARK_LANES, and other widths: the lanes' loop below).
      * simdvol-bench-shade on the 256^3 phantom, alternated three times:
      * marking cost the fused kernel 2.2-2.4 ms by the lanes' loop and
      * 1.4-1.9 ms by quads (17.9 / 18.5 / 16.6 -> 15.8 / 16.3 / 15.9 ms);
@@ -742,6 +727,11 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
     if (sq.w && !(sq.x && bq.w == bq.x) && !(sq.y && bq.w == bq.y) && !(sq.z && bq.w == bq.z))
       atomic_or(&occ[bq.w], 1u);
 #else
+    /* The distinct bricks of the set lanes, smallest first (usually one to
+     * four per chunk): one atomic each, no per-lane loop. Against a loop
+     * over the 16 lanes (an atomic where the brick changed), within each
+     * run of simdvol-bench-shade (fused with and without marking, three
+     * runs) the marking cost 7.5-7.9 ms that way and 4.2-5.8 ms this way. */
     int16 left = select((int16)(INT_MAX), bi, set);
     while (any(left != INT_MAX)) {
       const int8 m8 = min(left.lo, left.hi);

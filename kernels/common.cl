@@ -38,13 +38,17 @@ typedef float16 sv_float16u __attribute__((aligned(4)));
 #define SV_VLOAD16(p) vload16(0, (p))
 #endif
 
-/* The 16-float store likewise: vstore16 became four 16-byte stores
+/* Store of 16 floats at p, likewise: vstore16 became four 16-byte stores
  * (vmovdqu xmm, vextractf32x4) in the float16 shade and classify kernels;
- * SV_VSTORE_BUILTIN keeps vstore16 for comparison. */
-#ifndef SV_VSTORE_BUILTIN
-#define SV_STORE16(v, p) (*(__global sv_float16u*)(p) = (v))
+ * SV_VSTORE_BUILTIN keeps vstore16 for comparison. With SV_NT, a
+ * non-temporal store (no read-for-ownership of the line; p 64-byte
+ * aligned: planes and chunks start on multiples of 16 floats). */
+#if defined(SV_NT) && defined(__clang__)
+#define SV_VSTORE16(v, p) __builtin_nontemporal_store((v), (__global float16*)(p))
+#elif defined(SV_VSTORE_BUILTIN)
+#define SV_VSTORE16(v, p) vstore16((v), 0, (p))
 #else
-#define SV_STORE16(v, p) vstore16((v), 0, (p))
+#define SV_VSTORE16(v, p) (*(__global sv_float16u*)(p) = (v))
 #endif
 
 /* A helper LLVM must inline: it kept some of the larger SV_FN helpers as

@@ -229,17 +229,6 @@ __kernel void simdvol_shade_rows(__global const float* restrict cells, __global 
  * per cell row the lanes lie in, merged by selects (sv_ld16_rows); the
  * arithmetic stays float16 (the scalar kernels, which PoCL leaves
  * unvectorised, ran 3-5 times slower per voxel). */
-#ifndef SV_VSTORE16
-/* Store of 16 floats at p (64-byte aligned: planes and chunks start on
- * multiples of 16 floats). With SV_NT, a non-temporal store (no
- * read-for-ownership of the line: the output buffers are far larger than
- * the caches). */
-#if defined(SV_NT) && defined(__clang__)
-#define SV_VSTORE16(v, p) __builtin_nontemporal_store((v), (__global float16*)(p))
-#else
-#define SV_VSTORE16(v, p) SV_STORE16((v), (p))
-#endif
-#endif
 
 /* sv_pow on 16 lanes. SV_POWN against exp(y log x) (~50 operations and a
  * division): simdvol-bench-shade, alternated 3 times, shade 42-45 -> 31-33
