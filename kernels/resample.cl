@@ -318,10 +318,83 @@ SV_FN void sv_neville16(float16* q, const float16* d, const int16 low) {
   }
 }
 
+/* Order 1 on interleaved cells, the stencil in its natural order: corner
+ * (a, b, c) of a lane is table_x[f + a] + table_y[f + b] + table_z[f + c]
+ * (f clamped per axis), and the table is separable, so it is the lane's
+ * base (a = b = c = 0) plus a * dX + b * dY + c * dZ, each the table's step
+ * from f to f + 1 on that axis (4 floats, a row or a plane inside the cell;
+ * a jump into the neighbour PE's block at its edge; 0 where the volume's edge
+ * clamps). So a lane's 8 corner addresses come from 4 integers instead of 8
+ * extracted sums (vpextrq and its kin had about a quarter of the fused
+ * kernel's samples). Each axis is then t * v(f + 1) - (t - 1) * v(f): the
+ * products and the difference of sv_neville16's low-side lane (whose
+ * factor is 1); its high-side lanes compute -((t - 1) * v(f) - t * v(f +
+ * 1)), the same rounding of the negated difference, so the samples are
+ * sv_sample8_il's bit for bit but for the sign of a zero, which over cannot
+ * tell (resample.cl, empty-space skipping). */
+#if ORDER == 1 && !defined(SV_IL1_GENERIC)
+#define SV_IL1_ROWS 1
+#define SV_LD4(l) vload4(0, vox + o.s##l), vload4(0, vox + o.s##l + dx.s##l)
+SV_FN_INLINE void sv_sample8_il1(const long8* X, int nx, int ny, int nz, __global const int* table,
+                                 __global const float* vox, float16* u) {
+  const int n[3] = {nx, ny, nz};
+  int8 base = (int8)(0), dd[3];
+  float8 tt[3];
+  __global const int* tab = table;
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    const int8 f = convert_int8(X[a] >> SV_FRAC_BITS);
+    tt[a] = convert_float8(convert_uint8(X[a] & 0xFFFFFFFFL)) * (1.0f / 4294967296.0f);
+    const int8 t0 = SV_GI8(tab, clamp(f, (int8)(0), (int8)(n[a] - 1)));
+    const int8 t1 = SV_GI8(tab, clamp(f + 1, (int8)(0), (int8)(n[a] - 1)));
+    base += t0;
+    dd[a] = t1 - t0;
+    tab += n[a];
+  }
+  const int8 dx = dd[0];
+  const int8 rows[4] = {base, base + dd[1], base + dd[2], base + dd[1] + dd[2]}; /* (b, c) */
+#pragma unroll
+  for (int h = 0; h < 2; ++h) {
+    const uint hb = 4 * h;
+    const float16 w1x = sv_spread4(tt[0], hb), w0x = sv_spread4(tt[0] - 1.0f, hb);
+    const float16 w1y = sv_spread4(tt[1], hb), w0y = sv_spread4(tt[1] - 1.0f, hb);
+    const float16 w1z = sv_spread4(tt[2], hb), w0z = sv_spread4(tt[2] - 1.0f, hb);
+    float16 q[4];
+#pragma unroll
+    for (int r = 0; r < 4; ++r) {
+      const int8 o = rows[r];
+      /* lanes 4h .. 4h + 3: v(f) and v(f + 1) of each, as sv_sample8_il
+       * assembles a float16 from two float8 halves */
+      float8 l0, l1, l2, l3;
+      if (h == 0) {
+        l0 = (float8)(SV_LD4(0));
+        l1 = (float8)(SV_LD4(1));
+        l2 = (float8)(SV_LD4(2));
+        l3 = (float8)(SV_LD4(3));
+      } else {
+        l0 = (float8)(SV_LD4(4));
+        l1 = (float8)(SV_LD4(5));
+        l2 = (float8)(SV_LD4(6));
+        l3 = (float8)(SV_LD4(7));
+      }
+      const float16 v0 = (float16)((float8)(l0.lo, l1.lo), (float8)(l2.lo, l3.lo));
+      const float16 v1 = (float16)((float8)(l0.hi, l1.hi), (float8)(l2.hi, l3.hi));
+      q[r] = w1x * v1 - w0x * v0;
+    }
+    const float16 y0 = w1y * q[1] - w0y * q[0], y1 = w1y * q[3] - w0y * q[2];
+    u[h] = w1z * y1 - w0z * y0;
+  }
+}
+#undef SV_LD4
+#endif
+
 /* The samples of 8 lanes at X[0..2]: u[h] = lanes 4h .. 4h + 3, each its
  * premultiplied RGBA (sv_sample8's values, as (lane, channel)). */
 SV_FN_INLINE void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const int* table,
                                 __global const float* vox, float16* u) {
+#ifdef SV_IL1_ROWS
+  sv_sample8_il1(X, nx, ny, nz, table, vox, u);
+#else
   SV_AXES8(X, nx, ny, nz, table);
 #pragma unroll
   for (int h = 0; h < 2; ++h) {
@@ -366,6 +439,7 @@ SV_FN_INLINE void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global
     sv_neville16(qz, wz, mz);
     u[h] = qz[0];
   }
+#endif
 }
 
 /* The 8 lanes' float4 results: from two float16 of (lane, channel), lanes

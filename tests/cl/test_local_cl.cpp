@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 #include <numeric>
@@ -301,6 +303,20 @@ bool same_bits(const Footprints& a, const Footprints& b) {
          std::memcmp(a.pixels.data(), b.pixels.data(), a.pixels.size() * sizeof(Rgba)) == 0;
 }
 
+// The index of the first float of a and b (n RGBA each) that differs other
+// than in the sign of a zero or of a NaN, or -1 (no consumer of stored
+// samples can tell those apart: over adds them as zeros, a Monte Carlo walk
+// compares them with draws in [0, 1)).
+std::ptrdiff_t first_difference_but_signs(const Rgba* a, const Rgba* b, std::size_t n) {
+  for (std::size_t i = 0; i < 4 * n; ++i) {
+    const float x = (&a[0].r)[i], y = (&b[0].r)[i];
+    if (std::memcmp(&x, &y, sizeof x) == 0) continue;
+    if ((x == 0.0f && y == 0.0f) || (std::isnan(x) && std::isnan(y))) continue;
+    return static_cast<std::ptrdiff_t>(i);
+  }
+  return -1;
+}
+
 // Axis-aligned, 30 deg, (45, 45, 0) and two random views (seed).
 std::vector<ViewAngles> skip_test_views(unsigned seed) {
   std::mt19937 rng(seed);
@@ -532,8 +548,15 @@ TEST(LocalCl, InterleavedCellsGiveTheSameBits) {
           if (ns > 0) {
             const std::vector<Rgba> a0 = read_all<Rgba>(dev, s0, ns);
             const std::vector<Rgba> a4 = read_all<Rgba>(dev, s4, ns);
-            EXPECT_EQ(std::memcmp(a0.data(), a4.data(), ns * sizeof(Rgba)), 0)
-                << "stored samples, skip " << skip;
+            // Order 1 on interleaved cells takes each axis's stencil in its
+            // natural order (resample.cl, sv_sample8_il1): the same
+            // samples but for the sign of a zero or a NaN.
+            if (order == 1)
+              EXPECT_EQ(first_difference_but_signs(a0.data(), a4.data(), ns), -1)
+                  << "stored samples, skip " << skip;
+            else
+              EXPECT_EQ(std::memcmp(a0.data(), a4.data(), ns * sizeof(Rgba)), 0)
+                  << "stored samples, skip " << skip;
           }
         }
         EXPECT_THROW(enqueue_resample_local(dev, segs, t, vb4, order, fp), ArgumentError);
