@@ -92,6 +92,34 @@ __kernel void simdvol_resample_local(__global const sv_segment* segs, const int 
 /* ---- simdvol_resample_local_v8: the fused kernel with explicit vectors ----
  * (resample.cl's simdvol_resample_v8 with over instead of stores; the lanes
  * and sv_sample8 are described there). */
+/* The voxels of the PE whose segments come SV_VOX_PF positions after the
+ * work-item's (512: one work-group ahead at 8 segments per work-item; 0:
+ * none), prefetched, each work-item its share of the PE's block (pe_floats
+ * = floats per PE block, 4 x stride; 0: none) in proportion to where those
+ * positions lie in the PE's range. The blocks come from memory, written
+ * by the shade + classify before (the 256^3 phantom's are 268 MB): with
+ * every voxel load folded into 2 MiB (scratch build, wrong images) the
+ * kernel took 24 against 52 ms at view (20, 35, 10), so it waited on
+ * memory more than it computed; the stencils' walks through a 32 KiB
+ * block give the hardware's stream prefetch little to follow. A prefetch
+ * is a hint: it changes no result. */
+#ifndef SV_VOX_PF
+#define SV_VOX_PF 512
+#endif
+SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, const int nseg,
+                                const int s0, __global const float* vox, const int pe_floats) {
+#if SV_VOX_PF > 0
+  const int sa = s0 + SV_VOX_PF;
+  if (sa >= nseg || pe_floats <= 0) return;
+  const int q = sv_pe_of_segment(seg_off, log2p, sa);
+  const long a = seg_off[q], n = seg_off[q + 1] - a; /* n >= 1: sa is in q's range */
+  const long lines = pe_floats / 16;                 /* 64-byte lines */
+  const long l0 = (sa - a) * lines / n, l1 = min((sa - a + 8) * lines / n, lines);
+  __global const float* blk = vox + (size_t)q * (size_t)pe_floats;
+  for (long l = l0; l < l1; ++l) SV_PREFETCH(blk + 16 * l);
+#endif
+}
+
 /* simdvol_resample_local_v8 (planar cells, il = 0) and _v8_il (interleaved
  * cells, il = 1; cs is 1 there): one body, the layout a constant. */
 SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
@@ -101,12 +129,13 @@ SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
                               __global const sv_rect* rects, __global const int* rect_off,
                               __global float4* foot, __global const uchar* reach, const int nbx,
                               const int nby, const int skip, __global const int* order,
-                              const int ordered, const int il) {
+                              const int ordered, const int pe_floats, const int il) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8];
   long8 X[3];
   int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X);
+  sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, vox, pe_floats);
   int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
   const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
@@ -180,16 +209,14 @@ SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
   }
 }
 
-__kernel void simdvol_resample_local_v8(__global const sv_segment* segs, const int nseg,
-                                        __global const int* seg_off, const int log2p,
-                                        __global const sv_view* view, __global const int* table,
-                                        __global const float* vox, const int cs,
-                                        __global const sv_rect* rects, __global const int* rect_off,
-                                        __global float4* foot, __global const uchar* reach,
-                                        const int nbx, const int nby, const int skip,
-                                        __global const int* order, const int ordered) {
+__kernel void simdvol_resample_local_v8(
+    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
+    __global const sv_view* view, __global const int* table, __global const float* vox,
+    const int cs, __global const sv_rect* rects, __global const int* rect_off,
+    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
+    const int skip, __global const int* order, const int ordered, const int pe_floats) {
   sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, 0);
+                     nbx, nby, skip, order, ordered, pe_floats, 0);
 }
 
 __kernel void simdvol_resample_local_v8_il(
@@ -197,9 +224,9 @@ __kernel void simdvol_resample_local_v8_il(
     __global const sv_view* view, __global const int* table, __global const float* vox,
     const int cs, __global const sv_rect* rects, __global const int* rect_off,
     __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
-    const int skip, __global const int* order, const int ordered) {
+    const int skip, __global const int* order, const int ordered, const int pe_floats) {
   sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, 1);
+                     nbx, nby, skip, order, ordered, pe_floats, 1);
 }
 #endif
 
