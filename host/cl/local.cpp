@@ -317,9 +317,13 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
                   cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
-                  // floats per PE block, for the prefetch ahead (local.cl);
-                  // it fits: the table checked pes * 4 * stride <= 2^31 - 1
-                  static_cast<cl_int>(4 * voxels.layout().stride));
+                  // the cell and the floats per PE block, for the prefetch
+                  // ahead (local.cl); they fit: the table checked pes * 4 *
+                  // stride <= 2^31 - 1
+                  cl_int4{{static_cast<cl_int>(voxels.layout().cell()[0]),
+                           static_cast<cl_int>(voxels.layout().cell()[1]),
+                           static_cast<cl_int>(voxels.layout().cell()[2]),
+                           static_cast<cl_int>(4 * voxels.layout().stride)}});
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }
