@@ -70,6 +70,16 @@ typedef float16 sv_float16u __attribute__((aligned(4)));
 #define SV_PREFETCH(p) ((void)0)
 #endif
 
+/* Largest p with seg_off[p] <= s: the PE of segment s (P = 2^log2p). */
+SV_FN int sv_pe_of_segment(__global const int* seg_off, const int log2p, const int s) {
+  int p = 0;
+  for (int b = log2p - 1; b >= 0; --b) {
+    const int c = p | (1 << b);
+    p = seg_off[c] <= s ? c : p;
+  }
+  return p;
+}
+
 /* Work-group size of 1-D kernels; the host passes the same value as the
  * local size. */
 #ifndef WGS

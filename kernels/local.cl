@@ -26,16 +26,6 @@
 
 #pragma OPENCL FP_CONTRACT OFF
 
-/* Largest p with seg_off[p] <= s: the PE of segment s (P = 2^log2p). */
-SV_FN int sv_pe_of_segment(__global const int* seg_off, const int log2p, const int s) {
-  int p = 0;
-  for (int b = log2p - 1; b >= 0; --b) {
-    const int c = p | (1 << b);
-    p = seg_off[c] <= s ? c : p;
-  }
-  return p;
-}
-
 SV_FN float4 sv_over(const float4 acc, const float4 s) {
   const float t = 1.0f - acc.w;
   return (float4)(acc.x + t * s.x, acc.y + t * s.y, acc.z + t * s.z, acc.w + t * s.w);
@@ -92,80 +82,6 @@ __kernel void simdvol_resample_local(__global const sv_segment* segs, const int 
 /* ---- simdvol_resample_local_v8: the fused kernel with explicit vectors ----
  * (resample.cl's simdvol_resample_v8 with over instead of stores; the lanes
  * and sv_sample8 are described there). */
-/* The voxels of the PE whose segments come SV_VOX_PF positions after the
- * work-item's (512: one work-group ahead at 8 segments per work-item; 0:
- * none) are prefetched: the cell and the halo its stencils read, each
- * work-item its share of the rows in proportion to where those positions
- * lie in the PE's range (pe_cell = the cell's extents and, in .w, the
- * floats per PE block, 4 x stride; .w = 0: none). The blocks come from
- * memory, written by the shade + classify before (the 256^3 phantom's are
- * 268 MB): with every voxel load folded into 2 MiB (scratch build, wrong
- * images) the kernel took 24 against 52 ms at view (20, 35, 10), so it
- * waited on memory more than it computed; stencils walking a 32 KiB block
- * give the hardware's stream prefetch little to follow. -DSV_VOX_PF_BLOCK
- * prefetches the PE's block alone (no halo). A prefetch is a hint: it
- * changes no result. */
-#ifndef SV_VOX_PF
-#define SV_VOX_PF 512
-#endif
-SV_FN void sv_prefetch_pe_ahead(__global const sv_segment* segs, __global const int* seg_off,
-                                const int log2p, const int nseg, const int s0,
-                                __global const sv_view* view, __global const int* table,
-                                __global const float* vox, const int cs, const int4 pe_cell,
-                                const int il) {
-#if SV_VOX_PF > 0
-  const int sa = s0 + SV_VOX_PF;
-  if (sa >= nseg || pe_cell.w <= 0) return;
-  const int q = sv_pe_of_segment(seg_off, log2p, sa);
-  const long a = seg_off[q], n = seg_off[q + 1] - a; /* n >= 1: sa is in q's range */
-#ifdef SV_VOX_PF_BLOCK
-  const long lines = pe_cell.w / 16; /* 64-byte lines */
-  const long l0 = (sa - a) * lines / n, l1 = min((sa - a + 8) * lines / n, lines);
-  __global const float* blk = vox + (size_t)q * (size_t)pe_cell.w;
-  for (long l = l0; l < l1; ++l) SV_PREFETCH(blk + 16 * l);
-#else
-  /* PE q's cell origin: the floor of segment sa's first sample is in q's
-   * cell (a segment of q; an empty one may give another cell: a wasted
-   * hint), and the table's entry there, modulo the block, is the floor's
-   * place in the cell times the axis's multiplier. */
-  const sv_segment g = segs[sa];
-  const int nn[3] = {view->dims[0], view->dims[1], view->dims[2]};
-  const int cc[3] = {pe_cell.x, pe_cell.y, pe_cell.z};
-  const int vm = il ? 4 : 1;
-  const int mult[3] = {vm, vm * pe_cell.x, vm * pe_cell.x * pe_cell.y};
-  int o[3];
-  __global const int* tab[3] = {table, table + nn[0], table + nn[0] + nn[1]};
-#pragma unroll
-  for (int ax = 0; ax < 3; ++ax) {
-    const int f = clamp((int)(sv_pos(view, ax, g.i, g.j, g.k0) >> SV_FRAC_BITS), 0, nn[ax] - 1);
-    o[ax] = f - (tab[ax][f] % pe_cell.w) / mult[ax];
-  }
-  /* The rows (y, z) of the cell and its stencils' halo (low 1, high 1 at
-   * orders 0 and 1, high 2 at orders 2 and 3) that lie in the volume; this
-   * work-item takes its share of them: the cell's part of each row (one
-   * run in q's block) and its halo voxels in the neighbours' blocks. */
-  const int lo = ORDER >= 2 ? 1 : 0, hi = ORDER >= 2 ? 2 : 1;
-  const int ry = cc[1] + lo + hi, rows = ry * (cc[2] + lo + hi);
-  const long r0 = (sa - a) * rows / n, r1 = min((sa - a + 8) * rows / n, (long)rows);
-  const int x0 = o[0], x1 = min(o[0] + cc[0], nn[0]); /* the cell's x run */
-  const int run = (x1 - 1 - x0) * vm;                 /* floats after the run's first */
-  for (long r = r0; r < r1; ++r) {
-    const int y = o[1] - lo + (int)(r % ry), z = o[2] - lo + (int)(r / ry);
-    if (y < 0 || y >= nn[1] || z < 0 || z >= nn[2]) continue;
-    const int row = tab[1][y] + tab[2][z];
-    for (int ch = 0; ch < (il ? 1 : 4); ++ch) {
-      __global const float* p = vox + row + ch * cs;
-      for (int e = 0; e < run; e += 16) SV_PREFETCH(p + tab[0][x0] + e);
-      SV_PREFETCH(p + tab[0][x0] + run);
-      for (int x = x0 - lo; x < x0; ++x)
-        if (x >= 0) SV_PREFETCH(p + tab[0][x]);
-      for (int x = x1; x < min(x1 + hi, nn[0]); ++x) SV_PREFETCH(p + tab[0][x]);
-    }
-  }
-#endif
-#endif
-}
-
 /* simdvol_resample_local_v8 (planar cells, il = 0) and _v8_il (interleaved
  * cells, il = 1; cs is 1 there): one body, the layout a constant. */
 SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,

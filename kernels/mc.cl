@@ -492,15 +492,6 @@ __kernel void simdvol_mc_allocate(__global const int* ray_off, __global const in
   }
 }
 
-SV_FN int sv_mc_pe_of_segment(__global const int* seg_off, const int log2p, const int s) {
-  int p = 0;
-  for (int bb = log2p - 1; bb >= 0; --bb) {
-    const int c = p | (1 << bb);
-    p = seg_off[c] <= s ? c : p;
-  }
-  return p;
-}
-
 __kernel void simdvol_mc_local(__global const sv_segment* segs, const int nseg,
                                __global const int* seg_off, const int log2p,
                                __global const int* sample_off, __global const float4* samples,
@@ -518,7 +509,7 @@ __kernel void simdvol_mc_local(__global const sv_segment* segs, const int nseg,
     const int n = ALLOC ? alloc[s] : walks;
     v = sv_mc_estimate(segs, sample_off, samples, 0, s, 1, key, n, seed, &st);
   }
-  const int p = sv_mc_pe_of_segment(seg_off, log2p, s);
+  const int p = sv_pe_of_segment(seg_off, log2p, s);
   const sv_rect r = rects[p];
   foot[rect_off[p] + (g.j - r.j0) * r.w + (g.i - r.i0)] = v;
 #if STATS

@@ -58,6 +58,14 @@ void check_tables(const LocalSegments& segs, const ResampleTables& t, const Voxe
   if (segs.pes != t.pes) throw ArgumentError("segments", "PE count differs from the voxels'");
 }
 
+// The cell's extents and the floats per PE block, for the resample kernels'
+// prefetch ahead (resample.cl, sv_prefetch_pe_ahead); they fit in int: the
+// address table checked pes * 4 * stride <= 2^31 - 1.
+cl_int4 pe_cell_arg(const VoxelLayout& L) {
+  return cl_int4{{static_cast<cl_int>(L.cell()[0]), static_cast<cl_int>(L.cell()[1]),
+                  static_cast<cl_int>(L.cell()[2]), static_cast<cl_int>(4 * L.stride)}};
+}
+
 // An occupancy for skipping, if any, must be that of `voxels` for `order`.
 void check_occupancy(const DeviceOccupancy* skip, const VoxelBuffer& voxels, int order) {
   if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
@@ -203,7 +211,8 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
   if (v8)
     set_args_from(k, name, 8, lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
                   skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
-                  skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0));
+                  skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0), segs.seg_offset,
+                  static_cast<cl_int>(log2_exact(segs.pes)), pe_cell_arg(voxels.layout()));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }
@@ -317,13 +326,7 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
                   cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
-                  // the cell and the floats per PE block, for the prefetch
-                  // ahead (local.cl); they fit: the table checked pes * 4 *
-                  // stride <= 2^31 - 1
-                  cl_int4{{static_cast<cl_int>(voxels.layout().cell()[0]),
-                           static_cast<cl_int>(voxels.layout().cell()[1]),
-                           static_cast<cl_int>(voxels.layout().cell()[2]),
-                           static_cast<cl_int>(4 * voxels.layout().stride)}});
+                  pe_cell_arg(voxels.layout()));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }
