@@ -465,8 +465,8 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
 }
 
 /* The voxels of the PE whose segments come SV_VOX_PF positions after the
- * work-item's (512: one work-group ahead at 8 segments per work-item; 0:
- * none) are prefetched: the cell and the halo its stencils read, each
+ * work-item's (256: half a work-group ahead at 8 segments per work-item;
+ * 0: none) are prefetched: the cell and the halo its stencils read, each
  * work-item its share of the rows in proportion to where those positions
  * lie in the PE's range (pe_cell = the cell's extents and, in .w, the
  * floats per PE block, 4 x stride; .w = 0: none). The blocks come from
@@ -474,11 +474,15 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
  * 268 MB): with every voxel load folded into 2 MiB (scratch build, wrong
  * images) the kernel took 24 against 52 ms at view (20, 35, 10), so it
  * waited on memory more than it computed; stencils walking a 32 KiB block
- * give the hardware's stream prefetch little to follow. -DSV_VOX_PF_BLOCK
- * prefetches the PE's block alone (no halo). A prefetch is a hint: it
+ * give the hardware's stream prefetch little to follow. Frames alternated
+ * in one process (docs/PERFORMANCE.md), resample + local of the phantom /
+ * ch2 at view (20, 35, 10): no prefetch 61.2 / 49.7 ms; 64 positions
+ * ahead 57.5 / 48.4, 128 53.8 / 38.2, 256 44.8 / 36.8, 512 49.8 / 39.2,
+ * 1024 56.6 ms (phantom); the PE's block alone without the halo
+ * (-DSV_VOX_PF_BLOCK) 56.5 against 46.3 ms. A prefetch is a hint: it
  * changes no result. */
 #ifndef SV_VOX_PF
-#define SV_VOX_PF 512
+#define SV_VOX_PF 256
 #endif
 SV_FN void sv_prefetch_pe_ahead(__global const sv_segment* segs, __global const int* seg_off,
                                 const int log2p, const int nseg, const int s0,
