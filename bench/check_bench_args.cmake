@@ -72,6 +72,13 @@ expect_bad(TABLES --sweeps --sweeps 65)
 expect_bad(TABLES --views --views 0,nan)
 expect_bad(TABLES --markdown --markdown ${CMAKE_CURRENT_LIST_DIR}/no-such-dir/t.md)
 
+expect_bad(OPTIONS --variant --frames 3)
+expect_bad(OPTIONS --frames --frames 0 --variant -DSV_VOX_PF=0)
+expect_bad(OPTIONS --view --view 1,2 --variant -DSV_VOX_PF=0)
+expect_bad(OPTIONS --volume --volume /no/such/volume.den --variant -DSV_VOX_PF=0)
+expect_bad(OPTIONS --classifier --classifier no-such-classifier --variant -DSV_VOX_PF=0)
+expect_bad(OPTIONS --order --order 4 --variant -DSV_VOX_PF=0)
+
 expect_bad(BENCH --repeat --repeat 3,4)
 expect_bad(BENCH --turntable --turntable 721)
 expect_bad(BENCH --sizes --sizes 256,0)
