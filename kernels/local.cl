@@ -126,9 +126,9 @@ SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
   for (int t = 0; t < T; ++t) {
     const int8 on = (int8)(t) < N;
     if (skip && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, on))) {
-      X[0] += s_0; /* every stepping lane's sample is +-0: over keeps the composite */
-      X[1] += s_1;
-      X[2] += s_2;
+      /* every stepping lane's sample is +-0: over keeps the composite; a lane
+       * past its end stays where it is (sv_step8) */
+      sv_step8(X, on, s_0, s_1, s_2);
       continue;
     }
     if (il) {
@@ -148,9 +148,7 @@ SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
       ab = select(ab, ab + tr * u[2], on);
       aa = select(aa, aa + tr * u[3], on);
     }
-    X[0] += s_0;
-    X[1] += s_1;
-    X[2] += s_2;
+    sv_step8(X, on, s_0, s_1, s_2);
   }
   float4 res[8];
   if (il)
