@@ -170,6 +170,9 @@ int main(int argc, char** argv) {
     CellBuffer cells = array.layout(vol, 1, LayoutKernel::rows, &e_layout);
     const VoxelLayout L = make_voxel_layout(cells.layout());
     VoxelBuffer shading(dev, L), rgba(dev, L);
+    // The frame's own kernel writes interleaved cells (a position's RGBA in
+    // 16 bytes, for the resample's corner loads).
+    VoxelBuffer rgba_il(dev, make_voxel_layout(cells.layout(), true));
     const std::size_t n = vol.voxel_count();
     cl::Buffer flat_vol = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(float),
                                      const_cast<float*>(vol.data().data()), "flat volume");
@@ -253,6 +256,16 @@ int main(int argc, char** argv) {
          [&] {
            return std::vector{
                enqueue_shade_classify(dev, cells, sp, cp, rgba, ShadeKernel::vec16, &occ)};
+         },
+         [&] {
+           cl_check(dev.queue().enqueueFillBuffer(occ.occupied, cl_uint(0), 0,
+                                                  static_cast<std::size_t>(occ.count()) * 4),
+                    "clEnqueueFillBuffer(brick occupancy)");
+         }},
+        {"shade+classify fused, interleaved, marking (the frame's)", cells_bytes + vox_bytes,
+         [&] {
+           return std::vector{
+               enqueue_shade_classify(dev, cells, sp, cp, rgba_il, ShadeKernel::vec16, &occ)};
          },
          [&] {
            cl_check(dev.queue().enqueueFillBuffer(occ.occupied, cl_uint(0), 0,
