@@ -91,13 +91,14 @@ SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
                               __global const sv_rect* rects, __global const int* rect_off,
                               __global float4* foot, __global const uchar* reach, const int nbx,
                               const int nby, const int skip, __global const int* order,
-                              const int ordered, const int4 pe_cell, const int il) {
+                              const int ordered, __global const int4* origins, const int4 pe_cell,
+                              const int il) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8];
   long8 X[3];
   int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X);
-  sv_prefetch_pe_ahead(segs, seg_off, log2p, nseg, s0, view, table, vox, cs, pe_cell, il);
+  sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, view, table, vox, cs, origins, pe_cell, il);
   int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
   const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
@@ -169,14 +170,17 @@ SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
   }
 }
 
-__kernel void simdvol_resample_local_v8(
-    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
-    __global const sv_view* view, __global const int* table, __global const float* vox,
-    const int cs, __global const sv_rect* rects, __global const int* rect_off,
-    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
-    const int skip, __global const int* order, const int ordered, const int4 pe_cell) {
+__kernel void simdvol_resample_local_v8(__global const sv_segment* segs, const int nseg,
+                                        __global const int* seg_off, const int log2p,
+                                        __global const sv_view* view, __global const int* table,
+                                        __global const float* vox, const int cs,
+                                        __global const sv_rect* rects, __global const int* rect_off,
+                                        __global float4* foot, __global const uchar* reach,
+                                        const int nbx, const int nby, const int skip,
+                                        __global const int* order, const int ordered,
+                                        __global const int4* origins, const int4 pe_cell) {
   sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, pe_cell, 0);
+                     nbx, nby, skip, order, ordered, origins, pe_cell, 0);
 }
 
 __kernel void simdvol_resample_local_v8_il(
@@ -184,9 +188,10 @@ __kernel void simdvol_resample_local_v8_il(
     __global const sv_view* view, __global const int* table, __global const float* vox,
     const int cs, __global const sv_rect* rects, __global const int* rect_off,
     __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
-    const int skip, __global const int* order, const int ordered, const int4 pe_cell) {
+    const int skip, __global const int* order, const int ordered, __global const int4* origins,
+    const int4 pe_cell) {
   sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, pe_cell, 1);
+                     nbx, nby, skip, order, ordered, origins, pe_cell, 1);
 }
 #endif
 

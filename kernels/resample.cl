@@ -468,7 +468,8 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
  * work-item's (256: half a work-group ahead at 8 segments per work-item;
  * 0: none) are prefetched: the cell and the halo its stencils read, each
  * work-item its share of the rows in proportion to where those positions
- * lie in the PE's range (pe_cell = the cell's extents and, in .w, the
+ * lie in the PE's range (origins: each PE's cell origin; pe_cell = the cell's
+ * extents and, in .w, the
  * floats per PE block, 4 x stride; .w = 0: none). The blocks come from
  * memory, written by the shade + classify before (the 256^3 phantom's are
  * 268 MB): with every voxel load folded into 2 MiB (scratch build, wrong
@@ -484,61 +485,63 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
 #ifndef SV_VOX_PF
 #define SV_VOX_PF 256
 #endif
-SV_FN void sv_prefetch_pe_ahead(__global const sv_segment* segs, __global const int* seg_off,
-                                const int log2p, const int nseg, const int s0,
-                                __global const sv_view* view, __global const int* table,
-                                __global const float* vox, const int cs, const int4 pe_cell,
-                                const int il) {
+SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, const int nseg,
+                                const int s0, __global const sv_view* view,
+                                __global const int* table, __global const float* vox, const int cs,
+                                __global const int4* origins, const int4 pe_cell, const int il) {
 #if SV_VOX_PF > 0
   const int sa = s0 + SV_VOX_PF;
   if (sa >= nseg || pe_cell.w <= 0) return;
   const int q = sv_pe_of_segment(seg_off, log2p, sa);
-  const long a = seg_off[q], n = seg_off[q + 1] - a; /* n >= 1: sa is in q's range */
+  const int a = seg_off[q], n = seg_off[q + 1] - a; /* n >= 1: sa is in q's range */
+  /* This work-item's share [k0, k1) of K items: the same expression at both
+   * ends, so the shares of consecutive work-items tile the items (double:
+   * no 64-bit division). */
+  const double share = 1.0 / (double)n;
+#define SV_SHARE(K, d) min((int)((double)(sa - a + (d)) * (double)(K)*share), (K))
 #ifdef SV_VOX_PF_BLOCK
-  const long lines = pe_cell.w / 16; /* 64-byte lines */
-  const long l0 = (sa - a) * lines / n, l1 = min((sa - a + 8) * lines / n, lines);
+  const int lines = pe_cell.w / 16; /* 64-byte lines */
   __global const float* blk = vox + (size_t)q * (size_t)pe_cell.w;
-  for (long l = l0; l < l1; ++l) SV_PREFETCH(blk + 16 * l);
+  for (int l = SV_SHARE(lines, 0); l < SV_SHARE(lines, 8); ++l) SV_PREFETCH(blk + 16 * l);
 #else
-  /* PE q's cell origin: the floor of segment sa's first sample is in q's
-   * cell (a segment of q; an empty one may give another cell: a wasted
-   * hint), and the table's entry there, modulo the block, is the floor's
-   * place in the cell times the axis's multiplier. */
-  const sv_segment g = segs[sa];
-  const int nn[3] = {view->dims[0], view->dims[1], view->dims[2]};
-  const int cc[3] = {pe_cell.x, pe_cell.y, pe_cell.z};
-  const int vm = il ? 4 : 1;
-  const int mult[3] = {vm, vm * pe_cell.x, vm * pe_cell.x * pe_cell.y};
-  int o[3];
-  __global const int* tab[3] = {table, table + nn[0], table + nn[0] + nn[1]};
-#pragma unroll
-  for (int ax = 0; ax < 3; ++ax) {
-    const int f = clamp((int)(sv_pos(view, ax, g.i, g.j, g.k0) >> SV_FRAC_BITS), 0, nn[ax] - 1);
-    o[ax] = f - (tab[ax][f] % pe_cell.w) / mult[ax];
-  }
   /* The rows (y, z) of the cell and its stencils' halo (low 1, high 1 at
    * orders 0 and 1, high 2 at orders 2 and 3) that lie in the volume; this
    * work-item takes its share of them: the cell's part of each row (one
    * run in q's block) and its halo voxels in the neighbours' blocks. */
+  const int4 o = origins[q];
+  const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
+  __global const int* tx = table;
+  __global const int* ty = table + nx;
+  __global const int* tz = table + nx + ny;
+  const int vm = il ? 4 : 1;
   const int lo = ORDER >= 2 ? 1 : 0, hi = ORDER >= 2 ? 2 : 1;
-  const int ry = cc[1] + lo + hi, rows = ry * (cc[2] + lo + hi);
-  const long r0 = (sa - a) * rows / n, r1 = min((sa - a + 8) * rows / n, (long)rows);
-  const int x0 = o[0], x1 = min(o[0] + cc[0], nn[0]); /* the cell's x run */
-  const int run = (x1 - 1 - x0) * vm;                 /* floats after the run's first */
-  for (long r = r0; r < r1; ++r) {
-    const int y = o[1] - lo + (int)(r % ry), z = o[2] - lo + (int)(r / ry);
-    if (y < 0 || y >= nn[1] || z < 0 || z >= nn[2]) continue;
-    const int row = tab[1][y] + tab[2][z];
-    for (int ch = 0; ch < (il ? 1 : 4); ++ch) {
-      __global const float* p = vox + row + ch * cs;
-      for (int e = 0; e < run; e += 16) SV_PREFETCH(p + tab[0][x0] + e);
-      SV_PREFETCH(p + tab[0][x0] + run);
-      for (int x = x0 - lo; x < x0; ++x)
-        if (x >= 0) SV_PREFETCH(p + tab[0][x]);
-      for (int x = x1; x < min(x1 + hi, nn[0]); ++x) SV_PREFETCH(p + tab[0][x]);
+  const int ry = pe_cell.y + lo + hi, rows = ry * (pe_cell.z + lo + hi);
+  const int r0 = SV_SHARE(rows, 0), r1 = SV_SHARE(rows, 8);
+  if (r0 >= r1) return;
+  const int x0 = o.x, x1 = min(o.x + pe_cell.x, nx); /* the cell's x run */
+  const int run = (x1 - 1 - x0) * vm;                /* floats after the run's first */
+  const int tx0 = tx[x0];
+  int ly = r0 % ry, z = o.z - lo + r0 / ry;
+  for (int r = r0; r < r1; ++r) {
+    const int y = o.y - lo + ly;
+    if (y >= 0 && y < ny && z >= 0 && z < nz) {
+      const int row = ty[y] + tz[z];
+      for (int ch = 0; ch < (il ? 1 : 4); ++ch) {
+        __global const float* p = vox + row + ch * cs;
+        for (int e = 0; e < run; e += 16) SV_PREFETCH(p + tx0 + e);
+        SV_PREFETCH(p + tx0 + run);
+        for (int x = x0 - lo; x < x0; ++x)
+          if (x >= 0) SV_PREFETCH(p + tx[x]);
+        for (int x = x1; x < min(x1 + hi, nx); ++x) SV_PREFETCH(p + tx[x]);
+      }
+    }
+    if (++ly == ry) {
+      ly = 0;
+      ++z;
     }
   }
 #endif
+#undef SV_SHARE
 #endif
 }
 
@@ -752,14 +755,14 @@ SV_FN void sv_resample8(__global const sv_segment* segs, const int nseg,
                         __global const int* table, __global const float* vox, const int cs,
                         __global float4* out, __global const int* order, const int ordered,
                         __global const uchar* reach, const int nbx, const int nby, const int skip,
-                        __global const int* seg_off, const int log2p, const int4 pe_cell,
-                        const int il) {
+                        __global const int* seg_off, const int log2p, __global const int4* origins,
+                        const int4 pe_cell, const int il) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8], lo[8];
   long8 X[3];
   const int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X);
-  sv_prefetch_pe_ahead(segs, seg_off, log2p, nseg, s0, view, table, vox, cs, pe_cell, il);
+  sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, view, table, vox, cs, origins, pe_cell, il);
 #pragma unroll
   for (int l = 0; l < 8; ++l) {
     const int pos = min(s0 + l, nseg - 1);
@@ -800,9 +803,10 @@ __kernel void simdvol_resample_v8(__global const sv_segment* segs, const int nse
                                   const int cs, __global float4* out, __global const int* order,
                                   const int ordered, __global const uchar* reach, const int nbx,
                                   const int nby, const int skip, __global const int* seg_off,
-                                  const int log2p, const int4 pe_cell) {
+                                  const int log2p, __global const int4* origins,
+                                  const int4 pe_cell) {
   sv_resample8(segs, nseg, sample_off, view, table, vox, cs, out, order, ordered, reach, nbx, nby,
-               skip, seg_off, log2p, pe_cell, 0);
+               skip, seg_off, log2p, origins, pe_cell, 0);
 }
 
 __kernel void simdvol_resample_v8_il(__global const sv_segment* segs, const int nseg,
@@ -811,9 +815,10 @@ __kernel void simdvol_resample_v8_il(__global const sv_segment* segs, const int 
                                      const int cs, __global float4* out, __global const int* order,
                                      const int ordered, __global const uchar* reach, const int nbx,
                                      const int nby, const int skip, __global const int* seg_off,
-                                     const int log2p, const int4 pe_cell) {
+                                     const int log2p, __global const int4* origins,
+                                     const int4 pe_cell) {
   sv_resample8(segs, nseg, sample_off, view, table, vox, cs, out, order, ordered, reach, nbx, nby,
-               skip, seg_off, log2p, pe_cell, 1);
+               skip, seg_off, log2p, origins, pe_cell, 1);
 }
 
 __kernel void simdvol_zero4(__global float4* p, const int n) {

@@ -151,6 +151,13 @@ ResampleTables make_resample_tables(Device& device, const VoxelLayout& L,
   t.interleaved = L.interleaved;
   const std::vector<cl_int> table = resample_address_table(L, &t.channel_stride);
   t.table = upload(device, table, "resample address table");
+  std::vector<cl_int4> origins(static_cast<std::size_t>(L.pes()));
+  for (int64_t p = 0; p < L.pes(); ++p) {
+    const Dims3 o = L.cells.split.cell_origin(p);
+    origins[static_cast<std::size_t>(p)] = cl_int4{
+        {static_cast<cl_int>(o[0]), static_cast<cl_int>(o[1]), static_cast<cl_int>(o[2]), 0}};
+  }
+  t.origins = upload(device, origins, "cell origins");
   std::vector<sv_view> v{view.grid};
   t.view = upload(device, v, "view");
   return t;
@@ -212,7 +219,8 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
     set_args_from(k, name, 8, lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
                   skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
                   skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0), segs.seg_offset,
-                  static_cast<cl_int>(log2_exact(segs.pes)), pe_cell_arg(voxels.layout()));
+                  static_cast<cl_int>(log2_exact(segs.pes)), tables.origins,
+                  pe_cell_arg(voxels.layout()));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }
@@ -326,7 +334,7 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
                   cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
-                  pe_cell_arg(voxels.layout()));
+                  tables.origins, pe_cell_arg(voxels.layout()));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }

@@ -57,8 +57,9 @@ cl::Buffer upload_sample_offsets(Device& device, const Matching& m);
 struct ResampleTables {
   Dims3 dims{0, 0, 0};
   int64_t pes = 0;
-  cl::Buffer view;   ///< one sv_view
-  cl::Buffer table;  ///< cl_int[nx + ny + nz]
+  cl::Buffer view;     ///< one sv_view
+  cl::Buffer table;    ///< cl_int[nx + ny + nz]
+  cl::Buffer origins;  ///< cl_int4[P]: each PE's cell origin (the resample's prefetch ahead)
   cl_int channel_stride = 0;
   bool interleaved = false;  ///< made for interleaved voxel cells (stages.hpp)
 };
