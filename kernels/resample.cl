@@ -468,9 +468,9 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
  * work-item's (256: half a work-group ahead at 8 segments per work-item;
  * 0: none) are prefetched: the cell and the halo its stencils read, each
  * work-item its share of the rows in proportion to where those positions
- * lie in the PE's range (origins: each PE's cell origin; pe_cell = the cell's
- * extents and, in .w, the
- * floats per PE block, 4 x stride; .w = 0: none). The blocks come from
+ * lie in the PE's range (origins: each PE's cell origin; pe_cell = the
+ * cell's extents and, in .w, the floats per PE block, 4 x stride; .w = 0:
+ * none). The blocks come from
  * memory, written by the shade + classify before (the 256^3 phantom's are
  * 268 MB): with every voxel load folded into 2 MiB (scratch build, wrong
  * images) the kernel took 24 against 52 ms at view (20, 35, 10), so it
