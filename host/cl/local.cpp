@@ -58,12 +58,27 @@ void check_tables(const LocalSegments& segs, const ResampleTables& t, const Voxe
   if (segs.pes != t.pes) throw ArgumentError("segments", "PE count differs from the voxels'");
 }
 
-// The cell's extents and the floats per PE block, for the resample kernels'
-// prefetch ahead (resample.cl, sv_prefetch_pe_ahead); they fit in int: the
-// address table checked pes * 4 * stride <= 2^31 - 1.
-cl_int4 pe_cell_arg(const VoxelLayout& L) {
-  return cl_int4{{static_cast<cl_int>(L.cell()[0]), static_cast<cl_int>(L.cell()[1]),
-                  static_cast<cl_int>(L.cell()[2]), static_cast<cl_int>(4 * L.stride)}};
+// The resample kernels' prefetch ahead (resample.cl, sv_prefetch_pe_ahead):
+// the cells' origins and pe_cell = the cell's extents and the floats per PE
+// block (they fit in int: the address table checked pes * 4 * stride <=
+// 2^31 - 1). Tables made without origins (a caller's own ResampleTables)
+// resample without the prefetch: w = 0, and any buffer in the origins' place,
+// never read. Origins of the wrong size are an ArgumentError.
+struct PrefetchArgs {
+  cl::Buffer origins;
+  cl_int4 pe_cell;
+};
+PrefetchArgs prefetch_args(const ResampleTables& t, const VoxelLayout& L) {
+  const bool on = t.origins() != nullptr;
+  if (on) {
+    std::size_t size = 0;
+    cl_check(t.origins.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(cell origins)");
+    if (size < static_cast<std::size_t>(L.pes()) * sizeof(cl_int4))
+      throw ArgumentError("resample tables", "the cell origins hold fewer than one int4 per PE");
+  }
+  return {on ? t.origins : t.table,
+          cl_int4{{static_cast<cl_int>(L.cell()[0]), static_cast<cl_int>(L.cell()[1]),
+                   static_cast<cl_int>(L.cell()[2]), on ? static_cast<cl_int>(4 * L.stride) : 0}}};
 }
 
 // An occupancy for skipping, if any, must be that of `voxels` for `order`.
@@ -215,12 +230,12 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
            tables.table, voxels.buffer(), tables.channel_stride, samples);
   // Without an order or skipping, the order and reach buffers are never
   // read: any buffer will do.
+  const PrefetchArgs pf = prefetch_args(tables, voxels.layout());
   if (v8)
     set_args_from(k, name, 8, lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
                   skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
                   skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0), segs.seg_offset,
-                  static_cast<cl_int>(log2_exact(segs.pes)), tables.origins,
-                  pe_cell_arg(voxels.layout()));
+                  static_cast<cl_int>(log2_exact(segs.pes)), pf.origins, pf.pe_cell);
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }
@@ -330,11 +345,12 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
            tables.channel_stride, segs.rects, fp.offsets, fp.pixels);
   // The float8 kernel's skipping and order arguments; without them the
   // reach and order buffers are never read: any buffer will do.
+  const PrefetchArgs pf = prefetch_args(tables, voxels.layout());
   if (v8)
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
                   cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
-                  tables.origins, pe_cell_arg(voxels.layout()));
+                  pf.origins, pf.pe_cell);
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }

@@ -567,6 +567,58 @@ TEST(LocalCl, InterleavedCellsGiveTheSameBits) {
   EXPECT_GT(coloured, 40);  // the footprints compared are not all empty
 }
 
+// The cells' origins in ResampleTables only steer the resample's prefetch:
+// tables built without them (as a caller's own, examples/embed) give the same
+// footprints and stored samples, bit for bit, in both layouts; origins of the
+// wrong size are refused.
+TEST(LocalCl, TablesWithoutOriginsResampleTheSame) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Fixture fx({37, 29, 23}, 7);
+  const ViewGeometry view = make_view(fx.vol, {20, 35, 10}, 40, 36, Sampling::voxel);
+  int compared = 0;
+  for (int64_t pes : {int64_t(8), int64_t(512)})
+    for (bool il : {false, true}) {
+      SCOPED_TRACE("P " + std::to_string(pes) + (il ? " interleaved" : " planar"));
+      const Matching m = match_reference(view, kd_split(fx.dims, pes));
+      const VoxelLayout L = make_voxel_layout(make_cell_layout(fx.dims, pes, 1), il);
+      VoxelBuffer vb(dev, L);
+      vb.write(dev, voxels_to_cells(fx.voxels, L));
+      const LocalSegments segs = upload_segments(dev, m);
+      const ResampleTables with = make_resample_tables(dev, L, view);
+      ASSERT_NE(with.origins(), nullptr);
+      ResampleTables without = with;
+      without.origins = cl::Buffer();
+      DeviceFootprints fp = make_footprints(dev, m.rects);
+      Footprints got[2];
+      std::vector<Rgba> stored[2];
+      const cl::Buffer soff = upload_sample_offsets(dev, m);
+      const std::size_t ns = static_cast<std::size_t>(sample_offsets(m).back());
+      for (int k = 0; k < 2; ++k) {
+        const ResampleTables& t = k ? without : with;
+        enqueue_zero_footprints(dev, fp);
+        enqueue_resample_local(dev, segs, t, vb, 1, fp);
+        got[k] = read_footprints(dev, fp);
+        cl::Buffer samples =
+            dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
+        enqueue_resample(dev, segs, soff, t, vb, 1, samples, LocalKernel::vector8);
+        if (ns > 0) stored[k] = read_all<Rgba>(dev, samples, ns);
+      }
+      EXPECT_TRUE(same_bits(got[0], got[1]));
+      ASSERT_EQ(stored[0].size(), stored[1].size());
+      EXPECT_EQ(std::memcmp(stored[0].data(), stored[1].data(), ns * sizeof(Rgba)), 0);
+      compared += std::any_of(got[0].pixels.begin(), got[0].pixels.end(),
+                              [](const Rgba& c) { return c.a != 0; });
+      ResampleTables small = with;
+      small.origins = dev.buffer(CL_MEM_READ_ONLY, 16, nullptr, "one origin");
+      EXPECT_THROW(enqueue_resample_local(dev, segs, small, vb, 1, fp), ArgumentError);
+      EXPECT_THROW(enqueue_resample(dev, segs, soff, small, vb, 1, fp.pixels, LocalKernel::vector8),
+                   ArgumentError);
+    }
+  EXPECT_EQ(compared, 4);  // footprints with colour were compared
+}
+
 // The lanes' order: in each block of SV_ORDER_BLOCK positions cut at the PEs'
 // boundaries, the segments stably sorted by min(k1 - k0, 63), longest first
 // (a host sort of the same keys), so each segment stays in its PE's range.

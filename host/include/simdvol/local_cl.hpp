@@ -57,9 +57,11 @@ cl::Buffer upload_sample_offsets(Device& device, const Matching& m);
 struct ResampleTables {
   Dims3 dims{0, 0, 0};
   int64_t pes = 0;
-  cl::Buffer view;     ///< one sv_view
-  cl::Buffer table;    ///< cl_int[nx + ny + nz]
-  cl::Buffer origins;  ///< cl_int4[P]: each PE's cell origin (the resample's prefetch ahead)
+  cl::Buffer view;   ///< one sv_view
+  cl::Buffer table;  ///< cl_int[nx + ny + nz]
+  /// cl_int4[P]: each PE's cell origin, for the resample's prefetch ahead;
+  /// optional (tables built by hand without it resample without the prefetch)
+  cl::Buffer origins;
   cl_int channel_stride = 0;
   bool interleaved = false;  ///< made for interleaved voxel cells (stages.hpp)
 };
