@@ -330,8 +330,8 @@ SV_FN void sv_neville16(float16* q, const float16* d, const int16 low) {
  * products and the difference of sv_neville16's low-side lane (whose
  * factor is 1); its high-side lanes compute -((t - 1) * v(f) - t * v(f +
  * 1)), the same rounding of the negated difference, so the samples are
- * sv_sample8_il's bit for bit but for the sign of a zero, which over cannot
- * tell (resample.cl, empty-space skipping). */
+ * sv_sample8_il's bit for bit but for the sign of a zero or of a NaN, which
+ * over cannot tell (resample.cl, empty-space skipping; a NaN stays a NaN). */
 #if ORDER == 1 && !defined(SV_IL1_GENERIC)
 #define SV_IL1_ROWS 1
 #define SV_LD4(l) vload4(0, vox + o.s##l), vload4(0, vox + o.s##l + dx.s##l)
