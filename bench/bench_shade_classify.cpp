@@ -232,6 +232,12 @@ int main(int argc, char** argv) {
             "clEnqueueCopyBuffer(shading)");
       };
     };
+    // The marking variants' untimed preparation: the occupancy zeroed.
+    auto zero_occupancy = [&] {
+      cl_check(dev.queue().enqueueFillBuffer(occ.occupied, cl_uint(0), 0,
+                                             static_cast<std::size_t>(occ.count()) * 4),
+               "clEnqueueFillBuffer(brick occupancy)");
+    };
     std::vector<Variant> variants = {
         {"shade", cells_bytes + vox_bytes,
          [&] { return std::vector{enqueue_shade(dev, cells, sp, shading)}; }},
@@ -257,21 +263,13 @@ int main(int argc, char** argv) {
            return std::vector{
                enqueue_shade_classify(dev, cells, sp, cp, rgba, ShadeKernel::vec16, &occ)};
          },
-         [&] {
-           cl_check(dev.queue().enqueueFillBuffer(occ.occupied, cl_uint(0), 0,
-                                                  static_cast<std::size_t>(occ.count()) * 4),
-                    "clEnqueueFillBuffer(brick occupancy)");
-         }},
+         zero_occupancy},
         {"shade+classify fused, interleaved, marking (the frame's)", cells_bytes + vox_bytes,
          [&] {
            return std::vector{
                enqueue_shade_classify(dev, cells, sp, cp, rgba_il, ShadeKernel::vec16, &occ)};
          },
-         [&] {
-           cl_check(dev.queue().enqueueFillBuffer(occ.occupied, cl_uint(0), 0,
-                                                  static_cast<std::size_t>(occ.count()) * 4),
-                    "clEnqueueFillBuffer(brick occupancy)");
-         }},
+         zero_occupancy},
         {"flat classify (1 PE)", 2 * flat4,
          [&] { return std::vector{enqueue_classify(dev, shading1, cp, rgba1)}; }},
         {"flat classify in place (1 PE)", 2 * flat4,

@@ -469,9 +469,8 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
  * 0: none) are prefetched: the cell and the halo its stencils read, each
  * work-item its share of the rows in proportion to where those positions
  * lie in the PE's range (origins: each PE's cell origin; pe_cell = the
- * cell's extents and, in .w, the floats per PE block, 4 x stride; .w = 0:
- * none). The blocks come from
- * memory, written by the shade + classify before (the 256^3 phantom's are
+ * cell's extents and, in .w, 1 to prefetch, 0 for none). The blocks come
+ * from memory, written by the shade + classify before (the 256^3 phantom's are
  * 268 MB): with every voxel load folded into 2 MiB (scratch build, wrong
  * images) the kernel took 24 against 52 ms at view (20, 35, 10), so it
  * waited on memory more than it computed; stencils walking a 32 KiB block
@@ -479,8 +478,8 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
  * in one process (docs/PERFORMANCE.md), resample + local of the phantom /
  * ch2 at view (20, 35, 10): no prefetch 61.2 / 49.7 ms; 64 positions
  * ahead 57.5 / 48.4, 128 53.8 / 38.2, 256 44.8 / 36.8, 512 49.8 / 39.2,
- * 1024 56.6 ms (phantom); the PE's block alone without the halo
- * (-DSV_VOX_PF_BLOCK) 56.5 against 46.3 ms. A prefetch is a hint: it
+ * 1024 56.6 ms (phantom); the PE's block alone without the halo (an
+ * earlier form) 56.5 against 46.3 ms. A prefetch is a hint: it
  * changes no result. */
 #ifndef SV_VOX_PF
 #define SV_VOX_PF 256
@@ -499,11 +498,6 @@ SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, co
    * no 64-bit division). */
   const double share = 1.0 / (double)n;
 #define SV_SHARE(K, d) min((int)((double)(sa - a + (d)) * (double)(K)*share), (K))
-#ifdef SV_VOX_PF_BLOCK
-  const int lines = pe_cell.w / 16; /* 64-byte lines */
-  __global const float* blk = vox + (size_t)q * (size_t)pe_cell.w;
-  for (int l = SV_SHARE(lines, 0); l < SV_SHARE(lines, 8); ++l) SV_PREFETCH(blk + 16 * l);
-#else
   /* The rows (y, z) of the cell and its stencils' halo (low 1, high 1 at
    * orders 0 and 1, high 2 at orders 2 and 3) that lie in the volume; this
    * work-item takes its share of them: the cell's part of each row (one
@@ -518,8 +512,10 @@ SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, co
   const int ry = pe_cell.y + lo + hi, rows = ry * (pe_cell.z + lo + hi);
   const int r0 = SV_SHARE(rows, 0), r1 = SV_SHARE(rows, 8);
   if (r0 >= r1) return;
-  const int x0 = o.x, x1 = min(o.x + pe_cell.x, nx); /* the cell's x run */
-  const int run = (x1 - 1 - x0) * vm;                /* floats after the run's first */
+  /* (clamped: origins of another split would make a wrong hint, never a
+   * read outside the table) */
+  const int x0 = clamp(o.x, 0, nx - 1), x1 = min(x0 + pe_cell.x, nx); /* the cell's x run */
+  const int run = (x1 - 1 - x0) * vm; /* floats after the run's first */
   const int tx0 = tx[x0];
   int ly = r0 % ry, z = o.z - lo + r0 / ry;
   for (int r = r0; r < r1; ++r) {
@@ -540,7 +536,6 @@ SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, co
       ++z;
     }
   }
-#endif
 #undef SV_SHARE
 #endif
 }

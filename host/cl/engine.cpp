@@ -203,7 +203,9 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
                           : enqueue_match(device, view, split, links);
   enqueue_balance(device, dm, view, split, eo.balance_sweeps);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
-  const ResampleTables tables = make_resample_tables(device, S.rgba->layout(), view);
+  // The cells' origin table is already on the device (the layout's).
+  const ResampleTables tables =
+      make_resample_tables(device, S.rgba->layout(), view, &S.cells->origins());
   const int W = view.width(), H = view.height();
   const int64_t npx = static_cast<int64_t>(W) * H;
 

@@ -30,6 +30,15 @@ std::size_t flat_count(const Dims3& d) {
 
 }  // namespace
 
+std::vector<cl_int4> cell_origin_table(const KdSplit& split) {
+  std::vector<cl_int4> t(static_cast<std::size_t>(split.pes()));
+  for (int64_t p = 0; p < split.pes(); ++p) {
+    const Dims3 o = split.cell_origin(p);
+    t[static_cast<std::size_t>(p)] = int4(o[0], o[1], o[2], 0);
+  }
+  return t;
+}
+
 namespace {
 
 void check_cell_layout(const CellLayout& layout) {
@@ -61,12 +70,10 @@ CellBuffer::CellBuffer(Device& device, const CellLayout& layout, cl::Buffer cell
     cells_ = device.buffer(CL_MEM_READ_WRITE, layout.bytes(), nullptr, "cell buffer");
   }
   const int64_t pes = layout.pes();
-  std::vector<cl_int4> origins(static_cast<std::size_t>(pes));
+  std::vector<cl_int4> origins = cell_origin_table(layout.split);
   std::vector<cl_int> pe_of_cell(static_cast<std::size_t>(pes));
   const Dims3 splits = layout.split.splits();
   for (int64_t p = 0; p < pes; ++p) {
-    Dims3 o = layout.split.cell_origin(p);
-    origins[p] = int4(o[0], o[1], o[2], 0);
     Dims3 i = layout.split.cell_index(p);
     pe_of_cell[(i[2] * splits[1] + i[1]) * splits[0] + i[0]] = static_cast<cl_int>(p);
   }

@@ -2,6 +2,7 @@
 #include <limits>
 #include <string>
 
+#include "simdvol/layout.hpp"
 #include "simdvol/local_cl.hpp"
 #include "simdvol/resample.hpp"
 #include "voxel_ranges.hpp"
@@ -59,9 +60,8 @@ void check_tables(const LocalSegments& segs, const ResampleTables& t, const Voxe
 }
 
 // The resample kernels' prefetch ahead (resample.cl, sv_prefetch_pe_ahead):
-// the cells' origins and pe_cell = the cell's extents and the floats per PE
-// block (they fit in int: the address table checked pes * 4 * stride <=
-// 2^31 - 1). Tables made without origins (a caller's own ResampleTables)
+// the cells' origins and pe_cell = the cell's extents and, in w, 1 to
+// prefetch. Tables made without origins (a caller's own ResampleTables)
 // resample without the prefetch: w = 0, and any buffer in the origins' place,
 // never read. Origins of the wrong size are an ArgumentError.
 struct PrefetchArgs {
@@ -78,7 +78,7 @@ PrefetchArgs prefetch_args(const ResampleTables& t, const VoxelLayout& L) {
   }
   return {on ? t.origins : t.table,
           cl_int4{{static_cast<cl_int>(L.cell()[0]), static_cast<cl_int>(L.cell()[1]),
-                   static_cast<cl_int>(L.cell()[2]), on ? static_cast<cl_int>(4 * L.stride) : 0}}};
+                   static_cast<cl_int>(L.cell()[2]), on ? 1 : 0}}};
 }
 
 // An occupancy for skipping, if any, must be that of `voxels` for `order`.
@@ -155,8 +155,8 @@ std::vector<cl_int> resample_address_table(const VoxelLayout& L, cl_int* channel
   return table;
 }
 
-ResampleTables make_resample_tables(Device& device, const VoxelLayout& L,
-                                    const ViewGeometry& view) {
+ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const ViewGeometry& view,
+                                    const cl::Buffer* origins) {
   for (int a = 0; a < 3; ++a)
     if (view.grid.dims[a] != L.dims()[a])
       throw ArgumentError("view", "was made for a volume of other dimensions");
@@ -166,13 +166,7 @@ ResampleTables make_resample_tables(Device& device, const VoxelLayout& L,
   t.interleaved = L.interleaved;
   const std::vector<cl_int> table = resample_address_table(L, &t.channel_stride);
   t.table = upload(device, table, "resample address table");
-  std::vector<cl_int4> origins(static_cast<std::size_t>(L.pes()));
-  for (int64_t p = 0; p < L.pes(); ++p) {
-    const Dims3 o = L.cells.split.cell_origin(p);
-    origins[static_cast<std::size_t>(p)] = cl_int4{
-        {static_cast<cl_int>(o[0]), static_cast<cl_int>(o[1]), static_cast<cl_int>(o[2]), 0}};
-  }
-  t.origins = upload(device, origins, "cell origins");
+  t.origins = origins ? *origins : upload(device, cell_origin_table(L.cells.split), "cell origins");
   std::vector<sv_view> v{view.grid};
   t.view = upload(device, v, "view");
   return t;

@@ -20,6 +20,11 @@
 
 namespace simdvol {
 
+/// Each PE's cell origin (x, y, z, 0), p = 0 .. P - 1: the table that
+/// CellBuffer::origins() holds for the layout kernels and that the resample
+/// kernels' prefetch reads (make_resample_tables).
+std::vector<cl_int4> cell_origin_table(const KdSplit& split);
+
 /// A PE-major cell buffer on the device plus its per-PE tables.
 class CellBuffer {
  public:

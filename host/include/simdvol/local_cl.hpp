@@ -66,9 +66,11 @@ struct ResampleTables {
   bool interleaved = false;  ///< made for interleaved voxel cells (stages.hpp)
 };
 /// ArgumentError if the voxel buffer exceeds int32 float indexing or `view`
-/// was made for other dims.
+/// was made for other dims. `origins`: the cells' origin table if the caller
+/// has it on the device (CellBuffer::origins() of the cells `layout` was made
+/// from, cell_origin_table of its split), taken instead of uploading a copy.
 ResampleTables make_resample_tables(Device& device, const VoxelLayout& layout,
-                                    const ViewGeometry& view);
+                                    const ViewGeometry& view, const cl::Buffer* origins = nullptr);
 /// The host table (for tests): float index of channel 0 of voxel g is
 /// t[gx] + t[nx + gy] + t[nx + ny + gz]; `channel_stride` receives cs.
 std::vector<cl_int> resample_address_table(const VoxelLayout& layout, cl_int* channel_stride);
