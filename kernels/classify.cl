@@ -696,8 +696,9 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   /* The brick occupancy of resample.cl's simdvol_occupancy, marked here
    * from the values just stored (so no pass reads them again): each voxel
    * of the cell inside the volume with a channel that is not +-0 sets its
-   * brick (atomically: bricks straddle chunks and cells). occ must be zero
-   * before; chunks stored as zeros above mark nothing. */
+   * brick (SV_MARK: bricks straddle chunks and cells, so work-items race,
+   * all storing 1). occ must be zero before; chunks stored as zeros above
+   * mark nothing. */
   if (mark) {
 #if SV_RW == 1
     const float16 xf = SV_ROWS16(fx);
@@ -721,15 +722,15 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
      * brainsmall the same. */
     const int4 sq = set.s048c | set.s159d | set.s26ae | set.s37bf;
     const int4 bq = bi.s048c;
-    if (sq.x) atomic_or(&occ[bq.x], 1u);
-    if (sq.y && !(sq.x && bq.y == bq.x)) atomic_or(&occ[bq.y], 1u);
-    if (sq.z && !(sq.x && bq.z == bq.x) && !(sq.y && bq.z == bq.y)) atomic_or(&occ[bq.z], 1u);
+    if (sq.x) SV_MARK(&occ[bq.x]);
+    if (sq.y && !(sq.x && bq.y == bq.x)) SV_MARK(&occ[bq.y]);
+    if (sq.z && !(sq.x && bq.z == bq.x) && !(sq.y && bq.z == bq.y)) SV_MARK(&occ[bq.z]);
     if (sq.w && !(sq.x && bq.w == bq.x) && !(sq.y && bq.w == bq.y) && !(sq.z && bq.w == bq.z))
-      atomic_or(&occ[bq.w], 1u);
+      SV_MARK(&occ[bq.w]);
 #else
     /* The distinct bricks of the set lanes, smallest first (usually one to
-     * four per chunk): one atomic each, no per-lane loop. Against a loop
-     * over the 16 lanes (an atomic where the brick changed), within each
+     * four per chunk): one mark each, no per-lane loop. Against a loop
+     * over the 16 lanes (a mark where the brick changed), within each
      * run of simdvol-bench-shade (fused with and without marking, three
      * runs) the marking cost 7.5-7.9 ms that way and 4.2-5.8 ms this way. */
     int16 left = select((int16)(INT_MAX), bi, set);
@@ -738,7 +739,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
       const int4 m4 = min(m8.lo, m8.hi);
       const int2 m2 = min(m4.lo, m4.hi);
       const int brick = min(m2.x, m2.y);
-      atomic_or(&occ[brick], 1u);
+      SV_MARK(&occ[brick]);
       left = select(left, (int16)(INT_MAX), left == brick);
     }
 #endif

@@ -625,9 +625,10 @@ SV_FN void sv_step8(long8* X, const int8 on, const long s0, const long s1, const
 /* One work-item per (PE p, plane lz of its cell): 2-D range (cz, P). Scans
  * the plane's voxels inside the volume (padding is never read by a stencil)
  * in the PE's block: voxel (lx, ly, lz) channel c at
- * p * 4 * stride + c * stride + (lz * cy + ly) * cx + lx; sets occ[b] |= 1
- * (atomically: bricks straddle cells) for each brick b holding a voxel with
- * a channel that is not +-0. occ must be zero before. */
+ * p * 4 * stride + c * stride + (lz * cy + ly) * cx + lx; sets occ[b] = 1
+ * (SV_MARK: bricks straddle cells, so work-items race, all storing 1) for
+ * each brick b holding a voxel with a channel that is not +-0. occ must be
+ * zero before. */
 SV_FN void sv_occupancy(__global const float* vox, const int stride, const int4 cell,
                         __global const int4* origins, const int4 dims, const int nbx, const int nby,
                         __global volatile uint* occ, const int il) {
@@ -647,7 +648,7 @@ SV_FN void sv_occupancy(__global const float* vox, const int stride, const int4 
     for (int lx = 0; lx < cx; ++lx) {
       const int bx = (o.x + lx) >> SV_BRICK_LOG2;
       if (bx != b) {
-        if (any & 0x7fffffffu) atomic_or(&occ[by + b], 1u);
+        if (any & 0x7fffffffu) SV_MARK(&occ[by + b]);
         b = bx;
         any = 0;
       }
@@ -660,7 +661,7 @@ SV_FN void sv_occupancy(__global const float* vox, const int stride, const int4 
                as_uint(v[3 * stride + e]);
       }
     }
-    if (any & 0x7fffffffu) atomic_or(&occ[by + b], 1u);
+    if (any & 0x7fffffffu) SV_MARK(&occ[by + b]);
   }
 }
 
