@@ -5,6 +5,8 @@
 # and direct compositing equal to the reference (PSNR >= 80 dB, or
 # identical) either way, no balance time without sweeps, the same samples
 # (fewer with skip-pes, which leaves out the PEs with nothing in reach);
+# the layout once (the default): the warm-up frame's layout timed, none in
+# the timed frames;
 # then that a bad option value exits 2 naming the option
 # and leaves no JSON behind.
 file(REMOVE ${OUT})
@@ -56,6 +58,13 @@ foreach(i RANGE ${last})
   get(bytes cases ${i} xnet swap_bytes)
   get(halo cases ${i} xnet halo_bytes)
   get(sweeps cases ${i} balance_sweeps)
+  get(layout cases ${i} layout)
+  get(layout_once cases ${i} layout_once_ms)
+  get(layout_med cases ${i} stages_ms layout median)
+  if(NOT layout STREQUAL "once" OR NOT layout_once GREATER 0 OR NOT layout_med EQUAL 0)
+    message(FATAL_ERROR
+            "${id}: layout ${layout}, once ${layout_once} ms, timed frames' median ${layout_med} ms")
+  endif()
   get(skip_pes cases ${i} skip_pes)
   get(bal cases ${i} stages_ms balance median)
   if(skip_pes STREQUAL "OFF" OR skip_pes STREQUAL "false")
@@ -141,6 +150,11 @@ execute_process(COMMAND ${BENCH} --skip-pes on,maybe
                 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(NOT rc EQUAL 2 OR NOT err MATCHES "--skip-pes")
   message(FATAL_ERROR "bad --skip-pes: exit ${rc}, stderr ${err}")
+endif()
+execute_process(COMMAND ${BENCH} --layout sometimes
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL 2 OR NOT err MATCHES "--layout: 'sometimes' is neither once nor every")
+  message(FATAL_ERROR "bad --layout: exit ${rc}, stderr ${err}")
 endif()
 execute_process(COMMAND ${BENCH} --volumes brainsmall --data ${OUT}.nodata
                 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
