@@ -104,7 +104,11 @@ void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layo
   cl::Buffer a = dev.buffer(CL_MEM_READ_WRITE, most * 16, nullptr, "a");
   cl::Buffer b = dev.buffer(CL_MEM_READ_WRITE, most * 16, nullptr, "b");
   std::vector<std::vector<double>> t(static_cast<std::size_t>(N));
-  std::vector<double> total;
+  std::vector<std::vector<double>> tf;  // per launch of the fused run
+  std::vector<double> total, total_fused;
+  // In turn, run after run: one launch per stage, and enqueue_swap's runs
+  // of up to kSwapFusedStages stages per launch (its level buffers come
+  // back from the pool of the previous run: no fresh pages).
   for (int r = 0; r <= runs; ++r) {
     std::vector<cl::Event> ev;
     cl::Buffer in = fp.pixels;
@@ -114,6 +118,12 @@ void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layo
       in = out;
     }
     dev.finish();
+    DeviceSwapRun fused;
+    {
+      Device::ReuseScope reuse(dev);
+      fused = enqueue_swap(dev, plan, fp);
+      dev.finish();
+    }
     if (r == 0) continue;
     double sum = 0;
     for (int k = 0; k < N; ++k) {
@@ -122,6 +132,14 @@ void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layo
       sum += ms;
     }
     total.push_back(sum);
+    tf.resize(fused.stages.size());
+    sum = 0;
+    for (std::size_t l = 0; l < fused.stages.size(); ++l) {
+      const double ms = static_cast<double>(event_ns(fused.stages[l])) * 1e-6;
+      tf[l].push_back(ms);
+      sum += ms;
+    }
+    total_fused.push_back(sum);
   }
   std::printf(
       "swap kernels only (buffers reused), %s -> %d %s, %s: total %.2f ms, plan %.2f ms; "
@@ -129,6 +147,11 @@ void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layo
       f.name.c_str(), f.size, f.sampling == Sampling::voxel ? "voxel" : "pixel",
       swap_layout_name(layout), median(total), plan_ms);
   for (const auto& v : t) std::printf(" %.2f", median(v));
+  std::printf(
+      "\n  up to %d stages per launch (the frame's swap, runs in turn with the above): "
+      "total %.2f ms (%.2f x); launches:",
+      kSwapFusedStages, median(total_fused), median(total_fused) / median(total));
+  for (const auto& v : tf) std::printf(" %.2f", median(v));
   std::printf("\n");
 }
 

@@ -19,6 +19,10 @@
  * rectangles per pixel (the same pixels); a plan made otherwise takes the
  * per-pixel path.
  *
+ * simdvol_swap_stages: stages k0 .. k0 + m - 1 in one launch, a work-group
+ * per group of 2^m PEs whose partners in those stages are all inside it
+ * (below); the engine runs the first stages so, where the levels are large.
+ *
  * simdvol_display: one work-item per intermediate pixel (x, y): the PE
  * xpe[x] | ype[y] holds it after the swap (0 if outside its rectangle).
  *
@@ -48,25 +52,19 @@ SV_FN int sv_rect_index(const int8 r, const int x, const int y) {
   return in ? b * r.s2 + a : -1;
 }
 
-__kernel void simdvol_swap_stage(__global const float4* in, __global const int8* in_rect,
-                                 __global const int* in_off, __global float4* out,
-                                 __global const int8* out_rect, __global const int* out_off,
-                                 __global const int2* chunks, const int nchunks, const int k,
-                                 const int front) {
-  const int c = (int)get_global_id(0);
-  if (c >= nchunks) return;
-  const int2 e = chunks[c];
-  const int p = e.x;
-  const int base = out_off[p] + e.y;
-  const int n = min(SV_SWAP_CHUNK, out_off[p + 1] - base);
-  const int8 o = out_rect[p];
-  const int q = p ^ (1 << k);
-  const int8 rp = in_rect[p], rq = in_rect[q];
-  __global const float4* inp = in + in_off[p];
-  __global const float4* inq = in + in_off[q];
+/* Pixels [first, first + n) of PE p's rectangle o at level k + 1 (from
+ * out_base on) from level k's buffer `in` (its rectangles rp of p and rq of
+ * the partner q = p ^ 2^k at offsets offp, offq): over(front, back), p in
+ * front when bit k of p equals `front`. */
+SV_FN void sv_swap_pixels(__global const float4* in, const int8 rp, const int offp, const int8 rq,
+                          const int offq, __global float4* out, const int8 o, const int out_base,
+                          const int first, const int n, const int p, const int k, const int front) {
+  __global const float4* inp = in + offp;
+  __global const float4* inq = in + offq;
   const bool p_front = ((p >> k) & 1) == front;
-  int row = e.y / o.s2;
-  int col = e.y - row * o.s2;
+  const int base = out_base + first;
+  int row = first / o.s2;
+  int col = first - row * o.s2;
   if (o.s6 >= rp.s6 && o.s6 >= rq.s6) {
     /* Row by row: along a row of o, x steps by 1 << o.s6, a multiple of
      * each input rectangle's x stride, so a pixel's alignment with an input
@@ -110,6 +108,67 @@ __kernel void simdvol_swap_stage(__global const float4* in, __global const int8*
       ++row;
     }
   }
+}
+
+__kernel void simdvol_swap_stage(__global const float4* in, __global const int8* in_rect,
+                                 __global const int* in_off, __global float4* out,
+                                 __global const int8* out_rect, __global const int* out_off,
+                                 __global const int2* chunks, const int nchunks, const int k,
+                                 const int front) {
+  const int c = (int)get_global_id(0);
+  if (c >= nchunks) return;
+  const int2 e = chunks[c];
+  const int p = e.x, q = p ^ (1 << k);
+  const int n = min(SV_SWAP_CHUNK, out_off[p + 1] - out_off[p] - e.y);
+  sv_swap_pixels(in, in_rect[p], in_off[p], in_rect[q], in_off[q], out, out_rect[p], out_off[p],
+                 e.y, n, p, k, front);
+}
+
+/* simdvol_swap_stages: stages k0 .. k0 + m - 1 (1 <= m <= 6) in one launch.
+ * Work-group g (local size 2^m) takes the 2^m PEs that differ only in bits
+ * k0 .. k0 + m - 1, p = base | (lid << k0) with base = (g's low k0 bits) |
+ * (the rest of g << (k0 + m)), one work-item per PE: every partner of those
+ * stages lies in the group, so a barrier between stages is all the
+ * synchronisation they need, and a group's levels stay in its thread's
+ * cache instead of going through memory between launches. Stage k0 + s
+ * reads level k0 + s (s = 0: `in`, else d[s - 1]) and writes level
+ * k0 + s + 1 to d[s]: each level of the launch has a buffer of its own,
+ * since the work-groups run apart (one group's stage s + 2 must not write
+ * where another group's stage s still reads). fronts bit s = stage
+ * k0 + s's `front`. Levels k0 .. k0 + m: rectangles r0 .. r6, offsets
+ * o0 .. o6 (the ones past m are not read, nor d past m - 1). Each pixel is
+ * the same over() as simdvol_swap_stage's. */
+__kernel void simdvol_swap_stages(
+    __global const float4* in, __global float4* d0, __global float4* d1, __global float4* d2,
+    __global float4* d3, __global float4* d4, __global float4* d5, __global const int8* r0,
+    __global const int8* r1, __global const int8* r2, __global const int8* r3,
+    __global const int8* r4, __global const int8* r5, __global const int8* r6,
+    __global const int* o0, __global const int* o1, __global const int* o2, __global const int* o3,
+    __global const int* o4, __global const int* o5, __global const int* o6, const int k0,
+    const int m, const int fronts) {
+  __global float4* D[6] = {d0, d1, d2, d3, d4, d5};
+  __global const int8* R[7] = {r0, r1, r2, r3, r4, r5, r6};
+  __global const int* O[7] = {o0, o1, o2, o3, o4, o5, o6};
+  const int lid = (int)get_local_id(0), g = (int)get_group_id(0);
+  const int low = g & ((1 << k0) - 1);
+  const int p = low | ((g >> k0) << (k0 + m)) | (lid << k0);
+  /* The six stage slots unrolled, each barrier outside any loop or branch
+   * (PoCL ran the loop with a barrier inside at several times the cost
+   * per work-item); slots past m do nothing. */
+#define SV_SWAP_SLOT(S)                                                                          \
+  if (S < m) {                                                                                   \
+    const int k = k0 + S, q = p ^ (1 << k), base = O[S + 1][p];                                  \
+    sv_swap_pixels(S == 0 ? in : D[S > 0 ? S - 1 : 0], R[S][p], O[S][p], R[S][q], O[S][q], D[S], \
+                   R[S + 1][p], base, 0, O[S + 1][p + 1] - base, p, k, (fronts >> S) & 1);       \
+  }                                                                                              \
+  barrier(CLK_GLOBAL_MEM_FENCE);
+  SV_SWAP_SLOT(0)
+  SV_SWAP_SLOT(1)
+  SV_SWAP_SLOT(2)
+  SV_SWAP_SLOT(3)
+  SV_SWAP_SLOT(4)
+  SV_SWAP_SLOT(5)
+#undef SV_SWAP_SLOT
 }
 
 __kernel void simdvol_display(__global const float4* last, __global const int8* rect,

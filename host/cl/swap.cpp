@@ -143,25 +143,91 @@ cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, con
                     cl::NDRange(kBlock));
 }
 
-DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const DeviceFootprints& fp) {
+cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, int m,
+                              const cl::Buffer& in, const std::vector<cl::Buffer>& out) {
+  const int N = d.plan.stages();
+  if (m < 1 || m > kSwapFusedStages || k0 < 0 || k0 + m > N)
+    throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
+                                      " outside 0 .. N-1 (N = " + std::to_string(N) +
+                                      ") or m outside 1 .. " + std::to_string(kSwapFusedStages));
+  if (out.size() != static_cast<std::size_t>(m))
+    throw ArgumentError("out", "needs one buffer per stage (" + std::to_string(m) + ")");
+  const std::string name = "simdvol_swap_stages";
+  cl::Kernel kern = swap_kernel(device, name);
+  // Levels k0 .. k0 + m and outputs 0 .. m - 1; the slots past them repeat
+  // the last (not read).
+  std::vector<const cl::Buffer*> r(7), o(7), w(6);
+  for (int s = 0; s < 7; ++s) {
+    const auto L = static_cast<std::size_t>(k0 + std::min(s, m));
+    r[static_cast<std::size_t>(s)] = &d.rects[L];
+    o[static_cast<std::size_t>(s)] = &d.offsets[L];
+  }
+  for (int s = 0; s < 6; ++s)
+    w[static_cast<std::size_t>(s)] = &out[std::min<std::size_t>(s, out.size() - 1)];
+  cl_int fronts = 0;
+  for (int s = 0; s < m; ++s)
+    if (d.plan.front[static_cast<std::size_t>(k0 + s)]) fronts |= cl_int(1) << s;
+  set_args(kern, name, in, *w[0], *w[1], *w[2], *w[3], *w[4], *w[5], *r[0], *r[1], *r[2], *r[3],
+           *r[4], *r[5], *r[6], *o[0], *o[1], *o[2], *o[3], *o[4], *o[5], *o[6],
+           static_cast<cl_int>(k0), static_cast<cl_int>(m), fronts);
+  const std::size_t pes = std::size_t(1) << N;
+  return device.run(kern, name, cl::NDRange(pes), cl::NDRange(std::size_t(1) << m));
+}
+
+DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const DeviceFootprints& fp,
+                           int max_fused) {
   if (fp.rect_offset != d.plan.offset[0])
     throw ArgumentError("footprints", "do not match the swap plan's rectangles");
+  if (max_fused < 1 || max_fused > kSwapFusedStages)
+    throw ArgumentError("max_fused", "outside 1 .. " + std::to_string(kSwapFusedStages));
   DeviceSwapRun r;
   const int N = d.plan.stages();
-  int64_t most = 0;
-  for (int L = 1; L <= N; ++L) most = std::max(most, d.plan.level_size(L));
   r.last = fp.pixels;
   if (N == 0) return r;
-  const std::size_t level_bytes =
-      static_cast<std::size_t>(std::max<int64_t>(most, 1)) * sizeof(cl_float4);
-  r.ping = device.scratch_buffer(CL_MEM_READ_WRITE, level_bytes, "swap level buffer");
-  r.pong =
-      N > 1 ? device.scratch_buffer(CL_MEM_READ_WRITE, level_bytes, "swap level buffer") : r.ping;
+  // Level L (1 .. N) in slot (L - 1) mod S: a launch of m stages reads
+  // level k0 and writes k0 + 1 .. k0 + m, at most kSwapFusedStages + 1
+  // consecutive levels, so S = max_fused + 1 slots give each its own
+  // buffer (two, ping and pong, when every stage is a launch of its own).
+  const int S = std::min(N, max_fused == 1 ? 2 : max_fused + 1);
+  std::vector<int64_t> most(static_cast<std::size_t>(S), 1);
+  for (int L = 1; L <= N; ++L) {
+    int64_t& m = most[static_cast<std::size_t>((L - 1) % S)];
+    m = std::max(m, d.plan.level_size(L));
+  }
+  for (int s = 0; s < S; ++s)
+    r.slots.push_back(device.scratch_buffer(
+        CL_MEM_READ_WRITE,
+        static_cast<std::size_t>(most[static_cast<std::size_t>(s)]) * sizeof(cl_float4),
+        "swap level buffer"));
+  auto slot = [&](int L) -> const cl::Buffer& {
+    return r.slots[static_cast<std::size_t>((L - 1) % S)];
+  };
   cl::Buffer in = fp.pixels;
-  for (int k = 0; k < N; ++k) {
-    const cl::Buffer& out = (k % 2 == 0) ? r.ping : r.pong;
-    if (d.plan.level_size(k + 1) > 0) r.stages.push_back(enqueue_swap_stage(device, d, k, in, out));
-    in = out;
+  for (int k = 0; k < N;) {
+    // The first stages, kSwapFusedMin or more of them, in one launch (a
+    // work-group per 2^m consecutive PEs); the rest one launch per stage.
+    // Later runs in one launch were slower (simdvol-bench-swap
+    // --swap-only: stages 6 .. 11 of the 256^3 phantom at 256^2, 8,192
+    // PEs, 3.1 ms against 2.3 one launch per stage; brainsmall 1.5 against
+    // 0.8): their levels are small (in the L3 cache either way), and a
+    // group of PEs 2^6 apart reads a few hundred scattered bytes per PE
+    // where the stage kernel streams consecutive PEs.
+    const int m = k == 0 ? std::min(max_fused, N) : 1;
+    if (m >= kSwapFusedMin) {
+      std::vector<cl::Buffer> out;
+      for (int s = 1; s <= m; ++s) out.push_back(slot(k + s));
+      r.stages.push_back(enqueue_swap_stages(device, d, k, m, in, out));
+      r.first_stage.push_back(k);
+      k += m;
+      in = slot(k);
+      continue;
+    }
+    if (d.plan.level_size(k + 1) > 0) {
+      r.stages.push_back(enqueue_swap_stage(device, d, k, in, slot(k + 1)));
+      r.first_stage.push_back(k);
+    }
+    in = slot(k + 1);
+    ++k;
   }
   r.last = in;
   return r;

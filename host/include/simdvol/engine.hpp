@@ -1,7 +1,8 @@
 // The OpenCL render engine: the pipeline of thesis figure 1.2 on the PE
 // array. Direct compositing, every stage on the device: layout -> shade ->
 // classify -> match -> balance -> resample + local (fused) -> binary swap
-// (one launch per stage, swap_cl.hpp) -> display (the final cut-and-stack or
+// (the first six stages in one launch, the rest one launch each; swap_cl.hpp)
+// -> display (the final cut-and-stack or
 // hierarchical layout -> intermediate image) -> warp (voxel sampling), then
 // one read of the output image. The host reads only the footprint
 // rectangles (to size the buffers) and plans the swap from them while the
@@ -70,7 +71,7 @@ struct EngineTimes {
   double walk_ms = 0;  ///< adaptive / mc walks (and the opacity allocation), zeroing included
   double plan_ms = 0;  ///< host: swap plan from the rectangles + its upload (overlaps the device)
   double swap_ms = 0;  ///< all swap stages
-  std::vector<double> swap_stage_ms;  ///< per launched stage
+  std::vector<double> swap_stage_ms;  ///< per swap launch (DeviceSwapRun::stages)
   double display_ms = 0;              ///< final layout -> intermediate image
   double warp_ms = 0;                 ///< intermediate -> output (voxel sampling)
   double composite_ms = 0;            ///< swap + display + warp

@@ -54,17 +54,36 @@ std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& offset);
 void swap_chunk_table_into(const std::vector<int64_t>& offset, std::vector<cl_int2>& table);
 
 /// The level buffers of a swap run.
+/// The most swap stages one launch runs (simdvol_swap_stages: a work-group
+/// of 2^m work-items per group of 2^m PEs, barriers between the stages).
+inline constexpr int kSwapFusedStages = 6;
+/// Fewer stages than this go one launch per stage (simdvol_swap_stage: with
+/// a work-group of 2 or 4 work-items per group, PoCL's cost per work-group
+/// would outweigh what the launches save).
+inline constexpr int kSwapFusedMin = 4;
+
 struct DeviceSwapRun {
-  cl::Buffer ping, pong;          ///< float4 level buffers (levels 1 .. N alternate)
-  cl::Buffer last;                ///< level N (the footprints when N = 0)
-  std::vector<cl::Event> stages;  ///< one event per launched stage (empty levels skip)
+  std::vector<cl::Buffer>
+      slots;        ///< float4 level buffers: level L (1 .. N) in slot (L - 1) mod size
+  cl::Buffer last;  ///< level N (the footprints when N = 0)
+  std::vector<cl::Event> stages;  ///< one event per launch (empty levels alone skip theirs)
+  std::vector<int> first_stage;   ///< per launch: its first stage (the next's first ends it)
 };
 /// Enqueues all N stages from the footprints `fp` (whose offsets must be the
-/// plan's level 0).
-DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& plan, const DeviceFootprints& fp);
+/// plan's level 0): the first min(max_fused, N) stages (max_fused in 1 ..
+/// kSwapFusedStages) in one launch (enqueue_swap_stages) when they are at
+/// least kSwapFusedMin, the others one launch per stage. The levels are the
+/// same bit for bit whatever max_fused.
+DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& plan, const DeviceFootprints& fp,
+                           int max_fused = kSwapFusedStages);
 /// Enqueues stage k alone: level k's buffer `in` -> level k + 1's `out`.
 cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& plan, int k,
                              const cl::Buffer& in, const cl::Buffer& out);
+/// Enqueues stages k0 .. k0 + m - 1 (1 <= m <= kSwapFusedStages) in one
+/// launch: level k0 in `in`, level k0 + s + 1 into out[s] (m buffers, each
+/// large enough for its level, all distinct and none of them `in`).
+cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& plan, int k0, int m,
+                              const cl::Buffer& in, const std::vector<cl::Buffer>& out);
 
 /// Display: level N's buffer -> the intermediate image (float4,
 /// width x height, allocated here into `image`).
