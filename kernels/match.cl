@@ -405,6 +405,11 @@ SV_FN void sv_link_targets(__constant sv_view* view, int4 ci, int4 splits, globa
  * altogether. */
 #define SV_MATCH_FN static inline __attribute__((always_inline))
 
+/* simdvol_match_fill prefetches its links' neighbour rows (1; 0: not). */
+#ifndef SV_FILL_PF
+#define SV_FILL_PF 1
+#endif
+
 SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
                                __constant long* stepc, global const sv_rect* cand,
                                global const int4* cidx, int4 cell, int4 splits,
@@ -517,6 +522,20 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
   if (!make_links) nq[0] = nq[1] = nq[2] = -1;
   for (int e = 0; e < 3; ++e)
     for (int l = 0; l < 8; ++l) t0[e][l] = SV_UNSET;
+#if SV_FILL_PF
+  /* A lane's first link along e reads the neighbour's row sums and offsets
+   * (rows j of PE nq[e], 16 bytes each, far from this PE's): prefetched
+   * here, the column loop runs before the first link needs them. */
+  for (int e = 0; e < 3; ++e)
+    if (nq[e] >= 0) {
+      const int q = nq[e], gq = q * H + (jj[0] - cand[q].j0);
+      SV_PREFETCH(rowsum + gq);
+      SV_PREFETCH(rowsum + gq + 7);
+      SV_PREFETCH(rowoff + gq);
+      SV_PREFETCH(rowoff + gq + 7);
+      SV_PREFETCH(seg_offset + q);
+    }
+#endif
   sv_row8 st;
   sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
   const int8 IA = vload8(0, ia), IB = vload8(0, ib);
