@@ -632,10 +632,20 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
                                int4 block, int pes, int vstride,
                                __constant const sv_shade_params* sp,
                                __constant const sv_classify_params* cp, __global volatile uint* occ,
-                               const int nbx, const int nby, const int mark, const int il) {
+                               const int nbx, const int nby, const int mark,
+                               __global const uchar* live, const int use_live, const int il) {
   const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (p >= pes || e0 >= vstride) return;
+    /* A PE flagged 0 in `live` (use_live = 1) keeps what `out` holds: the
+     * host passes the previous frame's PE mask only where that is the cell's
+     * zeros and every voxel of the cell stays transparent (the same volume
+     * and classification; engine.cpp), so this is what the kernel would
+     * write; its bricks take no mark. -DSV_NO_LIVE writes them again, for
+     * comparison. */
+#ifndef SV_NO_LIVE
+  if (use_live && !live[p]) return;
+#endif
   int rb[SV_NRB];
   float fx[SV_NR], fy[SV_NR], fz[SV_NR], ok[SV_NR];
   sv_chunk_rows(origins, cell, block, p, e0, rb, fx, fy, fz, ok);
@@ -750,18 +760,20 @@ __kernel void simdvol_shade_classify16(
     __global const float* restrict cells, __global float* restrict out,
     __global const int4* restrict origins, int4 dims, int4 cell, int4 block, int pes, int vstride,
     __constant const sv_shade_params* sp, __constant const sv_classify_params* cp,
-    __global volatile uint* occ, const int nbx, const int nby, const int mark) {
+    __global volatile uint* occ, const int nbx, const int nby, const int mark,
+    __global const uchar* live, const int use_live) {
   sv_shade_classify16(cells, out, origins, dims, cell, block, pes, vstride, sp, cp, occ, nbx, nby,
-                      mark, 0);
+                      mark, live, use_live, 0);
 }
 
 __kernel void simdvol_shade_classify16_il(
     __global const float* restrict cells, __global float* restrict out,
     __global const int4* restrict origins, int4 dims, int4 cell, int4 block, int pes, int vstride,
     __constant const sv_shade_params* sp, __constant const sv_classify_params* cp,
-    __global volatile uint* occ, const int nbx, const int nby, const int mark) {
+    __global volatile uint* occ, const int nbx, const int nby, const int mark,
+    __global const uchar* live, const int use_live) {
   sv_shade_classify16(cells, out, origins, dims, cell, block, pes, vstride, sp, cp, occ, nbx, nby,
-                      mark, 1);
+                      mark, live, use_live, 1);
 }
 #endif
 

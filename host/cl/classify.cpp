@@ -170,7 +170,8 @@ cl::Event enqueue_classify_in_place(Device& device, VoxelBuffer& voxels,
 
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
-                                 VoxelBuffer& out, ShadeKernel variant, DeviceOccupancy* mark) {
+                                 VoxelBuffer& out, ShadeKernel variant, DeviceOccupancy* mark,
+                                 const cl::Buffer* live) {
   const CellLayout& C = cells.layout();
   const VoxelLayout& V = out.layout();
   if (C.halo < 1) throw ArgumentError("cells", "the shade stage needs a halo of at least 1");
@@ -192,14 +193,24 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
   if (mark && !vec) throw ArgumentError("occupancy", "only the float16 fused kernel marks it");
   if (mark && mark->dims != V.dims())
     throw ArgumentError("occupancy", "was made for a volume of other dimensions");
+  if (live && !vec) throw ArgumentError("live", "only the float16 fused kernel takes a PE mask");
+  if (live) {
+    std::size_t have = 0;
+    cl_check(live->getInfo(CL_MEM_SIZE, &have), "clGetMemObjectInfo(live)");
+    if (have < static_cast<std::size_t>(C.pes()))
+      throw ArgumentError("live", "holds " + std::to_string(have) + " flags for " +
+                                      std::to_string(C.pes()) + " PEs");
+  }
   cl::Kernel k = fused_kernel(device, name, defines);
   set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
            cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
            static_cast<cl_int>(V.stride), sbuf, cbuf);
   if (vec) {
-    // Without marking the occupancy argument is never read: any buffer will do.
+    // Without marking the occupancy argument is never read, nor `live`
+    // without a mask: any buffer will do.
     set_args_from(k, name, 10, mark ? mark->occupied : cbuf, mark ? mark->bricks[0] : cl_int(0),
-                  mark ? mark->bricks[1] : cl_int(0), cl_int(mark ? 1 : 0));
+                  mark ? mark->bricks[1] : cl_int(0), cl_int(mark ? 1 : 0), live ? *live : cbuf,
+                  cl_int(live ? 1 : 0));
     const detail::PlaneRange r = detail::chunk_range(V);
     return device.run(k, name, r.global, r.local);
   }

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <climits>
+#include <cstring>
 #include <optional>
 #include <string>
 
@@ -71,6 +72,13 @@ struct RenderEngine::State {
   std::optional<VoxelBuffer> rgba;
   const Volume* laid_out = nullptr;  // reuse_layout: the volume in `cells`
   const float* laid_data = nullptr;
+  // The previous frame's PE mask (DeviceMatching::active) while `rgba`
+  // holds zeros in the cells of the PEs it flags 0 under classification
+  // `live_cp` of the volume kept in `cells`: the fused shade + classify
+  // leaves those cells as they are (enqueue_shade_classify's `live`).
+  cl::Buffer live;
+  sv_classify_params live_cp{};
+  bool live_valid = false;
   // Sized by the frame, grown on demand.
   Scratch pe_total, total, sample_off, samples, image;
   // The swap plan, its host vectors and device tables reused from frame to
@@ -129,6 +137,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.cells.reset();
     S.rgba.reset();
     S.laid_out = nullptr;
+    S.live_valid = false;
     const CellLayout cl_layout = S.array->cell_layout(vol.dims(), 1);
     // The fused shade + classify writes interleaved cells (a corner's RGBA
     // in one 16-byte load for the resample); the two-launch path classifies
@@ -175,10 +184,22 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       eo.skip_empty && eo.skip_pes &&
       (mode == CompositeMode::direct || mode == CompositeMode::adaptive || whole_mc || subray_mc);
   const bool need_reach = skip || mask_pes;
+  // The PEs whose cells are all transparent in the kept volume under the
+  // same classification (the previous frame's mask: a PE without reach has
+  // only zero voxels, and whether a voxel is transparent depends on its
+  // value, gradient and the classification, not on the view or the
+  // lighting) hold the zeros they would be given again: the shade leaves
+  // them out. The flag is down while the cells change, up once this
+  // frame's mask is enqueued (the next frame's shade reads it after).
+  const bool use_live =
+      eo.fused && keep && S.live_valid && std::memcmp(&S.live_cp, &cp, sizeof cp) == 0;
+  const cl::Buffer live_used = use_live ? S.live : cl::Buffer();  // for the stats
+  S.live_valid = false;
   if (eo.fused) {
     if (need_reach) occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));
-    e_classify = enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba, ShadeKernel::vec16,
-                                        occupancy ? &*occupancy : nullptr);
+    e_classify =
+        enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba, ShadeKernel::vec16,
+                               occupancy ? &*occupancy : nullptr, use_live ? &S.live : nullptr);
   } else {
     // Classified over the shading: no second voxel buffer, and a voxel
     // moves 32 bytes instead of 48 (enqueue_classify_in_place).
@@ -201,6 +222,11 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
                           ? enqueue_match(device, view, split,
                                           BrickReach{&occupancy->reach, occupancy->bricks}, links)
                           : enqueue_match(device, view, split, links);
+  if (mask_pes && eo.fused && eo.reuse_layout) {
+    S.live = dm.active;
+    S.live_cp = cp;
+    S.live_valid = true;
+  }
   enqueue_balance(device, dm, view, split, eo.balance_sweeps);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
   // The cells' origin table is already on the device (the layout's).
@@ -362,6 +388,12 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     stats->segments = segs.count;
     stats->swapped = swapped;
     if (swapped) stats->swap = swap_cost(S.swap_plan.plan, split, view, grid);
+    if (live_used()) {
+      std::vector<cl_uchar> live(static_cast<std::size_t>(dm.pes));
+      cl_check(device.queue().enqueueReadBuffer(live_used, CL_TRUE, 0, live.size(), live.data()),
+               "clEnqueueReadBuffer(live)");
+      stats->unshaded_pes = std::count(live.begin(), live.end(), cl_uchar(0));
+    }
   }
   return out;
 }

@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 #include "simdvol/classify.hpp"
@@ -201,5 +202,86 @@ TEST(RenderEngine, TurntableEqualsOneShotRenders) {
       for (const Rgba& p : a.pixels()) alpha += p.a;
       EXPECT_GT(alpha, 1.0f);  // not an empty frame
     }
+  }
+}
+
+// A turntable's engine leaves the cells of the previous frame's PEs without
+// reach unshaded (EngineStats::unshaded_pes): their voxels are transparent
+// under the same classification of the same volume, and the cells hold the
+// zeros a shade would write again. Every frame equals a one-shot render bit
+// for bit: across views and orders (the cells stay transparent), and after
+// the classification changes (air made faintly opaque: those cells are
+// shaded again, nothing is left out until a frame under one classification
+// has made its mask), and back.
+TEST(RenderEngine, TransparentCellsStayUnshadedBetweenFrames) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 2);
+  Classifier hazy = classifier_preset("ct");
+  hazy.mixture.materials[0].opacity = 0.01f;  // air
+  struct Frame {
+    double phi;
+    int order;
+    bool hazy;
+    bool unshaded;  // some PE left out
+  };
+  const Frame frames[] = {{0, 1, false, false},  {23, 1, false, true},  {40, 3, false, true},
+                          {55, 1, true, false},  {70, 1, false, false}, {85, 1, false, true},
+                          {100, 2, true, false}, {115, 2, true, false}};
+  EngineOptions eo;
+  eo.pes = 256;
+  eo.fused = true;
+  eo.reuse_layout = true;
+  RenderEngine engine(dev, eo);
+  int64_t most = 0;
+  for (const Frame& f : frames) {
+    SCOPED_TRACE("phi " + std::to_string(f.phi));
+    RenderOptions opt;
+    opt.width = opt.height = 40;
+    opt.view = {20, f.phi, 10};
+    opt.order = f.order;
+    opt.classifier = f.hazy ? hazy : classifier_preset("ct");
+    EngineStats st;
+    const Image a = engine.render(vol, opt, nullptr, &st);
+    const Image b = render_opencl(dev, vol, opt, eo);
+    ASSERT_EQ(a.pixels().size(), b.pixels().size());
+    int64_t differing = 0;
+    for (std::size_t n = 0; n < a.pixels().size(); ++n) {
+      const Rgba &x = a.pixels()[n], &y = b.pixels()[n];
+      differing += std::memcmp(&x, &y, sizeof x) != 0;
+    }
+    EXPECT_EQ(differing, 0);
+    EXPECT_EQ(st.unshaded_pes > 0, f.unshaded) << st.unshaded_pes << " PEs unshaded";
+    EXPECT_LT(st.unshaded_pes, eo.pes);
+    most = std::max(most, st.unshaded_pes);
+  }
+  EXPECT_GT(most, eo.pes / 8);  // the phantom's corners are air
+  // Another volume of the same dims (soft tissue everywhere): laid out
+  // again, every cell shaded, the same image as a one-shot render.
+  Volume tissue = vol;
+  std::fill(tissue.data().begin(), tissue.data().end(), 40.0f);
+  {
+    RenderOptions opt;
+    opt.width = opt.height = 40;
+    opt.classifier = classifier_preset("ct");
+    EngineStats st;
+    engine.render(vol, opt);  // the phantom's mask under this classification
+    engine.render(vol, opt, nullptr, &st);
+    EXPECT_GT(st.unshaded_pes, 0);
+    const Image a = engine.render(tissue, opt, nullptr, &st);
+    const Image b = render_opencl(dev, tissue, opt, eo);
+    EXPECT_EQ(st.unshaded_pes, 0);
+    EXPECT_EQ(std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(Rgba)),
+              0);
+  }
+  // Without the layout kept, every frame shades every cell.
+  eo.reuse_layout = false;
+  RenderEngine fresh(dev, eo);
+  RenderOptions opt;
+  opt.width = opt.height = 40;
+  opt.classifier = classifier_preset("ct");
+  for (int f = 0; f < 2; ++f) {
+    EngineStats st;
+    fresh.render(vol, opt, nullptr, &st);
+    EXPECT_EQ(st.unshaded_pes, 0);
   }
 }

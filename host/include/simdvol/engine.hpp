@@ -90,6 +90,11 @@ struct EngineStats {
   int64_t segments = 0;  ///< ray segments of the matching
   bool swapped = false;  ///< the frame went through the binary swap (direct, mc subray)
   SwapCost swap{};       ///< swap_cost of the frame's plan (when swapped)
+  /// PEs the shade + classify left as they were: their cells all zeros and
+  /// transparent under the same classification of the kept volume (the
+  /// previous frame's PEs without reach; EngineOptions::reuse_layout,
+  /// fused, skip_pes). 0 in a frame that shaded every cell.
+  int64_t unshaded_pes = 0;
   /// SIMD utilisation after balancing: mean load / max load over all P PEs,
   /// the skipped ones included (1 when idle).
   double utilisation() const;

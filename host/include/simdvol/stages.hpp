@@ -205,10 +205,16 @@ struct DeviceOccupancy;  // local_cl.hpp
 /// value the scalar 3-D range kernel. With `mark` (from make_occupancy for
 /// out's layout; vec16 only, else ArgumentError) the kernel also sets the
 /// brick occupancy of what it writes, as enqueue_occupancy's scan would.
+/// With `live` (cl_uchar per PE; vec16 only, else ArgumentError; fewer than
+/// P flags: ArgumentError) the PEs flagged 0 are left as they are in `out`
+/// (no loads, stores or marks): pass it only where each such PE's cell in
+/// `out` already holds what this call would write there, all zeros with
+/// every voxel transparent (the engine passes the previous frame's PE mask
+/// of the same volume and classification: match.hpp's inactive PEs).
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
                                  VoxelBuffer& out, ShadeKernel variant = ShadeKernel::vec16,
-                                 DeviceOccupancy* mark = nullptr);
+                                 DeviceOccupancy* mark = nullptr, const cl::Buffer* live = nullptr);
 
 /// Gathers the in-volume voxels of `voxels` into `flat` (a buffer of at
 /// least dims-product 16-byte elements, x fastest).
