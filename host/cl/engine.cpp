@@ -77,6 +77,9 @@ struct RenderEngine::State {
   // `live_cp` of the volume kept in `cells`: the fused shade + classify
   // leaves those cells as they are (enqueue_shade_classify's `live`).
   cl::Buffer live;
+  // and that frame's brick occupancy and reach (for its order), the same in
+  // this frame under the same conditions: no marks, no reach kernel.
+  std::optional<DeviceOccupancy> live_occupancy;
   sv_classify_params live_cp{};
   bool live_valid = false;
   // Sized by the frame, grown on demand.
@@ -195,11 +198,19 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       eo.fused && keep && S.live_valid && std::memcmp(&S.live_cp, &cp, sizeof cp) == 0;
   const cl::Buffer live_used = use_live ? S.live : cl::Buffer();  // for the stats
   S.live_valid = false;
+  // The occupancy too, where the order (the reach's stencil) is the same.
+  const bool reuse_occupancy =
+      use_live && need_reach && S.live_occupancy && S.live_occupancy->order == opt.order;
+  if (reuse_occupancy) {
+    occupancy = S.live_occupancy;
+    occupancy->events.clear();
+  }
   if (eo.fused) {
-    if (need_reach) occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));
-    e_classify =
-        enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba, ShadeKernel::vec16,
-                               occupancy ? &*occupancy : nullptr, use_live ? &S.live : nullptr);
+    if (need_reach && !reuse_occupancy)
+      occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));
+    e_classify = enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba, ShadeKernel::vec16,
+                                        occupancy && !reuse_occupancy ? &*occupancy : nullptr,
+                                        use_live ? &S.live : nullptr);
   } else {
     // Classified over the shading: no second voxel buffer, and a voxel
     // moves 32 bytes instead of 48 (enqueue_classify_in_place).
@@ -208,7 +219,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   }
   // The brick reach of empty-space skipping, before the matching (it may
   // leave out the PEs with nothing in reach).
-  if (need_reach) {
+  if (need_reach && !reuse_occupancy) {
     if (occupancy)
       enqueue_occupancy_reach(device, *occupancy);
     else
@@ -224,6 +235,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
                           : enqueue_match(device, view, split, links);
   if (mask_pes && eo.fused && eo.reuse_layout) {
     S.live = dm.active;
+    S.live_occupancy = occupancy;
     S.live_cp = cp;
     S.live_valid = true;
   }

@@ -65,7 +65,8 @@ struct EngineTimes {
                                  ///< sample buffer (adaptive, mc)
   double occupancy_ms = 0;       ///< with skip_empty: the brick occupancy's zeroing,
                                  ///< scan (not fused: fused marks it inside classify_ms) and
-                                 ///< reach (included in resample_local_ms)
+                                 ///< reach (included in resample_local_ms); 0 where the
+                                 ///< previous frame's is kept (EngineStats::unshaded_pes)
   double offsets_ms = 0;         ///< adaptive, mc: the sample offsets' scan
   double rays_ms = 0;            ///< adaptive, mc whole or allocated: per-pixel ray lists
   double walk_ms = 0;  ///< adaptive / mc walks (and the opacity allocation), zeroing included
@@ -93,7 +94,9 @@ struct EngineStats {
   /// PEs the shade + classify left as they were: their cells all zeros and
   /// transparent under the same classification of the kept volume (the
   /// previous frame's PEs without reach; EngineOptions::reuse_layout,
-  /// fused, skip_pes). 0 in a frame that shaded every cell.
+  /// fused, skip_pes). 0 in a frame that shaded every cell. Such a frame
+  /// also keeps the previous frame's brick occupancy and reach where the
+  /// order is the same (no marks, no reach kernel: the same bricks).
   int64_t unshaded_pes = 0;
   /// SIMD utilisation after balancing: mean load / max load over all P PEs,
   /// the skipped ones included (1 when idle).
