@@ -4,11 +4,14 @@
 // The plan is computed on the host from the footprint rectangles (which the
 // host already reads to size the footprints) and uploaded once per frame:
 // per level the strided rectangles and offsets, per stage the chunk table of
-// the output pixels ((PE, first pixel) per 16 pixels of one PE). One launch per stage (the
-// partner's rectangle is read directly: the whole level is one buffer), no
-// waits between them; level buffers ping-pong between two allocations sized
-// by the largest level. Every enqueue_* validates first and returns the
-// profiling events.
+// the output pixels ((PE, first pixel) per 16 pixels of one PE). The first
+// six stages run in one launch (a work-group per 64 consecutive PEs, whose
+// partners in those stages are all inside it; barriers between the
+// stages), the later ones one launch per stage (the partner's rectangle is
+// read directly: the whole level is one buffer), no waits between them;
+// level L lives in buffer slot (L - 1) mod 7 (two slots, ping-pong, when
+// every stage is a launch of its own), each slot sized by its largest
+// level. Every enqueue_* validates first and returns the profiling events.
 #pragma once
 
 #include <cstdint>
