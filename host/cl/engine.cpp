@@ -81,6 +81,7 @@ struct RenderEngine::State {
   // this frame under the same conditions: no marks, no reach kernel.
   std::optional<DeviceOccupancy> live_occupancy;
   sv_classify_params live_cp{};
+  float live_grad[4]{};  // and gradient scale (the transfer function's |g|)
   bool live_valid = false;
   // Sized by the frame, grown on demand.
   Scratch pe_total, total, sample_off, samples, image;
@@ -190,12 +191,14 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // The PEs whose cells are all transparent in the kept volume under the
   // same classification (the previous frame's mask: a PE without reach has
   // only zero voxels, and whether a voxel is transparent depends on its
-  // value, gradient and the classification, not on the view or the
-  // lighting) hold the zeros they would be given again: the shade leaves
-  // them out. The flag is down while the cells change, up once this
-  // frame's mask is enqueued (the next frame's shade reads it after).
-  const bool use_live =
-      eo.fused && keep && S.live_valid && std::memcmp(&S.live_cp, &cp, sizeof cp) == 0;
+  // value, gradient (its scale from the spacing) and the classification,
+  // not on the view or the lighting) hold the zeros they would be given
+  // again: the shade leaves them out. The flag is down while the cells
+  // change, up once this frame's mask is enqueued (the next frame's shade
+  // reads it after).
+  const bool use_live = eo.fused && keep && S.live_valid &&
+                        std::memcmp(&S.live_cp, &cp, sizeof cp) == 0 &&
+                        std::memcmp(S.live_grad, sp.grad_scale, sizeof S.live_grad) == 0;
   const cl::Buffer live_used = use_live ? S.live : cl::Buffer();  // for the stats
   S.live_valid = false;
   // The occupancy too, where the order (the reach's stencil) is the same.
@@ -237,6 +240,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.live = dm.active;
     S.live_occupancy = occupancy;
     S.live_cp = cp;
+    std::memcpy(S.live_grad, sp.grad_scale, sizeof S.live_grad);
     S.live_valid = true;
   }
   enqueue_balance(device, dm, view, split, eo.balance_sweeps);
