@@ -637,13 +637,13 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (p >= pes || e0 >= vstride) return;
-    /* A PE flagged 0 in `live` (use_live = 1) keeps what `out` holds: the
-     * host passes the previous frame's PE mask only where that is the cell's
-     * zeros and every voxel of the cell stays transparent (the same volume
-     * and classification; engine.cpp), so this is what the kernel would
-     * write; its bricks take no mark. -DSV_NO_LIVE writes them again, for
-     * comparison. */
 #ifndef SV_NO_LIVE
+  /* A PE flagged 0 in `live` (use_live = 1) keeps what `out` holds: the
+   * host passes the previous frame's PE mask only where that is the cell's
+   * zeros and every voxel of the cell stays transparent (the same volume
+   * and classification; engine.cpp), so this is what the kernel would
+   * write; its bricks take no mark. -DSV_NO_LIVE writes them again, for
+   * comparison. */
   if (use_live && !live[p]) return;
 #endif
   int rb[SV_NRB];

@@ -195,8 +195,7 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
     throw ArgumentError("occupancy", "was made for a volume of other dimensions");
   if (live && !vec) throw ArgumentError("live", "only the float16 fused kernel takes a PE mask");
   if (live) {
-    std::size_t have = 0;
-    cl_check(live->getInfo(CL_MEM_SIZE, &have), "clGetMemObjectInfo(live)");
+    const std::size_t have = buffer_size(*live, "clGetMemObjectInfo(live)");
     if (have < static_cast<std::size_t>(C.pes()))
       throw ArgumentError("live", "holds " + std::to_string(have) + " flags for " +
                                       std::to_string(C.pes()) + " PEs");
@@ -221,8 +220,7 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
 cl::Event enqueue_gather_voxels(Device& device, const VoxelBuffer& voxels, const cl::Buffer& flat) {
   const VoxelLayout& V = voxels.layout();
   const std::size_t n = static_cast<std::size_t>(V.dims()[0] * V.dims()[1] * V.dims()[2]);
-  std::size_t size = 0;
-  cl_check(flat.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(flat voxels)");
+  const std::size_t size = buffer_size(flat, "clGetMemObjectInfo(flat voxels)");
   if (size < n * 16)
     throw ArgumentError("flat voxels", "buffer of " + std::to_string(size) + " bytes is too small");
   // The origins table comes from a cell buffer of the same geometry; build it

@@ -43,7 +43,7 @@ struct Scratch {
     if (need > bytes) {
       check_allocation(need, device.info().max_alloc_bytes, what);
       buffer = device.scratch_buffer(CL_MEM_READ_WRITE, need, what);
-      cl_check(buffer.getInfo(CL_MEM_SIZE, &bytes), "clGetMemObjectInfo(CL_MEM_SIZE)");
+      bytes = buffer_size(buffer, "clGetMemObjectInfo(CL_MEM_SIZE)");
     }
     return buffer;
   }

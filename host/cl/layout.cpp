@@ -59,8 +59,7 @@ CellBuffer::CellBuffer(Device& device, const CellLayout& layout, cl::Buffer cell
     : layout_(layout) {
   check_cell_layout(layout);
   if (cells()) {
-    std::size_t size = 0;
-    cl_check(cells.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(cell buffer)");
+    const std::size_t size = buffer_size(cells, "clGetMemObjectInfo(cell buffer)");
     if (size < layout.bytes())
       throw ArgumentError("cell buffer", "the caller's buffer has " + std::to_string(size) +
                                              " bytes; the layout needs " +
@@ -148,8 +147,7 @@ cl::Event PeArray::enqueue_layout(const cl::Buffer& flat, CellBuffer& cells,
   const CellLayout& L = cells.layout();
   if (L.pes() != pes()) throw ArgumentError("cells", "laid out for a different PE count");
   const std::size_t n = flat_count(L.dims());
-  std::size_t size = 0;
-  cl_check(flat.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(volume)");
+  const std::size_t size = buffer_size(flat, "clGetMemObjectInfo(volume)");
   if (size < n * sizeof(float))
     throw ArgumentError("volume", "buffer of " + std::to_string(size) + " bytes holds fewer than " +
                                       std::to_string(n) + " floats");

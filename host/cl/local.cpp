@@ -71,8 +71,7 @@ struct PrefetchArgs {
 PrefetchArgs prefetch_args(const ResampleTables& t, const VoxelLayout& L) {
   const bool on = t.origins() != nullptr;
   if (on) {
-    std::size_t size = 0;
-    cl_check(t.origins.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(cell origins)");
+    const std::size_t size = buffer_size(t.origins, "clGetMemObjectInfo(cell origins)");
     if (size < static_cast<std::size_t>(L.pes()) * sizeof(cl_int4))
       throw ArgumentError("resample tables", "the cell origins hold fewer than one int4 per PE");
   }

@@ -53,8 +53,7 @@ VoxelBuffer::VoxelBuffer(Device& device, const VoxelLayout& layout) : layout_(la
 
 VoxelBuffer::VoxelBuffer(const VoxelLayout& layout, cl::Buffer buffer) : layout_(layout) {
   if (!buffer()) throw ArgumentError("voxel cell buffer", "null buffer");
-  std::size_t size = 0;
-  cl_check(buffer.getInfo(CL_MEM_SIZE, &size), "clGetMemObjectInfo(voxel cells)");
+  const std::size_t size = buffer_size(buffer, "clGetMemObjectInfo(voxel cells)");
   if (size < layout.bytes())
     throw ArgumentError("voxel cell buffer", "the caller's buffer has " + std::to_string(size) +
                                                  " bytes; the layout needs " +

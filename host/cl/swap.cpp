@@ -1,5 +1,6 @@
 // The swap, display and warp stages on the device (swap_cl.hpp).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -76,7 +77,7 @@ void stage(Device& device, cl::Buffer& b, const std::vector<T>& v, bool blocking
            const char* what) {
   const std::size_t bytes = std::max<std::size_t>(v.size(), 1) * sizeof(T);
   std::size_t have = 0;
-  if (b()) cl_check(b.getInfo(CL_MEM_SIZE, &have), "clGetMemObjectInfo(CL_MEM_SIZE)");
+  if (b()) have = buffer_size(b, "clGetMemObjectInfo(CL_MEM_SIZE)");
   if (have < bytes && blocking) {
     b = upload(device, v, what);
     return;
@@ -156,7 +157,8 @@ cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, i
   cl::Kernel kern = swap_kernel(device, name);
   // Levels k0 .. k0 + m and outputs 0 .. m - 1; the slots past them repeat
   // the last (not read).
-  std::vector<const cl::Buffer*> r(7), o(7), w(6);
+  std::array<const cl::Buffer*, 7> r{}, o{};
+  std::array<const cl::Buffer*, 6> w{};
   for (int s = 0; s < 7; ++s) {
     const auto L = static_cast<std::size_t>(k0 + std::min(s, m));
     r[static_cast<std::size_t>(s)] = &d.rects[L];

@@ -99,6 +99,14 @@ inline void cl_check(cl_int code, const char* call) {
   if (code != CL_SUCCESS) throw CLError(call, code);
 }
 
+/// The size in bytes of `buffer` (CL_MEM_SIZE); CLError(call, code) if the
+/// query fails.
+inline std::size_t buffer_size(const cl::Buffer& buffer, const char* call) {
+  std::size_t bytes = 0;
+  cl_check(buffer.getInfo(CL_MEM_SIZE, &bytes), call);
+  return bytes;
+}
+
 /// One OpenCL device as `simdvol devices` lists it.
 struct DeviceInfo {
   int index = -1;  ///< position in list_devices() (-1 for a wrapped external device)
