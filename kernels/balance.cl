@@ -15,7 +15,9 @@
  * over the buffer, and its time is mostly that of streaming their cache
  * lines (16-bit bounds of 2 M segments, 8 MB, stay in a 32 MB L3).
  * simdvol_balance_pack copies the bounds out of the segments before the
- * first round, simdvol_balance_unpack writes them back after the last.
+ * first round (for the 32-bit bounds only: simdvol_match_fill writes the
+ * 16-bit ones beside the segments), simdvol_balance_unpack writes them back
+ * after the last.
  *
  * Tables: cidx (int4[P], cell index of each PE), pe_of (int[P], the PE of
  * cell (ix, iy, iz) at (iz * sy + iy) * sx + ix), splits (int4, cells per

@@ -14,14 +14,16 @@
  *                        totals, load, footprint rect
  *   simdvol_match_scan   one work-item: seg_offset[P + 1], link-list offsets
  *   simdvol_match_fill   per (PE, row): the segments again, written at
- *                        seg_offset[p] + rowoff, with their balance links
- *                        (balance_links) and the per-(PE, axis) link lists
+ *                        seg_offset[p] + rowoff, with the per-(PE, axis)
+ *                        lists of their balance links (balance_links) and,
+ *                        where fill_bounds, their (k0, k1) as the balance's
+ *                        16-bit bounds
  *   simdvol_match_active per PE: active[p] = some brick with reach meets
  *                        the PE's cell (empty-space skipping, below)
  *
  *   simdvol_match_rows_nolinks, simdvol_match_fill_nolinks: the same
  *                        without the links (no balancing to follow): rowlk
- *                        0, links and llist not written; the segments,
+ *                        0, llist and bounds not written; the segments,
  *                        rects and loads are the same.
  * The links were about a third of the matching's time (SIMDVOL_CL_OPTIONS
  * switch, `simdvol render --view 20,35,10 --frames 6 --step 0
@@ -477,8 +479,8 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
                                global const int* pe_of, global const uchar* active, int pes, int H,
                                global const int4* rowsum, global const int4* rowoff,
                                global const int* seg_offset, global const int4* lofs,
-                               global sv_segment* segments, global int* links, global int2* llist,
-                               const int make_links) {
+                               global sv_segment* segments, global short2* bounds,
+                               const int fill_bounds, global int2* llist, const int make_links) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
@@ -557,7 +559,9 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
         sg.k0 = K0[l];
         sg.k1 = K1[l];
         segments[at[l]] = sg;
-        int link = -1;
+        /* The balance's 16-bit bounds (balance.cl), where the host asks for
+         * them: its pack would otherwise read the segments back. */
+        if (make_links && fill_bounds) bounds[at[l]] = (short2)((short)sg.k0, (short)sg.k1);
         if (make_links && LK[l] && nq[E[l]] >= 0) {
           const int e = E[l], q = nq[e];
           if (t0[e][l] == SV_UNSET) {
@@ -584,10 +588,8 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
             hn[e][l] = n;
             t = hb[e][l] + n;
           }
-          link = t * 4 + e;
           llist[la[e][l]++] = (int2)(at[l], t);
         }
-        if (make_links) links[at[l]] = link;
         ++at[l];
       }
     }
@@ -615,10 +617,10 @@ SV_MATCH_ROWS_KERNEL(simdvol_match_rows_nolinks, 0)
       global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,           \
       global const int* pe_of, global const uchar* active, int pes, int H,                   \
       global const int4* rowsum, global const int4* rowoff, global const int* seg_offset,    \
-      global const int4* lofs, global sv_segment* segments, global int* links,               \
-      global int2* llist) {                                                                  \
+      global const int4* lofs, global sv_segment* segments, global short2* bounds,           \
+      int fill_bounds, global int2* llist) {                                                 \
     sv_match_fill(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum, \
-                  rowoff, seg_offset, lofs, segments, links, llist, LINKS);                  \
+                  rowoff, seg_offset, lofs, segments, bounds, fill_bounds, llist, LINKS);    \
   }
 SV_MATCH_FILL_KERNEL(simdvol_match_fill, 1)
 SV_MATCH_FILL_KERNEL(simdvol_match_fill_nolinks, 0)

@@ -223,9 +223,13 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   m.rects = device.buffer(rw, P * sizeof(sv_rect), nullptr, "footprint rects");
   m.loads = device.buffer(rw, P * sizeof(cl_int), nullptr, "loads");
   m.linked = links == MatchLinks::make;
-  // Without links the kernels write neither buffer (a placeholder each).
+  // Without links the kernels write no link list (a placeholder).
   const std::size_t LC = m.linked ? C : 1;
-  m.links = device.scratch_buffer(rw, LC * sizeof(cl_int), "balance links");
+  // The balance's 16-bit bounds, where they will do: the fill writes them
+  // beside the segments (a placeholder otherwise; enqueue_balance packs).
+  m.bounds_filled = m.linked && balance_bounds16(view.grid.grid[2]);
+  m.bounds =
+      device.scratch_buffer(rw, (m.bounds_filled ? C : 1) * sizeof(cl_short2), "balance bounds");
   m.link_offset = device.buffer(rw, (P + 1) * sizeof(cl_int4), nullptr, "link offsets");
   m.link_list = device.scratch_buffer(rw, LC * sizeof(cl_int2), "link lists");
   const std::string rows_name = m.linked ? "simdvol_match_rows" : "simdvol_match_rows_nolinks";
@@ -252,7 +256,7 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   cl::Kernel k_fill = device.kernel("match", fill_name, match_defines());
   set_args(k_fill, fill_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
            m.pe_of, m.active, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset, m.segments,
-           m.links, m.link_list);
+           m.bounds, cl_int(m.bounds_filled), m.link_list);
   m.match_events.push_back(
       {"match_fill", device.run(k_fill, fill_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
   return m;
@@ -300,12 +304,21 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
                     round_name = "simdvol_balance_round" + sfx,
                     unpack_name = "simdvol_balance_unpack" + sfx;
   const std::size_t slots = static_cast<std::size_t>(m.capacity);  // Device::run rounds up
-  const cl::Buffer kk = device.scratch_buffer(
-      CL_MEM_READ_WRITE, static_cast<std::size_t>(m.capacity) * (narrow ? 4 : 8), "balance bounds");
-  cl::Kernel pack = device.kernel("balance", pack_name, defs);
-  set_args(pack, pack_name, m.seg_offset, npes, m.segments, kk);
-  m.balance_events.push_back(
-      {"balance_pack", device.run(pack, pack_name, cl::NDRange(slots), cl::NDRange(kWgs))});
+  // The 16-bit bounds are the fill's (its copy of the segments' k0, k1, kept
+  // equal to them by the unpack after every balance); else a pack.
+  const bool filled = narrow && m.bounds_filled;
+  m.bounds_filled = filled;  // a 32-bit balance leaves the fill's copy behind
+  const cl::Buffer kk =
+      filled ? m.bounds
+             : device.scratch_buffer(CL_MEM_READ_WRITE,
+                                     static_cast<std::size_t>(m.capacity) * (narrow ? 4 : 8),
+                                     "balance bounds");
+  if (!filled) {
+    cl::Kernel pack = device.kernel("balance", pack_name, defs);
+    set_args(pack, pack_name, m.seg_offset, npes, m.segments, kk);
+    m.balance_events.push_back(
+        {"balance_pack", device.run(pack, pack_name, cl::NDRange(slots), cl::NDRange(kWgs))});
+  }
   for (const Round& r : rounds) {
     cl::Kernel round = device.kernel("balance", round_name, defs);
     set_args(round, round_name, m.cidx, m.pe_of, splits, npes, cl_int(r.axis), cl_int(r.par),
@@ -353,11 +366,33 @@ std::vector<int32_t> DeviceMatching::read_links(Device& device) const {
       device.queue().enqueueReadBuffer(
           seg_offset, CL_TRUE, static_cast<std::size_t>(pes) * sizeof(cl_int), sizeof(cl_int), &n),
       "clEnqueueReadBuffer(seg_offset)");
-  std::vector<int32_t> out(static_cast<std::size_t>(n));
-  if (n > 0)
-    cl_check(device.queue().enqueueReadBuffer(links, CL_TRUE, 0, out.size() * sizeof(cl_int),
-                                              out.data()),
-             "clEnqueueReadBuffer(links)");
+  // The lists hold each link as (segment, linked segment), axis by axis
+  // (link_offset's y, z, w: where PE p's list along x, y, z starts; the
+  // entry P holds the ends): link = linked * 4 + axis at the segment.
+  const std::size_t P = static_cast<std::size_t>(pes);
+  std::vector<cl_int4> lofs(P + 1);
+  cl_check(device.queue().enqueueReadBuffer(link_offset, CL_TRUE, 0, lofs.size() * sizeof(cl_int4),
+                                            lofs.data()),
+           "clEnqueueReadBuffer(link offsets)");
+  const cl_int end = lofs[P].s[3];
+  if (lofs[0].s[1] != 0 || lofs[P].s[1] != lofs[0].s[2] || lofs[P].s[2] != lofs[0].s[3] || end > n)
+    throw Error("device link offsets are inconsistent");
+  std::vector<cl_int2> list(static_cast<std::size_t>(end));
+  if (end > 0)
+    cl_check(device.queue().enqueueReadBuffer(link_list, CL_TRUE, 0, list.size() * sizeof(cl_int2),
+                                              list.data()),
+             "clEnqueueReadBuffer(link lists)");
+  std::vector<int32_t> out(static_cast<std::size_t>(n), -1);
+  const std::array<cl_int, 4> starts{lofs[0].s[1], lofs[0].s[2], lofs[0].s[3], end};
+  for (int axis = 0; axis < 3; ++axis)
+    for (cl_int e = starts[axis]; e < starts[axis + 1]; ++e) {
+      const cl_int2 st = list[static_cast<std::size_t>(e)];
+      if (st.s[0] < 0 || st.s[0] >= n || st.s[1] < 0 || st.s[1] >= n ||
+          out[static_cast<std::size_t>(st.s[0])] != -1)
+        throw Error("device link list entry " + std::to_string(e) +
+                    " is out of range or links a segment twice");
+      out[static_cast<std::size_t>(st.s[0])] = st.s[1] * 4 + axis;
+    }
   return out;
 }
 

@@ -12,8 +12,11 @@
 //                          footprint rect
 //   3. simdvol_match_scan  one work-item: seg_offset[P + 1] and the link-list
 //                          offsets (a serial scan of P entries: microseconds)
-//   4. simdvol_match_fill  the segments again, written in place, with their
-//                          balance links and the per-(PE, axis) link lists
+//   4. simdvol_match_fill  the segments again, written in place, with the
+//                          per-(PE, axis) lists of their balance links and,
+//                          where 16-bit balance bounds will do, the bounds
+//                          the balance rounds move (so no pack reads the
+//                          segments back)
 // (with MatchLinks::skip, simdvol_match_rows_nolinks and _fill_nolinks: the
 // same without the links, their test compiled out)
 // With a PE mask (enqueue_match's `active`, or its `reach`: first
@@ -37,7 +40,9 @@
 // segments in a compact copy, 16-bit when the grid depth allows
 // (balance_bounds16; the kernels named ...16) and 32-bit otherwise, and
 // update loads in place; the
-// unpack writes the bounds back into segments. The rounds are bound by
+// unpack writes the bounds back into segments. The 16-bit copy is the one
+// the matching's fill wrote (DeviceMatching::bounds_filled), so no pack
+// runs; the 32-bit one is packed from the segments. The rounds are bound by
 // streaming the segments they touch: 4-byte bounds instead of 16-byte
 // segments keep 2 M segments' bounds in the L3 (simdvol-bench-match,
 // 256^3 at 45 deg, 8192 PEs: balance 112-132 -> 64-76 ms). The result
@@ -51,8 +56,10 @@
 //   rects       sv_rect[P]       footprint = bbox of the PE's rays (not changed
 //               by balancing)
 //   loads       cl_int[P]        sum of k1 - k0 (updated by balancing)
-//   links       cl_int[capacity] balance_links() (written by enqueue_match with
-//               MatchLinks::make, the default; with skip, no link buffers)
+//   link_list   cl_int2[capacity] the balance links per (axis, PE), at
+//               link_offset (written by enqueue_match with MatchLinks::make,
+//               the default; with skip, no link buffers); read_links gives
+//               them in balance_links()'s format
 #pragma once
 
 #include <array>
@@ -101,19 +108,24 @@ struct DeviceMatching {
   cl::Buffer segments;     ///< sv_segment[capacity]
   cl::Buffer rects;        ///< sv_rect[P]
   cl::Buffer loads;        ///< cl_int[P]
-  cl::Buffer links;        ///< cl_int[capacity], balance_links() format
+  cl::Buffer bounds;       ///< cl_short2[capacity]: (k0, k1) per segment, see bounds_filled
   cl::Buffer link_offset;  ///< cl_int4[P + 1]: y, z, w = start of PE p's list along x, y, z
   cl::Buffer link_list;    ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE)
   cl::Buffer active;       ///< cl_uchar[P]: the PE mask (all 1 without one)
   bool masked = false;     ///< made with a mask (read() then returns it in Matching::active)
-  bool linked = true;      ///< made with MatchLinks::make (links, link lists written)
+  bool linked = true;      ///< made with MatchLinks::make (link lists written)
+  /// `bounds` holds the segments' 16-bit (k0, k1) (written by the fill, kept
+  /// by balancing with 16-bit bounds): enqueue_balance then needs no pack.
+  bool bounds_filled = false;
   std::vector<StageEvent> match_events;    ///< (active,) rows, pe, scan, fill
   std::vector<StageEvent> balance_events;  ///< pack, every round, unpack
 
   /// Blocking read-back as a Matching (loads as int64).
   Matching read(Device& device) const;
-  /// Blocking read-back of the links (seg_offset[P] entries; written by
-  /// enqueue_match). ArgumentError if made with MatchLinks::skip.
+  /// Blocking read-back of the links in balance_links()'s format
+  /// (seg_offset[P] entries, from the link lists written by enqueue_match).
+  /// ArgumentError if made with MatchLinks::skip; Error if the lists link a
+  /// segment twice or out of range.
   std::vector<int32_t> read_links(Device& device) const;
 };
 
