@@ -1,4 +1,6 @@
 // The resample and local stages on the device (local_cl.hpp).
+#include <algorithm>
+#include <cstdint>
 #include <limits>
 #include <string>
 
@@ -80,6 +82,30 @@ PrefetchArgs prefetch_args(const ResampleTables& t, const VoxelLayout& L) {
                    static_cast<cl_int>(L.cell()[2]), on ? 1 : 0}}};
 }
 
+// The order-1 kernels' pair table (resample_pair_table). Tables made
+// without one (a caller's own ResampleTables) get it here from their address
+// table, read back (a few KiB, blocking). One of the wrong size is an
+// ArgumentError.
+cl::Buffer pair_table(Device& device, const ResampleTables& t) {
+  const int64_t n = t.dims[0] + t.dims[1] + t.dims[2];
+  if (t.pairs() != nullptr) {
+    const std::size_t size = buffer_size(t.pairs, "clGetMemObjectInfo(resample pair table)");
+    if (size < static_cast<std::size_t>(n + 6) * sizeof(cl_long))
+      throw ArgumentError("resample tables",
+                          "the pair table holds fewer than nx + ny + nz + 6 entries");
+    return t.pairs;
+  }
+  const std::size_t size = buffer_size(t.table, "clGetMemObjectInfo(resample address table)");
+  if (size < static_cast<std::size_t>(n) * sizeof(cl_int))
+    throw ArgumentError("resample tables",
+                        "the address table holds fewer than nx + ny + nz entries");
+  std::vector<cl_int> table(static_cast<std::size_t>(n));
+  cl_check(device.queue().enqueueReadBuffer(t.table, CL_TRUE, 0, table.size() * sizeof(cl_int),
+                                            table.data()),
+           "clEnqueueReadBuffer(resample address table)");
+  return upload(device, resample_pair_table(table, t.dims), "resample pair table");
+}
+
 // An occupancy for skipping, if any, must be that of `voxels` for `order`.
 void check_occupancy(const DeviceOccupancy* skip, const VoxelBuffer& voxels, int order) {
   if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
@@ -154,6 +180,25 @@ std::vector<cl_int> resample_address_table(const VoxelLayout& L, cl_int* channel
   return table;
 }
 
+std::vector<cl_long> resample_pair_table(const std::vector<cl_int>& table, const Dims3& dims) {
+  if (dims[0] < 1 || dims[1] < 1 || dims[2] < 1 ||
+      static_cast<int64_t>(table.size()) != dims[0] + dims[1] + dims[2])
+    throw ArgumentError("resample table", "does not hold nx + ny + nz entries");
+  std::vector<cl_long> pairs;
+  pairs.reserve(table.size() + 6);
+  const cl_int* t = table.data();
+  for (int a = 0; a < 3; ++a) {
+    const int64_t n = dims[a];
+    const auto at = [&](int64_t g) {
+      return static_cast<uint64_t>(static_cast<uint32_t>(t[std::clamp<int64_t>(g, 0, n - 1)]));
+    };
+    for (int64_t f = -1; f <= n; ++f)
+      pairs.push_back(static_cast<cl_long>(at(f) | (at(f + 1) << 32)));
+    t += n;
+  }
+  return pairs;
+}
+
 ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const ViewGeometry& view,
                                     const cl::Buffer* origins) {
   for (int a = 0; a < 3; ++a)
@@ -165,6 +210,7 @@ ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const 
   t.interleaved = L.interleaved;
   const std::vector<cl_int> table = resample_address_table(L, &t.channel_stride);
   t.table = upload(device, table, "resample address table");
+  t.pairs = upload(device, resample_pair_table(table, L.dims()), "resample pair table");
   t.origins = origins ? *origins : upload(device, cell_origin_table(L.cells.split), "cell origins");
   std::vector<sv_view> v{view.grid};
   t.view = upload(device, v, "view");
@@ -224,11 +270,14 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
   // Without an order or skipping, the order and reach buffers are never
   // read: any buffer will do.
   const PrefetchArgs pf = prefetch_args(tables, voxels.layout());
+  // (the planar kernels never read it)
+  const cl::Buffer pairs =
+      v8 && voxels.layout().interleaved ? pair_table(device, tables) : tables.table;
   if (v8)
     set_args_from(k, name, 8, lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
                   skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
                   skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0), segs.seg_offset,
-                  static_cast<cl_int>(log2_exact(segs.pes)), pf.origins, pf.pe_cell);
+                  static_cast<cl_int>(log2_exact(segs.pes)), pf.origins, pf.pe_cell, pairs);
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }
@@ -339,11 +388,14 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   // The float8 kernel's skipping and order arguments; without them the
   // reach and order buffers are never read: any buffer will do.
   const PrefetchArgs pf = prefetch_args(tables, voxels.layout());
+  // (the planar kernels never read it)
+  const cl::Buffer pairs =
+      v8 && voxels.layout().interleaved ? pair_table(device, tables) : tables.table;
   if (v8)
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
                   cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
-                  pf.origins, pf.pe_cell);
+                  pf.origins, pf.pe_cell, pairs);
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }

@@ -571,7 +571,34 @@ TEST(LocalCl, InterleavedCellsGiveTheSameBits) {
 // tables built without them (as a caller's own, examples/embed) give the same
 // footprints and stored samples, bit for bit, in both layouts; origins of the
 // wrong size are refused.
-TEST(LocalCl, TablesWithoutOriginsResampleTheSame) {
+// The order-1 kernels' pair table: entry f + 1 of an axis holds the address
+// table's entries at clamp(f) (low 32 bits) and clamp(f + 1) (high).
+TEST(LocalCl, PairTableHoldsEachAxisEntryAndItsSuccessor) {
+  for (const Dims3 dims : {Dims3{37, 29, 23}, Dims3{1, 2, 16}}) {
+    const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, 8, 1), true);
+    const std::vector<cl_int> t = resample_address_table(L, nullptr);
+    const std::vector<cl_long> pairs = resample_pair_table(t, dims);
+    ASSERT_EQ(pairs.size(), t.size() + 6);
+    std::size_t at = 0, base = 0;
+    for (int a = 0; a < 3; ++a) {
+      const int64_t n = dims[a];
+      for (int64_t f = -1; f <= n; ++f, ++at) {
+        const auto entry = [&](int64_t g) {
+          return t[base + static_cast<std::size_t>(std::clamp<int64_t>(g, 0, n - 1))];
+        };
+        const uint64_t q = static_cast<uint64_t>(pairs[at]);
+        EXPECT_EQ(static_cast<cl_int>(static_cast<uint32_t>(q)), entry(f)) << a << " " << f;
+        EXPECT_EQ(static_cast<cl_int>(static_cast<uint32_t>(q >> 32)), entry(f + 1))
+            << a << " " << f;
+      }
+      base += static_cast<std::size_t>(n);
+    }
+    std::vector<cl_int> short_table(t.begin(), t.end() - 1);
+    EXPECT_THROW(resample_pair_table(short_table, dims), ArgumentError);
+  }
+}
+
+TEST(LocalCl, TablesWithoutOriginsOrPairsResampleTheSame) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
   Device& dev = *dp;
@@ -588,26 +615,34 @@ TEST(LocalCl, TablesWithoutOriginsResampleTheSame) {
       const LocalSegments segs = upload_segments(dev, m);
       const ResampleTables with = make_resample_tables(dev, L, view);
       ASSERT_NE(with.origins(), nullptr);
-      ResampleTables without = with;
-      without.origins = cl::Buffer();
+      ASSERT_NE(with.pairs(), nullptr);
+      // Without the origins (no prefetch), without the pair table (made from
+      // the address table by enqueue_*), without either: the same bits.
+      ResampleTables variants[4] = {with, with, with, with};
+      variants[1].origins = cl::Buffer();
+      variants[2].pairs = cl::Buffer();
+      variants[3].origins = cl::Buffer();
+      variants[3].pairs = cl::Buffer();
       DeviceFootprints fp = make_footprints(dev, m.rects);
-      Footprints got[2];
-      std::vector<Rgba> stored[2];
+      Footprints got[4];
+      std::vector<Rgba> stored[4];
       const cl::Buffer soff = upload_sample_offsets(dev, m);
       const std::size_t ns = static_cast<std::size_t>(sample_offsets(m).back());
-      for (int k = 0; k < 2; ++k) {
-        const ResampleTables& t = k ? without : with;
+      for (int k = 0; k < 4; ++k) {
         enqueue_zero_footprints(dev, fp);
-        enqueue_resample_local(dev, segs, t, vb, 1, fp);
+        enqueue_resample_local(dev, segs, variants[k], vb, 1, fp);
         got[k] = read_footprints(dev, fp);
         cl::Buffer samples =
             dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
-        enqueue_resample(dev, segs, soff, t, vb, 1, samples, LocalKernel::vector8);
+        enqueue_resample(dev, segs, soff, variants[k], vb, 1, samples, LocalKernel::vector8);
         if (ns > 0) stored[k] = read_all<Rgba>(dev, samples, ns);
       }
-      EXPECT_TRUE(same_bits(got[0], got[1]));
-      ASSERT_EQ(stored[0].size(), stored[1].size());
-      EXPECT_EQ(std::memcmp(stored[0].data(), stored[1].data(), ns * sizeof(Rgba)), 0);
+      for (int k = 1; k < 4; ++k) {
+        SCOPED_TRACE("variant " + std::to_string(k));
+        EXPECT_TRUE(same_bits(got[0], got[k]));
+        ASSERT_EQ(stored[0].size(), stored[k].size());
+        EXPECT_EQ(std::memcmp(stored[0].data(), stored[k].data(), ns * sizeof(Rgba)), 0);
+      }
       compared += std::any_of(got[0].pixels.begin(), got[0].pixels.end(),
                               [](const Rgba& c) { return c.a != 0; });
       ResampleTables small = with;
@@ -615,6 +650,13 @@ TEST(LocalCl, TablesWithoutOriginsResampleTheSame) {
       EXPECT_THROW(enqueue_resample_local(dev, segs, small, vb, 1, fp), ArgumentError);
       EXPECT_THROW(enqueue_resample(dev, segs, soff, small, vb, 1, fp.pixels, LocalKernel::vector8),
                    ArgumentError);
+      if (il) {  // the planar kernels never read the pair table
+        ResampleTables few = with;
+        few.pairs = dev.buffer(CL_MEM_READ_ONLY, 16, nullptr, "two pairs");
+        EXPECT_THROW(enqueue_resample_local(dev, segs, few, vb, 1, fp), ArgumentError);
+        EXPECT_THROW(enqueue_resample(dev, segs, soff, few, vb, 1, fp.pixels, LocalKernel::vector8),
+                     ArgumentError);
+      }
     }
   EXPECT_EQ(compared, 4);  // footprints with colour were compared
 }

@@ -62,6 +62,10 @@ struct ResampleTables {
   /// cl_int4[P]: each PE's cell origin, for the resample's prefetch ahead;
   /// optional (tables built by hand without it resample without the prefetch)
   cl::Buffer origins;
+  /// cl_long[nx + ny + nz + 6]: resample_pair_table, the order-1 kernels'
+  /// table entries of f and f + 1 in one 64-bit load; optional (tables built
+  /// by hand without it gather `table` twice: the same samples)
+  cl::Buffer pairs;
   cl_int channel_stride = 0;
   bool interleaved = false;  ///< made for interleaved voxel cells (stages.hpp)
 };
@@ -74,6 +78,14 @@ ResampleTables make_resample_tables(Device& device, const VoxelLayout& layout,
 /// The host table (for tests): float index of channel 0 of voxel g is
 /// t[gx] + t[nx + gy] + t[nx + ny + gz]; `channel_stride` receives cs.
 std::vector<cl_int> resample_address_table(const VoxelLayout& layout, cl_int* channel_stride);
+/// The pair table of `table` (resample_address_table's, dims n): per axis a
+/// (x, then y, then z), n[a] + 2 entries, entry f + 1 for f = -1 .. n[a]
+/// holding t[clamp(f)] in its low 32 bits and t[clamp(f + 1)] in its high
+/// 32 bits (clamp to [0, n[a] - 1], both as uint32 bit patterns), so that a
+/// lane of the order-1 kernels gets both of an axis's entries in one
+/// 64-bit gather; the kernels index it with clamp(f, -1, n[a]) + 1.
+/// ArgumentError if `table` does not have n[0] + n[1] + n[2] entries.
+std::vector<cl_long> resample_pair_table(const std::vector<cl_int>& table, const Dims3& dims);
 
 /// Footprint buffers for rectangles `rects` (rect_offset = prefix of w * h).
 struct DeviceFootprints {
