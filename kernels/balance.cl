@@ -94,6 +94,18 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
 #endif
 }
 
+/* The rounds of sweep s > 0 do nothing where sweep s - 1 moved no sample:
+ * a sweep is the same rounds in the same order, so from a state one sweep
+ * leaves as it is every later sweep leaves it too (the result is the same,
+ * exactly). moves[s] = 1 once a pair of sweep s moved samples (moves zero
+ * before the first round). -DSV_BAL_EVERY_SWEEP runs every round, for
+ * comparison. */
+#ifndef SV_BAL_EVERY_SWEEP
+#define SV_BAL_SETTLED(moves, sweep) ((sweep) > 0 && (moves)[(sweep)-1] == 0)
+#else
+#define SV_BAL_SETTLED(moves, sweep) 0
+#endif
+
 /* The kernels, once for each width of the bounds (BT = the pair, B1 = one
  * bound): simdvol_balance_pack, _round and _unpack with int2 bounds, and
  * simdvol_balance_pack16, _round16 and _unpack16 with short2 bounds, which
@@ -111,7 +123,9 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
   __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_round##SFX(     \
       global const int4* cidx, global const int* pe_of, int4 splits, int pes, int axis, int par, \
       int dir, global const int4* lofs, global const int2* llist, global BT* kk,                 \
-      global int* loads) {                                                                       \
+      global int* loads, global int* moves, int sweep) {                                         \
+    /* A sweep that moved nothing left a state no later sweep changes. */                        \
+    if (SV_BAL_SETTLED(moves, sweep)) return;                                                    \
     const int p = (int)get_global_id(0);                                                         \
     sv_balance_prefetch(cidx, pe_of, splits, pes, axis, par, dir, lofs, llist,                   \
                         (global const uchar*)kk, (int)sizeof(BT), loads, p);                     \
@@ -149,6 +163,7 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
     }                                                                                            \
     loads[F] -= front_gives ? (int)moved : -(int)moved;                                          \
     loads[B] += front_gives ? (int)moved : -(int)moved;                                          \
+    moves[sweep] = 1; /* every writer stores the same 1 */                                       \
   }                                                                                              \
                                                                                                  \
   __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_pack##SFX(      \

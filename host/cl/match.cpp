@@ -286,14 +286,14 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
     throw ArgumentError(
         "bounds", "16-bit balance bounds cannot hold a grid depth of " + std::to_string(depth));
   struct Round {
-    int axis, par, dir;
+    int axis, par, dir, sweep;
   };
   std::vector<Round> rounds;
   for (int sweep = 0; sweep < sweeps; ++sweep)
     for (int a = 0; a < 3; ++a) {
       const int64_t dir = view.grid.step[a][2];
       if (dir == 0 || sp[a] < 2) continue;
-      for (int par = 0; par < 2; ++par) rounds.push_back({a, par, dir > 0 ? 1 : -1});
+      for (int par = 0; par < 2; ++par) rounds.push_back({a, par, dir > 0 ? 1 : -1, sweep});
     }
   if (rounds.empty()) return;
   // The rounds move the bounds (k0, k1) in a compact copy (balance.cl).
@@ -319,10 +319,17 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
     m.balance_events.push_back(
         {"balance_pack", device.run(pack, pack_name, cl::NDRange(slots), cl::NDRange(kWgs))});
   }
+  // Which sweeps moved samples: the rounds of a sweep after one that moved
+  // none return at once (balance.cl, SV_BAL_SETTLED).
+  const cl::Buffer moves = device.scratch_buffer(
+      CL_MEM_READ_WRITE, static_cast<std::size_t>(sweeps) * sizeof(cl_int), "balance moves");
+  cl_check(device.queue().enqueueFillBuffer(moves, cl_int(0), 0,
+                                            static_cast<std::size_t>(sweeps) * sizeof(cl_int)),
+           "clEnqueueFillBuffer(balance moves)");
   for (const Round& r : rounds) {
     cl::Kernel round = device.kernel("balance", round_name, defs);
     set_args(round, round_name, m.cidx, m.pe_of, splits, npes, cl_int(r.axis), cl_int(r.par),
-             cl_int(r.dir), m.link_offset, m.link_list, kk, m.loads);
+             cl_int(r.dir), m.link_offset, m.link_list, kk, m.loads, moves, cl_int(r.sweep));
     m.balance_events.push_back(
         {"balance_round", device.run(round, round_name, cl::NDRange(P), cl::NDRange(kWgs))});
   }
