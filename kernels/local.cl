@@ -84,15 +84,13 @@ __kernel void simdvol_resample_local(__global const sv_segment* segs, const int 
  * and sv_sample8 are described there). */
 /* simdvol_resample_local_v8 (planar cells, il = 0) and _v8_il (interleaved
  * cells, il = 1; cs is 1 there): one body, the layout a constant. */
-SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
-                              __global const int* seg_off, const int log2p,
-                              __global const sv_view* view, __global const int* table,
-                              __global const float* vox, const int cs,
-                              __global const sv_rect* rects, __global const int* rect_off,
-                              __global float4* foot, __global const uchar* reach, const int nbx,
-                              const int nby, const int skip, __global const int* order,
-                              const int ordered, __global const int4* origins, const int4 pe_cell,
-                              __global const long* pairs, const int il) {
+SV_FN_INLINE void sv_resample_local8(
+    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
+    __global const sv_view* view, __global const int* table, __global const float* vox,
+    const int cs, __global const sv_rect* rects, __global const int* rect_off,
+    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
+    const int skip, __global const int* order, const int ordered, __global const int4* origins,
+    const int4 pe_cell, __global const long* pairs, const int il, const int cb) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8];
@@ -151,7 +149,7 @@ SV_FN void sv_resample_local8(__global const sv_segment* segs, const int nseg,
     }
     if (il) {
       float16 u[2];
-      sv_sample8_il(X, nx, ny, nz, table, pairs, vox, u);
+      sv_sample8_il(X, nx, ny, nz, table, pairs, vox, u, cb);
 #pragma unroll
       for (int h = 0; h < 2; ++h) {
         const int16 onh = as_int16(sv_spread4(as_float8(on), 4 * h));
@@ -195,7 +193,7 @@ __kernel void simdvol_resample_local_v8(
     const int skip, __global const int* order, const int ordered, __global const int4* origins,
     const int4 pe_cell, __global const long* pairs) {
   sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, origins, pe_cell, pairs, 0);
+                     nbx, nby, skip, order, ordered, origins, pe_cell, pairs, 0, 0);
 }
 
 __kernel void simdvol_resample_local_v8_il(
@@ -206,7 +204,21 @@ __kernel void simdvol_resample_local_v8_il(
     const int skip, __global const int* order, const int ordered, __global const int4* origins,
     const int4 pe_cell, __global const long* pairs) {
   sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, origins, pe_cell, pairs, 1);
+                     nbx, nby, skip, order, ordered, origins, pe_cell, pairs, 1, 0);
+}
+
+/* simdvol_resample_local_v8_ilc: simdvol_resample_local_v8_il for address
+ * tables of uniform power-of-two cells, whose pair table carries the cell
+ * bits (resample_cell_bits): the same footprints, bit for bit. */
+__kernel void simdvol_resample_local_v8_ilc(
+    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
+    __global const sv_view* view, __global const int* table, __global const float* vox,
+    const int cs, __global const sv_rect* rects, __global const int* rect_off,
+    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
+    const int skip, __global const int* order, const int ordered, __global const int4* origins,
+    const int4 pe_cell, __global const long* pairs) {
+  sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
+                     nbx, nby, skip, order, ordered, origins, pe_cell, pairs, 1, ORDER == 1);
 }
 #endif
 

@@ -1,6 +1,7 @@
 // The resample and local stages on the device (local_cl.hpp).
 #include <algorithm>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 
@@ -86,13 +87,25 @@ PrefetchArgs prefetch_args(const ResampleTables& t, const VoxelLayout& L) {
 // without one (a caller's own ResampleTables) get it here from their address
 // table, read back (a few KiB, blocking). One of the wrong size is an
 // ArgumentError.
+constexpr std::size_t kCellBitsInts = 104;  // resample_cell_bits
+
+// The kernels with the cell bits (`_ilc`) where the tables carry them, at
+// order 1 on interleaved cells (elsewhere the cell bits are not read).
+std::string with_cell_bits(const std::string& name, const ResampleTables& t, const VoxelLayout& L,
+                           int order) {
+  return t.cell_bits && t.pairs() != nullptr && L.interleaved && order == 1 ? name + "c" : name;
+}
+
 cl::Buffer pair_table(Device& device, const ResampleTables& t) {
   const int64_t n = t.dims[0] + t.dims[1] + t.dims[2];
   if (t.pairs() != nullptr) {
     const std::size_t size = buffer_size(t.pairs, "clGetMemObjectInfo(resample pair table)");
-    if (size < static_cast<std::size_t>(n + 6) * sizeof(cl_long))
+    if (size < static_cast<std::size_t>(n + 6) * sizeof(cl_long) +
+                   (t.cell_bits ? kCellBitsInts * sizeof(cl_int) : 0))
       throw ArgumentError("resample tables",
-                          "the pair table holds fewer than nx + ny + nz + 6 entries");
+                          t.cell_bits ? "the pair table holds fewer than nx + ny + nz + 6 entries "
+                                        "and the cell bits"
+                                      : "the pair table holds fewer than nx + ny + nz + 6 entries");
     return t.pairs;
   }
   const std::size_t size = buffer_size(t.table, "clGetMemObjectInfo(resample address table)");
@@ -199,6 +212,40 @@ std::vector<cl_long> resample_pair_table(const std::vector<cl_int>& table, const
   return pairs;
 }
 
+std::vector<cl_int> resample_cell_bits(const std::vector<cl_int>& table, const Dims3& dims) {
+  if (dims[0] < 1 || dims[1] < 1 || dims[2] < 1 ||
+      static_cast<int64_t>(table.size()) != dims[0] + dims[1] + dims[2])
+    throw ArgumentError("resample table", "does not hold nx + ny + nz entries");
+  constexpr int kCells = 32;
+  std::vector<cl_int> out(3 * kCells + 8, 0);
+  const cl_int* t = table.data();
+  for (int a = 0; a < 3; ++a) {
+    const int64_t n = dims[a];
+    int found = -1;
+    cl_int stride = 0;
+    for (int sh = 30; sh >= 0 && found < 0; --sh) {
+      if (((n - 1) >> sh) >= kCells) break;  // smaller shifts: more cells
+      const int64_t c = int64_t(1) << sh, m = c - 1;
+      if (c > 2 * n && sh > 0) continue;  // the same as a smaller shift
+      const cl_int st = n >= 2 && c >= 2 ? t[1] - t[0] : 0;
+      bool ok = true;
+      for (int64_t g = 0; g < n && ok; ++g)
+        ok = int64_t(t[g]) == int64_t(t[g & ~m]) + (g & m) * int64_t(st);
+      if (ok) {
+        found = sh;
+        stride = st;
+      }
+    }
+    if (found < 0) return {};
+    for (int64_t ci = 0; (ci << found) < n; ++ci)
+      out[static_cast<std::size_t>(a * kCells + ci)] = t[ci << found];
+    out[static_cast<std::size_t>(3 * kCells + a)] = found;
+    out[static_cast<std::size_t>(3 * kCells + 3 + a)] = stride;
+    t += n;
+  }
+  return out;
+}
+
 ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const ViewGeometry& view,
                                     const cl::Buffer* origins) {
   for (int a = 0; a < 3; ++a)
@@ -210,7 +257,17 @@ ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const 
   t.interleaved = L.interleaved;
   const std::vector<cl_int> table = resample_address_table(L, &t.channel_stride);
   t.table = upload(device, table, "resample address table");
-  t.pairs = upload(device, resample_pair_table(table, L.dims()), "resample pair table");
+  std::vector<cl_long> pairs = resample_pair_table(table, L.dims());
+  // The cell bits after the pairs, as the kernels read them (ints in the
+  // order of memory; host and device share the byte order).
+  const std::vector<cl_int> bits = resample_cell_bits(table, L.dims());
+  if (!bits.empty()) {
+    const std::size_t at = pairs.size();
+    pairs.resize(at + bits.size() / 2);
+    std::memcpy(pairs.data() + at, bits.data(), bits.size() * sizeof(cl_int));
+    t.cell_bits = true;
+  }
+  t.pairs = upload(device, pairs, "resample pair table");
   t.origins = origins ? *origins : upload(device, cell_origin_table(L.cells.split), "cell origins");
   std::vector<sv_view> v{view.grid};
   t.view = upload(device, v, "view");
@@ -263,7 +320,9 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
   if (skip && !v8) throw ArgumentError("occupancy", "only the vector8 resample kernel skips");
   check_occupancy(skip, voxels, order);
   const std::string name =
-      v8 ? detail::voxel_kernel("simdvol_resample_v8", voxels.layout()) : "simdvol_resample";
+      v8 ? with_cell_bits(detail::voxel_kernel("simdvol_resample_v8", voxels.layout()), tables,
+                          voxels.layout(), order)
+         : "simdvol_resample";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), sample_off, tables.view,
            tables.table, voxels.buffer(), tables.channel_stride, samples);
@@ -379,8 +438,10 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   if (lanes && lanes->count != segs.count)
     throw ArgumentError("segment order", "was made for other segments");
   const bool v8 = variant == LocalKernel::vector8;
-  const std::string name = v8 ? detail::voxel_kernel("simdvol_resample_local_v8", voxels.layout())
-                              : "simdvol_resample_local";
+  const std::string name =
+      v8 ? with_cell_bits(detail::voxel_kernel("simdvol_resample_local_v8", voxels.layout()),
+                          tables, voxels.layout(), order)
+         : "simdvol_resample_local";
   cl::Kernel k = stage_kernel(device, name, order);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
            static_cast<cl_int>(log2_exact(segs.pes)), tables.view, tables.table, voxels.buffer(),

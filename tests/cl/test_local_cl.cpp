@@ -598,6 +598,106 @@ TEST(LocalCl, PairTableHoldsEachAxisEntryAndItsSuccessor) {
   }
 }
 
+// The cell bits: where given, every table entry is its cell's entry plus
+// the local position times the axis's stride; uniform power-of-two cells
+// (the 256^3 phantom's 8 x 16 x 16 at 8,192 PEs) have them, an axis of more
+// than 32 cells that no power of two tiles has none.
+TEST(LocalCl, CellBitsReproduceTheAddressTable) {
+  struct Case {
+    Dims3 dims;
+    int64_t pes;
+    int expect;  // 1: has cell bits, 0: has none, -1: either (checked if any)
+    int shifts[3];
+  };
+  const Case cases[] = {{{256, 256, 256}, 8192, 1, {3, 4, 4}}, {{64, 32, 16}, 512, 1, {-1, -1, -1}},
+                        {{41, 35, 29}, 1, 1, {6, 6, 5}},       {{37, 29, 23}, 64, -1, {-1, -1, -1}},
+                        {{99, 8, 8}, 16, 0, {-1, -1, -1}},     {{300, 8, 8}, 64, 0, {-1, -1, -1}}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(std::to_string(c.dims[0]) + "x" + std::to_string(c.dims[1]) + "x" +
+                 std::to_string(c.dims[2]) + " P " + std::to_string(c.pes));
+    const VoxelLayout L = make_voxel_layout(make_cell_layout(c.dims, c.pes, 1), true);
+    const std::vector<cl_int> t = resample_address_table(L, nullptr);
+    const std::vector<cl_int> bits = resample_cell_bits(t, c.dims);
+    if (c.expect == 0) {
+      // (cells of 6-7 and 4-5 positions: no power of two tiles them in at
+      // most 32 cells)
+      EXPECT_TRUE(bits.empty());
+      continue;
+    }
+    if (c.expect < 0 && bits.empty()) continue;
+    ASSERT_EQ(bits.size(), 104u);
+    std::size_t base = 0;
+    for (int a = 0; a < 3; ++a) {
+      const int sh = bits[96 + a];
+      const cl_int stride = bits[99 + a];
+      if (c.shifts[a] >= 0) EXPECT_EQ(sh, c.shifts[a]) << a;
+      ASSERT_LT((c.dims[a] - 1) >> sh, 32) << a;
+      for (int64_t g = 0; g < c.dims[a]; ++g) {
+        const cl_int want = t[base + static_cast<std::size_t>(g)];
+        const cl_int got = bits[static_cast<std::size_t>(32 * a + (g >> sh))] +
+                           static_cast<cl_int>(g & ((int64_t(1) << sh) - 1)) * stride;
+        ASSERT_EQ(got, want) << a << " " << g;
+      }
+      base += static_cast<std::size_t>(c.dims[a]);
+    }
+  }
+  EXPECT_THROW(resample_cell_bits(std::vector<cl_int>(5), {2, 2, 2}), ArgumentError);
+}
+
+// The order-1 kernels with the cell bits (_ilc) give the bits of those
+// without (_il), on uniform cells at every power-of-two PE count; orders 0
+// and 2 (where the cell bits are not read) too.
+TEST(LocalCl, CellBitsKernelsGiveTheSameBits) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Dims3 dims{32, 32, 16};
+  const Volume vol(dims, VoxelType::f32);
+  const std::vector<Rgba> v = sparse_voxels(dims, 11);
+  int compared = 0;
+  for (int64_t pes = 1; pes <= 8192; pes *= 8) {
+    const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, pes, 1), true);
+    VoxelBuffer vb(dev, L);
+    vb.write(dev, voxels_to_cells(v, L));
+    const KdSplit split = kd_split(dims, pes);
+    for (const ViewAngles& a : {ViewAngles{0, 0, 0}, ViewAngles{20, 35, 10}, ViewAngles{0, 45, 0},
+                                ViewAngles{-23.5, 71.25, 133.0}}) {
+      const ViewGeometry view = make_view(vol, a, 40, 36, Sampling::voxel);
+      const Matching m = balance_reference(match_reference(view, split), view, split);
+      const LocalSegments segs = upload_segments(dev, m);
+      const ResampleTables with = make_resample_tables(dev, L, view);
+      ASSERT_TRUE(with.cell_bits) << pes;
+      ResampleTables without = with;
+      without.cell_bits = false;
+      const cl::Buffer soff = upload_sample_offsets(dev, m);
+      const std::size_t ns = static_cast<std::size_t>(sample_offsets(m).back());
+      for (int order : {0, 1, 2}) {
+        SCOPED_TRACE("P " + std::to_string(pes) + " order " + std::to_string(order) + " view " +
+                     std::to_string(a.phi));
+        Footprints got[2];
+        std::vector<Rgba> stored[2];
+        DeviceFootprints fp = make_footprints(dev, m.rects);
+        for (int k = 0; k < 2; ++k) {
+          const ResampleTables& t = k ? without : with;
+          enqueue_zero_footprints(dev, fp);
+          enqueue_resample_local(dev, segs, t, vb, order, fp);
+          got[k] = read_footprints(dev, fp);
+          cl::Buffer samples =
+              dev.buffer(CL_MEM_READ_WRITE, std::max<std::size_t>(ns, 1) * 16, nullptr, "samples");
+          enqueue_resample(dev, segs, soff, t, vb, order, samples, LocalKernel::vector8);
+          if (ns > 0) stored[k] = read_all<Rgba>(dev, samples, ns);
+        }
+        EXPECT_TRUE(same_bits(got[0], got[1]));
+        ASSERT_EQ(stored[0].size(), stored[1].size());
+        EXPECT_EQ(std::memcmp(stored[0].data(), stored[1].data(), ns * sizeof(Rgba)), 0);
+        compared += order == 1 && std::any_of(got[0].pixels.begin(), got[0].pixels.end(),
+                                              [](const Rgba& c) { return c.a != 0; });
+      }
+    }
+  }
+  EXPECT_GE(compared, 12);  // footprints with colour were compared at order 1
+}
+
 TEST(LocalCl, TablesWithoutOriginsOrPairsResampleTheSame) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";

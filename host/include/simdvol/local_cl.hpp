@@ -66,6 +66,9 @@ struct ResampleTables {
   /// table entries of f and f + 1 in one 64-bit load; optional (tables built
   /// by hand without it gather `table` twice: the same samples)
   cl::Buffer pairs;
+  /// `pairs` carries the cell bits after its entries (resample_cell_bits):
+  /// the order-1 interleaved kernels then take them (the `_ilc` kernels)
+  bool cell_bits = false;
   cl_int channel_stride = 0;
   bool interleaved = false;  ///< made for interleaved voxel cells (stages.hpp)
 };
@@ -86,6 +89,15 @@ std::vector<cl_int> resample_address_table(const VoxelLayout& layout, cl_int* ch
 /// 64-bit gather; the kernels index it with clamp(f, -1, n[a]) + 1.
 /// ArgumentError if `table` does not have n[0] + n[1] + n[2] entries.
 std::vector<cl_long> resample_pair_table(const std::vector<cl_int>& table, const Dims3& dims);
+/// The cell bits of `table` (resample_address_table's, dims n), where its
+/// layout has them: per axis a, a shift s[a] such that every entry is
+/// t[g] = bits[a][g >> s[a]] + (g & (2^s[a] - 1)) * stride[a] (the cells'
+/// own entries and the axis's stride inside a cell: uniform cells of 2^s[a]
+/// positions), with at most 32 cells (s the largest that holds). Returns
+/// 104 ints: bits[0][0..31], bits[1][0..31], bits[2][0..31] (zero past the
+/// last cell), s[0..2], stride[0..2], 0, 0; empty where an axis has no such
+/// s. ArgumentError if `table` does not have n[0] + n[1] + n[2] entries.
+std::vector<cl_int> resample_cell_bits(const std::vector<cl_int>& table, const Dims3& dims);
 
 /// Footprint buffers for rectangles `rects` (rect_offset = prefix of w * h).
 struct DeviceFootprints {
