@@ -359,7 +359,7 @@ SV_FN_INLINE void sv_sample8_il1(const long8* X, int nx, int ny, int nz, __globa
        * gather. simdvol-bench-options, resample + local on the 256^3
        * phantom (cells 8 x 16 x 16), the _il kernels -> these: 30.7 -> 27.9
        * ms at (20, 35, 10), 31.4 -> 28.5 at (0, 45, 0), 26.0 -> 24.0 at 0
-       * degrees; brainsmall 5.93 -> 5.78 ms; the same images. */
+       * degrees; the same images. */
       const int sh = cbits[96 + a], mul = cbits[99 + a];
       const int8 g0 = clamp(f, (int8)(0), (int8)(n[a] - 1));
       const int8 g1 = clamp(f + 1, (int8)(0), (int8)(n[a] - 1));
