@@ -185,41 +185,24 @@ SV_FN_INLINE void sv_resample_local8(
   }
 }
 
-__kernel void simdvol_resample_local_v8(
-    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
-    __global const sv_view* view, __global const int* table, __global const float* vox,
-    const int cs, __global const sv_rect* rects, __global const int* rect_off,
-    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
-    const int skip, __global const int* order, const int ordered, __global const int4* origins,
-    const int4 pe_cell, __global const long* pairs) {
-  sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, origins, pe_cell, pairs, 0, 0);
-}
-
-__kernel void simdvol_resample_local_v8_il(
-    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
-    __global const sv_view* view, __global const int* table, __global const float* vox,
-    const int cs, __global const sv_rect* rects, __global const int* rect_off,
-    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
-    const int skip, __global const int* order, const int ordered, __global const int4* origins,
-    const int4 pe_cell, __global const long* pairs) {
-  sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, origins, pe_cell, pairs, 1, 0);
-}
-
-/* simdvol_resample_local_v8_ilc: simdvol_resample_local_v8_il for address
- * tables of uniform power-of-two cells, whose pair table carries the cell
- * bits (resample_cell_bits): the same footprints, bit for bit. */
-__kernel void simdvol_resample_local_v8_ilc(
-    __global const sv_segment* segs, const int nseg, __global const int* seg_off, const int log2p,
-    __global const sv_view* view, __global const int* table, __global const float* vox,
-    const int cs, __global const sv_rect* rects, __global const int* rect_off,
-    __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
-    const int skip, __global const int* order, const int ordered, __global const int4* origins,
-    const int4 pe_cell, __global const long* pairs) {
-  sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot, reach,
-                     nbx, nby, skip, order, ordered, origins, pe_cell, pairs, 1, ORDER == 1);
-}
+/* The kernels: planar cells (il = 0), interleaved cells (il = 1), and
+ * interleaved cells whose pair table carries the cell bits (_ilc: cb = 1 at
+ * order 1; resample_cell_bits): the same footprints, bit for bit. */
+#define SV_RESAMPLE_LOCAL_KERNEL(NAME, IL, CB)                                                     \
+  __kernel void NAME(__global const sv_segment* segs, const int nseg, __global const int* seg_off, \
+                     const int log2p, __global const sv_view* view, __global const int* table,     \
+                     __global const float* vox, const int cs, __global const sv_rect* rects,       \
+                     __global const int* rect_off, __global float4* foot,                          \
+                     __global const uchar* reach, const int nbx, const int nby, const int skip,    \
+                     __global const int* order, const int ordered, __global const int4* origins,   \
+                     const int4 pe_cell, __global const long* pairs) {                             \
+    sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot,    \
+                       reach, nbx, nby, skip, order, ordered, origins, pe_cell, pairs, IL, CB);    \
+  }
+SV_RESAMPLE_LOCAL_KERNEL(simdvol_resample_local_v8, 0, 0)
+SV_RESAMPLE_LOCAL_KERNEL(simdvol_resample_local_v8_il, 1, 0)
+SV_RESAMPLE_LOCAL_KERNEL(simdvol_resample_local_v8_ilc, 1, ORDER == 1)
+#undef SV_RESAMPLE_LOCAL_KERNEL
 #endif
 
 /* ---- simdvol_segment_order: the fused kernel's lane order ----

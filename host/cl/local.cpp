@@ -83,10 +83,6 @@ PrefetchArgs prefetch_args(const ResampleTables& t, const VoxelLayout& L) {
                    static_cast<cl_int>(L.cell()[2]), on ? 1 : 0}}};
 }
 
-// The order-1 kernels' pair table (resample_pair_table). Tables made
-// without one (a caller's own ResampleTables) get it here from their address
-// table, read back (a few KiB, blocking). One of the wrong size is an
-// ArgumentError.
 constexpr std::size_t kCellBitsInts = 104;  // resample_cell_bits
 
 // The kernels with the cell bits (`_ilc`) where the tables carry them, at
@@ -96,6 +92,11 @@ std::string with_cell_bits(const std::string& name, const ResampleTables& t, con
   return t.cell_bits && t.pairs() != nullptr && L.interleaved && order == 1 ? name + "c" : name;
 }
 
+// The order-1 kernels' pair table (resample_pair_table), with the cell bits
+// where `cell_bits` says so. Tables made without one (a caller's own
+// ResampleTables) get it here from their address table, read back (a few
+// KiB, blocking), without cell bits. One of the wrong size is an
+// ArgumentError.
 cl::Buffer pair_table(Device& device, const ResampleTables& t) {
   const int64_t n = t.dims[0] + t.dims[1] + t.dims[2];
   if (t.pairs() != nullptr) {

@@ -630,7 +630,9 @@ TEST(LocalCl, CellBitsReproduceTheAddressTable) {
     for (int a = 0; a < 3; ++a) {
       const int sh = bits[96 + a];
       const cl_int stride = bits[99 + a];
-      if (c.shifts[a] >= 0) EXPECT_EQ(sh, c.shifts[a]) << a;
+      if (c.shifts[a] >= 0) {
+        EXPECT_EQ(sh, c.shifts[a]) << a;
+      }
       ASSERT_LT((c.dims[a] - 1) >> sh, 32) << a;
       for (int64_t g = 0; g < c.dims[a]; ++g) {
         const cl_int want = t[base + static_cast<std::size_t>(g)];
