@@ -135,6 +135,14 @@ std::vector<double> Args::number_list(double lo, double hi) {
   return parse_double_list(value(), option_, lo, hi);
 }
 
+ViewAngles Args::view() {
+  const std::vector<double> v = number_list(-360, 360);
+  if (v.size() != 3)
+    throw ArgumentError(option_,
+                        "needs three angles theta,phi,varphi, got " + std::to_string(v.size()));
+  return {v[0], v[1], v[2]};
+}
+
 void Args::unknown() const {
   throw ArgumentError(option_, "unknown option");
 }

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "simdvol/error.hpp"
+#include "simdvol/view.hpp"
 
 namespace simdvol::bench {
 
@@ -63,6 +64,9 @@ class Args {
   double number(double lo, double hi);
   std::vector<int64_t> int_list(int64_t lo, int64_t hi);
   std::vector<double> number_list(double lo, double hi);
+  /// A view THETA,PHI,VARPHI in degrees, each in -360..360; ArgumentError
+  /// (option(), "needs three angles theta,phi,varphi, got N") otherwise.
+  ViewAngles view();
   /// ArgumentError(option(), "unknown option").
   [[noreturn]] void unknown() const;
 

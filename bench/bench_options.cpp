@@ -71,9 +71,7 @@ int main(int argc, char** argv) {
       } else if (args.is("--classifier")) {
         classifier = args.value();
       } else if (args.is("--view")) {
-        const std::vector<double> a = args.number_list(-360, 360);
-        if (a.size() != 3) throw ArgumentError("--view", "expected THETA,PHI,VARPHI");
-        view = ViewAngles{a[0], a[1], a[2]};
+        view = args.view();
       } else if (args.is("--size")) {
         size = static_cast<int>(args.integer(2, 4096));
       } else if (args.is("--order")) {

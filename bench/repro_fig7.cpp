@@ -204,11 +204,7 @@ int main(int argc, char** argv) try {
       } else if (args.is("--seed")) {
         seed = args.uint64();
       } else if (args.is("--view")) {
-        const std::vector<double> v = args.number_list(-360, 360);
-        if (v.size() != 3)
-          throw ArgumentError(args.option(), "needs three angles theta,phi,varphi, got " +
-                                                 std::to_string(v.size()));
-        angles = {v[0], v[1], v[2]};
+        angles = args.view();
       } else {
         args.unknown();
       }
