@@ -107,6 +107,36 @@ TEST(MatchCl, BalanceBoundsWidths) {
   EXPECT_THROW(enqueue_balance(dev, dm, deep, split, 1, BalanceBounds::narrow), ArgumentError);
 }
 
+// Balancing one matching twice, with either width of bounds each time: the
+// 16-bit bounds the fill wrote (kept equal to the segments by every
+// 16-bit balance) or a pack of the segments (after a 32-bit balance, which
+// leaves the fill's copy behind) give the reference's balance of as many
+// sweeps.
+TEST(MatchCl, RepeatedBalancingEqualsReference) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 dims{93, 57, 31};
+  const BalanceBounds n = BalanceBounds::narrow, w = BalanceBounds::wide;
+  const BalanceBounds orders[][2] = {{n, n}, {w, n}, {n, w}, {w, w}};
+  for (ViewAngles va : {kViews[2], kViews[3]})
+    for (int64_t pes : {int64_t(64), int64_t(512)}) {
+      const ViewGeometry v = geometry(dims, va, 96, 96);
+      const KdSplit split = kd_split(dims, pes);
+      const Matching ref = match_reference(v, split);
+      // (two sweeps, then three: the rounds of five sweeps)
+      const Matching want = balance_reference(ref, v, split, 5);
+      for (const auto& o : orders) {
+        DeviceMatching dm = enqueue_match(dev, v, split);
+        ASSERT_TRUE(dm.bounds_filled);
+        enqueue_balance(dev, dm, v, split, 2, o[0]);
+        enqueue_balance(dev, dm, v, split, 3, o[1]);
+        EXPECT_EQ(dm.bounds_filled, o[0] == n && o[1] == n);
+        expect_same(dm.read(dev), want,
+                    name(va, pes) + (o[0] == n ? " narrow" : " wide") +
+                        (o[1] == n ? " then narrow" : " then wide"));
+      }
+    }
+}
+
 TEST(MatchCl, EqualsReferenceRandomViews) {
   SIMDVOL_TEST_DEVICE(dev);
   std::mt19937 rng(9);
