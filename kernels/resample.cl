@@ -350,6 +350,7 @@ SV_FN_INLINE void sv_sample8_il1(const long8* X, int nx, int ny, int nz, __globa
   for (int a = 0; a < 3; ++a) {
     const int8 f = convert_int8(X[a] >> SV_FRAC_BITS);
     tt[a] = convert_float8(convert_uint8(X[a] & 0xFFFFFFFFL)) * (1.0f / 4294967296.0f);
+    int8 t0, t1;
     if (cb) {
       /* Cells of 2^s positions along the axis, at most 32 of them: entry g
        * of the table is the cell's entry bits[g >> s] plus (g & (2^s - 1))
@@ -371,30 +372,28 @@ SV_FN_INLINE void sv_sample8_il1(const long8* X, int nx, int ny, int nz, __globa
 #else
       const int8 b0 = SV_GI8(cbits + 32 * a, g0 >> sh), b1 = SV_GI8(cbits + 32 * a, g1 >> sh);
 #endif
-      const int8 t0 = b0 + (g0 & m) * mul, t1 = b1 + (g1 & m) * mul;
-      base += t0;
-      dd[a] = t1 - t0;
-      tab += n[a];
-      pt += n[a] + 2;
-      continue;
-    }
+      t0 = b0 + (g0 & m) * mul;
+      t1 = b1 + (g1 & m) * mul;
+    } else {
 #ifndef SV_NO_PAIRS
-    /* Both entries in one 64-bit gather (resample_pair_table: entry f + 1
-     * holds t[clamp(f)] low, t[clamp(f + 1)] high, for f = -1 .. n; f
-     * clamped to that range gives the same two entries as the two gathers
-     * of -DSV_NO_PAIRS). Those 8-lane gathers, two per axis, had about a
-     * sixth of the fused kernel's time (a probe without them, wrong images:
-     * 29.6 -> 23.2 ms). simdvol-bench-options, resample + local, -DSV_NO_PAIRS
-     * -> pairs: the phantom 29.3 / 28.7 -> 27.1 / 28.0 ms, at (0, 45, 0)
-     * 29.4 -> 27.5, ch2 25.7 -> 24.9, brainsmall 4.37 -> 4.22 ms. */
-    const int8 e = clamp(f, (int8)(-1), (int8)(n[a])) + 1;
-    const long8 q =
-        (long8)(pt[e.s0], pt[e.s1], pt[e.s2], pt[e.s3], pt[e.s4], pt[e.s5], pt[e.s6], pt[e.s7]);
-    const int8 t0 = convert_int8(q & 0xFFFFFFFFL), t1 = convert_int8(q >> 32);
+      /* Both entries in one 64-bit gather (resample_pair_table: entry f + 1
+       * holds t[clamp(f)] low, t[clamp(f + 1)] high, for f = -1 .. n; f
+       * clamped to that range gives the same two entries as the two gathers
+       * of -DSV_NO_PAIRS). Those 8-lane gathers, two per axis, had about a
+       * sixth of the fused kernel's time (a probe without them, wrong images:
+       * 29.6 -> 23.2 ms). simdvol-bench-options, resample + local, -DSV_NO_PAIRS
+       * -> pairs: the phantom 29.3 / 28.7 -> 27.1 / 28.0 ms, at (0, 45, 0)
+       * 29.4 -> 27.5, ch2 25.7 -> 24.9, brainsmall 4.37 -> 4.22 ms. */
+      const int8 e = clamp(f, (int8)(-1), (int8)(n[a])) + 1;
+      const long8 q =
+          (long8)(pt[e.s0], pt[e.s1], pt[e.s2], pt[e.s3], pt[e.s4], pt[e.s5], pt[e.s6], pt[e.s7]);
+      t0 = convert_int8(q & 0xFFFFFFFFL);
+      t1 = convert_int8(q >> 32);
 #else
-    const int8 t0 = SV_GI8(tab, clamp(f, (int8)(0), (int8)(n[a] - 1)));
-    const int8 t1 = SV_GI8(tab, clamp(f + 1, (int8)(0), (int8)(n[a] - 1)));
+      t0 = SV_GI8(tab, clamp(f, (int8)(0), (int8)(n[a] - 1)));
+      t1 = SV_GI8(tab, clamp(f + 1, (int8)(0), (int8)(n[a] - 1)));
 #endif
+    }
     base += t0;
     dd[a] = t1 - t0;
     tab += n[a];

@@ -194,10 +194,19 @@ std::vector<cl_int> resample_address_table(const VoxelLayout& L, cl_int* channel
   return table;
 }
 
-std::vector<cl_long> resample_pair_table(const std::vector<cl_int>& table, const Dims3& dims) {
+namespace {
+
+// resample_pair_table's and resample_cell_bits' input: nx + ny + nz entries.
+void check_address_table(const std::vector<cl_int>& table, const Dims3& dims) {
   if (dims[0] < 1 || dims[1] < 1 || dims[2] < 1 ||
       static_cast<int64_t>(table.size()) != dims[0] + dims[1] + dims[2])
     throw ArgumentError("resample table", "does not hold nx + ny + nz entries");
+}
+
+}  // namespace
+
+std::vector<cl_long> resample_pair_table(const std::vector<cl_int>& table, const Dims3& dims) {
+  check_address_table(table, dims);
   std::vector<cl_long> pairs;
   pairs.reserve(table.size() + 6);
   const cl_int* t = table.data();
@@ -214,9 +223,7 @@ std::vector<cl_long> resample_pair_table(const std::vector<cl_int>& table, const
 }
 
 std::vector<cl_int> resample_cell_bits(const std::vector<cl_int>& table, const Dims3& dims) {
-  if (dims[0] < 1 || dims[1] < 1 || dims[2] < 1 ||
-      static_cast<int64_t>(table.size()) != dims[0] + dims[1] + dims[2])
-    throw ArgumentError("resample table", "does not hold nx + ny + nz entries");
+  check_address_table(table, dims);
   constexpr int kCells = 32;
   std::vector<cl_int> out(3 * kCells + 8, 0);
   const cl_int* t = table.data();
