@@ -70,6 +70,10 @@ struct RenderEngine::State {
   std::optional<Dims3> dims;
   std::optional<CellBuffer> cells;
   std::optional<VoxelBuffer> rgba;
+  // The resample's tables of `rgba`'s layout (address, pair and cell-bit
+  // tables, the cells' origins): made with the cells, only their view is
+  // uploaded again per frame (set_resample_view).
+  std::optional<ResampleTables> tables;
   const Volume* laid_out = nullptr;  // reuse_layout: the volume in `cells`
   const float* laid_data = nullptr;
   // The previous frame's PE mask (DeviceMatching::active) while `rgba`
@@ -140,6 +144,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   if (!S.dims || *S.dims != vol.dims()) {
     S.cells.reset();
     S.rgba.reset();
+    S.tables.reset();
     S.laid_out = nullptr;
     S.live_valid = false;
     const CellLayout cl_layout = S.array->cell_layout(vol.dims(), 1);
@@ -245,9 +250,13 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   }
   enqueue_balance(device, dm, view, split, eo.balance_sweeps);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
-  // The cells' origin table is already on the device (the layout's).
-  const ResampleTables tables =
-      make_resample_tables(device, S.rgba->layout(), view, &S.cells->origins());
+  // The tables of the cells' layout, made once with them (the origin table
+  // is the layout's, already on the device); the frame's view uploaded.
+  if (!S.tables)
+    S.tables = make_resample_tables(device, S.rgba->layout(), view, &S.cells->origins());
+  else
+    set_resample_view(device, *S.tables, view);
+  const ResampleTables& tables = *S.tables;
   const int W = view.width(), H = view.height();
   const int64_t npx = static_cast<int64_t>(W) * H;
 

@@ -254,6 +254,14 @@ std::vector<cl_int> resample_cell_bits(const std::vector<cl_int>& table, const D
   return out;
 }
 
+void set_resample_view(Device& device, ResampleTables& tables, const ViewGeometry& view) {
+  for (int a = 0; a < 3; ++a)
+    if (view.grid.dims[a] != tables.dims[a])
+      throw ArgumentError("view", "was made for a volume of other dimensions");
+  std::vector<sv_view> v{view.grid};
+  tables.view = upload(device, v, "view");
+}
+
 ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const ViewGeometry& view,
                                     const cl::Buffer* origins) {
   for (int a = 0; a < 3; ++a)
@@ -277,8 +285,7 @@ ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const 
   }
   t.pairs = upload(device, pairs, "resample pair table");
   t.origins = origins ? *origins : upload(device, cell_origin_table(L.cells.split), "cell origins");
-  std::vector<sv_view> v{view.grid};
-  t.view = upload(device, v, "view");
+  set_resample_view(device, t, view);
   return t;
 }
 

@@ -763,6 +763,46 @@ TEST(LocalCl, TablesWithoutOriginsOrPairsResampleTheSame) {
   EXPECT_EQ(compared, 4);  // footprints with colour were compared
 }
 
+// Tables made for one view and given another by set_resample_view (as the
+// engine keeps them from frame to frame) resample that view as tables made
+// for it do, bit for bit; a view of other dims is refused.
+TEST(LocalCl, TablesGivenAnotherViewResampleIt) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Fixture fx({37, 29, 23}, 7);
+  const ViewGeometry first = make_view(fx.vol, {0, 0, 0}, 40, 36, Sampling::voxel);
+  const ViewGeometry view = make_view(fx.vol, {20, 35, 10}, 40, 36, Sampling::voxel);
+  const int64_t pes = 64;
+  const Matching m = match_reference(view, kd_split(fx.dims, pes));
+  const VoxelLayout L = make_voxel_layout(make_cell_layout(fx.dims, pes, 1), true);
+  VoxelBuffer vb(dev, L);
+  vb.write(dev, voxels_to_cells(fx.voxels, L));
+  const LocalSegments segs = upload_segments(dev, m);
+  ResampleTables kept = make_resample_tables(dev, L, first);
+  set_resample_view(dev, kept, view);
+  const ResampleTables fresh = make_resample_tables(dev, L, view);
+  DeviceFootprints fp = make_footprints(dev, m.rects);
+  Footprints got[2];
+  for (int k = 0; k < 2; ++k) {
+    enqueue_zero_footprints(dev, fp);
+    enqueue_resample_local(dev, segs, k == 0 ? fresh : kept, vb, 1, fp);
+    got[k] = read_footprints(dev, fp);
+  }
+  EXPECT_TRUE(same_bits(got[0], got[1]));
+  EXPECT_TRUE(std::any_of(got[0].pixels.begin(), got[0].pixels.end(),
+                          [](const Rgba& c) { return c.a != 0; }));
+  // The first view's tables resample it differently: the view is used.
+  ResampleTables old = make_resample_tables(dev, L, first);
+  enqueue_zero_footprints(dev, fp);
+  enqueue_resample_local(dev, segs, old, vb, 1, fp);
+  EXPECT_FALSE(same_bits(got[0], read_footprints(dev, fp)));
+  const Fixture other({36, 29, 23}, 7);
+  EXPECT_THROW(
+      set_resample_view(dev, kept, make_view(other.vol, {20, 35, 10}, 40, 36, Sampling::voxel)),
+      ArgumentError);
+}
+
 // The lanes' order: in each block of SV_ORDER_BLOCK positions cut at the PEs'
 // boundaries, the segments stably sorted by min(k1 - k0, 63), longest first
 // (a host sort of the same keys), so each segment stays in its PE's range.

@@ -78,6 +78,11 @@ struct ResampleTables {
 /// from, cell_origin_table of its split), taken instead of uploading a copy.
 ResampleTables make_resample_tables(Device& device, const VoxelLayout& layout,
                                     const ViewGeometry& view, const cl::Buffer* origins = nullptr);
+/// The tables' view replaced by `view` (uploaded), the rest kept: the
+/// tables depend on the layout only, so a caller that renders many views of
+/// one layout makes them once. ArgumentError if `view` was made for other
+/// dims than the tables.
+void set_resample_view(Device& device, ResampleTables& tables, const ViewGeometry& view);
 /// The host table (for tests): float index of channel 0 of voxel g is
 /// t[gx] + t[nx + gy] + t[nx + ny + gz]; `channel_stride` receives cs.
 std::vector<cl_int> resample_address_table(const VoxelLayout& layout, cl_int* channel_stride);
