@@ -62,6 +62,24 @@ void validate(const EngineOptions& eo, const RenderOptions& opt) {
                                                 std::to_string(kMaxBalanceSweeps));
 }
 
+// What the previous frame left in the voxel cells, for the next frame of the
+// same volume: its PE mask (DeviceMatching::active), under whose 0 flags the
+// cells hold zeros for classification `cp` and gradient scale `grad` (the
+// transfer function's |g|), so the fused shade + classify leaves those cells
+// as they are (enqueue_shade_classify's `live`); and its brick occupancy and
+// reach (for its order), the same in a frame under the same conditions: no
+// marks, no reach kernel.
+struct LiveCells {
+  cl::Buffer mask;
+  std::optional<DeviceOccupancy> occupancy;
+  sv_classify_params cp{};
+  float grad[4]{};
+  bool holds_for(const sv_classify_params& c, const sv_shade_params& sp) const {
+    return std::memcmp(&cp, &c, sizeof c) == 0 &&
+           std::memcmp(grad, sp.grad_scale, sizeof grad) == 0;
+  }
+};
+
 struct RenderEngine::State {
   Device* device = nullptr;
   EngineOptions eo;
@@ -76,17 +94,9 @@ struct RenderEngine::State {
   std::optional<ResampleTables> tables;
   const Volume* laid_out = nullptr;  // reuse_layout: the volume in `cells`
   const float* laid_data = nullptr;
-  // The previous frame's PE mask (DeviceMatching::active) while `rgba`
-  // holds zeros in the cells of the PEs it flags 0 under classification
-  // `live_cp` of the volume kept in `cells`: the fused shade + classify
-  // leaves those cells as they are (enqueue_shade_classify's `live`).
-  cl::Buffer live;
-  // and that frame's brick occupancy and reach (for its order), the same in
-  // this frame under the same conditions: no marks, no reach kernel.
-  std::optional<DeviceOccupancy> live_occupancy;
-  sv_classify_params live_cp{};
-  float live_grad[4]{};  // and gradient scale (the transfer function's |g|)
-  bool live_valid = false;
+  // The previous frame's PE mask while `rgba` holds zeros in the cells of
+  // the PEs it flags 0 (LiveCells); none while the cells change.
+  std::optional<LiveCells> live;
   // Sized by the frame, grown on demand.
   Scratch pe_total, total, sample_off, samples, image;
   // The swap plan, its host vectors and device tables reused from frame to
@@ -146,7 +156,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.rgba.reset();
     S.tables.reset();
     S.laid_out = nullptr;
-    S.live_valid = false;
+    S.live.reset();
     const CellLayout cl_layout = S.array->cell_layout(vol.dims(), 1);
     // The fused shade + classify writes interleaved cells (a corner's RGBA
     // in one 16-byte load for the resample); the two-launch path classifies
@@ -198,19 +208,19 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // only zero voxels, and whether a voxel is transparent depends on its
   // value, gradient (its scale from the spacing) and the classification,
   // not on the view or the lighting) hold the zeros they would be given
-  // again: the shade leaves them out. The flag is down while the cells
-  // change, up once this frame's mask is enqueued (the next frame's shade
+  // again: the shade leaves them out. S.live is empty while the cells
+  // change, set once this frame's mask is enqueued (the next frame's shade
   // reads it after).
-  const bool use_live = eo.fused && keep && S.live_valid &&
-                        std::memcmp(&S.live_cp, &cp, sizeof cp) == 0 &&
-                        std::memcmp(S.live_grad, sp.grad_scale, sizeof S.live_grad) == 0;
-  const cl::Buffer live_used = use_live ? S.live : cl::Buffer();  // for the stats
-  S.live_valid = false;
+  std::optional<LiveCells> live;
+  if (eo.fused && keep && S.live && S.live->holds_for(cp, sp)) live = std::move(S.live);
+  S.live.reset();
+  const bool use_live = live.has_value();
+  const cl::Buffer live_used = use_live ? live->mask : cl::Buffer();  // for the stats
   // The occupancy too, where the order (the reach's stencil) is the same.
   const bool reuse_occupancy =
-      use_live && need_reach && S.live_occupancy && S.live_occupancy->order == opt.order;
+      use_live && need_reach && live->occupancy && live->occupancy->order == opt.order;
   if (reuse_occupancy) {
-    occupancy = S.live_occupancy;
+    occupancy = live->occupancy;
     occupancy->events.clear();
   }
   if (eo.fused) {
@@ -218,7 +228,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));
     e_classify = enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba, ShadeKernel::vec16,
                                         occupancy && !reuse_occupancy ? &*occupancy : nullptr,
-                                        use_live ? &S.live : nullptr);
+                                        use_live ? &live->mask : nullptr);
   } else {
     // Classified over the shading: no second voxel buffer, and a voxel
     // moves 32 bytes instead of 48 (enqueue_classify_in_place).
@@ -242,11 +252,11 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
                                           BrickReach{&occupancy->reach, occupancy->bricks}, links)
                           : enqueue_match(device, view, split, links);
   if (mask_pes && eo.fused && eo.reuse_layout) {
-    S.live = dm.active;
-    S.live_occupancy = occupancy;
-    S.live_cp = cp;
-    std::memcpy(S.live_grad, sp.grad_scale, sizeof S.live_grad);
-    S.live_valid = true;
+    S.live.emplace();
+    S.live->mask = dm.active;
+    S.live->occupancy = occupancy;
+    S.live->cp = cp;
+    std::memcpy(S.live->grad, sp.grad_scale, sizeof S.live->grad);
   }
   enqueue_balance(device, dm, view, split, eo.balance_sweeps);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
