@@ -92,12 +92,14 @@ std::string with_cell_bits(const std::string& name, const ResampleTables& t, con
   return t.cell_bits && t.pairs() != nullptr && L.interleaved && order == 1 ? name + "c" : name;
 }
 
-// The order-1 kernels' pair table (resample_pair_table), with the cell bits
-// where `cell_bits` says so. Tables made without one (a caller's own
-// ResampleTables) get it here from their address table, read back (a few
-// KiB, blocking), without cell bits. One of the wrong size is an
-// ArgumentError.
-cl::Buffer pair_table(Device& device, const ResampleTables& t) {
+// The v8 kernels' last argument: for interleaved cells the order-1 kernels'
+// pair table (resample_pair_table), with the cell bits where `cell_bits`
+// says so; the planar kernels never read it (any buffer will do). Tables
+// made without one (a caller's own ResampleTables) get it here from their
+// address table, read back (a few KiB, blocking), without cell bits. One of
+// the wrong size is an ArgumentError.
+cl::Buffer pair_table(Device& device, const ResampleTables& t, const VoxelLayout& L, bool v8) {
+  if (!v8 || !L.interleaved) return t.table;
   const int64_t n = t.dims[0] + t.dims[1] + t.dims[2];
   if (t.pairs() != nullptr) {
     const std::size_t size = buffer_size(t.pairs, "clGetMemObjectInfo(resample pair table)");
@@ -264,11 +266,9 @@ void set_resample_view(Device& device, ResampleTables& tables, const ViewGeometr
 
 ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const ViewGeometry& view,
                                     const cl::Buffer* origins) {
-  for (int a = 0; a < 3; ++a)
-    if (view.grid.dims[a] != L.dims()[a])
-      throw ArgumentError("view", "was made for a volume of other dimensions");
   ResampleTables t;
   t.dims = L.dims();
+  set_resample_view(device, t, view);  // first: a view of other dims uploads nothing else
   t.pes = L.pes();
   t.interleaved = L.interleaved;
   const std::vector<cl_int> table = resample_address_table(L, &t.channel_stride);
@@ -285,7 +285,6 @@ ResampleTables make_resample_tables(Device& device, const VoxelLayout& L, const 
   }
   t.pairs = upload(device, pairs, "resample pair table");
   t.origins = origins ? *origins : upload(device, cell_origin_table(L.cells.split), "cell origins");
-  set_resample_view(device, t, view);
   return t;
 }
 
@@ -344,9 +343,7 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
   // Without an order or skipping, the order and reach buffers are never
   // read: any buffer will do.
   const PrefetchArgs pf = prefetch_args(tables, voxels.layout());
-  // (the planar kernels never read it)
-  const cl::Buffer pairs =
-      v8 && voxels.layout().interleaved ? pair_table(device, tables) : tables.table;
+  const cl::Buffer pairs = pair_table(device, tables, voxels.layout(), v8);
   if (v8)
     set_args_from(k, name, 8, lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
                   skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
@@ -464,9 +461,7 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   // The float8 kernel's skipping and order arguments; without them the
   // reach and order buffers are never read: any buffer will do.
   const PrefetchArgs pf = prefetch_args(tables, voxels.layout());
-  // (the planar kernels never read it)
-  const cl::Buffer pairs =
-      v8 && voxels.layout().interleaved ? pair_table(device, tables) : tables.table;
+  const cl::Buffer pairs = pair_table(device, tables, voxels.layout(), v8);
   if (v8)
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
