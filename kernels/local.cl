@@ -90,12 +90,13 @@ SV_FN_INLINE void sv_resample_local8(
     const int cs, __global const sv_rect* rects, __global const int* rect_off,
     __global float4* foot, __global const uchar* reach, const int nbx, const int nby,
     const int skip, __global const int* order, const int ordered, __global const int4* origins,
-    const int4 pe_cell, __global const long* pairs, const int il, const int cb) {
+    const int4 pe_cell, __global const long* pairs, __global const short2* kb, const int use_kb,
+    const int il, const int cb) {
   const int s0 = (int)get_global_id(0) * 8;
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8];
   long8 X[3];
-  int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X);
+  int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X, kb, use_kb);
   sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, view, table, vox, cs, origins, pe_cell, il);
   int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
@@ -195,9 +196,11 @@ SV_FN_INLINE void sv_resample_local8(
                      __global const int* rect_off, __global float4* foot,                          \
                      __global const uchar* reach, const int nbx, const int nby, const int skip,    \
                      __global const int* order, const int ordered, __global const int4* origins,   \
-                     const int4 pe_cell, __global const long* pairs) {                             \
+                     const int4 pe_cell, __global const long* pairs, __global const short2* kb,    \
+                     const int use_kb) {                                                           \
     sv_resample_local8(segs, nseg, seg_off, log2p, view, table, vox, cs, rects, rect_off, foot,    \
-                       reach, nbx, nby, skip, order, ordered, origins, pe_cell, pairs, IL, CB);    \
+                       reach, nbx, nby, skip, order, ordered, origins, pe_cell, pairs, kb, use_kb, \
+                       IL, CB);                                                                    \
   }
 SV_RESAMPLE_LOCAL_KERNEL(simdvol_resample_local_v8, 0, 0)
 SV_RESAMPLE_LOCAL_KERNEL(simdvol_resample_local_v8_il, 1, 0)
@@ -217,13 +220,18 @@ SV_RESAMPLE_LOCAL_KERNEL(simdvol_resample_local_v8_ilc, 1, ORDER == 1)
  * position s is still that of segment s (the fused kernel's search), and
  * the lanes still read one or two PEs' voxels. */
 #define SV_ORDER_BUCKETS 64
-SV_FN int sv_order_key(__global const sv_segment* segs, const int s) {
-  return clamp(segs[s].k1 - segs[s].k0, 0, SV_ORDER_BUCKETS - 1);
+SV_FN int sv_order_key(__global const sv_segment* segs, __global const short2* kb, const int use_kb,
+                       const int s) {
+  const int n = use_kb ? kb[s].y - kb[s].x : segs[s].k1 - segs[s].k0;
+  return clamp(n, 0, SV_ORDER_BUCKETS - 1);
 }
 
+/* use_kb: the lengths from the balanced bounds a deferred unpack left in kb
+ * (match_cl.hpp: BalanceUnpack), not from the segments. */
 __kernel void simdvol_segment_order(__global const sv_segment* segs, const int nseg,
                                     __global const int* seg_off, const int log2p,
-                                    __global int* order) {
+                                    __global int* order, __global const short2* kb,
+                                    const int use_kb) {
   const int c0 = (int)get_global_id(0) * SV_ORDER_BLOCK;
   if (c0 >= nseg) return;
   const int c1 = min(c0 + SV_ORDER_BLOCK, nseg);
@@ -233,14 +241,14 @@ __kernel void simdvol_segment_order(__global const sv_segment* segs, const int n
     if (b1 <= b0) continue; /* a PE without segments */
     int start[SV_ORDER_BUCKETS];
     for (int k = 0; k < SV_ORDER_BUCKETS; ++k) start[k] = 0;
-    for (int s = b0; s < b1; ++s) ++start[sv_order_key(segs, s)];
+    for (int s = b0; s < b1; ++s) ++start[sv_order_key(segs, kb, use_kb, s)];
     int at = b0;
     for (int k = SV_ORDER_BUCKETS - 1; k >= 0; --k) {
       const int c = start[k];
       start[k] = at;
       at += c;
     }
-    for (int s = b0; s < b1; ++s) order[start[sv_order_key(segs, s)]++] = s;
+    for (int s = b0; s < b1; ++s) order[start[sv_order_key(segs, kb, use_kb, s)]++] = s;
     b0 = b1;
   }
 }

@@ -605,10 +605,11 @@ SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, co
 #endif
 SV_FN int sv_lanes8(__global const sv_segment* segs, __global const int* order, const int ordered,
                     const int nseg, const int s0, __global const sv_view* view, int* li, int* lj,
-                    int* lk, int* ln, long8* X) {
+                    int* lk, int* ln, long8* X, __global const short2* kb, const int use_kb) {
 #if SV_SEG_PF > 0
   SV_PREFETCH(segs + min(s0 + SV_SEG_PF, nseg - 1));
   SV_PREFETCH(segs + min(s0 + SV_SEG_PF + 4, nseg - 1));
+  if (use_kb) SV_PREFETCH(kb + min(s0 + SV_SEG_PF, nseg - 1));
 #endif
   int T = 0;
 #pragma unroll
@@ -616,10 +617,14 @@ SV_FN int sv_lanes8(__global const sv_segment* segs, __global const int* order, 
     const int pos = min(s0 + l, nseg - 1);
     const int s = ordered ? order[pos] : pos;
     const sv_segment g = segs[s];
+    /* use_kb: the balanced bounds a deferred unpack left in kb (match_cl.hpp:
+     * BalanceUnpack); the segment's own k0, k1 are the matching's then */
+    const short2 b = use_kb ? kb[s] : (short2)(0);
+    const int k0 = use_kb ? b.x : g.k0, k1 = use_kb ? b.y : g.k1;
     li[l] = g.i;
     lj[l] = g.j;
-    lk[l] = g.k0;
-    ln[l] = s0 + l < nseg ? g.k1 - g.k0 : 0;
+    lk[l] = k0;
+    ln[l] = s0 + l < nseg ? k1 - k0 : 0;
     T = max(T, ln[l]);
   }
   const int8 I = (int8)(li[0], li[1], li[2], li[3], li[4], li[5], li[6], li[7]);
@@ -807,7 +812,7 @@ SV_FN_INLINE void sv_resample8(__global const sv_segment* segs, const int nseg,
   if (s0 >= nseg) return;
   int li[8], lj[8], lk[8], ln[8], lo[8];
   long8 X[3];
-  const int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X);
+  const int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X, 0, 0);
   sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, view, table, vox, cs, origins, pe_cell, il);
 #pragma unroll
   for (int l = 0; l < 8; ++l) {

@@ -258,7 +258,12 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.live->cp = cp;
     std::memcpy(S.live->grad, sp.grad_scale, sizeof S.live->grad);
   }
-  enqueue_balance(device, dm, view, split, eo.balance_sweeps);
+  // Direct compositing's kernels (the segment order, the fused resample +
+  // local) read the balanced bounds where the rounds left them: no unpack
+  // pass over the segments (BalanceUnpack::deferred; about a third of the
+  // balance stage).
+  enqueue_balance(device, dm, view, split, eo.balance_sweeps, BalanceBounds::automatic,
+                  mode == CompositeMode::direct ? BalanceUnpack::deferred : BalanceUnpack::now);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
   // The tables of the cells' layout, made once with them (the origin table
   // is the layout's, already on the device); the frame's view uploaded.

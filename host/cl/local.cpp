@@ -150,12 +150,21 @@ LocalSegments upload_segments(Device& device, const Matching& m) {
   return s;
 }
 
+void check_bounds_unpacked(const LocalSegments& segs, const char* stage) {
+  if (segs.bounds_pending)
+    throw ArgumentError("segments", std::string(stage) +
+                                        " needs the balanced bounds in the segments (a deferred "
+                                        "unpack is pending: enqueue_balance_unpack)");
+}
+
 LocalSegments device_segments(Device& device, const DeviceMatching& m) {
   LocalSegments s;
   s.pes = m.pes;
   s.segments = m.segments;
   s.seg_offset = m.seg_offset;
   s.rects = m.rects;
+  s.bounds_pending = m.unpack_pending;
+  if (m.unpack_pending) s.bounds = m.bounds;
   s.host_rects.resize(static_cast<std::size_t>(m.pes));
   cl_int count = 0;
   cl_check(device.queue().enqueueReadBuffer(m.seg_offset, CL_FALSE,
@@ -327,6 +336,7 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
                            const ResampleTables& tables, const VoxelBuffer& voxels, int order,
                            const cl::Buffer& samples, LocalKernel variant,
                            const SegmentOrder* lanes, const DeviceOccupancy* skip) {
+  check_bounds_unpacked(segs, "enqueue_resample");
   check_tables(segs, tables, voxels);
   if (lanes && lanes->count != segs.count)
     throw ArgumentError("segment order", "was made for other segments");
@@ -355,6 +365,7 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
 
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                         const cl::Buffer& samples, DeviceFootprints& fp) {
+  check_bounds_unpacked(segs, "enqueue_local");
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
     throw ArgumentError("footprints", "PE count differs from the segments'");
   const std::string name = "simdvol_local";
@@ -432,8 +443,10 @@ SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs) {
   o.order = device.scratch_buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int), "segment order");
   const std::string name = "simdvol_segment_order";
   cl::Kernel k = stage_kernel(device, name, 1);
+  // Without pending bounds the kernel's `kb` is a placeholder (not read).
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
-           static_cast<cl_int>(log2_exact(segs.pes)), o.order);
+           static_cast<cl_int>(log2_exact(segs.pes)), o.order,
+           segs.bounds_pending ? segs.bounds : segs.segments, cl_int(segs.bounds_pending));
   const int64_t blocks = (segs.count + SV_ORDER_BLOCK - 1) / SV_ORDER_BLOCK;
   o.event = device.run(k, name, segment_range(blocks), cl::NDRange(kSegmentWgs));
   return o;
@@ -450,6 +463,7 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   if (lanes && lanes->count != segs.count)
     throw ArgumentError("segment order", "was made for other segments");
   const bool v8 = variant == LocalKernel::vector8;
+  if (!v8) check_bounds_unpacked(segs, "the scalar resample + local");
   const std::string name =
       v8 ? with_cell_bits(detail::voxel_kernel("simdvol_resample_local_v8", voxels.layout()),
                           tables, voxels.layout(), order)
@@ -466,7 +480,8 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
                   cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
-                  pf.origins, pf.pe_cell, pairs);
+                  pf.origins, pf.pe_cell, pairs, segs.bounds_pending ? segs.bounds : segs.segments,
+                  cl_int(segs.bounds_pending));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }

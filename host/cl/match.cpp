@@ -268,8 +268,27 @@ bool balance_bounds16(int64_t depth) {
   return depth <= 32767;
 }
 
+namespace {
+
+void enqueue_unpack(Device& device, DeviceMatching& m, const std::string& name,
+                    const cl::Buffer& kk) {
+  cl::Kernel unpack = device.kernel("balance", name, match_defines());
+  set_args(unpack, name, m.seg_offset, static_cast<cl_int>(m.pes), kk, m.segments);
+  const std::size_t slots = static_cast<std::size_t>(m.capacity);  // Device::run rounds up
+  m.balance_events.push_back(
+      {"balance_unpack", device.run(unpack, name, cl::NDRange(slots), cl::NDRange(kWgs))});
+}
+
+}  // namespace
+
+void enqueue_balance_unpack(Device& device, DeviceMatching& m) {
+  if (!m.unpack_pending) return;
+  enqueue_unpack(device, m, "simdvol_balance_unpack16", m.bounds);
+  m.unpack_pending = false;
+}
+
 void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view,
-                     const KdSplit& split, int sweeps, BalanceBounds bounds) {
+                     const KdSplit& split, int sweeps, BalanceBounds bounds, BalanceUnpack unpack) {
   if (sweeps < 0) throw ArgumentError("sweeps", "must be >= 0");
   if (m.pes != split.pes()) throw ArgumentError("matching", "made for another PE count");
   if (sweeps > 0 && !m.linked)
@@ -307,6 +326,8 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   // The 16-bit bounds are the fill's (its copy of the segments' k0, k1, kept
   // equal to them by the unpack after every balance); else a pack.
   const bool filled = narrow && m.bounds_filled;
+  // A 32-bit balance packs from the segments: a deferred unpack first.
+  if (!filled) enqueue_balance_unpack(device, m);
   m.bounds_filled = filled;  // a 32-bit balance leaves the fill's copy behind
   const cl::Buffer kk =
       filled ? m.bounds
@@ -333,10 +354,13 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
     m.balance_events.push_back(
         {"balance_round", device.run(round, round_name, cl::NDRange(P), cl::NDRange(kWgs))});
   }
-  cl::Kernel unpack = device.kernel("balance", unpack_name, defs);
-  set_args(unpack, unpack_name, m.seg_offset, npes, kk, m.segments);
-  m.balance_events.push_back(
-      {"balance_unpack", device.run(unpack, unpack_name, cl::NDRange(slots), cl::NDRange(kWgs))});
+  // The fill's 16-bit copy may stay the only current one (deferred).
+  if (filled && unpack == BalanceUnpack::deferred) {
+    m.unpack_pending = true;
+    return;
+  }
+  enqueue_unpack(device, m, unpack_name, kk);
+  if (filled) m.unpack_pending = false;
 }
 
 Matching DeviceMatching::read(Device& device) const {
@@ -348,10 +372,20 @@ Matching DeviceMatching::read(Device& device) const {
   cl_check(q.enqueueReadBuffer(seg_offset, CL_TRUE, 0, off.size() * sizeof(cl_int), off.data()),
            "clEnqueueReadBuffer(seg_offset)");
   m.segments.resize(static_cast<std::size_t>(off[P]));
-  if (off[P] > 0)
+  if (off[P] > 0) {
     cl_check(q.enqueueReadBuffer(segments, CL_TRUE, 0, m.segments.size() * sizeof(sv_segment),
                                  m.segments.data()),
              "clEnqueueReadBuffer(segments)");
+    if (unpack_pending) {  // the balanced bounds are in `bounds` only
+      std::vector<cl_short2> b(m.segments.size());
+      cl_check(q.enqueueReadBuffer(bounds, CL_TRUE, 0, b.size() * sizeof(cl_short2), b.data()),
+               "clEnqueueReadBuffer(balance bounds)");
+      for (std::size_t s = 0; s < b.size(); ++s) {
+        m.segments[s].k0 = b[s].s[0];
+        m.segments[s].k1 = b[s].s[1];
+      }
+    }
+  }
   cl_check(q.enqueueReadBuffer(rects, CL_TRUE, 0, P * sizeof(sv_rect), m.rects.data()),
            "clEnqueueReadBuffer(rects)");
   cl_check(q.enqueueReadBuffer(loads, CL_TRUE, 0, P * sizeof(cl_int), loads32.data()),

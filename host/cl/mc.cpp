@@ -61,6 +61,7 @@ DeviceMcStats* prepare_stats(Device& device, DeviceMcStats* stats, int64_t n, cl
 
 DeviceRayLists enqueue_ray_lists(Device& device, const LocalSegments& segs,
                                  const ViewGeometry& view) {
+  check_bounds_unpacked(segs, "enqueue_ray_lists");
   const int width = view.width(), height = view.height();
   check_pixels(width, height);
   DeviceRayLists r;
@@ -134,6 +135,7 @@ cl::Event enqueue_mc_whole(Device& device, const LocalSegments& segs, const cl::
                            const cl::Buffer& samples, const DeviceRayLists& rays,
                            const CompositeParams& p, const cl::Buffer& image,
                            DeviceMcStats* stats) {
+  check_bounds_unpacked(segs, "enqueue_mc_whole");
   if (p.samples <= 0) throw ArgumentError("--samples", "must be positive");
   check_pixels(rays.width, rays.height);
   const int npx = rays.width * rays.height;
@@ -149,6 +151,7 @@ cl::Event enqueue_mc_whole(Device& device, const LocalSegments& segs, const cl::
 DeviceAllocation enqueue_mc_allocation(Device& device, const LocalSegments& segs,
                                        const cl::Buffer& sample_off, const cl::Buffer& samples,
                                        const DeviceRayLists& rays, int budget) {
+  check_bounds_unpacked(segs, "enqueue_mc_allocation");
   if (budget < 0) throw ArgumentError("budget", "must not be negative");
   check_pixels(rays.width, rays.height);
   DeviceAllocation a;
@@ -174,6 +177,7 @@ cl::Event enqueue_mc_local(Device& device, const LocalSegments& segs, const cl::
                            const cl::Buffer& samples, int width, const CompositeParams& p,
                            const DeviceAllocation* alloc, DeviceFootprints& fp,
                            DeviceMcStats* stats) {
+  check_bounds_unpacked(segs, "enqueue_mc_local");
   if (!alloc && p.samples <= 0) throw ArgumentError("--samples", "must be positive");
   if (width < 1) throw ArgumentError("width", "must be positive");
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)

@@ -14,6 +14,7 @@
 
 #include "simdvol/engine.hpp"
 #include "simdvol/local_cl.hpp"
+#include "simdvol/mc_cl.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 #include "stage_testing.hpp"
@@ -860,6 +861,91 @@ TEST(LocalCl, SegmentOrderSortsWithinPeBlocks) {
   EXPECT_THROW(
       enqueue_resample_local(dev, segs, tables, vb, 1, fp, LocalKernel::vector8, nullptr, &wrong),
       ArgumentError);
+}
+
+// Segments whose balance left its unpack pending (BalanceUnpack::deferred,
+// the engine's direct frames): the segment order and the fused float8
+// kernel read the balanced bounds from the 16-bit copy and give the same
+// order and footprints, bit for bit, as segments of the same balance
+// unpacked at once (orders 1 and 3, with and without skipping and the lane
+// order); the stages that read the segments' own bounds refuse them.
+TEST(LocalCl, DeferredBalanceUnpackGivesTheSameBits) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Dims3 dims{41, 35, 29};
+  const Volume vol(dims, VoxelType::f32);
+  int moved = 0, coloured = 0;
+  for (int64_t pes : {int64_t(8), int64_t(512), int64_t(8192)}) {
+    const std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes + 3));
+    const VoxelLayout L4 = make_voxel_layout(make_cell_layout(dims, pes, 1), true);
+    VoxelBuffer vb4(dev, L4);
+    vb4.write(dev, voxels_to_cells(v, L4));
+    const KdSplit split = kd_split(dims, pes);
+    for (const ViewAngles& a :
+         {ViewAngles{0, 45, 0}, ViewAngles{20, 35, 10}, ViewAngles{33, 71, -12}}) {
+      SCOPED_TRACE("P " + std::to_string(pes) + " view " + std::to_string(a.theta) + "," +
+                   std::to_string(a.phi) + "," + std::to_string(a.varphi));
+      const ViewGeometry view = make_view(vol, a, 48, 40, Sampling::voxel);
+      DeviceMatching deferred = enqueue_match(dev, view, split);
+      enqueue_balance(dev, deferred, view, split, kBalanceSweeps, BalanceBounds::automatic,
+                      BalanceUnpack::deferred);
+      ASSERT_TRUE(deferred.unpack_pending);
+      DeviceMatching unpacked = enqueue_match(dev, view, split);
+      enqueue_balance(dev, unpacked, view, split);
+      const LocalSegments sd = device_segments(dev, deferred);
+      const LocalSegments sn = device_segments(dev, unpacked);
+      ASSERT_TRUE(sd.bounds_pending);
+      ASSERT_FALSE(sn.bounds_pending);
+      ASSERT_EQ(sd.count, sn.count);
+      const Matching m = unpacked.read(dev);
+      moved += m.loads != match_reference(view, split).loads;
+      const SegmentOrder od = enqueue_segment_order(dev, sd);
+      const SegmentOrder on = enqueue_segment_order(dev, sn);
+      const std::size_t count = static_cast<std::size_t>(std::max<int64_t>(sd.count, 1));
+      EXPECT_EQ(read_all<cl_int>(dev, od.order, count), read_all<cl_int>(dev, on.order, count));
+      const ResampleTables t4 = make_resample_tables(dev, L4, view);
+      DeviceFootprints fd = make_footprints(dev, m.rects), fn = make_footprints(dev, m.rects);
+      for (int order : {1, 3}) {
+        const DeviceOccupancy occ = enqueue_occupancy(dev, vb4, order);
+        for (int variant = 0; variant < 3; ++variant) {
+          const DeviceOccupancy* skip = variant >= 1 ? &occ : nullptr;
+          enqueue_zero_footprints(dev, fd);
+          enqueue_zero_footprints(dev, fn);
+          enqueue_resample_local(dev, sd, t4, vb4, order, fd, LocalKernel::vector8, skip,
+                                 variant == 2 ? &od : nullptr);
+          enqueue_resample_local(dev, sn, t4, vb4, order, fn, LocalKernel::vector8, skip,
+                                 variant == 2 ? &on : nullptr);
+          const Footprints want = read_footprints(dev, fn);
+          EXPECT_TRUE(same_bits(read_footprints(dev, fd), want))
+              << "order " << order << " variant " << variant;
+          coloured += std::any_of(want.pixels.begin(), want.pixels.end(),
+                                  [](const Rgba& c) { return c.a != 0; });
+        }
+      }
+      const cl::Buffer soff = upload_sample_offsets(dev, m);
+      cl::Buffer samples =
+          dev.buffer(CL_MEM_READ_WRITE,
+                     static_cast<std::size_t>(std::max<int64_t>(sample_offsets(m).back(), 1)) * 16,
+                     nullptr, "samples");
+      EXPECT_THROW(enqueue_resample_local(dev, sd, t4, vb4, 1, fd, LocalKernel::segment),
+                   ArgumentError);
+      EXPECT_THROW(enqueue_resample(dev, sd, soff, t4, vb4, 1, samples), ArgumentError);
+      EXPECT_THROW(enqueue_local(dev, sd, soff, samples, fd), ArgumentError);
+      EXPECT_THROW(enqueue_ray_lists(dev, sd, view), ArgumentError);
+      // once unpacked, the segments are those of the other balance
+      enqueue_balance_unpack(dev, deferred);
+      const LocalSegments su = device_segments(dev, deferred);
+      EXPECT_FALSE(su.bounds_pending);
+      EXPECT_NO_THROW(enqueue_resample(dev, su, soff, t4, vb4, 1, samples));
+      const std::size_t n = static_cast<std::size_t>(sd.count);
+      const std::vector<sv_segment> a0 = read_all<sv_segment>(dev, su.segments, n);
+      const std::vector<sv_segment> a1 = read_all<sv_segment>(dev, sn.segments, n);
+      EXPECT_EQ(std::memcmp(a0.data(), a1.data(), n * sizeof(sv_segment)), 0);
+    }
+  }
+  EXPECT_GT(moved, 3);     // the balances moved samples
+  EXPECT_GT(coloured, 9);  // and the footprints are not all empty
 }
 
 // The engine with and without skip_empty, skip_pes and order_lanes: the

@@ -137,6 +137,67 @@ TEST(MatchCl, RepeatedBalancingEqualsReference) {
     }
 }
 
+// A balance with its unpack deferred (BalanceUnpack::deferred, the engine's
+// direct frames) leaves the balanced bounds in the fill's 16-bit copy only:
+// read() still returns the reference's balance, and enqueue_balance_unpack
+// writes them into the segments (then the segments are those of a balance
+// that unpacked at once). Rounds of either width may follow: a 16-bit
+// balance keeps the unpack pending where asked, a 32-bit one (packed from
+// the segments) unpacks first; both give the reference's balance of all
+// the sweeps.
+TEST(MatchCl, DeferredUnpackEqualsReference) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 dims{93, 57, 31};
+  const BalanceBounds n = BalanceBounds::narrow, w = BalanceBounds::wide;
+  const BalanceUnpack later = BalanceUnpack::deferred, now = BalanceUnpack::now;
+  for (ViewAngles va : {kViews[2], kViews[3]})
+    for (int64_t pes : {int64_t(64), int64_t(8192)}) {
+      const ViewGeometry v = geometry(dims, va, 96, 96);
+      const KdSplit split = kd_split(dims, pes);
+      const Matching ref = match_reference(v, split);
+      const Matching want2 = balance_reference(ref, v, split, 2);
+      const Matching want5 = balance_reference(ref, v, split, 5);
+      EXPECT_NE(want2.loads, ref.loads) << name(va, pes);  // the sweeps move samples
+      DeviceMatching dm = enqueue_match(dev, v, split);
+      enqueue_balance(dev, dm, v, split, 2, n, later);
+      ASSERT_TRUE(dm.unpack_pending);
+      expect_same(dm.read(dev), want2, name(va, pes) + " pending");
+      // the segments themselves still hold the matching's bounds
+      std::vector<sv_segment> raw(want2.segments.size());
+      cl_check(dev.queue().enqueueReadBuffer(dm.segments, CL_TRUE, 0,
+                                             raw.size() * sizeof(sv_segment), raw.data()),
+               "read segments");
+      bool stale = false;
+      for (std::size_t s = 0; s < raw.size(); ++s)
+        stale |= raw[s].k0 != ref.segments[s].k0 || raw[s].k1 != ref.segments[s].k1;
+      EXPECT_FALSE(stale) << name(va, pes);
+      enqueue_balance_unpack(dev, dm);
+      EXPECT_FALSE(dm.unpack_pending);
+      enqueue_balance_unpack(dev, dm);  // nothing pending: nothing done
+      expect_same(dm.read(dev), want2, name(va, pes) + " unpacked");
+      cl_check(dev.queue().enqueueReadBuffer(dm.segments, CL_TRUE, 0,
+                                             raw.size() * sizeof(sv_segment), raw.data()),
+               "read segments");
+      for (std::size_t s = 0; s < raw.size(); ++s)
+        ASSERT_TRUE(raw[s].k0 == want2.segments[s].k0 && raw[s].k1 == want2.segments[s].k1)
+            << name(va, pes) << " segment " << s;
+      // Deferred, then three more sweeps of each width and either unpack.
+      const std::pair<BalanceBounds, BalanceUnpack> then[] = {
+          {n, later}, {n, now}, {w, later}, {w, now}};
+      for (const auto& [b, u] : then) {
+        DeviceMatching d2 = enqueue_match(dev, v, split);
+        enqueue_balance(dev, d2, v, split, 2, n, later);
+        enqueue_balance(dev, d2, v, split, 3, b, u);
+        EXPECT_EQ(d2.unpack_pending, b == n && u == later) << name(va, pes);
+        const std::string what = name(va, pes) + (b == n ? " then narrow" : " then wide") +
+                                 (u == later ? " deferred" : "");
+        expect_same(d2.read(dev), want5, what);
+        enqueue_balance_unpack(dev, d2);
+        expect_same(d2.read(dev), want5, what + ", unpacked");
+      }
+    }
+}
+
 TEST(MatchCl, EqualsReferenceRandomViews) {
   SIMDVOL_TEST_DEVICE(dev);
   std::mt19937 rng(9);

@@ -39,7 +39,17 @@ struct LocalSegments {
   cl::Buffer seg_offset;            ///< cl_int[P + 1]
   cl::Buffer rects;                 ///< sv_rect[P]
   std::vector<sv_rect> host_rects;  ///< the same rectangles on the host (footprint sizes)
+  /// Where a balance left its unpack pending (DeviceMatching::unpack_pending,
+  /// BalanceUnpack::deferred): the segments' (k0, k1) are cl_short2 in
+  /// `bounds` (the segments hold the matching's). Only enqueue_segment_order
+  /// and the vector8 enqueue_resample_local take them there; every other
+  /// stage throws ArgumentError on such segments (enqueue_balance_unpack
+  /// first, then device_segments again).
+  bool bounds_pending = false;
+  cl::Buffer bounds;
 };
+/// ArgumentError naming `stage` where segs.bounds_pending.
+void check_bounds_unpacked(const LocalSegments& segs, const char* stage);
 /// Uploads m's segments, offsets and rectangles (blocking). ArgumentError if
 /// P is not a power of two or the counts exceed int32.
 LocalSegments upload_segments(Device& device, const Matching& m);
@@ -127,7 +137,8 @@ struct SegmentOrder {
   cl::Buffer order;   ///< cl_int[count]: position -> segment index
   cl::Event event;
 };
-/// Enqueues the sort of `segs` (their current k0, k1).
+/// Enqueues the sort of `segs` (their current k0, k1, from `bounds` where
+/// bounds_pending).
 SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs);
 
 /// Kernel of the resample stages: `vector8` (the default: 8 segments per
@@ -180,7 +191,9 @@ void enqueue_occupancy_reach(Device& device, DeviceOccupancy& o);
 /// (`variant` as for enqueue_resample). With `skip` (made for these voxels
 /// and `order`) the vector8 kernel steps over samples whose every stencil
 /// voxel is zero; with `lanes` (made for `segs`) it takes the segments in
-/// that order. The scalar `segment` kernel ignores both.
+/// that order. The scalar `segment` kernel ignores both. The vector8 kernel
+/// reads segs.bounds where segs.bounds_pending (the same footprints as
+/// after enqueue_balance_unpack); the scalar one throws ArgumentError there.
 cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
                                  DeviceFootprints& fp, LocalKernel variant = LocalKernel::vector8,

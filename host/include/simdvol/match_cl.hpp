@@ -117,6 +117,11 @@ struct DeviceMatching {
   /// `bounds` holds the segments' 16-bit (k0, k1) (written by the fill, kept
   /// by balancing with 16-bit bounds): enqueue_balance then needs no pack.
   bool bounds_filled = false;
+  /// Left by enqueue_balance with BalanceUnpack::deferred: the balanced
+  /// (k0, k1) are in `bounds` (16-bit) only, the segments still hold the
+  /// matching's. read() returns the balanced ones either way; the kernels
+  /// that take them from `bounds` are the frame's (LocalSegments::bounds).
+  bool unpack_pending = false;
   std::vector<StageEvent> match_events;    ///< (active,) rows, pe, scan, fill
   std::vector<StageEvent> balance_events;  ///< pack, every round, unpack
 
@@ -157,12 +162,26 @@ enum class BalanceBounds { automatic, narrow, wide };
 /// Whether 16-bit bounds hold every k of a grid `depth` samples deep.
 bool balance_bounds16(int64_t depth);
 
+/// Whether the balanced bounds go back into the segments at the end of
+/// enqueue_balance (now: simdvol_balance_unpack), or, with 16-bit bounds,
+/// stay in DeviceMatching::bounds for the kernels that read them there
+/// (deferred: unpack_pending; the frame's segment order and fused resample
+/// + local, which saves the unpack's pass over every segment, about a third
+/// of the balance stage). With 32-bit bounds both unpack now.
+enum class BalanceUnpack { now, deferred };
+
 /// Enqueues `sweeps` sweeps of balancing on `m` (made by enqueue_match with
 /// the same view and split). Throws ArgumentError for sweeps < 0, for
 /// BalanceBounds::narrow where the grid is too deep for it, or for sweeps > 0
-/// on a matching made with MatchLinks::skip.
+/// on a matching made with MatchLinks::skip. A pending unpack of an earlier
+/// balance is done first where these rounds take 32-bit bounds (packed from
+/// the segments).
 void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view,
                      const KdSplit& split, int sweeps = kBalanceSweeps,
-                     BalanceBounds bounds = BalanceBounds::automatic);
+                     BalanceBounds bounds = BalanceBounds::automatic,
+                     BalanceUnpack unpack = BalanceUnpack::now);
+/// Writes the balanced bounds of a deferred unpack into the segments
+/// (simdvol_balance_unpack16); nothing where none is pending.
+void enqueue_balance_unpack(Device& device, DeviceMatching& m);
 
 }  // namespace simdvol
