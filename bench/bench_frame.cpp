@@ -383,7 +383,10 @@ int main(int argc, char** argv) try {
           enqueue_shade_classify(device, cells, sp, cp, rgba4, ShadeKernel::vec16, &occ);
       enqueue_occupancy_reach(device, occ);
       DeviceMatching dm = enqueue_match(device, view, split, BrickReach{&occ.reach, occ.bricks});
-      enqueue_balance(device, dm, view, split);
+      // as the engine's direct frames: the order and the fused kernel read
+      // the balanced bounds, no unpack
+      enqueue_balance(device, dm, view, split, kBalanceSweeps, BalanceBounds::automatic,
+                      BalanceUnpack::deferred);
       const LocalSegments ls = device_segments(device, dm);
       const SegmentOrder lanes = enqueue_segment_order(device, ls);
       DeviceFootprints fp2 = make_footprints(device, ls.host_rects);
@@ -456,8 +459,9 @@ int main(int argc, char** argv) try {
       "the zero fill and simdvol_occupancy_reach. The frame path, every PE matched: sum = match + "
       "balance + occ' + ordered4 + zero. With EngineOptions::skip_pes (the frame's default): "
       "active = the fraction of PEs whose cell has something in reach; match', balance' = their "
-      "matching and balancing; rsloc' = occ' + order + zero + the fused kernel on their "
-      "segments; sum' = the three.\n");
+      "matching and balancing (its unpack deferred, as in the engine's direct frames: the order "
+      "and the fused kernel read the balanced bounds; `balance` unpacks); rsloc' = occ' + order + "
+      "zero + the fused kernel on their segments; sum' = the three.\n");
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "%s: %s\n", kProgram, e.what());
