@@ -157,6 +157,16 @@ void check_bounds_unpacked(const LocalSegments& segs, const char* stage) {
                                         "unpack is pending: enqueue_balance_unpack)");
 }
 
+namespace {
+
+// The kernels' (kb, use_kb): the pending balanced bounds, or a placeholder
+// buffer that use_kb = 0 leaves unread.
+const cl::Buffer& bounds_arg(const LocalSegments& segs) {
+  return segs.bounds_pending ? segs.bounds : segs.segments;
+}
+
+}  // namespace
+
 LocalSegments device_segments(Device& device, const DeviceMatching& m) {
   LocalSegments s;
   s.pes = m.pes;
@@ -443,10 +453,9 @@ SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs) {
   o.order = device.scratch_buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int), "segment order");
   const std::string name = "simdvol_segment_order";
   cl::Kernel k = stage_kernel(device, name, 1);
-  // Without pending bounds the kernel's `kb` is a placeholder (not read).
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
-           static_cast<cl_int>(log2_exact(segs.pes)), o.order,
-           segs.bounds_pending ? segs.bounds : segs.segments, cl_int(segs.bounds_pending));
+           static_cast<cl_int>(log2_exact(segs.pes)), o.order, bounds_arg(segs),
+           cl_int(segs.bounds_pending));
   const int64_t blocks = (segs.count + SV_ORDER_BLOCK - 1) / SV_ORDER_BLOCK;
   o.event = device.run(k, name, segment_range(blocks), cl::NDRange(kSegmentWgs));
   return o;
@@ -480,8 +489,7 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
                   cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
-                  pf.origins, pf.pe_cell, pairs, segs.bounds_pending ? segs.bounds : segs.segments,
-                  cl_int(segs.bounds_pending));
+                  pf.origins, pf.pe_cell, pairs, bounds_arg(segs), cl_int(segs.bounds_pending));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));
 }

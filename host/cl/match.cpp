@@ -360,7 +360,7 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
     return;
   }
   enqueue_unpack(device, m, unpack_name, kk);
-  if (filled) m.unpack_pending = false;
+  m.unpack_pending = false;  // (a 32-bit balance unpacked a pending one first)
 }
 
 Matching DeviceMatching::read(Device& device) const {
