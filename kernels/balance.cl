@@ -68,12 +68,21 @@ SV_FN int2 sv_balance_pair(global const int4* cidx, global const int* pe_of, int
 
 /* A round's work-items walk their pair's links and bounds, scattered over
  * megabytes: the work-item SV_BAL_PF ahead (8; 0: none) prefetches its
- * pair's link list and the bounds the list points to (between the list's
- * ends), where the pair moves samples in this round (its loads, which no
+ * pair's link list and the bounds the list points to (all of F's and B's,
+ * below), where the pair moves samples in this round (its loads, which no
  * other pair of the round changes, differ by 2 or more). A hint only.
  * simdvol-bench-match --repeat 3 --random 0 (every PE), alternated twice:
  * balance at 30 / 45 deg 29.2 / 55.1 and 20.9 / 40.1 -> 23.7 / 31.3 and
- * 21.4 / 30.7 ms, at 0 deg 3.0 / 2.6 against 2.2 / 3.3 ms. */
+ * 21.4 / 30.7 ms, at 0 deg 3.0 / 2.6 against 2.2 / 3.3 ms.
+ * The bounds prefetched are those of every segment of F and of B (lofs[.].x
+ * = seg_offset: no load that waits), not the range between the list's first
+ * and last entries (-DSV_BAL_PF_ENDS, for comparison: those two loads of
+ * the list, just prefetched, had about a fifth of the round's samples in
+ * perf annotate). 2-core Zen 4 EPYC, 2026-12-02: simdvol-bench-options
+ * --view 0,45,0, 12 frames, both orders, balance 11.6 / 12.1 -> 11.2 / 11.6
+ * ms; simdvol-bench-frame --views 30,45, alternated twice, balance (every
+ * PE) 23.6 / 19.4 -> 16.7 / 17.0 ms at 30 deg, 38.5 / 40.0 -> 35.7 / 28.6
+ * at 45. */
 #ifndef SV_BAL_PF
 #define SV_BAL_PF 8
 #endif
@@ -84,13 +93,20 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
 #if SV_BAL_PF > 0
   const int2 fb = sv_balance_pair(cidx, pe_of, splits, pes, axis, par, dir, p + SV_BAL_PF);
   if (fb.x < 0 || (loads[fb.x] - loads[fb.y]) / 2 == 0) return;
-  const int e0 = sv_list_start(lofs[fb.x], axis), e1 = sv_list_start(lofs[fb.x + 1], axis);
+  const int4 f0 = lofs[fb.x], f1 = lofs[fb.x + 1];
+  const int e0 = sv_list_start(f0, axis), e1 = sv_list_start(f1, axis);
   if (e1 <= e0) return;
   for (int e = e0; e < e1; e += 8) SV_PREFETCH(llist + e);
-  const int2 a = llist[e0], b = llist[e1 - 1];
   const int step = 64 / kb; /* kb bytes per segment's bounds */
+#ifdef SV_BAL_PF_ENDS
+  const int2 a = llist[e0], b = llist[e1 - 1];
   for (int x = min(a.x, b.x); x <= max(a.x, b.x); x += step) SV_PREFETCH(kk + (size_t)x * kb);
   for (int y = min(a.y, b.y); y <= max(a.y, b.y); y += step) SV_PREFETCH(kk + (size_t)y * kb);
+#else
+  const int b0 = lofs[fb.y].x, b1 = lofs[fb.y + 1].x;
+  for (int x = f0.x; x < f1.x; x += step) SV_PREFETCH(kk + (size_t)x * kb);
+  for (int y = b0; y < b1; y += step) SV_PREFETCH(kk + (size_t)y * kb);
+#endif
 #endif
 }
 
