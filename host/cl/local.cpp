@@ -406,7 +406,9 @@ DeviceOccupancy make_occupancy(Device& device, const VoxelLayout& L, int order) 
 }
 
 void enqueue_occupancy_reach(Device& device, DeviceOccupancy& o) {
-  const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(o.count(), 1));
+  // one work-item per row of bricks (by, bz)
+  const std::size_t n =
+      static_cast<std::size_t>(std::max<int64_t>(int64_t(o.bricks[1]) * o.bricks[2], 1));
   const std::string name = "simdvol_occupancy_reach";
   cl::Kernel r = stage_kernel(device, name, o.order);
   // Stencil voxels f + p: p in 0..1 for orders 0 and 1, -1..2 for 2 and 3.

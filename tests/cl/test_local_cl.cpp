@@ -333,7 +333,10 @@ TEST(LocalCl, OccupancyEqualsBruteForce) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
   Device& dev = *dp;
-  for (const Dims3 dims : {Dims3{37, 29, 23}, Dims3{16, 16, 16}, Dims3{5, 9, 3}})
+  // {150, 9, 7}: 38 bricks a row, two whole chunks of 16 of the reach and a
+  // tail; {128, 9, 7}: 32, the last chunk's +1 offset at the row's end
+  for (const Dims3 dims :
+       {Dims3{37, 29, 23}, Dims3{16, 16, 16}, Dims3{5, 9, 3}, Dims3{150, 9, 7}, Dims3{128, 9, 7}})
     for (int64_t pes : {int64_t(1), int64_t(8), int64_t(512), int64_t(8192)}) {
       std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes + dims[0]));
       v[v.size() / 3].b = std::numeric_limits<float>::quiet_NaN();
