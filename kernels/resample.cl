@@ -740,7 +740,8 @@ __kernel void simdvol_occupancy_il(__global const float* vox, const int stride, 
  * element with the offsets outside the row read as 0). The earlier kernel
  * took one work-item per brick (its index split by divisions, clipped
  * loops over up to 27 bricks, which PoCL ran as scalar code): on the 256^3
- * phantom (64^3 bricks, order 1) it took 1.8-2.2 ms of each frame, this one
+ * phantom (64^3 bricks, order 1) it took 1.8-2.2 ms of a frame that makes
+ * the reach (the engine keeps it while the classification stays), this one
  * 0.15-0.29 ms (simdvol-bench-frame --views 45, the reach's profiling
  * event over 5 runs each; a 2-core Zen 4 EPYC, 2026-12-02). */
 SV_FN uint16 sv_occ_row16(__global const uint* row, const int s, const int n) {
