@@ -237,8 +237,23 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
  * exactly). moves[s] = 1 once a pair of sweep s moved samples (moves zero
  * before the first round). -DSV_BAL_EVERY_SWEEP runs every round, for
  * comparison. */
+/* A pair that moved samples sets its sweep's flag, where no pair has yet:
+ * a store by every such pair (and the other core's reads of the line) cost
+ * about a seventh of the round's samples in perf annotate, the line going
+ * back and forth between the cores. -DSV_BAL_MOVES_EVERY stores it in every
+ * such pair, for comparison. */
+#ifndef SV_BAL_MOVES_EVERY
+#define SV_BAL_MOVED(moves, sweep)                              \
+  do {                                                          \
+    global int* m_ = (moves) + (sweep)*SV_BAL_MOVES_STRIDE;     \
+    if (*m_ == 0) *m_ = 1; /* every writer stores the same 1 */ \
+  } while (0)
+#else
+#define SV_BAL_MOVED(moves, sweep) ((moves)[(sweep)*SV_BAL_MOVES_STRIDE] = 1)
+#endif
 #ifndef SV_BAL_EVERY_SWEEP
-#define SV_BAL_SETTLED(moves, sweep) ((sweep) > 0 && (moves)[(sweep)-1] == 0)
+#define SV_BAL_SETTLED(moves, sweep) \
+  ((sweep) > 0 && (moves)[((sweep)-1) * SV_BAL_MOVES_STRIDE] == 0)
 #else
 #define SV_BAL_SETTLED(moves, sweep) 0
 #endif
@@ -298,7 +313,7 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
     SV_BAL_SHARES(BT, B1, SFX)                                                                   \
     loads[F] -= front_gives ? (int)moved : -(int)moved;                                          \
     loads[B] += front_gives ? (int)moved : -(int)moved;                                          \
-    moves[sweep] = 1; /* every writer stores the same 1 */                                       \
+    SV_BAL_MOVED(moves, sweep);                                                                  \
   }                                                                                              \
                                                                                                  \
   __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_pack##SFX(      \

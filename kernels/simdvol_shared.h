@@ -110,6 +110,10 @@ SV_FN float sv_uniform(sv_u64 seed, sv_u32 ray, sv_u32 sample, sv_u32 step) {
  * simdvol_segment_order): segments sorted by length within blocks of
  * SV_ORDER_BLOCK consecutive segments. */
 #define SV_ORDER_BLOCK 256
+/* The balance's per-sweep "moved samples" flags (balance.cl: moves): one
+ * int per SV_BAL_MOVES_STRIDE, a cache line each, so that the flag a round
+ * reads (the sweep before) shares no line with the one it writes. */
+#define SV_BAL_MOVES_STRIDE 16
 #define SV_MAX_KNOTS 32
 #define SV_CLASSIFY_MIXTURE 0
 #define SV_CLASSIFY_TRANSFER 1

@@ -342,10 +342,11 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   }
   // Which sweeps moved samples: the rounds of a sweep after one that moved
   // none return at once (balance.cl, SV_BAL_SETTLED).
-  const cl::Buffer moves = device.scratch_buffer(
-      CL_MEM_READ_WRITE, static_cast<std::size_t>(sweeps) * sizeof(cl_int), "balance moves");
-  cl_check(device.queue().enqueueFillBuffer(moves, cl_int(0), 0,
-                                            static_cast<std::size_t>(sweeps) * sizeof(cl_int)),
+  // One flag per cache line (SV_BAL_MOVES_STRIDE ints).
+  const std::size_t moves_bytes =
+      static_cast<std::size_t>(sweeps) * SV_BAL_MOVES_STRIDE * sizeof(cl_int);
+  const cl::Buffer moves = device.scratch_buffer(CL_MEM_READ_WRITE, moves_bytes, "balance moves");
+  cl_check(device.queue().enqueueFillBuffer(moves, cl_int(0), 0, moves_bytes),
            "clEnqueueFillBuffer(balance moves)");
   for (const Round& r : rounds) {
     cl::Kernel round = device.kernel("balance", round_name, defs);
