@@ -237,11 +237,17 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
  * exactly). moves[s] = 1 once a pair of sweep s moved samples (moves zero
  * before the first round). -DSV_BAL_EVERY_SWEEP runs every round, for
  * comparison. */
-/* A pair that moved samples sets its sweep's flag, where no pair has yet:
- * a store by every such pair (and the other core's reads of the line) cost
- * about a seventh of the round's samples in perf annotate, the line going
- * back and forth between the cores. -DSV_BAL_MOVES_EVERY stores it in every
- * such pair, for comparison. */
+/* A pair that moved samples sets its sweep's flag, where no pair has yet.
+ * The flags lie a cache line apart (SV_BAL_MOVES_STRIDE): the load of the
+ * sweep before's flag, in every work-item, had about a seventh of the
+ * round's samples in perf annotate while it shared its line with the flag
+ * the other core's pairs were storing. simdvol-bench-options, 12 frames,
+ * against the flags side by side (a worktree, alternated): balance at (0,
+ * 45, 0) 7.61 / 7.61 / 8.64 -> 7.02 / 7.49 / 6.78 ms, ch2 at (20, 35, 10)
+ * 7.32 / 7.15 -> 6.78 / 6.90, the phantom at (0, 30, 0) 2.11 / 2.09 ->
+ * 1.93 / 2.06 (a 2-core Intel Xeon, 2026-12-02). Storing only where the
+ * flag is 0 made no difference measured (-DSV_BAL_MOVES_EVERY stores it in
+ * every such pair). */
 #ifndef SV_BAL_MOVES_EVERY
 #define SV_BAL_MOVED(moves, sweep)                              \
   do {                                                          \
