@@ -6,9 +6,10 @@
  * (y, z, w for axis x, y, z) is the start of PE p's list of its segments
  * linked along that axis, lofs[p + 1] its end; entry (s, t) = the segment s
  * of p and the segment t of the same ray in the face neighbour, in p's
- * segment order. A round's pair (F, B) walks F's list along the round's
- * axis twice (cap, then cumulative shares); the share's floor division uses
- * a double estimate corrected exactly.
+ * segment order: an int2, or in the _n rounds (narrow links) one uint of
+ * the two indices within p's and the neighbour's segments (sv_bal_link). A round's pair (F, B)
+ * walks F's list along the round's axis twice (cap, then cumulative shares); the share's floor
+ * division uses a double estimate corrected exactly.
  *
  * The rounds read and move the segments' bounds (k0, k1) in `kk`, 4 (or 8)
  * bytes per segment, not the 16-byte segments: a round touches segments all
@@ -66,6 +67,27 @@ SV_FN int2 sv_balance_pair(global const int4* cidx, global const int* pe_of, int
   return dir > 0 ? (int2)(p, q) : (int2)(q, p);
 }
 
+/* Link entry e of a list: (segment of F, linked segment of B), from an
+ * int2 or, with narrow links (nl), from one uint of the two indices within
+ * F's and B's segments (match.cl: simdvol_match_fill), sF and sB their
+ * first segments. */
+SV_FN int2 sv_bal_link(global const int2* llist, const int nl, const int e, const int sF,
+                       const int sB) {
+  if (!nl) return llist[e];
+  const uint w = ((global const uint*)llist)[e];
+  return (int2)(sF + (int)(w & 0xffffu), sB + (int)(w >> 16));
+}
+/* The indices of 8 entries' giving segments (front_gives: F's, else B's). */
+SV_FN int8 sv_bal_give8(global const int2* llist, const int nl, const int e, const int sF,
+                        const int sB, const int front_gives) {
+  if (nl) {
+    const uint8 w = vload8(0, (global const uint*)llist + e);
+    return front_gives ? sF + convert_int8(w & 0xffffu) : sB + convert_int8(w >> 16);
+  }
+  const int16 L = vload16(0, (global const int*)(llist + e));
+  return front_gives ? L.even : L.odd;
+}
+
 /* A round's work-items walk their pair's links and bounds, scattered over
  * megabytes: the work-item SV_BAL_PF ahead (8; 0: none) prefetches its
  * pair's link list and the bounds the list points to (all of F's and B's,
@@ -88,18 +110,20 @@ SV_FN int2 sv_balance_pair(global const int4* cidx, global const int* pe_of, int
 #endif
 SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of, int4 splits,
                                int pes, int axis, int par, int dir, global const int4* lofs,
-                               global const int2* llist, global const uchar* kk, int kb,
-                               global const int* loads, int p) {
+                               global const int2* llist, const int nl, global const uchar* kk,
+                               int kb, global const int* loads, int p) {
 #if SV_BAL_PF > 0
   const int2 fb = sv_balance_pair(cidx, pe_of, splits, pes, axis, par, dir, p + SV_BAL_PF);
   if (fb.x < 0 || (loads[fb.x] - loads[fb.y]) / 2 == 0) return;
   const int4 f0 = lofs[fb.x], f1 = lofs[fb.x + 1];
   const int e0 = sv_list_start(f0, axis), e1 = sv_list_start(f1, axis);
   if (e1 <= e0) return;
-  for (int e = e0; e < e1; e += 8) SV_PREFETCH(llist + e);
+  const int lb = nl ? 4 : 8; /* bytes per list entry */
+  for (int e = e0; e < e1; e += 64 / lb) SV_PREFETCH((global const uchar*)llist + (size_t)e * lb);
   const int step = 64 / kb; /* kb bytes per segment's bounds */
 #ifdef SV_BAL_PF_ENDS
-  const int2 a = llist[e0], b = llist[e1 - 1];
+  const int2 a = sv_bal_link(llist, nl, e0, f0.x, lofs[fb.y].x),
+             b = sv_bal_link(llist, nl, e1 - 1, f0.x, lofs[fb.y].x);
   for (int x = min(a.x, b.x); x <= max(a.x, b.x); x += step) SV_PREFETCH(kk + (size_t)x * kb);
   for (int y = min(a.y, b.y); y <= max(a.y, b.y); y += step) SV_PREFETCH(kk + (size_t)y * kb);
 #else
@@ -186,39 +210,38 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
 #else
 #define SV_BAL_SPARSE 0
 #endif
-#define SV_BAL_SHARES(BT, B1, SFX)                                               \
-  long r = 0;                                                                    \
-  const int sparse = SV_BAL_SPARSE;                                              \
-  for (int e = e0; e < e1;) {                                                    \
-    int stop = e1;                                                               \
-    if (sparse) {                                                                \
-      for (; e + 8 <= e1; e += 8) {                                              \
-        const int16 L = vload16(0, (global const int*)(llist + e));              \
-        const int8 n8 = sv_bal_len8_##SFX(kk, front_gives ? L.even : L.odd);     \
-        const int4 n4 = n8.lo + n8.hi;                                           \
-        const long nr = r + moved * ((long)(n4.x + n4.y) + (long)(n4.z + n4.w)); \
-        if (nr >= cap) break;                                                    \
-        r = nr;                                                                  \
-      }                                                                          \
-      stop = min(e + 8, e1);                                                     \
-    }                                                                            \
-    for (; e < stop; ++e) {                                                      \
-      const int2 st = llist[e];                                                  \
-      const BT g = kk[front_gives ? st.x : st.y];                                \
-      r += moved * (long)(g.y - g.x);                                            \
-      if (r < cap) continue;                                                     \
-      const int give = r < 2 * cap ? 1 : (int)sv_floor_div(r, cap, inv);         \
-      r -= (long)give * cap;                                                     \
-      const int shift = front_gives ? -give : give;                              \
-      kk[st.x].y = (B1)(kk[st.x].y + shift);                                     \
-      kk[st.y].x = (B1)(kk[st.y].x + shift);                                     \
-    }                                                                            \
+#define SV_BAL_SHARES(BT, B1, SFX, NL)                                                          \
+  long r = 0;                                                                                   \
+  const int sparse = SV_BAL_SPARSE;                                                             \
+  for (int e = e0; e < e1;) {                                                                   \
+    int stop = e1;                                                                              \
+    if (sparse) {                                                                               \
+      for (; e + 8 <= e1; e += 8) {                                                             \
+        const int8 n8 = sv_bal_len8_##SFX(kk, sv_bal_give8(llist, NL, e, sF, sB, front_gives)); \
+        const int4 n4 = n8.lo + n8.hi;                                                          \
+        const long nr = r + moved * ((long)(n4.x + n4.y) + (long)(n4.z + n4.w));                \
+        if (nr >= cap) break;                                                                   \
+        r = nr;                                                                                 \
+      }                                                                                         \
+      stop = min(e + 8, e1);                                                                    \
+    }                                                                                           \
+    for (; e < stop; ++e) {                                                                     \
+      const int2 st = sv_bal_link(llist, NL, e, sF, sB);                                        \
+      const BT g = kk[front_gives ? st.x : st.y];                                               \
+      r += moved * (long)(g.y - g.x);                                                           \
+      if (r < cap) continue;                                                                    \
+      const int give = r < 2 * cap ? 1 : (int)sv_floor_div(r, cap, inv);                        \
+      r -= (long)give * cap;                                                                    \
+      const int shift = front_gives ? -give : give;                                             \
+      kk[st.x].y = (B1)(kk[st.x].y + shift);                                                    \
+      kk[st.y].x = (B1)(kk[st.y].x + shift);                                                    \
+    }                                                                                           \
   }
 #else
-#define SV_BAL_SHARES(BT, B1, SFX)                      \
+#define SV_BAL_SHARES(BT, B1, SFX, NL)                  \
   long cum = 0, prev = 0;                               \
   for (int e = e0; e < e1; ++e) {                       \
-    const int2 st = llist[e];                           \
+    const int2 st = sv_bal_link(llist, NL, e, sF, sB);  \
     const BT g = kk[front_gives ? st.x : st.y];         \
     cum += g.y - g.x;                                   \
     const long f = sv_floor_div(moved * cum, cap, inv); \
@@ -274,54 +297,58 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
  *
  * _round: one round, the pairs along `axis` whose lower cell index has
  * parity `par`; dir = sign of the depth step along the axis (non-zero).
+ * _roundn, _round16n: the same on narrow link lists (one uint per entry,
+ * sv_bal_link), which the host takes where the matching wrote them
+ * (DeviceMatching::links_narrow).
  * _pack: before the first round, the bounds out of the segments (one
  * work-item per segment slot; slots past seg_offset[pes] hold nothing).
  * _unpack: after the last round, the bounds back into the segments. */
-#define SV_BALANCE_KERNELS(SFX, BT, B1)                                                          \
-  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_round##SFX(     \
-      global const int4* cidx, global const int* pe_of, int4 splits, int pes, int axis, int par, \
-      int dir, global const int4* lofs, global const int2* llist, global BT* kk,                 \
-      global int* loads, global int* moves, int sweep) {                                         \
-    /* A sweep that moved nothing left a state no later sweep changes. */                        \
-    if (SV_BAL_SETTLED(moves, sweep)) return;                                                    \
-    const int p = (int)get_global_id(0);                                                         \
-    sv_balance_prefetch(cidx, pe_of, splits, pes, axis, par, dir, lofs, llist,                   \
-                        (global const uchar*)kk, (int)sizeof(BT), loads, p);                     \
-    const int2 fb = sv_balance_pair(cidx, pe_of, splits, pes, axis, par, dir, p);                \
-    if (fb.x < 0) return;                                                                        \
-    const int F = fb.x, B = fb.y;                                                                \
-    const int diff = loads[F] - loads[B];                                                        \
-    const int t = diff / 2; /* truncates towards 0 */                                            \
-    if (t == 0) return;                                                                          \
-    const int front_gives = t > 0;                                                               \
-    const int want = front_gives ? t : -t;                                                       \
-    const int e0 = sv_list_start(lofs[F], axis), e1 = sv_list_start(lofs[F + 1], axis);          \
-    const int ev = SV_BAL_VEC ? e0 + ((e1 - e0) & ~7) : e0; /* the 8-entry chunks' end */        \
-    long cap = 0;                                                                                \
-    if (SV_BAL_VEC) {                                                                            \
-      int8 c8 = (int8)(0);                                                                       \
-      for (int e = e0; e < ev; e += 8) {                                                         \
-        const int16 L = vload16(0, (global const int*)(llist + e));                              \
-        c8 += sv_bal_len8_##SFX(kk, front_gives ? L.even : L.odd);                               \
-      }                                                                                          \
-      const int4 c4 = c8.lo + c8.hi;                                                             \
-      cap = (long)(c4.x + c4.y) + (long)(c4.z + c4.w);                                           \
-    }                                                                                            \
-    for (int e = ev; e < e1; ++e) {                                                              \
-      const int2 st = llist[e];                                                                  \
-      const BT g = kk[front_gives ? st.x : st.y];                                                \
-      cap += g.y - g.x;                                                                          \
-    }                                                                                            \
-    const long moved = min(cap, (long)want);                                                     \
-    if (moved == 0) return;                                                                      \
-    /* Cumulative shares: floor(moved C_r / cap) - floor(moved C_{r-1} / cap). */                \
-    const double inv = 1.0 / (double)cap;                                                        \
-    SV_BAL_SHARES(BT, B1, SFX)                                                                   \
-    loads[F] -= front_gives ? (int)moved : -(int)moved;                                          \
-    loads[B] += front_gives ? (int)moved : -(int)moved;                                          \
-    SV_BAL_MOVED(moves, sweep);                                                                  \
-  }                                                                                              \
-                                                                                                 \
+#define SV_BALANCE_ROUND(SFX, NSFX, BT, B1, NL)                                                    \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_round##SFX##NSFX( \
+      global const int4* cidx, global const int* pe_of, int4 splits, int pes, int axis, int par,   \
+      int dir, global const int4* lofs, global const int2* llist, global BT* kk,                   \
+      global int* loads, global int* moves, int sweep) {                                           \
+    /* A sweep that moved nothing left a state no later sweep changes. */                          \
+    if (SV_BAL_SETTLED(moves, sweep)) return;                                                      \
+    const int p = (int)get_global_id(0);                                                           \
+    sv_balance_prefetch(cidx, pe_of, splits, pes, axis, par, dir, lofs, llist, NL,                 \
+                        (global const uchar*)kk, (int)sizeof(BT), loads, p);                       \
+    const int2 fb = sv_balance_pair(cidx, pe_of, splits, pes, axis, par, dir, p);                  \
+    if (fb.x < 0) return;                                                                          \
+    const int F = fb.x, B = fb.y;                                                                  \
+    const int diff = loads[F] - loads[B];                                                          \
+    const int t = diff / 2; /* truncates towards 0 */                                              \
+    if (t == 0) return;                                                                            \
+    const int front_gives = t > 0;                                                                 \
+    const int want = front_gives ? t : -t;                                                         \
+    const int sF = lofs[F].x, sB = lofs[B].x; /* (narrow links: their first segments) */           \
+    const int e0 = sv_list_start(lofs[F], axis), e1 = sv_list_start(lofs[F + 1], axis);            \
+    const int ev = SV_BAL_VEC ? e0 + ((e1 - e0) & ~7) : e0; /* the 8-entry chunks' end */          \
+    long cap = 0;                                                                                  \
+    if (SV_BAL_VEC) {                                                                              \
+      int8 c8 = (int8)(0);                                                                         \
+      for (int e = e0; e < ev; e += 8) {                                                           \
+        c8 += sv_bal_len8_##SFX(kk, sv_bal_give8(llist, NL, e, sF, sB, front_gives));              \
+      }                                                                                            \
+      const int4 c4 = c8.lo + c8.hi;                                                               \
+      cap = (long)(c4.x + c4.y) + (long)(c4.z + c4.w);                                             \
+    }                                                                                              \
+    for (int e = ev; e < e1; ++e) {                                                                \
+      const int2 st = sv_bal_link(llist, NL, e, sF, sB);                                           \
+      const BT g = kk[front_gives ? st.x : st.y];                                                  \
+      cap += g.y - g.x;                                                                            \
+    }                                                                                              \
+    const long moved = min(cap, (long)want);                                                       \
+    if (moved == 0) return;                                                                        \
+    /* Cumulative shares: floor(moved C_r / cap) - floor(moved C_{r-1} / cap). */                  \
+    const double inv = 1.0 / (double)cap;                                                          \
+    SV_BAL_SHARES(BT, B1, SFX, NL)                                                                 \
+    loads[F] -= front_gives ? (int)moved : -(int)moved;                                            \
+    loads[B] += front_gives ? (int)moved : -(int)moved;                                            \
+    SV_BAL_MOVED(moves, sweep);                                                                    \
+  }
+
+#define SV_BALANCE_PACK(SFX, BT, B1)                                                             \
   __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_pack##SFX(      \
       global const int* seg_offset, int pes, global const sv_segment* segments, global BT* kk) { \
     const int s = (int)get_global_id(0);                                                         \
@@ -339,5 +366,9 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
     segments[s].k1 = g.y;                                                                        \
   }
 
-SV_BALANCE_KERNELS(, int2, int)
-SV_BALANCE_KERNELS(16, short2, short)
+SV_BALANCE_ROUND(, , int2, int, 0)
+SV_BALANCE_ROUND(16, , short2, short, 0)
+SV_BALANCE_ROUND(, n, int2, int, 1)
+SV_BALANCE_ROUND(16, n, short2, short, 1)
+SV_BALANCE_PACK(, int2, int)
+SV_BALANCE_PACK(16, short2, short)

@@ -17,7 +17,13 @@
  *                        seg_offset[p] + rowoff, with the per-(PE, axis)
  *                        lists of their balance links (balance_links) and,
  *                        where fill_bounds, their (k0, k1) as the balance's
- *                        16-bit bounds
+ *                        16-bit bounds. A link entry is (segment, linked
+ *                        segment) as int2, or, where `narrow` (every PE's
+ *                        candidate rays <= 65536: match_cl.hpp), one uint:
+ *                        the segment's index within its PE's segments in
+ *                        the low 16 bits, the linked one's within its PE's
+ *                        in the high 16; lbase[p] = (the first segment of
+ *                        p's link target along x, y, z, or -1; p's own)
  *   simdvol_match_active per PE: active[p] = some brick with reach meets
  *                        the PE's cell (empty-space skipping, below)
  *
@@ -480,7 +486,8 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
                                global const int4* rowsum, global const int4* rowoff,
                                global const int* seg_offset, global const int4* lofs,
                                global sv_segment* segments, global short2* bounds,
-                               const int fill_bounds, global int2* llist, const int make_links) {
+                               const int fill_bounds, global int2* llist, const int narrow,
+                               global int4* lbase, const int make_links) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
@@ -508,6 +515,15 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
       i1 = max(i1, ib[l]);
     }
   }
+  /* The link targets; with narrow links (16-bit indices within each PE's
+   * segments, below), their first segments, which the PE's first
+   * work-item also leaves in lbase[p] for DeviceMatching::read_links. */
+  if (i0 > i1 && row0 != 0) return;
+  int nq[3], qb[3];
+  sv_link_targets(view, ci, splits, pe_of, active, nq);
+  if (!make_links) nq[0] = nq[1] = nq[2] = -1;
+  for (int e = 0; e < 3; ++e) qb[e] = narrow && nq[e] >= 0 ? seg_offset[nq[e]] : -1;
+  if (make_links && narrow && row0 == 0) lbase[p] = (int4)(qb[0], qb[1], qb[2], base);
   if (i0 > i1) return;
     /* A link along axis e goes to the face neighbour nq[e] (one per axis for
      * the whole work-item), into the same row j. Per (axis, lane), set at its
@@ -519,9 +535,7 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
      * before. */
 #define SV_UNSET INT_MAX
 #define SV_HOLES INT_MIN
-  int nq[3], t0[3][8], hb[3][8], hc[3][8], hn[3][8];
-  sv_link_targets(view, ci, splits, pe_of, active, nq);
-  if (!make_links) nq[0] = nq[1] = nq[2] = -1;
+  int t0[3][8], hb[3][8], hc[3][8], hn[3][8];
   for (int e = 0; e < 3; ++e)
     for (int l = 0; l < 8; ++l) t0[e][l] = SV_UNSET;
 #if SV_FILL_PF
@@ -588,7 +602,10 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
             hn[e][l] = n;
             t = hb[e][l] + n;
           }
-          llist[la[e][l]++] = (int2)(at[l], t);
+          if (narrow)
+            ((global uint*)llist)[la[e][l]++] = (uint)(at[l] - base) | ((uint)(t - qb[e]) << 16);
+          else
+            llist[la[e][l]++] = (int2)(at[l], t);
         }
         ++at[l];
       }
@@ -611,16 +628,17 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
 SV_MATCH_ROWS_KERNEL(simdvol_match_rows, 1)
 SV_MATCH_ROWS_KERNEL(simdvol_match_rows_nolinks, 0)
 
-#define SV_MATCH_FILL_KERNEL(NAME, LINKS)                                                    \
-  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void NAME(                       \
-      __constant sv_view* view, __constant float* geo, __constant long* stepc,               \
-      global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,           \
-      global const int* pe_of, global const uchar* active, int pes, int H,                   \
-      global const int4* rowsum, global const int4* rowoff, global const int* seg_offset,    \
-      global const int4* lofs, global sv_segment* segments, global short2* bounds,           \
-      int fill_bounds, global int2* llist) {                                                 \
-    sv_match_fill(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum, \
-                  rowoff, seg_offset, lofs, segments, bounds, fill_bounds, llist, LINKS);    \
+#define SV_MATCH_FILL_KERNEL(NAME, LINKS)                                                        \
+  __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void NAME(                           \
+      __constant sv_view* view, __constant float* geo, __constant long* stepc,                   \
+      global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,               \
+      global const int* pe_of, global const uchar* active, int pes, int H,                       \
+      global const int4* rowsum, global const int4* rowoff, global const int* seg_offset,        \
+      global const int4* lofs, global sv_segment* segments, global short2* bounds,               \
+      int fill_bounds, global int2* llist, int narrow, global int4* lbase) {                     \
+    sv_match_fill(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum,     \
+                  rowoff, seg_offset, lofs, segments, bounds, fill_bounds, llist, narrow, lbase, \
+                  LINKS);                                                                        \
   }
 SV_MATCH_FILL_KERNEL(simdvol_match_fill, 1)
 SV_MATCH_FILL_KERNEL(simdvol_match_fill_nolinks, 0)

@@ -183,10 +183,11 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   const std::vector<sv_rect> cand = match_candidates(view, split);  // validates the split
   const int64_t pes = split.pes();
   if (pes > INT_MAX / 2) throw ArgumentError("split", "too many PEs");
-  int64_t capacity = 0, rows = 1;
+  int64_t capacity = 0, rows = 1, most = 0;
   for (const sv_rect& r : cand) {
     capacity += int64_t(r.w) * r.h;
     rows = std::max<int64_t>(rows, r.h);
+    most = std::max<int64_t>(most, int64_t(r.w) * r.h);
   }
   if (capacity > INT_MAX / 4)
     throw ArgumentError("view", "too many candidate rays for 32-bit segment indices");
@@ -225,13 +226,19 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   m.linked = links == MatchLinks::make;
   // Without links the kernels write no link list (a placeholder).
   const std::size_t LC = m.linked ? C : 1;
+  // Narrow links where every PE's segments (at most its candidate rays)
+  // have 16-bit indices.
+  m.links_narrow = m.linked && most <= 65536;
   // The balance's 16-bit bounds, where they will do: the fill writes them
   // beside the segments (a placeholder otherwise; enqueue_balance packs).
   m.bounds_filled = m.linked && balance_bounds16(view.grid.grid[2]);
   m.bounds =
       device.scratch_buffer(rw, (m.bounds_filled ? C : 1) * sizeof(cl_short2), "balance bounds");
   m.link_offset = device.buffer(rw, (P + 1) * sizeof(cl_int4), nullptr, "link offsets");
-  m.link_list = device.scratch_buffer(rw, LC * sizeof(cl_int2), "link lists");
+  m.link_list = device.scratch_buffer(rw, LC * (m.links_narrow ? sizeof(cl_uint) : sizeof(cl_int2)),
+                                      "link lists");
+  m.link_base =
+      device.buffer(rw, (m.links_narrow ? P : 1) * sizeof(cl_int4), nullptr, "link bases");
   const std::string rows_name = m.linked ? "simdvol_match_rows" : "simdvol_match_rows_nolinks";
   const std::string fill_name = m.linked ? "simdvol_match_fill" : "simdvol_match_fill_nolinks";
 
@@ -256,7 +263,7 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   cl::Kernel k_fill = device.kernel("match", fill_name, match_defines());
   set_args(k_fill, fill_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
            m.pe_of, m.active, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset, m.segments,
-           m.bounds, cl_int(m.bounds_filled), m.link_list);
+           m.bounds, cl_int(m.bounds_filled), m.link_list, cl_int(m.links_narrow), m.link_base);
   m.match_events.push_back(
       {"match_fill", device.run(k_fill, fill_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
   return m;
@@ -320,7 +327,7 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   const Defines& defs = match_defines();
   const std::string sfx = narrow ? "16" : "";
   const std::string pack_name = "simdvol_balance_pack" + sfx,
-                    round_name = "simdvol_balance_round" + sfx,
+                    round_name = "simdvol_balance_round" + sfx + (m.links_narrow ? "n" : ""),
                     unpack_name = "simdvol_balance_unpack" + sfx;
   const std::size_t slots = static_cast<std::size_t>(m.capacity);  // Device::run rounds up
   // The 16-bit bounds are the fill's (its copy of the segments' k0, k1, kept
@@ -420,10 +427,29 @@ std::vector<int32_t> DeviceMatching::read_links(Device& device) const {
   if (lofs[0].s[1] != 0 || lofs[P].s[1] != lofs[0].s[2] || lofs[P].s[2] != lofs[0].s[3] || end > n)
     throw Error("device link offsets are inconsistent");
   std::vector<cl_int2> list(static_cast<std::size_t>(end));
-  if (end > 0)
+  if (end > 0 && !links_narrow)
     cl_check(device.queue().enqueueReadBuffer(link_list, CL_TRUE, 0, list.size() * sizeof(cl_int2),
                                               list.data()),
              "clEnqueueReadBuffer(link lists)");
+  if (end > 0 && links_narrow) {
+    // (segment, linked segment) from the two 16-bit indices: PE p's list
+    // along an axis holds p's segments linked to its target's on that axis.
+    std::vector<cl_uint> words(static_cast<std::size_t>(end));
+    std::vector<cl_int4> base(P);
+    cl_check(device.queue().enqueueReadBuffer(link_list, CL_TRUE, 0, words.size() * sizeof(cl_uint),
+                                              words.data()),
+             "clEnqueueReadBuffer(link lists)");
+    cl_check(device.queue().enqueueReadBuffer(link_base, CL_TRUE, 0, base.size() * sizeof(cl_int4),
+                                              base.data()),
+             "clEnqueueReadBuffer(link bases)");
+    for (std::size_t p = 0; p < P; ++p)
+      for (int axis = 0; axis < 3; ++axis)
+        for (cl_int e = lofs[p].s[1 + axis]; e < lofs[p + 1].s[1 + axis]; ++e) {
+          const cl_uint w = words[static_cast<std::size_t>(e)];
+          list[static_cast<std::size_t>(e)] = {{base[p].s[3] + static_cast<cl_int>(w & 0xffffu),
+                                                base[p].s[axis] + static_cast<cl_int>(w >> 16)}};
+        }
+  }
   std::vector<int32_t> out(static_cast<std::size_t>(n), -1);
   const std::array<cl_int, 4> starts{lofs[0].s[1], lofs[0].s[2], lofs[0].s[3], end};
   for (int axis = 0; axis < 3; ++axis)

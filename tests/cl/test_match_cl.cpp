@@ -107,6 +107,30 @@ TEST(MatchCl, BalanceBoundsWidths) {
   EXPECT_THROW(enqueue_balance(dev, dm, deep, split, 1, BalanceBounds::narrow), ArgumentError);
 }
 
+// The link lists hold 16-bit indices within each PE's segments where every
+// PE has at most 65536 candidate rays (DeviceMatching::links_narrow), and
+// (segment, linked segment) pairs otherwise: a 500 x 500 x 7 volume in a
+// 520 x 520 grid gives each of 2 PEs more than 65536 rays and each of 16
+// fewer. Both formats give the
+// reference's links and balance, with either width of bounds.
+TEST(MatchCl, LinkWidths) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 dims{500, 500, 7};
+  for (ViewAngles va : {kViews[2], kViews[3]}) {
+    const ViewGeometry v = geometry(dims, va, 520, 520);
+    for (int64_t pes : {2, 16}) {
+      const KdSplit split = kd_split(dims, pes);
+      int64_t most = 0;
+      for (const sv_rect& r : match_candidates(v, split))
+        most = std::max<int64_t>(most, int64_t(r.w) * r.h);
+      ASSERT_EQ(most > 65536, pes == 2) << name(va, pes) << ": the case this test needs";
+      EXPECT_EQ(enqueue_match(dev, v, split).links_narrow, pes == 16) << name(va, pes);
+      for (BalanceBounds b : {BalanceBounds::narrow, BalanceBounds::wide})
+        check_device(dev, v, split, 8, name(va, pes), b);
+    }
+  }
+}
+
 // Balancing one matching twice, with either width of bounds each time: the
 // 16-bit bounds the fill wrote (kept equal to the segments by every
 // 16-bit balance) or a pack of the segments (after a 32-bit balance, which

@@ -59,7 +59,14 @@
 //   link_list   cl_int2[capacity] the balance links per (axis, PE), at
 //               link_offset (written by enqueue_match with MatchLinks::make,
 //               the default; with skip, no link buffers); read_links gives
-//               them in balance_links()'s format
+//               them in balance_links()'s format. Narrow (links_narrow,
+//               where every PE has at most 65536 candidate rays): one
+//               cl_uint per link, the two segments' indices within their
+//               PEs' segments (16 bits each), half the bytes for the fill
+//               to write and the rounds to read; link_base then holds each
+//               PE's link targets' first segments (simdvol-bench-options,
+//               the 256^3 phantom at (0, 45, 0), 8192 PEs: balance 6.6-6.8
+//               -> 5.9-6.0 ms; ch2 the same)
 #pragma once
 
 #include <array>
@@ -110,10 +117,17 @@ struct DeviceMatching {
   cl::Buffer loads;        ///< cl_int[P]
   cl::Buffer bounds;       ///< cl_short2[capacity]: (k0, k1) per segment, see bounds_filled
   cl::Buffer link_offset;  ///< cl_int4[P + 1]: y, z, w = start of PE p's list along x, y, z
-  cl::Buffer link_list;    ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE)
-  cl::Buffer active;       ///< cl_uchar[P]: the PE mask (all 1 without one)
-  bool masked = false;     ///< made with a mask (read() then returns it in Matching::active)
-  bool linked = true;      ///< made with MatchLinks::make (link lists written)
+  cl::Buffer link_list;    ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE);
+                           ///< cl_uint[capacity] where links_narrow
+  /// cl_int4[P] where links_narrow: the first segment of PE p's link target
+  /// along x, y, z (-1: none) and p's own (w).
+  cl::Buffer link_base;
+  cl::Buffer active;    ///< cl_uchar[P]: the PE mask (all 1 without one)
+  bool masked = false;  ///< made with a mask (read() then returns it in Matching::active)
+  bool linked = true;   ///< made with MatchLinks::make (link lists written)
+  /// The link entries are 16-bit pairs of indices within the PEs' segments
+  /// (every PE has at most 65536 candidate rays; the rounds named ...n).
+  bool links_narrow = false;
   /// `bounds` holds the segments' 16-bit (k0, k1) (written by the fill, kept
   /// by balancing with 16-bit bounds): enqueue_balance then needs no pack.
   bool bounds_filled = false;
