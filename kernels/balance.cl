@@ -339,7 +339,7 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
       cap += g.y - g.x;                                                                            \
     }                                                                                              \
     const long moved = min(cap, (long)want);                                                       \
-    if (moved == 0) return;                                                                        \
+    if (moved <= 0) return; /* (cap < 0 only from bounds not as matched: no hang) */               \
     /* Cumulative shares: floor(moved C_r / cap) - floor(moved C_{r-1} / cap). */                  \
     const double inv = 1.0 / (double)cap;                                                          \
     SV_BAL_SHARES(BT, B1, SFX, NL)                                                                 \
