@@ -7,9 +7,10 @@
  * linked along that axis, lofs[p + 1] its end; entry (s, t) = the segment s
  * of p and the segment t of the same ray in the face neighbour, in p's
  * segment order: an int2, or in the _n rounds (narrow links) one uint of
- * the two indices within p's and the neighbour's segments (sv_bal_link). A round's pair (F, B)
- * walks F's list along the round's axis twice (cap, then cumulative shares); the share's floor
- * division uses a double estimate corrected exactly.
+ * the two indices within p's and the neighbour's segments (sv_bal_link).
+ * A round's pair (F, B) walks F's list along the round's axis twice (cap,
+ * then cumulative shares); the share's floor division uses a double
+ * estimate corrected exactly.
  *
  * The rounds read and move the segments' bounds (k0, k1) in `kk`, 4 (or 8)
  * bytes per segment, not the 16-byte segments: a round touches segments all
@@ -178,6 +179,12 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
   return h.odd - h.even;
 }
 
+/* The sum of 8 lengths, in 64 bits. */
+SV_FN long sv_bal_sum8(const int8 n8) {
+  const int4 n4 = n8.lo + n8.hi;
+  return (long)(n4.x + n4.y) + (long)(n4.z + n4.w);
+}
+
 /* The second walk: each entry's share of `moved`, floor(moved C_r / cap) -
  * floor(moved C_{r-1} / cap) with C_r the lengths' running sum, moved to
  * the pair's other segment. The floors by their remainder: r = moved C_r -
@@ -210,32 +217,31 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
 #else
 #define SV_BAL_SPARSE 0
 #endif
-#define SV_BAL_SHARES(BT, B1, SFX, NL)                                                          \
-  long r = 0;                                                                                   \
-  const int sparse = SV_BAL_SPARSE;                                                             \
-  for (int e = e0; e < e1;) {                                                                   \
-    int stop = e1;                                                                              \
-    if (sparse) {                                                                               \
-      for (; e + 8 <= e1; e += 8) {                                                             \
-        const int8 n8 = sv_bal_len8_##SFX(kk, sv_bal_give8(llist, NL, e, sF, sB, front_gives)); \
-        const int4 n4 = n8.lo + n8.hi;                                                          \
-        const long nr = r + moved * ((long)(n4.x + n4.y) + (long)(n4.z + n4.w));                \
-        if (nr >= cap) break;                                                                   \
-        r = nr;                                                                                 \
-      }                                                                                         \
-      stop = min(e + 8, e1);                                                                    \
-    }                                                                                           \
-    for (; e < stop; ++e) {                                                                     \
-      const int2 st = sv_bal_link(llist, NL, e, sF, sB);                                        \
-      const BT g = kk[front_gives ? st.x : st.y];                                               \
-      r += moved * (long)(g.y - g.x);                                                           \
-      if (r < cap) continue;                                                                    \
-      const int give = r < 2 * cap ? 1 : (int)sv_floor_div(r, cap, inv);                        \
-      r -= (long)give * cap;                                                                    \
-      const int shift = front_gives ? -give : give;                                             \
-      kk[st.x].y = (B1)(kk[st.x].y + shift);                                                    \
-      kk[st.y].x = (B1)(kk[st.y].x + shift);                                                    \
-    }                                                                                           \
+#define SV_BAL_SHARES(BT, B1, SFX, NL)                                                         \
+  long r = 0;                                                                                  \
+  const int sparse = SV_BAL_SPARSE;                                                            \
+  for (int e = e0; e < e1;) {                                                                  \
+    int stop = e1;                                                                             \
+    if (sparse) {                                                                              \
+      for (; e + 8 <= e1; e += 8) {                                                            \
+        const long nr = r + moved * sv_bal_sum8(sv_bal_len8_##SFX(                             \
+                                        kk, sv_bal_give8(llist, NL, e, sF, sB, front_gives))); \
+        if (nr >= cap) break;                                                                  \
+        r = nr;                                                                                \
+      }                                                                                        \
+      stop = min(e + 8, e1);                                                                   \
+    }                                                                                          \
+    for (; e < stop; ++e) {                                                                    \
+      const int2 st = sv_bal_link(llist, NL, e, sF, sB);                                       \
+      const BT g = kk[front_gives ? st.x : st.y];                                              \
+      r += moved * (long)(g.y - g.x);                                                          \
+      if (r < cap) continue;                                                                   \
+      const int give = r < 2 * cap ? 1 : (int)sv_floor_div(r, cap, inv);                       \
+      r -= (long)give * cap;                                                                   \
+      const int shift = front_gives ? -give : give;                                            \
+      kk[st.x].y = (B1)(kk[st.x].y + shift);                                                   \
+      kk[st.y].x = (B1)(kk[st.y].x + shift);                                                   \
+    }                                                                                          \
   }
 #else
 #define SV_BAL_SHARES(BT, B1, SFX, NL)                  \
@@ -260,26 +266,17 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
  * exactly). moves[s] = 1 once a pair of sweep s moved samples (moves zero
  * before the first round). -DSV_BAL_EVERY_SWEEP runs every round, for
  * comparison. */
-/* A pair that moved samples sets its sweep's flag, where no pair has yet.
- * The flags lie a cache line apart (SV_BAL_MOVES_STRIDE): the load of the
- * sweep before's flag, in every work-item, had about a seventh of the
- * round's samples in perf annotate while it shared its line with the flag
- * the other core's pairs were storing. simdvol-bench-options, 12 frames,
- * against the flags side by side (a worktree, alternated): balance at (0,
- * 45, 0) 7.61 / 7.61 / 8.64 -> 7.02 / 7.49 / 6.78 ms, ch2 at (20, 35, 10)
- * 7.32 / 7.15 -> 6.78 / 6.90, the phantom at (0, 30, 0) 2.11 / 2.09 ->
- * 1.93 / 2.06 (a 2-core Intel Xeon, 2026-12-02). Storing only where the
- * flag is 0 made no difference measured (-DSV_BAL_MOVES_EVERY stores it in
- * every such pair). */
-#ifndef SV_BAL_MOVES_EVERY
-#define SV_BAL_MOVED(moves, sweep)                              \
-  do {                                                          \
-    global int* m_ = (moves) + (sweep)*SV_BAL_MOVES_STRIDE;     \
-    if (*m_ == 0) *m_ = 1; /* every writer stores the same 1 */ \
-  } while (0)
-#else
+/* A pair that moved samples sets its sweep's flag (every writer stores
+ * the same 1). The flags lie a cache line apart (SV_BAL_MOVES_STRIDE): the
+ * load of the sweep before's flag, in every work-item, had about a seventh
+ * of the round's samples in perf annotate while it shared its line with
+ * the flag the other core's pairs were storing. simdvol-bench-options, 12
+ * frames, against the flags side by side (a worktree, alternated): balance
+ * at (0, 45, 0) 7.61 / 7.61 / 8.64 -> 7.02 / 7.49 / 6.78 ms, ch2 at (20,
+ * 35, 10) 7.32 / 7.15 -> 6.78 / 6.90, the phantom at (0, 30, 0) 2.11 /
+ * 2.09 -> 1.93 / 2.06 (a 2-core Intel Xeon, 2026-12-02). Storing only where
+ * the flag was still 0 measured the same, so the store stays plain. */
 #define SV_BAL_MOVED(moves, sweep) ((moves)[(sweep)*SV_BAL_MOVES_STRIDE] = 1)
-#endif
 #ifndef SV_BAL_EVERY_SWEEP
 #define SV_BAL_SETTLED(moves, sweep) \
   ((sweep) > 0 && (moves)[((sweep)-1) * SV_BAL_MOVES_STRIDE] == 0)
@@ -330,8 +327,7 @@ SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
       for (int e = e0; e < ev; e += 8) {                                                           \
         c8 += sv_bal_len8_##SFX(kk, sv_bal_give8(llist, NL, e, sF, sB, front_gives));              \
       }                                                                                            \
-      const int4 c4 = c8.lo + c8.hi;                                                               \
-      cap = (long)(c4.x + c4.y) + (long)(c4.z + c4.w);                                             \
+      cap = sv_bal_sum8(c8);                                                                       \
     }                                                                                              \
     for (int e = ev; e < e1; ++e) {                                                                \
       const int2 st = sv_bal_link(llist, NL, e, sF, sB);                                           \

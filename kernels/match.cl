@@ -517,13 +517,15 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
   }
   /* The link targets; with narrow links (16-bit indices within each PE's
    * segments, below), their first segments, which the PE's first
-   * work-item also leaves in lbase[p] for DeviceMatching::read_links. */
-  if (i0 > i1 && row0 != 0) return;
+   * work-item also leaves in lbase[p] for DeviceMatching::read_links (so
+   * that one runs on even where its rows are empty). */
+  const int writes_base = make_links && narrow && row0 == 0;
+  if (i0 > i1 && !writes_base) return;
   int nq[3], qb[3];
   sv_link_targets(view, ci, splits, pe_of, active, nq);
   if (!make_links) nq[0] = nq[1] = nq[2] = -1;
   for (int e = 0; e < 3; ++e) qb[e] = narrow && nq[e] >= 0 ? seg_offset[nq[e]] : -1;
-  if (make_links && narrow && row0 == 0) lbase[p] = (int4)(qb[0], qb[1], qb[2], base);
+  if (writes_base) lbase[p] = (int4)(qb[0], qb[1], qb[2], base);
   if (i0 > i1) return;
     /* A link along axis e goes to the face neighbour nq[e] (one per axis for
      * the whole work-item), into the same row j. Per (axis, lane), set at its
