@@ -365,7 +365,7 @@ SV_FN_INLINE int8 sv_lookup32(__global const int* t, const int8 i) {
 #if defined(__AVX512F__) || defined(SV_LD4_FLOAT)
 #define SV_LD4(l) vload4(0, vox + o.s##l), vload4(0, vox + o.s##l + dx.s##l)
 #else
-#define SV_LD4(l)                                       \
+#define SV_LD4(l)                                          \
   as_float4(vload4(0, (__global const int*)vox + o.s##l)), \
       as_float4(vload4(0, (__global const int*)vox + o.s##l + dx.s##l))
 #endif
