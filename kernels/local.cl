@@ -82,6 +82,17 @@ __kernel void simdvol_resample_local(__global const sv_segment* segs, const int 
 /* ---- simdvol_resample_local_v8: the fused kernel with explicit vectors ----
  * (resample.cl's simdvol_resample_v8 with over instead of stores; the lanes
  * and sv_sample8 are described there). */
+/* acc[h] = over(acc[h], u[h]) in the lanes with `on` set: lanes 4h .. 4h + 3
+ * as (lane, channel), alpha = each lane's alpha index. */
+SV_FN_INLINE void sv_over_lanes16(float16* acc, const float16* u, const int8 on,
+                                  const uint16 alpha) {
+#pragma unroll
+  for (int h = 0; h < 2; ++h) {
+    const int16 onh = as_int16(sv_spread4(as_float8(on), 4 * h));
+    acc[h] = select(acc[h], acc[h] + (1.0f - shuffle(acc[h], alpha)) * u[h], onh);
+  }
+}
+
 /* simdvol_resample_local_v8 (planar cells, il = 0) and _v8_il (interleaved
  * cells, il = 1; cs is 1 there): one body, the layout a constant. */
 SV_FN_INLINE void sv_resample_local8(
@@ -140,6 +151,28 @@ SV_FN_INLINE void sv_resample_local8(
   float8 ar = (float8)(0.0f), ag = ar, ab = ar, aa = ar; /* planar: by channel */
   float16 acc[2] = {(float16)(0.0f), (float16)(0.0f)};   /* interleaved: (lane, channel) */
   const uint16 alpha = (uint16)(3, 3, 3, 3, 7, 7, 7, 7, 11, 11, 11, 11, 15, 15, 15, 15);
+#if defined(SV_IL1_ROWS) && !defined(SV_POS_LONG)
+  /* Order 1 on interleaved cells: the positions stepped as floor and
+   * fraction (sv_step8_split; the same integers, so the same samples);
+   * -DSV_POS_LONG steps the 64-bit positions, for comparison. */
+  if (il) {
+    int8 F[3];
+    uint8 L[3];
+    sv_split8(X, F, L);
+    for (int t = 0; t < T; ++t) {
+      const int8 on = (int8)(t) < N;
+      if (steps && !any(sv_reach8_f(F, nx, ny, nz, nbx, nby, reach, on))) {
+        sv_step8_split(F, L, on, s_0, s_1, s_2);
+        continue;
+      }
+      float16 u[2];
+      sv_sample8_il1(F, L, nx, ny, nz, table, pairs, vox, u, cb);
+      sv_over_lanes16(acc, u, on, alpha);
+      sv_step8_split(F, L, on, s_0, s_1, s_2);
+    }
+    T = 0;
+  }
+#endif
   for (int t = 0; t < T; ++t) {
     const int8 on = (int8)(t) < N;
     if (steps && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, on))) {
@@ -151,11 +184,7 @@ SV_FN_INLINE void sv_resample_local8(
     if (il) {
       float16 u[2];
       sv_sample8_il(X, nx, ny, nz, table, pairs, vox, u, cb);
-#pragma unroll
-      for (int h = 0; h < 2; ++h) {
-        const int16 onh = as_int16(sv_spread4(as_float8(on), 4 * h));
-        acc[h] = select(acc[h], acc[h] + (1.0f - shuffle(acc[h], alpha)) * u[h], onh);
-      }
+      sv_over_lanes16(acc, u, on, alpha);
     } else {
       float8 u[4];
       sv_sample8(X, nx, ny, nz, table, vox, cs, u);

@@ -332,6 +332,17 @@ SV_FN void sv_neville16(float16* q, const float16* d, const int16 low) {
  * 1)), the same rounding of the negated difference, so the samples are
  * sv_sample8_il's bit for bit but for the sign of a zero or of a NaN, which
  * over cannot tell (resample.cl, empty-space skipping; a NaN stays a NaN). */
+/* The fixed-point positions X as their floors F = X >> 32 and fractions
+ * L = X & (2^32 - 1) (SV_FRAC_BITS = 32): sv_sample8_il1 takes them so, and
+ * the fused kernel's steps and sv_trim8's walk step them so (sv_step8_split),
+ * which saves the 64-bit lanes' shifts and narrowing at each step. */
+SV_FN_INLINE void sv_split8(const long8* X, int8* F, uint8* L) {
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    F[a] = convert_int8(X[a] >> SV_FRAC_BITS);
+    L[a] = convert_uint8(X[a] & 0xFFFFFFFFL);
+  }
+}
 #if ORDER == 1 && !defined(SV_IL1_GENERIC)
 #define SV_IL1_ROWS 1
 #if defined(__clang__) && defined(__AVX2__) && !defined(__AVX512F__)
@@ -369,9 +380,9 @@ SV_FN_INLINE int8 sv_lookup32(__global const int* t, const int8 i) {
   as_float4(vload4(0, (__global const int*)vox + o.s##l)), \
       as_float4(vload4(0, (__global const int*)vox + o.s##l + dx.s##l))
 #endif
-SV_FN_INLINE void sv_sample8_il1(const long8* X, int nx, int ny, int nz, __global const int* table,
-                                 __global const long* pairs, __global const float* vox, float16* u,
-                                 const int cb) {
+SV_FN_INLINE void sv_sample8_il1(const int8* F, const uint8* L, int nx, int ny, int nz,
+                                 __global const int* table, __global const long* pairs,
+                                 __global const float* vox, float16* u, const int cb) {
   const int n[3] = {nx, ny, nz};
   int8 base = (int8)(0), dd[3];
   float8 tt[3];
@@ -382,8 +393,8 @@ SV_FN_INLINE void sv_sample8_il1(const long8* X, int nx, int ny, int nz, __globa
   __global const int* cbits = (__global const int*)(pairs + nx + ny + nz + 6);
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
-    const int8 f = convert_int8(X[a] >> SV_FRAC_BITS);
-    tt[a] = convert_float8(convert_uint8(X[a] & 0xFFFFFFFFL)) * (1.0f / 4294967296.0f);
+    const int8 f = F[a];
+    tt[a] = convert_float8(L[a]) * (1.0f / 4294967296.0f);
     int8 t0, t1;
     if (cb) {
       /* Cells of 2^s positions along the axis, at most 32 of them: entry g
@@ -479,7 +490,10 @@ SV_FN_INLINE void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global
                                 __global const long* pairs, __global const float* vox, float16* u,
                                 const int cb) {
 #ifdef SV_IL1_ROWS
-  sv_sample8_il1(X, nx, ny, nz, table, pairs, vox, u, cb);
+  int8 F[3];
+  uint8 L[3];
+  sv_split8(X, F, L);
+  sv_sample8_il1(F, L, nx, ny, nz, table, pairs, vox, u, cb);
 #else
   SV_AXES8(X, nx, ny, nz, table);
 #pragma unroll
@@ -701,6 +715,21 @@ SV_FN void sv_step8(long8* X, const int8 on, const long s0, const long s1, const
 #endif
 }
 
+/* sv_step8 on positions split as sv_split8 does: the fraction's sum with
+ * the carry out of it into the floor, the same integers as the 64-bit sum
+ * (frozen lanes add 0 and carry nothing). */
+SV_FN void sv_step8_split(int8* F, uint8* L, const int8 on, const long s0, const long s1,
+                          const long s2) {
+  const long s[3] = {s0, s1, s2};
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    const uint8 add = (uint8)((uint)(s[a] & 0xFFFFFFFFL)) & as_uint8(on);
+    const uint8 l = L[a] + add;
+    F[a] = F[a] + ((int8)((int)(s[a] >> SV_FRAC_BITS)) & on) - (l < add);
+    L[a] = l;
+  }
+}
+
 /* ---- empty-space skipping (the fused kernel's `reach` argument) ----
  * Bricks: the volume cut into SV_BRICK^3 voxel bricks, nb = ceil(n / SV_BRICK)
  * per axis, brick (bx, by, bz) at index bx + nbx * (by + nby * bz).
@@ -823,14 +852,20 @@ __kernel void simdvol_occupancy_reach(__global const uint* occ, const int nbx, c
 }
 
 /* -1 in the lanes with on[l] whose sample at X is in a brick with reach 1. */
-SV_FN int8 sv_reach8(const long8* X, int nx, int ny, int nz, int nbx, int nby,
-                     __global const uchar* reach, const int8 on) {
-  const int8 fx = clamp(convert_int8(X[0] >> SV_FRAC_BITS), (int8)(0), (int8)(nx - 1));
-  const int8 fy = clamp(convert_int8(X[1] >> SV_FRAC_BITS), (int8)(0), (int8)(ny - 1));
-  const int8 fz = clamp(convert_int8(X[2] >> SV_FRAC_BITS), (int8)(0), (int8)(nz - 1));
+SV_FN int8 sv_reach8_f(const int8* F, int nx, int ny, int nz, int nbx, int nby,
+                       __global const uchar* reach, const int8 on) {
+  const int8 fx = clamp(F[0], (int8)(0), (int8)(nx - 1));
+  const int8 fy = clamp(F[1], (int8)(0), (int8)(ny - 1));
+  const int8 fz = clamp(F[2], (int8)(0), (int8)(nz - 1));
   const int8 b =
       (fx >> SV_BRICK_LOG2) + nbx * ((fy >> SV_BRICK_LOG2) + nby * (fz >> SV_BRICK_LOG2));
   return (SV_GI8(reach, b) != 0) & on;
+}
+SV_FN int8 sv_reach8(const long8* X, int nx, int ny, int nz, int nbx, int nby,
+                     __global const uchar* reach, const int8 on) {
+  const int8 F[3] = {convert_int8(X[0] >> SV_FRAC_BITS), convert_int8(X[1] >> SV_FRAC_BITS),
+                     convert_int8(X[2] >> SV_FRAC_BITS)};
+  return sv_reach8_f(F, nx, ny, nz, nbx, nby, reach, on);
 }
 
 /* Trims each lane to its first .. last sample in a brick with reach 1 (the
