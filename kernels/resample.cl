@@ -874,8 +874,21 @@ SV_FN int8 sv_reach8(const long8* X, int nx, int ny, int nz, int nbx, int nby,
  * lengths (0 if none); returns the longest. */
 SV_FN int sv_trim8(long8* X, int8* N, const int T, const long s0, const long s1, const long s2,
                    int nx, int ny, int nz, int nbx, int nby, __global const uchar* reach) {
-  long8 Y[3] = {X[0], X[1], X[2]};
   int8 first = *N, last = (int8)(-1);
+#ifndef SV_TRIM_LONG
+  /* the walk on split positions (sv_step8_split, every lane on: the same
+   * floors as the 64-bit sums of -DSV_TRIM_LONG) */
+  int8 F[3];
+  uint8 L[3];
+  sv_split8(X, F, L);
+  for (int t = 0; t < T; ++t) {
+    const int8 r = sv_reach8_f(F, nx, ny, nz, nbx, nby, reach, (int8)(t) < *N);
+    first = select(first, min(first, (int8)(t)), r);
+    last = select(last, (int8)(t), r);
+    sv_step8_split(F, L, (int8)(-1), s0, s1, s2);
+  }
+#else
+  long8 Y[3] = {X[0], X[1], X[2]};
   for (int t = 0; t < T; ++t) {
     const int8 r = sv_reach8(Y, nx, ny, nz, nbx, nby, reach, (int8)(t) < *N);
     first = select(first, min(first, (int8)(t)), r);
@@ -884,6 +897,7 @@ SV_FN int sv_trim8(long8* X, int8* N, const int T, const long s0, const long s1,
     Y[1] += s1;
     Y[2] += s2;
   }
+#endif
   const int8 n = max(last - first + 1, (int8)(0));
   const long8 k = convert_long8(select((int8)(0), first, n > 0));
   X[0] += k * s0;
