@@ -138,8 +138,12 @@ SV_FN_INLINE void sv_resample_local8(
     const int8 on = N > 0;
     const long8 n1 = convert_long8(max(N - 1, (int8)(0)));
     const long8 Y[3] = {X[0] + n1 * s_0, X[1] + n1 * s_1, X[2] + n1 * s_2};
-    const int8 ends = sv_reach8(X, nx, ny, nz, nbx, nby, reach, on) &
-                      sv_reach8(Y, nx, ny, nz, nbx, nby, reach, on);
+    int8 FX[3], FY[3];
+    uint8 LX[3], LY[3];
+    sv_split8(X, FX, LX);
+    sv_split8(Y, FY, LY);
+    const int8 ends = sv_reach8(FX, nx, ny, nz, nbx, nby, reach, on) &
+                      sv_reach8(FY, nx, ny, nz, nbx, nby, reach, on);
     if (any(on & ~ends)) {
       T = sv_trim8(X, &N, T, s_0, s_1, s_2, nx, ny, nz, nbx, nby, reach);
 #ifndef SV_STEP_TEST_ALL
@@ -151,50 +155,32 @@ SV_FN_INLINE void sv_resample_local8(
   float8 ar = (float8)(0.0f), ag = ar, ab = ar, aa = ar; /* planar: by channel */
   float16 acc[2] = {(float16)(0.0f), (float16)(0.0f)};   /* interleaved: (lane, channel) */
   const uint16 alpha = (uint16)(3, 3, 3, 3, 7, 7, 7, 7, 11, 11, 11, 11, 15, 15, 15, 15);
-#if defined(SV_IL1_ROWS) && !defined(SV_POS_LONG)
-  /* Order 1 on interleaved cells: the positions stepped as floor and
-   * fraction (sv_step8_split; the same integers, so the same samples);
-   * -DSV_POS_LONG steps the 64-bit positions, for comparison. */
-  if (il) {
-    int8 F[3];
-    uint8 L[3];
-    sv_split8(X, F, L);
-    for (int t = 0; t < T; ++t) {
-      const int8 on = (int8)(t) < N;
-      if (steps && !any(sv_reach8_f(F, nx, ny, nz, nbx, nby, reach, on))) {
-        sv_step8_split(F, L, on, s_0, s_1, s_2);
-        continue;
-      }
-      float16 u[2];
-      sv_sample8_il1(F, L, nx, ny, nz, table, pairs, vox, u, cb);
-      sv_over_lanes16(acc, u, on, alpha);
-      sv_step8_split(F, L, on, s_0, s_1, s_2);
-    }
-    T = 0;
-  }
-#endif
+  /* the positions split (sv_split8) and stepped so */
+  int8 F[3];
+  uint8 L[3];
+  sv_split8(X, F, L);
   for (int t = 0; t < T; ++t) {
     const int8 on = (int8)(t) < N;
-    if (steps && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, on))) {
+    if (steps && !any(sv_reach8(F, nx, ny, nz, nbx, nby, reach, on))) {
       /* every stepping lane's sample is +-0: over keeps the composite; a lane
        * past its end stays where it is (sv_step8) */
-      sv_step8(X, on, s_0, s_1, s_2);
+      sv_step8(F, L, on, s_0, s_1, s_2);
       continue;
     }
     if (il) {
       float16 u[2];
-      sv_sample8_il(X, nx, ny, nz, table, pairs, vox, u, cb);
+      sv_sample8_il(F, L, nx, ny, nz, table, pairs, vox, u, cb);
       sv_over_lanes16(acc, u, on, alpha);
     } else {
       float8 u[4];
-      sv_sample8(X, nx, ny, nz, table, vox, cs, u);
+      sv_sample8(F, L, nx, ny, nz, table, vox, cs, u);
       const float8 tr = 1.0f - aa;
       ar = select(ar, ar + tr * u[0], on);
       ag = select(ag, ag + tr * u[1], on);
       ab = select(ab, ab + tr * u[2], on);
       aa = select(aa, aa + tr * u[3], on);
     }
-    sv_step8(X, on, s_0, s_1, s_2);
+    sv_step8(F, L, on, s_0, s_1, s_2);
   }
   float4 res[8];
   if (il)

@@ -184,10 +184,22 @@ __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
  * same times on the 2-core EPYC (simdvol-bench-frame), so the portable form
  * stays.) */
 
-SV_FN_INLINE void sv_axis8(long8 X, int n, __global const int* table, int8* addr, float8* d,
-                           int8* low) {
-  const int8 f = convert_int8(X >> SV_FRAC_BITS);
-  const float8 t = convert_float8(convert_uint8(X & 0xFFFFFFFFL)) * (1.0f / 4294967296.0f);
+/* The fixed-point positions X as their floors F = X >> 32 and fractions
+ * L = X & (2^32 - 1) (SV_FRAC_BITS = 32): the float8 kernels step them so
+ * (sv_step8, the same integers as the 64-bit sums), and the samplers and the
+ * reach test take them so, which saves the 64-bit lanes' shifts and
+ * narrowing at each step. */
+SV_FN_INLINE void sv_split8(const long8* X, int8* F, uint8* L) {
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    F[a] = convert_int8(X[a] >> SV_FRAC_BITS);
+    L[a] = convert_uint8(X[a] & 0xFFFFFFFFL);
+  }
+}
+/* One axis of 8 lanes at split positions (floor f, fraction l: sv_split8). */
+SV_FN_INLINE void sv_axis8(const int8 f, const uint8 l, int n, __global const int* table,
+                           int8* addr, float8* d, int8* low) {
+  const float8 t = convert_float8(l) * (1.0f / 4294967296.0f);
   const int8 lo = t <= 0.5f; /* -1 where low */
   *low = lo;
 #pragma unroll
@@ -221,20 +233,21 @@ SV_FN void sv_neville8(float8* q, const int R, const float8* d, const int8 low) 
   }
 }
 
-/* sv_axis8 for the three axes of 8 lanes at X[0..2]. */
-#define SV_AXES8(X, nx, ny, nz, table)                 \
-  int8 ax[SV_M], ay[SV_M], az[SV_M];                   \
-  float8 dx[SV_M], dy[SV_M], dz[SV_M];                 \
-  int8 lx, ly, lz;                                     \
-  sv_axis8((X)[0], (nx), (table), ax, dx, &lx);        \
-  sv_axis8((X)[1], (ny), (table) + (nx), ay, dy, &ly); \
-  sv_axis8((X)[2], (nz), (table) + (nx) + (ny), az, dz, &lz)
+/* sv_axis8 for the three axes of 8 lanes at split positions F, L [0..2]. */
+#define SV_AXES8(F, L, nx, ny, nz, table)                      \
+  int8 ax[SV_M], ay[SV_M], az[SV_M];                           \
+  float8 dx[SV_M], dy[SV_M], dz[SV_M];                         \
+  int8 lx, ly, lz;                                             \
+  sv_axis8((F)[0], (L)[0], (nx), (table), ax, dx, &lx);        \
+  sv_axis8((F)[1], (L)[1], (ny), (table) + (nx), ay, dy, &ly); \
+  sv_axis8((F)[2], (L)[2], (nz), (table) + (nx) + (ny), az, dz, &lz)
 
-/* The samples at the fixed-point positions X[0..2] of 8 lanes: u[ch] =
+/* The samples at the split positions F, L [0..2] of 8 lanes: u[ch] =
  * channel ch of each lane's sample (sv_sample per lane). */
-SV_FN_INLINE void sv_sample8(const long8* X, int nx, int ny, int nz, __global const int* table,
-                             __global const float* vox, int cs, float8* u) {
-  SV_AXES8(X, nx, ny, nz, table);
+SV_FN_INLINE void sv_sample8(const int8* F, const uint8* L, int nx, int ny, int nz,
+                             __global const int* table, __global const float* vox, int cs,
+                             float8* u) {
+  SV_AXES8(F, L, nx, ny, nz, table);
   /* z outermost: the x pass of a row (b, c) runs as soon as its SV_M
    * corners are loaded, the y pass of a plane c as soon as its rows are
    * done, so about 4 * (SV_M + 2) float8 values are live instead of the
@@ -332,17 +345,6 @@ SV_FN void sv_neville16(float16* q, const float16* d, const int16 low) {
  * 1)), the same rounding of the negated difference, so the samples are
  * sv_sample8_il's bit for bit but for the sign of a zero or of a NaN, which
  * over cannot tell (resample.cl, empty-space skipping; a NaN stays a NaN). */
-/* The fixed-point positions X as their floors F = X >> 32 and fractions
- * L = X & (2^32 - 1) (SV_FRAC_BITS = 32): sv_sample8_il1 takes them so, and
- * the fused kernel's steps and sv_trim8's walk step them so (sv_step8_split),
- * which saves the 64-bit lanes' shifts and narrowing at each step. */
-SV_FN_INLINE void sv_split8(const long8* X, int8* F, uint8* L) {
-#pragma unroll
-  for (int a = 0; a < 3; ++a) {
-    F[a] = convert_int8(X[a] >> SV_FRAC_BITS);
-    L[a] = convert_uint8(X[a] & 0xFFFFFFFFL);
-  }
-}
 #if ORDER == 1 && !defined(SV_IL1_GENERIC)
 #define SV_IL1_ROWS 1
 #if defined(__clang__) && defined(__AVX2__) && !defined(__AVX512F__)
@@ -484,18 +486,15 @@ SV_FN_INLINE void sv_sample8_il1(const int8* F, const uint8* L, int nx, int ny, 
 #undef SV_LD4
 #endif
 
-/* The samples of 8 lanes at X[0..2]: u[h] = lanes 4h .. 4h + 3, each its
+/* The samples of 8 lanes at F, L [0..2]: u[h] = lanes 4h .. 4h + 3, each its
  * premultiplied RGBA (sv_sample8's values, as (lane, channel)). */
-SV_FN_INLINE void sv_sample8_il(const long8* X, int nx, int ny, int nz, __global const int* table,
-                                __global const long* pairs, __global const float* vox, float16* u,
-                                const int cb) {
+SV_FN_INLINE void sv_sample8_il(const int8* F, const uint8* L, int nx, int ny, int nz,
+                                __global const int* table, __global const long* pairs,
+                                __global const float* vox, float16* u, const int cb) {
 #ifdef SV_IL1_ROWS
-  int8 F[3];
-  uint8 L[3];
-  sv_split8(X, F, L);
   sv_sample8_il1(F, L, nx, ny, nz, table, pairs, vox, u, cb);
 #else
-  SV_AXES8(X, nx, ny, nz, table);
+  SV_AXES8(F, L, nx, ny, nz, table);
 #pragma unroll
   for (int h = 0; h < 2; ++h) {
     const uint base = 4 * h;
@@ -701,25 +700,16 @@ SV_FN int sv_lanes8(__global const sv_segment* segs, __global const int* order, 
  * instead of walking on through lines nobody prefetched. Frames alternated
  * in one process (simdvol-bench-options, 20 frames, view (20, 35, 10)):
  * resample + local of the phantom 34.5 -> 32.4 ms, ch2 33.5 -> 32.4 ms,
- * brainsmall 5.41 -> 4.97 ms; -DSV_NO_FREEZE steps every lane. */
-SV_FN void sv_step8(long8* X, const int8 on, const long s0, const long s1, const long s2) {
+ * brainsmall 5.41 -> 4.97 ms; -DSV_NO_FREEZE steps every lane.
+ * The positions are split (sv_split8): the fraction's sum with the carry out
+ * of it into the floor, the same integers as the 64-bit sum (frozen lanes
+ * add 0 and carry nothing). Stepped as 64-bit sums and split at each sample
+ * (before 2026-12-03), resample + local took 5-10% longer (docs/
+ * PERFORMANCE.md). */
+SV_FN void sv_step8(int8* F, uint8* L, int8 on, const long s0, const long s1, const long s2) {
 #ifdef SV_NO_FREEZE
-  X[0] += s0;
-  X[1] += s1;
-  X[2] += s2;
-#else
-  const long8 m = convert_long8(on); /* -1 where on */
-  X[0] += (long8)(s0)&m;
-  X[1] += (long8)(s1)&m;
-  X[2] += (long8)(s2)&m;
+  on = (int8)(-1);
 #endif
-}
-
-/* sv_step8 on positions split as sv_split8 does: the fraction's sum with
- * the carry out of it into the floor, the same integers as the 64-bit sum
- * (frozen lanes add 0 and carry nothing). */
-SV_FN void sv_step8_split(int8* F, uint8* L, const int8 on, const long s0, const long s1,
-                          const long s2) {
   const long s[3] = {s0, s1, s2};
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
@@ -851,21 +841,16 @@ __kernel void simdvol_occupancy_reach(__global const uint* occ, const int nbx, c
   }
 }
 
-/* -1 in the lanes with on[l] whose sample at X is in a brick with reach 1. */
-SV_FN int8 sv_reach8_f(const int8* F, int nx, int ny, int nz, int nbx, int nby,
-                       __global const uchar* reach, const int8 on) {
+/* -1 in the lanes with on[l] whose sample at floors F is in a brick with
+ * reach 1. */
+SV_FN int8 sv_reach8(const int8* F, int nx, int ny, int nz, int nbx, int nby,
+                     __global const uchar* reach, const int8 on) {
   const int8 fx = clamp(F[0], (int8)(0), (int8)(nx - 1));
   const int8 fy = clamp(F[1], (int8)(0), (int8)(ny - 1));
   const int8 fz = clamp(F[2], (int8)(0), (int8)(nz - 1));
   const int8 b =
       (fx >> SV_BRICK_LOG2) + nbx * ((fy >> SV_BRICK_LOG2) + nby * (fz >> SV_BRICK_LOG2));
   return (SV_GI8(reach, b) != 0) & on;
-}
-SV_FN int8 sv_reach8(const long8* X, int nx, int ny, int nz, int nbx, int nby,
-                     __global const uchar* reach, const int8 on) {
-  const int8 F[3] = {convert_int8(X[0] >> SV_FRAC_BITS), convert_int8(X[1] >> SV_FRAC_BITS),
-                     convert_int8(X[2] >> SV_FRAC_BITS)};
-  return sv_reach8_f(F, nx, ny, nz, nbx, nby, reach, on);
 }
 
 /* Trims each lane to its first .. last sample in a brick with reach 1 (the
@@ -875,29 +860,16 @@ SV_FN int8 sv_reach8(const long8* X, int nx, int ny, int nz, int nbx, int nby,
 SV_FN int sv_trim8(long8* X, int8* N, const int T, const long s0, const long s1, const long s2,
                    int nx, int ny, int nz, int nbx, int nby, __global const uchar* reach) {
   int8 first = *N, last = (int8)(-1);
-#ifndef SV_TRIM_LONG
-  /* the walk on split positions (sv_step8_split, every lane on: the same
-   * floors as the 64-bit sums of -DSV_TRIM_LONG) */
+  /* the walk on split positions, every lane stepping */
   int8 F[3];
   uint8 L[3];
   sv_split8(X, F, L);
   for (int t = 0; t < T; ++t) {
-    const int8 r = sv_reach8_f(F, nx, ny, nz, nbx, nby, reach, (int8)(t) < *N);
+    const int8 r = sv_reach8(F, nx, ny, nz, nbx, nby, reach, (int8)(t) < *N);
     first = select(first, min(first, (int8)(t)), r);
     last = select(last, (int8)(t), r);
-    sv_step8_split(F, L, (int8)(-1), s0, s1, s2);
+    sv_step8(F, L, (int8)(-1), s0, s1, s2);
   }
-#else
-  long8 Y[3] = {X[0], X[1], X[2]};
-  for (int t = 0; t < T; ++t) {
-    const int8 r = sv_reach8(Y, nx, ny, nz, nbx, nby, reach, (int8)(t) < *N);
-    first = select(first, min(first, (int8)(t)), r);
-    last = select(last, (int8)(t), r);
-    Y[0] += s0;
-    Y[1] += s1;
-    Y[2] += s2;
-  }
-#endif
   const int8 n = max(last - first + 1, (int8)(0));
   const long8 k = convert_long8(select((int8)(0), first, n > 0));
   X[0] += k * s0;
@@ -945,29 +917,32 @@ SV_FN_INLINE void sv_resample8(__global const sv_segment* segs, const int nseg,
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
   const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
   const int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
+  int8 F[3];
+  uint8 L[3];
+  sv_split8(X, F, L);
   for (int t = 0; t < T; ++t) {
     const int8 on = (int8)(t) < N;
-    if (skip && !any(sv_reach8(X, nx, ny, nz, nbx, nby, reach, on))) {
+    if (skip && !any(sv_reach8(F, nx, ny, nz, nbx, nby, reach, on))) {
 #pragma unroll
       for (int l = 0; l < 8; ++l)
         if (t < ln[l]) out[lo[l] + t] = (float4)(0.0f);
-      sv_step8(X, on, s_0, s_1, s_2);
+      sv_step8(F, L, on, s_0, s_1, s_2);
       continue;
     }
     float4 res[8];
     if (il) {
       float16 u[2];
-      sv_sample8_il(X, nx, ny, nz, table, pairs, vox, u, cb);
+      sv_sample8_il(F, L, nx, ny, nz, table, pairs, vox, u, cb);
       sv_lanes_of16(u, res);
     } else {
       float8 u[4];
-      sv_sample8(X, nx, ny, nz, table, vox, cs, u);
+      sv_sample8(F, L, nx, ny, nz, table, vox, cs, u);
       sv_lanes_of8(u[0], u[1], u[2], u[3], res);
     }
 #pragma unroll
     for (int l = 0; l < 8; ++l)
       if (t < ln[l]) out[lo[l] + t] = res[l];
-    sv_step8(X, on, s_0, s_1, s_2);
+    sv_step8(F, L, on, s_0, s_1, s_2);
   }
 }
 
