@@ -139,9 +139,8 @@ SV_FN_INLINE void sv_resample_local8(
     const long8 n1 = convert_long8(max(N - 1, (int8)(0)));
     const long8 Y[3] = {X[0] + n1 * s_0, X[1] + n1 * s_1, X[2] + n1 * s_2};
     int8 FX[3], FY[3];
-    uint8 LX[3], LY[3];
-    sv_split8(X, FX, LX);
-    sv_split8(Y, FY, LY);
+    sv_floors8(X, FX);
+    sv_floors8(Y, FY);
     const int8 ends = sv_reach8(FX, nx, ny, nz, nbx, nby, reach, on) &
                       sv_reach8(FY, nx, ny, nz, nbx, nby, reach, on);
     if (any(on & ~ends)) {

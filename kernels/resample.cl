@@ -189,12 +189,14 @@ __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
  * (sv_step8, the same integers as the 64-bit sums), and the samplers and the
  * reach test take them so, which saves the 64-bit lanes' shifts and
  * narrowing at each step. */
-SV_FN_INLINE void sv_split8(const long8* X, int8* F, uint8* L) {
+SV_FN_INLINE void sv_floors8(const long8* X, int8* F) {
 #pragma unroll
-  for (int a = 0; a < 3; ++a) {
-    F[a] = convert_int8(X[a] >> SV_FRAC_BITS);
-    L[a] = convert_uint8(X[a] & 0xFFFFFFFFL);
-  }
+  for (int a = 0; a < 3; ++a) F[a] = convert_int8(X[a] >> SV_FRAC_BITS);
+}
+SV_FN_INLINE void sv_split8(const long8* X, int8* F, uint8* L) {
+  sv_floors8(X, F);
+#pragma unroll
+  for (int a = 0; a < 3; ++a) L[a] = convert_uint8(X[a] & 0xFFFFFFFFL);
 }
 /* One axis of 8 lanes at split positions (floor f, fraction l: sv_split8). */
 SV_FN_INLINE void sv_axis8(const int8 f, const uint8 l, int n, __global const int* table,
@@ -704,8 +706,8 @@ SV_FN int sv_lanes8(__global const sv_segment* segs, __global const int* order, 
  * The positions are split (sv_split8): the fraction's sum with the carry out
  * of it into the floor, the same integers as the 64-bit sum (frozen lanes
  * add 0 and carry nothing). Stepped as 64-bit sums and split at each sample
- * (before 2026-12-03), resample + local took 5-10% longer (docs/
- * PERFORMANCE.md). */
+ * (before 2026-12-03), the fused resample + local at order 1 took 2-10 %
+ * longer on the phantom (docs/PERFORMANCE.md). */
 SV_FN void sv_step8(int8* F, uint8* L, int8 on, const long s0, const long s1, const long s2) {
 #ifdef SV_NO_FREEZE
   on = (int8)(-1);
