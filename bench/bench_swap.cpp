@@ -106,6 +106,8 @@ void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layo
   std::vector<std::vector<double>> t(static_cast<std::size_t>(N));
   std::vector<std::vector<double>> tf;  // per launch of the fused run
   std::vector<double> total, total_fused;
+  int64_t slot_bytes = 0;
+  std::size_t slot_count = 0;
   // In turn, run after run: one launch per stage, and enqueue_swap's runs
   // of up to kSwapFusedStages stages per launch (its level buffers come
   // back from the pool of the previous run: no fresh pages).
@@ -124,6 +126,10 @@ void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layo
       fused = enqueue_swap(dev, plan, fp);
       dev.finish();
     }
+    slot_bytes = 0;
+    slot_count = fused.slots.size();
+    for (const cl::Buffer& sb : fused.slots)
+      slot_bytes += static_cast<int64_t>(buffer_size(sb, "clGetMemObjectInfo(CL_MEM_SIZE)"));
     if (r == 0) continue;
     double sum = 0;
     for (int k = 0; k < N; ++k) {
@@ -152,7 +158,20 @@ void swap_kernels_only(Device& dev, const Frame& f, int64_t pes, SwapLayout layo
       "total %.2f ms (%.2f x); launches:",
       kSwapFusedStages, median(total_fused), median(total_fused) / median(total));
   for (const auto& v : tf) std::printf(" %.2f", median(v));
-  std::printf("\n");
+  // The level buffers of that run, against one buffer per level of the
+  // fused launch (slot (L - 1) mod 7, each sized by its largest level: the
+  // form before the levels between moved to local memory).
+  std::vector<int64_t> per_level(static_cast<std::size_t>(std::min(N, kSwapFusedStages + 1)), 1);
+  for (int L = 1; L <= N; ++L) {
+    int64_t& m = per_level[static_cast<std::size_t>((L - 1) % per_level.size())];
+    m = std::max(m, plan.plan.level_size(L) * 16);
+  }
+  int64_t seven = 0;
+  for (const int64_t v : per_level) seven += v;
+  std::printf(
+      "\n  level buffers %.1f MiB in %zu slots (a buffer per level of the launch: %.1f MiB)\n",
+      static_cast<double>(slot_bytes) / 1048576.0, slot_count,
+      static_cast<double>(seven) / 1048576.0);
 }
 
 constexpr const char* kUsage =

@@ -55,60 +55,69 @@ SV_FN int sv_rect_index(const int8 r, const int x, const int y) {
 /* Pixels [first, first + n) of PE p's rectangle o at level k + 1 (from
  * out_base on) from level k's buffer `in` (its rectangles rp of p and rq of
  * the partner q = p ^ 2^k at offsets offp, offq): over(front, back), p in
- * front when bit k of p equals `front`. */
-SV_FN void sv_swap_pixels(__global const float4* in, const int8 rp, const int offp, const int8 rq,
-                          const int offq, __global float4* out, const int8 o, const int out_base,
-                          const int first, const int n, const int p, const int k, const int front) {
-  __global const float4* inp = in + offp;
-  __global const float4* inq = in + offq;
-  const bool p_front = ((p >> k) & 1) == front;
-  const int base = out_base + first;
-  int row = first / o.s2;
-  int col = first - row * o.s2;
-  if (o.s6 >= rp.s6 && o.s6 >= rq.s6) {
-    /* Row by row: along a row of o, x steps by 1 << o.s6, a multiple of
-     * each input rectangle's x stride, so a pixel's alignment with an input
-     * rectangle is that of the row's first, and its column there steps by
-     * 1 << (o.s6 - r.s6): sv_rect_index's result, incrementally. */
-    const int ip_inc = 1 << (o.s6 - rp.s6), iq_inc = 1 << (o.s6 - rq.s6);
-    for (int i = 0; i < n;) {
-      const int x = o.s0 + (col << o.s6), y = o.s1 + (row << o.s7);
-      const int m = min(o.s2 - col, n - i);
-      const int dxp = x - rp.s0, dyp = y - rp.s1, dxq = x - rq.s0, dyq = y - rq.s1;
-      const int bp = dyp >> rp.s7, bq = dyq >> rq.s7;
-      const bool okp =
-          dyp >= 0 && (dyp & (rp.s5 - 1)) == 0 && bp < rp.s3 && (dxp & (rp.s4 - 1)) == 0;
-      const bool okq =
-          dyq >= 0 && (dyq & (rq.s5 - 1)) == 0 && bq < rq.s3 && (dxq & (rq.s4 - 1)) == 0;
-      int ap = dxp >> rp.s6, aq = dxq >> rq.s6;
-      __global const float4* rowp = inp + bp * rp.s2;
-      __global const float4* rowq = inq + bq * rq.s2;
-      for (int j = 0; j < m; ++j) {
-        const float4 vp = okp && ap >= 0 && ap < rp.s2 ? rowp[ap] : (float4)(0.0f);
-        const float4 vq = okq && aq >= 0 && aq < rq.s2 ? rowq[aq] : (float4)(0.0f);
-        out[base + i + j] = p_front ? sv_swap_over(vp, vq) : sv_swap_over(vq, vp);
-        ap += ip_inc;
-        aq += iq_inc;
-      }
-      i += m;
-      col = 0;
-      ++row;
-    }
-    return;
+ * front when bit k of p equals `front`. One body for each pair of address
+ * spaces (IN, OUT) the kernels need (OpenCL 1.2 has no generic pointers):
+ * sv_swap_pixels global -> global, _gl global -> local, _ll local -> local,
+ * _lg local -> global. */
+#define SV_SWAP_PIXELS(NAME, IN, OUT)                                                        \
+  SV_FN void NAME(IN const float4* in, const int8 rp, const int offp, const int8 rq,         \
+                  const int offq, OUT float4* out, const int8 o, const int out_base,         \
+                  const int first, const int n, const int p, const int k, const int front) { \
+    IN const float4* inp = in + offp;                                                        \
+    IN const float4* inq = in + offq;                                                        \
+    const bool p_front = ((p >> k) & 1) == front;                                            \
+    const int base = out_base + first;                                                       \
+    int row = first / o.s2;                                                                  \
+    int col = first - row * o.s2;                                                            \
+    if (o.s6 >= rp.s6 && o.s6 >= rq.s6) {                                                    \
+      /* Row by row: along a row of o, x steps by 1 << o.s6, a multiple of                   \
+       * each input rectangle's x stride, so a pixel's alignment with an input               \
+       * rectangle is that of the row's first, and its column there steps by                 \
+       * 1 << (o.s6 - r.s6): sv_rect_index's result, incrementally. */                       \
+      const int ip_inc = 1 << (o.s6 - rp.s6), iq_inc = 1 << (o.s6 - rq.s6);                  \
+      for (int i = 0; i < n;) {                                                              \
+        const int x = o.s0 + (col << o.s6), y = o.s1 + (row << o.s7);                        \
+        const int m = min(o.s2 - col, n - i);                                                \
+        const int dxp = x - rp.s0, dyp = y - rp.s1, dxq = x - rq.s0, dyq = y - rq.s1;        \
+        const int bp = dyp >> rp.s7, bq = dyq >> rq.s7;                                      \
+        const bool okp =                                                                     \
+            dyp >= 0 && (dyp & (rp.s5 - 1)) == 0 && bp < rp.s3 && (dxp & (rp.s4 - 1)) == 0;  \
+        const bool okq =                                                                     \
+            dyq >= 0 && (dyq & (rq.s5 - 1)) == 0 && bq < rq.s3 && (dxq & (rq.s4 - 1)) == 0;  \
+        int ap = dxp >> rp.s6, aq = dxq >> rq.s6;                                            \
+        IN const float4* rowp = inp + bp * rp.s2;                                            \
+        IN const float4* rowq = inq + bq * rq.s2;                                            \
+        for (int j = 0; j < m; ++j) {                                                        \
+          const float4 vp = okp && ap >= 0 && ap < rp.s2 ? rowp[ap] : (float4)(0.0f);        \
+          const float4 vq = okq && aq >= 0 && aq < rq.s2 ? rowq[aq] : (float4)(0.0f);        \
+          out[base + i + j] = p_front ? sv_swap_over(vp, vq) : sv_swap_over(vq, vp);         \
+          ap += ip_inc;                                                                      \
+          aq += iq_inc;                                                                      \
+        }                                                                                    \
+        i += m;                                                                              \
+        col = 0;                                                                             \
+        ++row;                                                                               \
+      }                                                                                      \
+      return;                                                                                \
+    }                                                                                        \
+    for (int i = 0; i < n; ++i) {                                                            \
+      const int x = o.s0 + (col << o.s6), y = o.s1 + (row << o.s7);                          \
+      const int ip = sv_rect_index(rp, x, y);                                                \
+      const int iq = sv_rect_index(rq, x, y);                                                \
+      const float4 vp = ip >= 0 ? inp[ip] : (float4)(0.0f);                                  \
+      const float4 vq = iq >= 0 ? inq[iq] : (float4)(0.0f);                                  \
+      out[base + i] = p_front ? sv_swap_over(vp, vq) : sv_swap_over(vq, vp);                 \
+      if (++col == o.s2) {                                                                   \
+        col = 0;                                                                             \
+        ++row;                                                                               \
+      }                                                                                      \
+    }                                                                                        \
   }
-  for (int i = 0; i < n; ++i) {
-    const int x = o.s0 + (col << o.s6), y = o.s1 + (row << o.s7);
-    const int ip = sv_rect_index(rp, x, y);
-    const int iq = sv_rect_index(rq, x, y);
-    const float4 vp = ip >= 0 ? inp[ip] : (float4)(0.0f);
-    const float4 vq = iq >= 0 ? inq[iq] : (float4)(0.0f);
-    out[base + i] = p_front ? sv_swap_over(vp, vq) : sv_swap_over(vq, vp);
-    if (++col == o.s2) {
-      col = 0;
-      ++row;
-    }
-  }
-}
+SV_SWAP_PIXELS(sv_swap_pixels, __global, __global)
+SV_SWAP_PIXELS(sv_swap_pixels_gl, __global, __local)
+SV_SWAP_PIXELS(sv_swap_pixels_ll, __local, __local)
+SV_SWAP_PIXELS(sv_swap_pixels_lg, __local, __global)
+#undef SV_SWAP_PIXELS
 
 __kernel void simdvol_swap_stage(__global const float4* in, __global const int8* in_rect,
                                  __global const int* in_off, __global float4* out,
@@ -129,39 +138,69 @@ __kernel void simdvol_swap_stage(__global const float4* in, __global const int8*
  * k0 .. k0 + m - 1, p = base | (lid << k0) with base = (g's low k0 bits) |
  * (the rest of g << (k0 + m)), one work-item per PE: every partner of those
  * stages lies in the group, so a barrier between stages is all the
- * synchronisation they need, and a group's levels stay in its thread's
- * cache instead of going through memory between launches. Stage k0 + s
- * reads level k0 + s (s = 0: `in`, else d[s - 1]) and writes level
- * k0 + s + 1 to d[s]: each level of the launch has a buffer of its own,
- * since the work-groups run apart (one group's stage s + 2 must not write
- * where another group's stage s still reads). fronts bit s = stage
- * k0 + s's `front`. Levels k0 .. k0 + m: rectangles r0 .. r6, offsets
- * o0 .. o6 (the ones past m are not read, nor d past m - 1). Each pixel is
+ * synchronisation they need. Stage k0 + s reads level k0 + s (s = 0: `in`)
+ * and writes level k0 + s + 1; the levels between, k0 + 1 .. k0 + m - 1,
+ * are the group's alone and live in local memory: level k0 + s in la for
+ * odd s, lb for even s, the group's PEs one after the other in lid order
+ * (each PE's offset there the sum of the sizes before it), so they never
+ * go out to memory; only level k0 + m is written to `out`. la and lb must
+ * hold the largest group's pixels of their levels (the host sizes them).
+ * fronts bit s = stage k0 + s's `front`. Levels k0 .. k0 + m: rectangles
+ * r0 .. r6, offsets o0 .. o6 (the ones past m are not read). Each pixel is
  * the same over() as simdvol_swap_stage's. */
+#define SV_SWAP_GROUP 64 /* 2^6: kSwapFusedStages in swap_cl.hpp */
 __kernel void simdvol_swap_stages(
-    __global const float4* in, __global float4* d0, __global float4* d1, __global float4* d2,
-    __global float4* d3, __global float4* d4, __global float4* d5, __global const int8* r0,
-    __global const int8* r1, __global const int8* r2, __global const int8* r3,
-    __global const int8* r4, __global const int8* r5, __global const int8* r6,
-    __global const int* o0, __global const int* o1, __global const int* o2, __global const int* o3,
-    __global const int* o4, __global const int* o5, __global const int* o6, const int k0,
-    const int m, const int fronts) {
-  __global float4* D[6] = {d0, d1, d2, d3, d4, d5};
+    __global const float4* in, __global float4* out, __local float4* la, __local float4* lb,
+    __global const int8* r0, __global const int8* r1, __global const int8* r2,
+    __global const int8* r3, __global const int8* r4, __global const int8* r5,
+    __global const int8* r6, __global const int* o0, __global const int* o1, __global const int* o2,
+    __global const int* o3, __global const int* o4, __global const int* o5, __global const int* o6,
+    const int k0, const int m, const int fronts) {
   __global const int8* R[7] = {r0, r1, r2, r3, r4, r5, r6};
   __global const int* O[7] = {o0, o1, o2, o3, o4, o5, o6};
+  /* Level k0 + s's pixel count and local offset of each PE of the group
+   * (index s - 1, lid). */
+  __local int size[5][SV_SWAP_GROUP];
+  __local int start[5][SV_SWAP_GROUP];
   const int lid = (int)get_local_id(0), g = (int)get_group_id(0);
   const int low = g & ((1 << k0) - 1);
   const int p = low | ((g >> k0) << (k0 + m)) | (lid << k0);
+  for (int s = 1; s < m; ++s) size[s - 1][lid] = O[s][p + 1] - O[s][p];
+  barrier(CLK_LOCAL_MEM_FENCE);
+  for (int s = 1; s < m; ++s) {
+    int a = 0;
+    for (int j = 0; j < lid; ++j) a += size[s - 1][j];
+    start[s - 1][lid] = a;
+  }
+  barrier(CLK_LOCAL_MEM_FENCE);
   /* The six stage slots unrolled, each barrier outside any loop or branch
    * (PoCL ran the loop with a barrier inside at several times the cost
-   * per work-item); slots past m do nothing. */
-#define SV_SWAP_SLOT(S)                                                                          \
-  if (S < m) {                                                                                   \
-    const int k = k0 + S, q = p ^ (1 << k), base = O[S + 1][p];                                  \
-    sv_swap_pixels(S == 0 ? in : D[S > 0 ? S - 1 : 0], R[S][p], O[S][p], R[S][q], O[S][q], D[S], \
-                   R[S + 1][p], base, 0, O[S + 1][p + 1] - base, p, k, (fronts >> S) & 1);       \
-  }                                                                                              \
-  barrier(CLK_GLOBAL_MEM_FENCE);
+   * per work-item); slots past m do nothing. Slot S reads level k0 + S
+   * (global for S = 0, else local) and writes level k0 + S + 1 (global for
+   * S = m - 1, else local). */
+#define SV_SWAP_SLOT(S)                                                                        \
+  if (S < m) {                                                                                 \
+    const int k = k0 + S, q = p ^ (1 << k), lq = lid ^ (1 << S), fr = (fronts >> S) & 1;       \
+    __local float4* lin = (S & 1) ? la : lb;                                                   \
+    __local float4* lout = (S & 1) ? lb : la;                                                  \
+    const int8 rp = R[S][p], rq = R[S][q], ro = R[S + 1][p];                                   \
+    const int n = O[S + 1][p + 1] - O[S + 1][p];                                               \
+    if (S == m - 1) {                                                                          \
+      if (S == 0)                                                                              \
+        sv_swap_pixels(in, rp, O[0][p], rq, O[0][q], out, ro, O[S + 1][p], 0, n, p, k, fr);    \
+      else                                                                                     \
+        sv_swap_pixels_lg(lin, rp, start[S > 0 ? S - 1 : 0][lid], rq,                          \
+                          start[S > 0 ? S - 1 : 0][lq], out, ro, O[S + 1][p], 0, n, p, k, fr); \
+    } else {                                                                                   \
+      const int base = start[S < 5 ? S : 0][lid];                                              \
+      if (S == 0)                                                                              \
+        sv_swap_pixels_gl(in, rp, O[0][p], rq, O[0][q], lout, ro, base, 0, n, p, k, fr);       \
+      else                                                                                     \
+        sv_swap_pixels_ll(lin, rp, start[S > 0 ? S - 1 : 0][lid], rq,                          \
+                          start[S > 0 ? S - 1 : 0][lq], lout, ro, base, 0, n, p, k, fr);       \
+    }                                                                                          \
+  }                                                                                            \
+  barrier(CLK_LOCAL_MEM_FENCE);
   SV_SWAP_SLOT(0)
   SV_SWAP_SLOT(1)
   SV_SWAP_SLOT(2)

@@ -16,6 +16,9 @@ namespace {
 
 constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
 constexpr int64_t kBlock = 64;  // local size
+// simdvol_swap_stages' own local arrays (size and start: 2 x 5 x 64 ints),
+// and 1 KiB for the padding that aligns its four local blocks.
+constexpr int64_t kSwapStagesFixedLocal = 2 * 5 * 64 * int64_t(sizeof(cl_int)) + 1024;
 
 template <class T>
 cl::Buffer upload(Device& device, const std::vector<T>& v, const std::string& what) {
@@ -144,40 +147,82 @@ cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, con
                     cl::NDRange(kBlock));
 }
 
+int64_t swap_group_pixels(const SwapPlan& plan, int k0, int m, int L) {
+  const int N = plan.stages();
+  if (m < 1 || m > kSwapFusedStages || k0 < 0 || k0 + m > N || L < 0 || L > N)
+    throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
+                                      ", level " + std::to_string(L) + " outside the plan");
+  const std::vector<int64_t>& off = plan.offset[static_cast<std::size_t>(L)];
+  const std::size_t pes = std::size_t(1) << N, groups = pes >> m;
+  const std::size_t lowmask = (std::size_t(1) << k0) - 1;
+  std::vector<int64_t> sum(groups, 0);
+  for (std::size_t p = 0; p < pes; ++p)
+    sum[(p & lowmask) | ((p >> (k0 + m)) << k0)] += off[p + 1] - off[p];
+  return sum.empty() ? 0 : *std::max_element(sum.begin(), sum.end());
+}
+
+std::array<int64_t, 2> swap_stages_local_bytes(const SwapPlan& plan, int k0, int m) {
+  std::array<int64_t, 2> most{0, 0};
+  for (int s = 1; s < m; ++s) {
+    int64_t& b = most[static_cast<std::size_t>((s & 1) ? 0 : 1)];
+    b = std::max(b, swap_group_pixels(plan, k0, m, k0 + s) * int64_t(sizeof(cl_float4)));
+  }
+  return most;
+}
+
+namespace {
+
+int64_t local_budget(const Device& device, int64_t local_bytes) {
+  return local_bytes > 0 ? local_bytes : static_cast<int64_t>(device.info().local_mem_bytes);
+}
+
+}  // namespace
+
+int64_t swap_stages_local_need(const SwapPlan& plan, int k0, int m) {
+  const std::array<int64_t, 2> b = swap_stages_local_bytes(plan, k0, m);
+  return b[0] + b[1] + kSwapStagesFixedLocal;
+}
+
 cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, int m,
-                              const cl::Buffer& in, const std::vector<cl::Buffer>& out) {
+                              const cl::Buffer& in, const cl::Buffer& out, int64_t local_bytes) {
   const int N = d.plan.stages();
   if (m < 1 || m > kSwapFusedStages || k0 < 0 || k0 + m > N)
     throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
                                       " outside 0 .. N-1 (N = " + std::to_string(N) +
                                       ") or m outside 1 .. " + std::to_string(kSwapFusedStages));
-  if (out.size() != static_cast<std::size_t>(m))
-    throw ArgumentError("out", "needs one buffer per stage (" + std::to_string(m) + ")");
+  // PoCL checks a launch's local memory only with an assertion: too much
+  // aborts the process, so it is checked here.
+  const std::array<int64_t, 2> lbytes = swap_stages_local_bytes(d.plan, k0, m);
+  const int64_t need = lbytes[0] + lbytes[1] + kSwapStagesFixedLocal;
+  const int64_t have = local_budget(device, local_bytes);
+  if (need > have)
+    throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
+                                      ": the levels between need " + std::to_string(need) +
+                                      " bytes of local memory, more than the " +
+                                      std::to_string(have) + " available");
   const std::string name = "simdvol_swap_stages";
   cl::Kernel kern = swap_kernel(device, name);
-  // Levels k0 .. k0 + m and outputs 0 .. m - 1; the slots past them repeat
-  // the last (not read).
+  // Levels k0 .. k0 + m; the slots past them repeat the last (not read).
   std::array<const cl::Buffer*, 7> r{}, o{};
-  std::array<const cl::Buffer*, 6> w{};
   for (int s = 0; s < 7; ++s) {
     const auto L = static_cast<std::size_t>(k0 + std::min(s, m));
     r[static_cast<std::size_t>(s)] = &d.rects[L];
     o[static_cast<std::size_t>(s)] = &d.offsets[L];
   }
-  for (int s = 0; s < 6; ++s)
-    w[static_cast<std::size_t>(s)] = &out[std::min<std::size_t>(s, out.size() - 1)];
   cl_int fronts = 0;
   for (int s = 0; s < m; ++s)
     if (d.plan.front[static_cast<std::size_t>(k0 + s)]) fronts |= cl_int(1) << s;
-  set_args(kern, name, in, *w[0], *w[1], *w[2], *w[3], *w[4], *w[5], *r[0], *r[1], *r[2], *r[3],
-           *r[4], *r[5], *r[6], *o[0], *o[1], *o[2], *o[3], *o[4], *o[5], *o[6],
+  set_args(kern, name, in, out,
+           cl::Local(static_cast<std::size_t>(std::max<int64_t>(lbytes[0], 16))),
+           cl::Local(static_cast<std::size_t>(std::max<int64_t>(lbytes[1], 16))), *r[0], *r[1],
+           *r[2], *r[3], *r[4], *r[5], *r[6], *o[0], *o[1], *o[2], *o[3], *o[4], *o[5], *o[6],
            static_cast<cl_int>(k0), static_cast<cl_int>(m), fronts);
   const std::size_t pes = std::size_t(1) << N;
   return device.run(kern, name, cl::NDRange(pes), cl::NDRange(std::size_t(1) << m));
 }
 
 DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const DeviceFootprints& fp,
-                           int max_fused) {
+                           int max_fused, int64_t local_bytes) {
   if (fp.rect_offset != d.plan.offset[0])
     throw ArgumentError("footprints", "do not match the swap plan's rectangles");
   if (max_fused < 1 || max_fused > kSwapFusedStages)
@@ -186,13 +231,26 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
   const int N = d.plan.stages();
   r.last = fp.pixels;
   if (N == 0) return r;
-  // Level L (1 .. N) in slot (L - 1) mod S: a launch of m stages reads
-  // level k0 and writes k0 + 1 .. k0 + m, at most kSwapFusedStages + 1
-  // consecutive levels, so S = max_fused + 1 slots give each its own
-  // buffer (two, ping and pong, when every stage is a launch of its own).
-  const int S = std::min(N, max_fused == 1 ? 2 : max_fused + 1);
+  // The first stages, kSwapFusedMin or more of them, in one launch (a
+  // work-group per 2^m consecutive PEs), no more than local memory holds
+  // the levels between of; the rest one launch per stage. Later runs in
+  // one launch were slower (simdvol-bench-swap --swap-only: stages 6 .. 11
+  // of the 256^3 phantom at 256^2, 8,192 PEs, 3.1 ms against 2.3 one launch
+  // per stage; brainsmall 1.5 against 0.8): their levels are small (in the
+  // L3 cache either way), and a group of PEs 2^6 apart reads a few hundred
+  // scattered bytes per PE where the stage kernel streams consecutive PEs.
+  int m0 = std::min(max_fused, N);
+  while (m0 >= kSwapFusedMin &&
+         swap_stages_local_need(d.plan, 0, m0) > local_budget(device, local_bytes))
+    --m0;
+  const int first = m0 >= kSwapFusedMin ? m0 : 1;  // the first level written to memory
+  // Level L (first .. N) in slot (L - 1) mod S, S = 2 (ping and pong): a
+  // launch writes the level after the one it reads (the fused launch reads
+  // the footprints), so never into the slot it reads; each slot sized by
+  // the largest level it holds.
+  const int S = std::min(N - first + 1, 2);
   std::vector<int64_t> most(static_cast<std::size_t>(S), 1);
-  for (int L = 1; L <= N; ++L) {
+  for (int L = first; L <= N; ++L) {
     int64_t& m = most[static_cast<std::size_t>((L - 1) % S)];
     m = std::max(m, d.plan.level_size(L));
   }
@@ -205,31 +263,19 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
     return r.slots[static_cast<std::size_t>((L - 1) % S)];
   };
   cl::Buffer in = fp.pixels;
-  for (int k = 0; k < N;) {
-    // The first stages, kSwapFusedMin or more of them, in one launch (a
-    // work-group per 2^m consecutive PEs); the rest one launch per stage.
-    // Later runs in one launch were slower (simdvol-bench-swap
-    // --swap-only: stages 6 .. 11 of the 256^3 phantom at 256^2, 8,192
-    // PEs, 3.1 ms against 2.3 one launch per stage; brainsmall 1.5 against
-    // 0.8): their levels are small (in the L3 cache either way), and a
-    // group of PEs 2^6 apart reads a few hundred scattered bytes per PE
-    // where the stage kernel streams consecutive PEs.
-    const int m = k == 0 ? std::min(max_fused, N) : 1;
-    if (m >= kSwapFusedMin) {
-      std::vector<cl::Buffer> out;
-      for (int s = 1; s <= m; ++s) out.push_back(slot(k + s));
-      r.stages.push_back(enqueue_swap_stages(device, d, k, m, in, out));
-      r.first_stage.push_back(k);
-      k += m;
-      in = slot(k);
-      continue;
-    }
+  int k = 0;
+  if (m0 >= kSwapFusedMin) {
+    r.stages.push_back(enqueue_swap_stages(device, d, 0, m0, in, slot(m0), local_bytes));
+    r.first_stage.push_back(0);
+    k = m0;
+    in = slot(k);
+  }
+  for (; k < N; ++k) {
     if (d.plan.level_size(k + 1) > 0) {
       r.stages.push_back(enqueue_swap_stage(device, d, k, in, slot(k + 1)));
       r.first_stage.push_back(k);
     }
     in = slot(k + 1);
-    ++k;
   }
   r.last = in;
   return r;

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -69,6 +70,56 @@ TEST(SwapChunkTable, SixteenPixelsOfOnePe) {
   EXPECT_THROW(swap_chunk_table({0}), ArgumentError);
 }
 
+// swap_group_pixels: the largest sum of level L's pixel counts over a
+// work-group's PEs, enumerated as simdvol_swap_stages numbers them (group
+// g, lane lid: p = (g's low k0 bits) | (lid << k0) | (the rest of g << (k0
+// + m))); every PE in exactly one group. swap_stages_local_bytes: levels
+// k0 + s, odd s in the first buffer, even s in the second.
+TEST(SwapStagesLocal, GroupPixelsAndLocalBytes) {
+  const Dims3 d{29, 23, 17};
+  const ViewGeometry view = make_view(d, {1, 1, 1}, {30, 45, 0}, 45, 37, Sampling::voxel);
+  const int64_t P = 512;
+  const KdSplit split = kd_split(d, P);
+  const Matching m = balance_reference(match_reference(view, split), view, split);
+  const SwapPlan plan = plan_swap(m.rects, split, view, pe_grid(P), SwapLayout::cut_and_stack);
+  const int N = plan.stages();
+  ASSERT_EQ(N, 9);
+  int checked = 0;
+  for (int k0 = 0; k0 < N; ++k0)
+    for (int fm = 1; fm <= std::min(kSwapFusedStages, N - k0); ++fm) {
+      std::vector<int> seen(static_cast<std::size_t>(P), 0);
+      std::array<int64_t, 2> bytes{0, 0};
+      for (int L = 0; L <= N; ++L) {
+        const auto& off = plan.offset[static_cast<std::size_t>(L)];
+        int64_t most = 0;
+        for (int64_t g = 0; g < (P >> fm); ++g) {
+          const int64_t low = g & ((int64_t(1) << k0) - 1), high = g >> k0;
+          int64_t sum = 0;
+          for (int64_t lid = 0; lid < (int64_t(1) << fm); ++lid) {
+            const int64_t p = low | (lid << k0) | (high << (k0 + fm));
+            sum += off[static_cast<std::size_t>(p + 1)] - off[static_cast<std::size_t>(p)];
+            if (L == 0) ++seen[static_cast<std::size_t>(p)];
+          }
+          most = std::max(most, sum);
+        }
+        EXPECT_EQ(swap_group_pixels(plan, k0, fm, L), most) << k0 << " " << fm << " " << L;
+        const int s = L - k0;
+        if (s > 0 && s < fm) {
+          int64_t& b = bytes[static_cast<std::size_t>(s % 2 == 1 ? 0 : 1)];
+          b = std::max(b, most * 16);
+        }
+      }
+      EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](int c) { return c == 1; }));
+      EXPECT_EQ(swap_stages_local_bytes(plan, k0, fm), bytes);
+      EXPECT_GE(swap_stages_local_need(plan, k0, fm), bytes[0] + bytes[1]);
+      ++checked;
+    }
+  EXPECT_GT(checked, 30);
+  EXPECT_THROW(swap_group_pixels(plan, 0, kSwapFusedStages + 1, 0), ArgumentError);
+  EXPECT_THROW(swap_group_pixels(plan, N - 1, 2, 0), ArgumentError);
+  EXPECT_THROW(swap_group_pixels(plan, 0, 1, N + 1), ArgumentError);
+}
+
 // Every stage, display and warp equal the references bit for bit.
 TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
   SIMDVOL_TEST_DEVICE(dev);
@@ -94,6 +145,7 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
         }
         // Stage by stage.
         std::vector<Rgba> level = f.pixels;
+        std::vector<std::vector<Rgba>> levels{level};  // every level, for the launches below
         cl::Buffer in = fp.pixels;
         for (int k = 0; k < plan.plan.stages(); ++k) {
           const int64_t size = plan.plan.level_size(k + 1);
@@ -103,6 +155,7 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
           const std::vector<Rgba> want = swap_stage_reference(plan.plan, k, level);
           ASSERT_TRUE(bitwise_equal(read_rgba(dev, out, size), want)) << "stage " << k;
           level = want;
+          levels.push_back(want);
           in = out;
         }
         // The whole run, display and warp.
@@ -134,6 +187,51 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
         }
         EXPECT_THROW(enqueue_swap(dev, plan, fp, 0), ArgumentError);
         EXPECT_THROW(enqueue_swap(dev, plan, fp, kSwapFusedStages + 1), ArgumentError);
+        // Stages k0 .. k0 + m - 1 in one launch from any level k0 (its
+        // levels between in local memory, the group's PEs 2^k0 apart):
+        // level k0 + m, bit for bit.
+        for (int k0 = 0; k0 < std::min(N, 3); ++k0)
+          for (int fm = 1; fm <= std::min(kSwapFusedStages, N - k0); ++fm) {
+            const auto& lin = levels[static_cast<std::size_t>(k0)];
+            const int64_t out_size = plan.plan.level_size(k0 + fm);
+            cl::Buffer bin = dev.buffer(
+                CL_MEM_READ_WRITE, std::max<std::size_t>(lin.size(), 1) * 16, nullptr, "level k0");
+            if (!lin.empty())
+              cl_check(dev.queue().enqueueWriteBuffer(bin, CL_TRUE, 0, lin.size() * sizeof(Rgba),
+                                                      lin.data()),
+                       "write");
+            cl::Buffer bout =
+                dev.buffer(CL_MEM_READ_WRITE, std::max<int64_t>(out_size, 1) * 16, nullptr, "out");
+            enqueue_swap_stages(dev, plan, k0, fm, bin, bout);
+            ASSERT_TRUE(bitwise_equal(read_rgba(dev, bout, out_size),
+                                      levels[static_cast<std::size_t>(k0 + fm)]))
+                << "stages " << k0 << " .. " << k0 + fm - 1 << " in one launch";
+          }
+        // Local memory too small for six stages in one launch: as many as
+        // fit (at least kSwapFusedMin), or none; the same bits.
+        if (N >= kSwapFusedMin) {
+          const int64_t need4 = swap_stages_local_need(plan.plan, 0, kSwapFusedMin);
+          for (const int64_t budget : {need4, need4 - 1}) {
+            int want_m = 0;
+            for (int fm = std::min(N, kSwapFusedStages); fm >= kSwapFusedMin && !want_m; --fm)
+              if (swap_stages_local_need(plan.plan, 0, fm) <= budget) want_m = fm;
+            EXPECT_EQ(want_m > 0, budget == need4);
+            const DeviceSwapRun t = enqueue_swap(dev, plan, fp, kSwapFusedStages, budget);
+            ASSERT_TRUE(bitwise_equal(read_rgba(dev, t.last, plan.plan.level_size(N)), level))
+                << "local memory " << budget;
+            // The launches: stages 0 .. want_m - 1 together, then each stage
+            // whose level is not empty alone.
+            std::vector<int> first;
+            if (want_m > 0) first.push_back(0);
+            for (int k = want_m; k < N; ++k)
+              if (plan.plan.level_size(k + 1) > 0) first.push_back(k);
+            EXPECT_EQ(t.first_stage, first) << "local memory " << budget;
+          }
+          cl::Buffer bout = dev.buffer(
+              CL_MEM_READ_WRITE, std::max<int64_t>(plan.plan.level_size(4), 1) * 16, nullptr, "o");
+          EXPECT_THROW(enqueue_swap_stages(dev, plan, 0, kSwapFusedMin, fp.pixels, bout, need4 - 1),
+                       ArgumentError);
+        }
         plan_swap_into(reused.plan, m.rects, split, view, pe_grid(P), L);
         upload_swap_plan(dev, reused, false);
         EXPECT_EQ(reused.chunk_count, plan.chunk_count);

@@ -6,13 +6,16 @@
 // per level the strided rectangles and offsets, per stage the chunk table of
 // the output pixels ((PE, first pixel) per 16 pixels of one PE). The first
 // six stages run in one launch (a work-group per 64 consecutive PEs, whose
-// partners in those stages are all inside it; barriers between the
-// stages), the later ones one launch per stage (the partner's rectangle is
-// read directly: the whole level is one buffer), no waits between them;
-// level L lives in buffer slot (L - 1) mod 7 (two slots, ping-pong, when
-// every stage is a launch of its own), each slot sized by its largest
-// level. Every enqueue_* validates first and returns the profiling events.
+// partners in those stages are all inside it; barriers between the stages;
+// the five levels between in the work-group's local memory, fewer stages
+// where they would not fit), the later ones one launch per stage (the
+// partner's rectangle is read directly: the whole level is one buffer), no
+// waits between them; the levels written to memory take turns in two
+// buffer slots (ping-pong), each sized by its largest level. Every
+// enqueue_* validates first and returns the profiling events.
 #pragma once
+
+#include <array>
 
 #include <cstdint>
 #include <vector>
@@ -73,20 +76,37 @@ struct DeviceSwapRun {
   std::vector<int> first_stage;   ///< per launch: its first stage (the next's first ends it)
 };
 /// Enqueues all N stages from the footprints `fp` (whose offsets must be the
-/// plan's level 0): the first min(max_fused, N) stages (max_fused in 1 ..
-/// kSwapFusedStages) in one launch (enqueue_swap_stages) when they are at
-/// least kSwapFusedMin, the others one launch per stage. The levels are the
-/// same bit for bit whatever max_fused.
+/// plan's level 0): the first m stages in one launch (enqueue_swap_stages),
+/// m the largest of min(max_fused, N), min(max_fused, N) - 1, ... whose
+/// levels between fit in `local_bytes` of local memory (0: the device's
+/// CL_DEVICE_LOCAL_MEM_SIZE; swap_stages_local_need) when it is at least
+/// kSwapFusedMin, the others one launch per stage. max_fused in 1 ..
+/// kSwapFusedStages. The levels are the same bit for bit whatever
+/// max_fused and local_bytes.
 DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& plan, const DeviceFootprints& fp,
-                           int max_fused = kSwapFusedStages);
+                           int max_fused = kSwapFusedStages, int64_t local_bytes = 0);
 /// Enqueues stage k alone: level k's buffer `in` -> level k + 1's `out`.
 cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& plan, int k,
                              const cl::Buffer& in, const cl::Buffer& out);
 /// Enqueues stages k0 .. k0 + m - 1 (1 <= m <= kSwapFusedStages) in one
-/// launch: level k0 in `in`, level k0 + s + 1 into out[s] (m buffers, each
-/// large enough for its level, all distinct and none of them `in`).
+/// launch: level k0 in `in`, level k0 + m into `out` (large enough for it,
+/// not `in`); the levels between stay in the work-groups' local memory.
+/// ArgumentError if they need more than `local_bytes` (0: the device's
+/// local memory size; swap_stages_local_need), since PoCL aborts on a
+/// launch with too much.
 cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& plan, int k0, int m,
-                              const cl::Buffer& in, const std::vector<cl::Buffer>& out);
+                              const cl::Buffer& in, const cl::Buffer& out, int64_t local_bytes = 0);
+/// The most pixels of level L that one work-group of enqueue_swap_stages
+/// (k0, m) holds: the largest sum over a group's 2^m PEs (those differing
+/// only in bits k0 .. k0 + m - 1). ArgumentError outside the plan.
+int64_t swap_group_pixels(const SwapPlan& plan, int k0, int m, int L);
+/// The two local buffers of enqueue_swap_stages (k0, m) in bytes: for the
+/// levels k0 + s with s odd and with s even (0 < s < m), each the largest
+/// of its levels' swap_group_pixels x 16.
+std::array<int64_t, 2> swap_stages_local_bytes(const SwapPlan& plan, int k0, int m);
+/// All the local memory enqueue_swap_stages (k0, m) takes: the two buffers,
+/// the kernel's own tables and room for alignment.
+int64_t swap_stages_local_need(const SwapPlan& plan, int k0, int m);
 
 /// Display: level N's buffer -> the intermediate image (float4,
 /// width x height, allocated here into `image`).
