@@ -87,15 +87,38 @@ float Volume::at_clamped(int64_t x, int64_t y, int64_t z) const {
 }
 
 ValueRange Volume::range() const {
-  float lo = std::numeric_limits<float>::infinity();
-  float hi = -lo;
-  for (float v : data_) {
-    if (!std::isfinite(v)) continue;
-    lo = std::min(lo, v);
-    hi = std::max(hi, v);
+  // Sixteen running minima and maxima, each a select of finite values
+  // only (|v| <= FLT_MAX is false for NaN and infinities), without a
+  // branch: the compiler keeps them in vector registers. The same result
+  // as one running pair with `if (!isfinite(v)) continue;` (min and max
+  // are exact and associative), which took about 11 ms for ch2's 7.1
+  // million voxels, on the host before every frame of a relative
+  // classification (the MRI preset).
+  constexpr std::size_t K = 16;
+  constexpr float inf = std::numeric_limits<float>::infinity();
+  constexpr float big = std::numeric_limits<float>::max();
+  float lo[K], hi[K];
+  for (std::size_t k = 0; k < K; ++k) lo[k] = inf, hi[k] = -inf;
+  const float* d = data_.data();
+  const std::size_t n = data_.size(), whole = n - n % K;
+  for (std::size_t i = 0; i < whole; i += K)
+    for (std::size_t k = 0; k < K; ++k) {
+      const float v = d[i + k];
+      const bool ok = std::fabs(v) <= big;
+      const float vl = ok ? v : inf, vh = ok ? v : -inf;
+      lo[k] = vl < lo[k] ? vl : lo[k];
+      hi[k] = vh > hi[k] ? vh : hi[k];
+    }
+  for (std::size_t i = whole; i < n; ++i) {
+    const float v = d[i];
+    const bool ok = std::fabs(v) <= big;
+    lo[0] = ok && v < lo[0] ? v : lo[0];
+    hi[0] = ok && v > hi[0] ? v : hi[0];
   }
-  if (lo > hi) return {0.0f, 0.0f};
-  return {lo, hi};
+  float a = inf, b = -inf;
+  for (std::size_t k = 0; k < K; ++k) a = std::min(a, lo[k]), b = std::max(b, hi[k]);
+  if (a > b) return {0.0f, 0.0f};
+  return {a, b};
 }
 
 }  // namespace simdvol

@@ -285,3 +285,49 @@ TEST(RenderEngine, TransparentCellsStayUnshadedBetweenFrames) {
     EXPECT_EQ(st.unshaded_pes, 0);
   }
 }
+
+// A relative classification (the MRI preset: materials at fractions of the
+// value range) takes the range of the volume it renders. A turntable's
+// engine keeps it for the kept volume only: another volume, or the same
+// object with its data changed while the layout is not kept, gets its own
+// range, and every frame equals a one-shot render bit for bit. The second
+// volume is the first scaled by 3 and shifted by 50, so that its range
+// differs while its classification (by fractions of its own range) does
+// not: an image made with the first volume's range would differ.
+TEST(RenderEngine, RelativeClassificationTakesEachVolumesRange) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 2);
+  Volume scaled = vol;
+  for (float& x : scaled.data()) x = 3.0f * x + 50.0f;
+  RenderOptions opt;
+  opt.width = opt.height = 40;
+  opt.view = {20, 35, 10};
+  opt.classifier = classifier_preset("mri");
+  ASSERT_TRUE(opt.classifier.kind == Classifier::Kind::mixture && opt.classifier.mixture.relative);
+  auto same = [](const Image& a, const Image& b) {
+    return a.pixels().size() == b.pixels().size() &&
+           std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(Rgba)) == 0;
+  };
+  for (const bool keep : {true, false}) {
+    SCOPED_TRACE(keep ? "reuse_layout" : "no reuse_layout");
+    EngineOptions eo;
+    eo.pes = 256;
+    eo.reuse_layout = keep;
+    RenderEngine engine(dev, eo);
+    const Image one = render_opencl(dev, vol, opt, eo);
+    float alpha = 0;
+    for (const Rgba& p : one.pixels()) alpha += p.a;
+    EXPECT_GT(alpha, 1.0f);  // not an empty frame
+    EXPECT_TRUE(same(engine.render(vol, opt), one));
+    EXPECT_TRUE(same(engine.render(vol, opt), one));  // the kept range
+    EXPECT_TRUE(same(engine.render(scaled, opt), render_opencl(dev, scaled, opt, eo)));
+    EXPECT_TRUE(same(engine.render(vol, opt), one));
+    if (!keep) {
+      // The same object changed in place (allowed without reuse_layout).
+      Volume v = vol;
+      EXPECT_TRUE(same(engine.render(v, opt), one));
+      for (float& x : v.data()) x = 3.0f * x + 50.0f;
+      EXPECT_TRUE(same(engine.render(v, opt), render_opencl(dev, scaled, opt, eo)));
+    }
+  }
+}

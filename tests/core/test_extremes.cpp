@@ -5,6 +5,10 @@
 // treats a NaN neighbour as no surface, so the image stays finite).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
 #include "extremes_cases.hpp"
 #include "simdvol/classify.hpp"
 #include "simdvol/render.hpp"
@@ -158,4 +162,36 @@ TEST(Extremes, NanVoxelsAreTransparent) {
   for (const ViewAngles& v : extreme_views())
     for (int order = 0; order <= 3; ++order)
       EXPECT_EQ(image_problem(render(sprinkled, lit, v, Sampling::voxel, order)), "");
+}
+
+// Volume::range: the smallest and largest finite value, NaN and infinities
+// left out, at every position of the sixteen running lanes and in the tail
+// (sizes 1 .. 40, so counts below, at and past multiples of 16), against a
+// plain loop over the values.
+TEST(Extremes, RangeSkipsNonFiniteValuesAnywhere) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  int checked = 0;
+  for (int64_t n = 1; n <= 40; ++n)
+    for (int64_t at = 0; at < n; ++at) {
+      Volume v({n, 1, 1}, VoxelType::f32);
+      for (int64_t i = 0; i < n; ++i) v.data()[static_cast<std::size_t>(i)] = float(i % 7) - 3.0f;
+      // One extreme value at `at`, the non-finite ones beside it.
+      v.data()[static_cast<std::size_t>(at)] = at % 2 ? 100.0f + float(at) : -100.0f - float(at);
+      if (at + 1 < n) v.data()[static_cast<std::size_t>(at + 1)] = at % 3 ? nan : inf;
+      if (at > 0) v.data()[static_cast<std::size_t>(at - 1)] = -inf;
+      float lo = inf, hi = -inf;
+      for (float x : v.data())
+        if (std::isfinite(x)) lo = std::min(lo, x), hi = std::max(hi, x);
+      const ValueRange r = v.range();
+      ASSERT_EQ(r.min, lo) << n << " " << at;
+      ASSERT_EQ(r.max, hi) << n << " " << at;
+      ++checked;
+    }
+  EXPECT_EQ(checked, 40 * 41 / 2);
+  Volume none({20, 1, 1}, VoxelType::f32);
+  for (float& x : none.data()) x = nan;
+  none.data()[3] = inf;
+  EXPECT_EQ(none.range().min, 0.0f);  // no finite value: {0, 0}
+  EXPECT_EQ(none.range().max, 0.0f);
 }
