@@ -176,11 +176,15 @@ int64_t local_budget(const Device& device, int64_t local_bytes) {
   return local_bytes > 0 ? local_bytes : static_cast<int64_t>(device.info().local_mem_bytes);
 }
 
+// All the local memory of a launch whose two buffers take `b` bytes.
+int64_t local_need(const std::array<int64_t, 2>& b) {
+  return b[0] + b[1] + kSwapStagesFixedLocal;
+}
+
 }  // namespace
 
 int64_t swap_stages_local_need(const SwapPlan& plan, int k0, int m) {
-  const std::array<int64_t, 2> b = swap_stages_local_bytes(plan, k0, m);
-  return b[0] + b[1] + kSwapStagesFixedLocal;
+  return local_need(swap_stages_local_bytes(plan, k0, m));
 }
 
 cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, int m,
@@ -193,7 +197,7 @@ cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, i
   // PoCL checks a launch's local memory only with an assertion: too much
   // aborts the process, so it is checked here.
   const std::array<int64_t, 2> lbytes = swap_stages_local_bytes(d.plan, k0, m);
-  const int64_t need = lbytes[0] + lbytes[1] + kSwapStagesFixedLocal;
+  const int64_t need = local_need(lbytes);
   const int64_t have = local_budget(device, local_bytes);
   if (need > have)
     throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +

@@ -99,22 +99,17 @@ ValueRange Volume::range() const {
   constexpr float big = std::numeric_limits<float>::max();
   float lo[K], hi[K];
   for (std::size_t k = 0; k < K; ++k) lo[k] = inf, hi[k] = -inf;
+  auto take = [&](std::size_t k, float v) {
+    const bool ok = std::fabs(v) <= big;
+    const float vl = ok ? v : inf, vh = ok ? v : -inf;
+    lo[k] = vl < lo[k] ? vl : lo[k];
+    hi[k] = vh > hi[k] ? vh : hi[k];
+  };
   const float* d = data_.data();
   const std::size_t n = data_.size(), whole = n - n % K;
   for (std::size_t i = 0; i < whole; i += K)
-    for (std::size_t k = 0; k < K; ++k) {
-      const float v = d[i + k];
-      const bool ok = std::fabs(v) <= big;
-      const float vl = ok ? v : inf, vh = ok ? v : -inf;
-      lo[k] = vl < lo[k] ? vl : lo[k];
-      hi[k] = vh > hi[k] ? vh : hi[k];
-    }
-  for (std::size_t i = whole; i < n; ++i) {
-    const float v = d[i];
-    const bool ok = std::fabs(v) <= big;
-    lo[0] = ok && v < lo[0] ? v : lo[0];
-    hi[0] = ok && v > hi[0] ? v : hi[0];
-  }
+    for (std::size_t k = 0; k < K; ++k) take(k, d[i + k]);
+  for (std::size_t i = whole; i < n; ++i) take(0, d[i]);
   float a = inf, b = -inf;
   for (std::size_t k = 0; k < K; ++k) a = std::min(a, lo[k]), b = std::max(b, hi[k]);
   if (a > b) return {0.0f, 0.0f};
