@@ -80,6 +80,25 @@ struct LiveCells {
   }
 };
 
+// Which volume something on the device was made from, while reuse_layout
+// promises that volume unchanged between frames: the object, its voxels'
+// storage and its dims (a volume resized in place has other dims at the
+// same address). The layout's and the relative classification's range each
+// keep one: the range is needed before the layout decision, and survives
+// frames that need no range while the layout's key moves on.
+namespace {
+struct KeptVolume {
+  const Volume* volume = nullptr;
+  const float* data = nullptr;
+  Dims3 dims{0, 0, 0};
+  bool is(const Volume& v) const {
+    return volume == &v && data == v.data().data() && dims == v.dims();
+  }
+  void keep(const Volume& v) { *this = {&v, v.data().data(), v.dims()}; }
+  void clear() { *this = {}; }
+};
+}  // namespace
+
 struct RenderEngine::State {
   Device* device = nullptr;
   EngineOptions eo;
@@ -92,16 +111,13 @@ struct RenderEngine::State {
   // tables, the cells' origins): made with the cells, only their view is
   // uploaded again per frame (set_resample_view).
   std::optional<ResampleTables> tables;
-  const Volume* laid_out = nullptr;  // reuse_layout: the volume in `cells`
-  const float* laid_data = nullptr;
+  KeptVolume laid_out;  // reuse_layout: the volume in `cells`
   // The value range of a relative classification (the MRI preset), kept
   // for the volume it was computed from while reuse_layout promises that
   // volume unchanged: a scan of every voxel on the host before each frame
   // otherwise (about 2.4 ms for ch2, before any kernel is enqueued).
   std::optional<ValueRange> range;
-  const Volume* range_of = nullptr;
-  const float* range_data = nullptr;
-  Dims3 range_dims{0, 0, 0};
+  KeptVolume range_of;
   // The previous frame's PE mask while `rgba` holds zeros in the cells of
   // the PEs it flags 0 (LiveCells); none while the cells change.
   std::optional<LiveCells> live;
@@ -152,16 +168,13 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       opt.classifier.kind == Classifier::Kind::mixture && opt.classifier.mixture.relative;
   ValueRange values{};
   if (need_range) {
-    const bool kept = eo.reuse_layout && S.range && S.range_of == &vol &&
-                      S.range_data == vol.data().data() && S.range_dims == vol.dims();
+    const bool kept = eo.reuse_layout && S.range && S.range_of.is(vol);
     if (!kept) {
       S.range.reset();
       values = vol.range();
       if (eo.reuse_layout) {
         S.range = values;
-        S.range_of = &vol;
-        S.range_data = vol.data().data();
-        S.range_dims = vol.dims();
+        S.range_of.keep(vol);
       }
     }
     if (S.range) values = *S.range;
@@ -178,7 +191,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.cells.reset();
     S.rgba.reset();
     S.tables.reset();
-    S.laid_out = nullptr;
+    S.laid_out.clear();
     S.live.reset();
     const CellLayout cl_layout = S.array->cell_layout(vol.dims(), 1);
     // The fused shade + classify writes interleaved cells (a corner's RGBA
@@ -191,12 +204,11 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.dims = vol.dims();
   }
   cl::Event e_layout, e_shade, e_classify;
-  const bool keep = eo.reuse_layout && S.laid_out == &vol && S.laid_data == vol.data().data();
+  const bool keep = eo.reuse_layout && S.laid_out.is(vol);
   if (!keep) {
-    S.laid_out = nullptr;
+    S.laid_out.clear();
     S.array->layout_into(vol.data().data(), *S.cells, LayoutKernel::rows, &e_layout);  // blocking
-    S.laid_out = &vol;
-    S.laid_data = vol.data().data();
+    S.laid_out.keep(vol);
   }
   // Empty-space skipping: the fused kernel marks the brick occupancy as it
   // writes the voxels (otherwise a scan makes it); direct compositing's

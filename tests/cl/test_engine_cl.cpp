@@ -288,9 +288,10 @@ TEST(RenderEngine, TransparentCellsStayUnshadedBetweenFrames) {
 
 // A relative classification (the MRI preset: materials at fractions of the
 // value range) takes the range of the volume it renders. A turntable's
-// engine keeps it for the kept volume only: another volume, or the same
-// object with its data changed while the layout is not kept, gets its own
-// range, and every frame equals a one-shot render bit for bit. The second
+// engine keeps it for the kept volume only (the same object, data pointer
+// and dims): another volume, the same object with other storage, or the
+// same object with its data changed while the layout is not kept, gets its
+// own range, and every frame equals a one-shot render bit for bit. The second
 // volume is the first scaled by 3 and shifted by 50, so that its range
 // differs while its classification (by fractions of its own range) does
 // not: an image made with the first volume's range would differ.
@@ -322,7 +323,16 @@ TEST(RenderEngine, RelativeClassificationTakesEachVolumesRange) {
     EXPECT_TRUE(same(engine.render(vol, opt), one));  // the kept range
     EXPECT_TRUE(same(engine.render(scaled, opt), render_opencl(dev, scaled, opt, eo)));
     EXPECT_TRUE(same(engine.render(vol, opt), one));
-    if (!keep) {
+    if (keep) {
+      // The same object given other storage (a new data pointer, the key's
+      // part that a caller replacing the voxels changes): laid out and its
+      // range taken again.
+      Volume v = vol;
+      EXPECT_TRUE(same(engine.render(v, opt), one));
+      std::vector<float> d = scaled.data();
+      v.data().swap(d);
+      EXPECT_TRUE(same(engine.render(v, opt), render_opencl(dev, scaled, opt, eo)));
+    } else {
       // The same object changed in place (allowed without reuse_layout).
       Volume v = vol;
       EXPECT_TRUE(same(engine.render(v, opt), one));
