@@ -187,23 +187,14 @@ int64_t swap_stages_local_need(const SwapPlan& plan, int k0, int m) {
   return local_need(swap_stages_local_bytes(plan, k0, m));
 }
 
-cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, int m,
-                              const cl::Buffer& in, const cl::Buffer& out, int64_t local_bytes) {
+namespace {
+
+// enqueue_swap_stages with its local buffers' sizes (swap_stages_local_bytes
+// of the same k0, m) already computed and checked.
+cl::Event enqueue_swap_stages_sized(Device& device, const DeviceSwapPlan& d, int k0, int m,
+                                    const cl::Buffer& in, const cl::Buffer& out,
+                                    const std::array<int64_t, 2>& lbytes) {
   const int N = d.plan.stages();
-  if (m < 1 || m > kSwapFusedStages || k0 < 0 || k0 + m > N)
-    throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
-                                      " outside 0 .. N-1 (N = " + std::to_string(N) +
-                                      ") or m outside 1 .. " + std::to_string(kSwapFusedStages));
-  // PoCL checks a launch's local memory only with an assertion: too much
-  // aborts the process, so it is checked here.
-  const std::array<int64_t, 2> lbytes = swap_stages_local_bytes(d.plan, k0, m);
-  const int64_t need = local_need(lbytes);
-  const int64_t have = local_budget(device, local_bytes);
-  if (need > have)
-    throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
-                                      ": the levels between need " + std::to_string(need) +
-                                      " bytes of local memory, more than the " +
-                                      std::to_string(have) + " available");
   const std::string name = "simdvol_swap_stages";
   cl::Kernel kern = swap_kernel(device, name);
   // Levels k0 .. k0 + m; the slots past them repeat the last (not read).
@@ -225,6 +216,28 @@ cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, i
   return device.run(kern, name, cl::NDRange(pes), cl::NDRange(std::size_t(1) << m));
 }
 
+}  // namespace
+
+cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, int m,
+                              const cl::Buffer& in, const cl::Buffer& out, int64_t local_bytes) {
+  const int N = d.plan.stages();
+  if (m < 1 || m > kSwapFusedStages || k0 < 0 || k0 + m > N)
+    throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
+                                      " outside 0 .. N-1 (N = " + std::to_string(N) +
+                                      ") or m outside 1 .. " + std::to_string(kSwapFusedStages));
+  // PoCL checks a launch's local memory only with an assertion: too much
+  // aborts the process, so it is checked here.
+  const std::array<int64_t, 2> lbytes = swap_stages_local_bytes(d.plan, k0, m);
+  const int64_t need = local_need(lbytes);
+  const int64_t have = local_budget(device, local_bytes);
+  if (need > have)
+    throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
+                                      ": the levels between need " + std::to_string(need) +
+                                      " bytes of local memory, more than the " +
+                                      std::to_string(have) + " available");
+  return enqueue_swap_stages_sized(device, d, k0, m, in, out, lbytes);
+}
+
 DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const DeviceFootprints& fp,
                            int max_fused, int64_t local_bytes) {
   if (fp.rect_offset != d.plan.offset[0])
@@ -243,10 +256,14 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
   // per stage; brainsmall 1.5 against 0.8): their levels are small (in the
   // L3 cache either way), and a group of PEs 2^6 apart reads a few hundred
   // scattered bytes per PE where the stage kernel streams consecutive PEs.
+  // The launch's local buffers are sized once, here (their sums are a pass
+  // over the PEs per level).
   int m0 = std::min(max_fused, N);
-  while (m0 >= kSwapFusedMin &&
-         swap_stages_local_need(d.plan, 0, m0) > local_budget(device, local_bytes))
-    --m0;
+  std::array<int64_t, 2> lbytes{0, 0};
+  for (; m0 >= kSwapFusedMin; --m0) {
+    lbytes = swap_stages_local_bytes(d.plan, 0, m0);
+    if (local_need(lbytes) <= local_budget(device, local_bytes)) break;
+  }
   const int first = m0 >= kSwapFusedMin ? m0 : 1;  // the first level written to memory
   // Level L (first .. N) in slot (L - 1) mod S, S = 2 (ping and pong): a
   // launch writes the level after the one it reads (the fused launch reads
@@ -269,7 +286,7 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
   cl::Buffer in = fp.pixels;
   int k = 0;
   if (m0 >= kSwapFusedMin) {
-    r.stages.push_back(enqueue_swap_stages(device, d, 0, m0, in, slot(m0), local_bytes));
+    r.stages.push_back(enqueue_swap_stages_sized(device, d, 0, m0, in, slot(m0), lbytes));
     r.first_stage.push_back(0);
     k = m0;
     in = slot(k);
