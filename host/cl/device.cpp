@@ -309,14 +309,15 @@ std::string stage_program_source(std::string_view stage, const Defines& defines)
   return program_source(kFrameGroup[0], defines, {kFrameGroup[1], kFrameGroup[2], kFrameGroup[3]});
 }
 
-void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what) {
+void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what,
+                      const std::string& hint) {
   if (bytes == 0) throw ArgumentError(what, "buffer of 0 bytes");
   if (bytes > max_alloc_bytes)
     throw ArgumentError(what, "needs a buffer of " + std::to_string(bytes) +
                                   " bytes, more than the device's largest allocation of " +
                                   std::to_string(max_alloc_bytes) +
-                                  " bytes (CL_DEVICE_MAX_MEM_ALLOC_SIZE): use a smaller "
-                                  "volume or fewer PEs/less halo");
+                                  " bytes (CL_DEVICE_MAX_MEM_ALLOC_SIZE)" +
+                                  (hint.empty() ? std::string() : ": " + hint));
 }
 
 struct Device::Pool {

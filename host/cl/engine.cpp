@@ -41,7 +41,8 @@ struct Scratch {
   const cl::Buffer& at_least(Device& device, std::size_t need, const char* what) {
     need = std::max<std::size_t>(need, 16);
     if (need > bytes) {
-      check_allocation(need, device.info().max_alloc_bytes, what);
+      // (the frame's samples and images: both grow with the output size)
+      check_allocation(need, device.info().max_alloc_bytes, what, "use a smaller --size");
       buffer = device.scratch_buffer(CL_MEM_READ_WRITE, need, what);
       bytes = buffer_size(buffer, "clGetMemObjectInfo(CL_MEM_SIZE)");
     }
@@ -198,7 +199,8 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     // in one 16-byte load for the resample); the two-launch path classifies
     // the planar shading in place.
     const VoxelLayout vl = make_voxel_layout(cl_layout, eo.fused);
-    check_allocation(vl.bytes(), device.info().max_alloc_bytes, "volume (voxel cells)");
+    check_allocation(vl.bytes(), device.info().max_alloc_bytes, "volume (voxel cells)",
+                     "use a smaller volume or fewer PEs");
     S.cells.emplace(device, cl_layout);
     S.rgba.emplace(device, vl);
     S.dims = vol.dims();

@@ -112,9 +112,10 @@ PeArray::PeArray(Device& device, PeGrid grid) : device_(&device), grid_(grid) {
 
 CellLayout PeArray::cell_layout(const Dims3& dims, int halo) const {
   CellLayout L = make_cell_layout(dims, pes(), halo);
-  check_allocation(L.bytes(), device_->info().max_alloc_bytes, "volume (PE-major cell buffer)");
+  check_allocation(L.bytes(), device_->info().max_alloc_bytes, "volume (PE-major cell buffer)",
+                   "use a smaller volume or fewer PEs/less halo");
   check_allocation(flat_count(dims) * sizeof(float), device_->info().max_alloc_bytes,
-                   "volume (flat)");
+                   "volume (flat)", "use a smaller volume");
   return L;
 }
 

@@ -32,7 +32,10 @@ cl::Buffer upload(Device& device, const std::vector<T>& v, const std::string& wh
                        const_cast<T*>(src->data()), what);
 }
 
+// (the intermediate and output images)
 cl::Buffer float4_buffer(Device& device, int64_t n, const std::string& what) {
+  check_allocation(static_cast<std::uint64_t>(std::max<int64_t>(n, 1)) * sizeof(cl_float4),
+                   device.info().max_alloc_bytes, what, "use a smaller --size");
   return device.buffer(CL_MEM_READ_WRITE,
                        static_cast<std::size_t>(std::max<int64_t>(n, 1)) * sizeof(cl_float4),
                        nullptr, what);

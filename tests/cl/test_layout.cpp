@@ -229,6 +229,20 @@ TEST(CellLayout, AllocationCheckRefusesOversizedBuffers) {
     EXPECT_EQ(m.rfind("volume: ", 0), 0u) << m;
     EXPECT_NE(m.find("1001"), std::string::npos) << m;
     EXPECT_NE(m.find("CL_DEVICE_MAX_MEM_ALLOC_SIZE"), std::string::npos) << m;
+    // No advice that the caller did not give: a buffer of another kind
+    // (an image) must not be told to use a smaller volume.
+    EXPECT_EQ(m.find("smaller"), std::string::npos) << m;
+    EXPECT_EQ(m.back(), ')') << m;
+  }
+  try {
+    check_allocation(1001, 1000, "output image", "use a smaller --size");
+    FAIL() << "expected ArgumentError";
+  } catch (const ArgumentError& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("output image: ", 0), 0u) << m;
+    const std::string tail = "(CL_DEVICE_MAX_MEM_ALLOC_SIZE): use a smaller --size";
+    ASSERT_GE(m.size(), tail.size()) << m;
+    EXPECT_EQ(m.substr(m.size() - tail.size()), tail) << m;
   }
   EXPECT_THROW(check_allocation(0, 1000, "volume"), ArgumentError);
   // A 2048^3 layout with 8192 PEs: 32 GiB of floats, more than a fake 4 GiB limit.
@@ -384,6 +398,8 @@ TEST_F(LayoutDevice, RefusesVolumesBeyondTheMaxAllocation) {
     FAIL() << "expected ArgumentError";
   } catch (const ArgumentError& e) {
     EXPECT_NE(std::string(e.what()).find("largest allocation"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("use a smaller volume or fewer PEs"), std::string::npos)
+        << e.what();
   }
   // Mismatched PE counts are refused before anything is enqueued.
   PeArray other(*device_, pe_grid(8));

@@ -176,8 +176,12 @@ std::string stage_program_source(std::string_view stage, const Defines& defines 
 std::optional<std::filesystem::path> program_cache_dir();
 
 /// Throws ArgumentError naming `what` if a buffer of `bytes` exceeds the
-/// device's largest allocation `max_alloc_bytes` (or is zero).
-void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what);
+/// device's largest allocation `max_alloc_bytes` (or is zero). `hint`, if
+/// given, ends the message: what makes the buffer smaller ("use a smaller
+/// volume or fewer PEs" for the voxel cells, "use a smaller --size" for an
+/// image); Device::buffer gives none, since it cannot tell.
+void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what,
+                      const std::string& hint = "");
 
 /// Rounds n up to a multiple of m (m > 0).
 inline std::size_t round_up(std::size_t n, std::size_t m) {
