@@ -487,7 +487,15 @@ int main(int argc, char** argv) {
       std::cout << "wrote " << fs::absolute(p).string() << "\n";
     } else if (*compare) {
       const Image a = read_image(img_a), b = read_image(img_b);
-      std::cout << "psnr_db " << psnr(a, b) << "\nmax_abs_diff " << max_abs_diff(a, b) << "\n";
+      if (a.width() != b.width() || a.height() != b.height())
+        throw ArgumentError(img_a + " and " + img_b,
+                            "image sizes differ: " + std::to_string(a.width()) + "x" +
+                                std::to_string(a.height()) + " against " +
+                                std::to_string(b.width()) + "x" + std::to_string(b.height()));
+      // Both figures before any output: an error prints nothing on stdout.
+      const double db = psnr(a, b);
+      const float diff = max_abs_diff(a, b);
+      std::cout << "psnr_db " << db << "\nmax_abs_diff " << diff << "\n";
     } else if (*devices) {
       return print_devices(std::cout);
     } else if (*mm) {

@@ -952,6 +952,11 @@ Volume load_nifti(const std::filesystem::path& path) {
 }
 
 Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw) {
+  {
+    // before the extension (a directory has none to speak of)
+    std::error_code ec;
+    if (fs::is_directory(path, ec)) throw FileError(path, "is a directory, not a volume file");
+  }
   const std::string name = lower(path.filename().string());
   auto ends_with = [&](const std::string& suffix) {
     return name.size() > suffix.size() &&

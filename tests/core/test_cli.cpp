@@ -243,6 +243,8 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render " + path("missing.nrrd") + " -o " + path("x.png"), "missing.nrrd"},
       {"render " + path("vol.xyz") + " -o " + path("x.png"), "vol.xyz"},
       {"info " + path("missing.den"), "missing.den"},
+      {"info " + path("adir"), "adir: is a directory"},
+      {"render " + path("adir.nrrd") + " -o " + path("x.png"), "adir.nrrd: is a directory"},
       {"render --light 0,0,0 -o " + path("x.png"), "--light"},
       {"render --light 1,2 -o " + path("x.png"), "--light"},
       {"render --light 1,2,3, -o " + path("x.png"), "--light"},
@@ -257,12 +259,31 @@ TEST_F(Cli, BadArgumentsFailClearly) {
   };
   std::ofstream(dir_ / "vol.xyz") << "junk";
   std::ofstream(dir_ / "vol.raw") << "12345678";
+  fs::create_directories(dir_ / "adir");
+  fs::create_directories(dir_ / "adir.nrrd");
   for (const Case& c : cases) {
     const Result r = run(c.args);
     EXPECT_NE(r.code, 0) << c.args;
     EXPECT_NE(r.output.find(c.needle), std::string::npos) << c.args << "\n" << r.output;
   }
   EXPECT_FALSE(fs::exists(dir_ / "x.png"));
+}
+
+// compare: images of other sizes fail with both files named and nothing on
+// stdout before the error (no half-printed "psnr_db"); the same image
+// compares as identical.
+TEST_F(Cli, CompareNamesBothImagesOfOtherSizes) {
+  ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("a.png")).code, 0);
+  ASSERT_EQ(run("render --phantom-size 16 --size 24x16 -o " + path("b.png")).code, 0);
+  Result r = run("compare " + path("a.png") + " " + path("b.png"));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find(path("a.png") + " and " + path("b.png")), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("16x16 against 24x16"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("psnr_db"), std::string::npos) << r.output;
+  r = run("compare " + path("a.png") + " " + path("a.png"));
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("psnr_db inf"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("max_abs_diff 0"), std::string::npos) << r.output;
 }
 
 TEST_F(Cli, FailedRenderLeavesExistingOutputUntouched) {
