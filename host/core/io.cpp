@@ -759,7 +759,9 @@ Volume load_nrrd(const std::filesystem::path& path) {
     uint64_t available = 0;
     const std::vector<fs::path> files = nrrd_data_files(path, nio.get());
     if (files.empty()) {
-      available = file_size;  // attached: data follows the header in this file
+      // attached: the data follow the header in this file
+      const std::optional<uint64_t> off = nrrd_header_end(path);
+      available = off && *off <= file_size ? file_size - *off : file_size;
     } else {
       for (const fs::path& f : files) {
         std::error_code ec;

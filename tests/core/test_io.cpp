@@ -531,10 +531,23 @@ TEST_F(IoTest, NrrdMalformed) {
   write_file(file("text.nrrd"), std::string("1 2 3\n4 5 6\n"));
   expect_file_error([&] { simdvol::load_nrrd(file("text.nrrd")); }, file("text.nrrd"),
                     {"not a NRRD"});
-  // Truncated raw data (teem notices) and too much raw data (we notice).
+  // Truncated raw data (the data after the header counted, not the whole
+  // file) and too much raw data.
   write_file(file("short.nrrd"), concat(good_hdr, Bytes(kN - 1, 3)));
   expect_file_error([&] { simdvol::load_nrrd(file("short.nrrd")); }, file("short.nrrd"),
                     {"truncated"});
+  // Far too short (10 of 240 bytes of floats, less than the header too):
+  // the count is the data's, not the file's.
+  write_file(file("tiny.nrrd"),
+             concat(nrrd_header(VoxelType::f32, false, "raw") + "\n", Bytes(10, 3)));
+  try {
+    simdvol::load_nrrd(file("tiny.nrrd"));
+    ADD_FAILURE() << "no FileError for tiny.nrrd";
+  } catch (const FileError& e) {
+    const std::string m = e.problem();
+    EXPECT_NE(m.find("truncated data: 10 bytes of raw data"), std::string::npos) << m;
+    EXPECT_NE(m.find(std::to_string(kN * 4) + " bytes"), std::string::npos) << m;
+  }
   write_file(file("long.nrrd"), concat(good_hdr, Bytes(kN + 1, 3)));
   expect_file_error([&] { simdvol::load_nrrd(file("long.nrrd")); }, file("long.nrrd"),
                     {"disagrees"});
