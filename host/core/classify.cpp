@@ -357,6 +357,11 @@ struct Parser {
 }  // namespace
 
 Classifier load_classifier(const std::filesystem::path& path) {
+  {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec))
+      throw FileError(path, "is a directory, not a classifier file");
+  }
   std::ifstream in(path);
   if (!in) throw FileError(path, "cannot open classifier file");
 

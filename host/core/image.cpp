@@ -291,6 +291,7 @@ void write_image(const Image& img, const fs::path& path) {
 
 Image read_image(const fs::path& path) {
   std::error_code ec;
+  if (fs::is_directory(path, ec)) throw FileError(path, "is a directory, not an image file");
   if (!fs::is_regular_file(path, ec)) throw FileError(path, "no such image file");
   const OiioModule& m = oiio_module();
   if (!m.problem.empty()) throw FileError(path, m.problem);

@@ -244,6 +244,8 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render " + path("vol.xyz") + " -o " + path("x.png"), "vol.xyz"},
       {"info " + path("missing.den"), "missing.den"},
       {"info " + path("adir"), "adir: is a directory"},
+      {"render --classify " + path("adir") + " -o " + path("x.png"), "adir: is a directory"},
+      {"compare " + path("adir") + " " + path("adir"), "adir: is a directory"},
       {"render " + path("adir.nrrd") + " -o " + path("x.png"), "adir.nrrd: is a directory"},
       {"render --light 0,0,0 -o " + path("x.png"), "--light"},
       {"render --light 1,2 -o " + path("x.png"), "--light"},
