@@ -34,11 +34,9 @@ cl::Buffer upload(Device& device, const std::vector<T>& v, const std::string& wh
 
 // (the intermediate and output images)
 cl::Buffer float4_buffer(Device& device, int64_t n, const std::string& what) {
-  check_allocation(static_cast<std::uint64_t>(std::max<int64_t>(n, 1)) * sizeof(cl_float4),
-                   device.info().max_alloc_bytes, what, "use a smaller --size");
-  return device.buffer(CL_MEM_READ_WRITE,
-                       static_cast<std::size_t>(std::max<int64_t>(n, 1)) * sizeof(cl_float4),
-                       nullptr, what);
+  const std::size_t bytes = static_cast<std::size_t>(std::max<int64_t>(n, 1)) * sizeof(cl_float4);
+  check_allocation(bytes, device.info().max_alloc_bytes, what, "use a smaller --size");
+  return device.buffer(CL_MEM_READ_WRITE, bytes, nullptr, what);
 }
 
 // swap.cl takes no define, but the host builds it in one program with
@@ -184,14 +182,6 @@ int64_t local_need(const std::array<int64_t, 2>& b) {
   return b[0] + b[1] + kSwapStagesFixedLocal;
 }
 
-}  // namespace
-
-int64_t swap_stages_local_need(const SwapPlan& plan, int k0, int m) {
-  return local_need(swap_stages_local_bytes(plan, k0, m));
-}
-
-namespace {
-
 // enqueue_swap_stages with its local buffers' sizes (swap_stages_local_bytes
 // of the same k0, m) already computed and checked.
 cl::Event enqueue_swap_stages_sized(Device& device, const DeviceSwapPlan& d, int k0, int m,
@@ -220,6 +210,10 @@ cl::Event enqueue_swap_stages_sized(Device& device, const DeviceSwapPlan& d, int
 }
 
 }  // namespace
+
+int64_t swap_stages_local_need(const SwapPlan& plan, int k0, int m) {
+  return local_need(swap_stages_local_bytes(plan, k0, m));
+}
 
 cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, int m,
                               const cl::Buffer& in, const cl::Buffer& out, int64_t local_bytes) {

@@ -48,6 +48,12 @@ std::string errno_text(int e) {
   return std::generic_category().message(e);
 }
 
+/// A directory named where a volume file is expected: FileError.
+void refuse_directory(const fs::path& path) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw FileError(path, "is a directory, not a volume file");
+}
+
 /// Checks that `path` names a readable, non-empty regular file; returns its size.
 uint64_t require_regular_file(const fs::path& path) {
   std::error_code ec;
@@ -57,7 +63,7 @@ uint64_t require_regular_file(const fs::path& path) {
       throw FileError(path, "cannot access file: " + ec.message());
     throw FileError(path, "file not found (no such file)");
   }
-  if (fs::is_directory(st)) throw FileError(path, "is a directory, not a volume file");
+  refuse_directory(path);
   if (!fs::is_regular_file(st)) throw FileError(path, "is not a regular file");
   const uintmax_t size = fs::file_size(path, ec);
   if (ec) throw FileError(path, "cannot read file size: " + ec.message());
@@ -954,11 +960,7 @@ Volume load_nifti(const std::filesystem::path& path) {
 }
 
 Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw) {
-  {
-    // before the extension (a directory has none to speak of)
-    std::error_code ec;
-    if (fs::is_directory(path, ec)) throw FileError(path, "is a directory, not a volume file");
-  }
+  refuse_directory(path);  // before the extension (a directory has none to speak of)
   const std::string name = lower(path.filename().string());
   auto ends_with = [&](const std::string& suffix) {
     return name.size() > suffix.size() &&
