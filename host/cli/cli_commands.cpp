@@ -15,9 +15,15 @@ namespace simdvol {
 
 void check_output_path(const fs::path& p, const char* arg) {
   if (p.empty()) throw ArgumentError(arg, "empty output path");
-  if (fs::is_directory(p)) throw ArgumentError(arg, p.string() + " is a directory");
+  // Error codes, not exceptions: a name too long for the file system (or
+  // any other failure to look it up) is the argument's problem.
+  std::error_code ec;
+  const fs::file_status st = fs::status(p, ec);
+  if (ec && st.type() != fs::file_type::not_found)
+    throw ArgumentError(arg, p.string() + ": " + ec.message());
+  if (fs::is_directory(st)) throw ArgumentError(arg, p.string() + " is a directory");
   const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
-  if (!fs::is_directory(dir))
+  if (!fs::is_directory(dir, ec))
     throw ArgumentError(arg, "directory " + dir.string() + " of " + p.string() + " does not exist");
 }
 

@@ -8,8 +8,9 @@
 
 namespace simdvol {
 
-/// Throws ArgumentError (naming `arg`) if the output's directory is missing
-/// or the path is a directory, before any work is done.
+/// Throws ArgumentError (naming `arg`) if the output's directory is missing,
+/// the path is a directory, or it cannot be looked up (e.g. a name too long
+/// for the file system), before any work is done.
 void check_output_path(const std::filesystem::path& p, const char* arg);
 
 /// `simdvol info`: dims, type, spacing, value range, histogram summary.

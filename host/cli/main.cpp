@@ -83,8 +83,8 @@ std::array<int, 2> parse_size(const std::string& s) {
   const auto parts = split(s, 'x');
   if (parts.size() == 1) {
     const int64_t n = parse_int(parts[0], "--size");
-    return {static_cast<int>(std::clamp<int64_t>(n, -1, 1 << 30)),
-            static_cast<int>(std::clamp<int64_t>(n, -1, 1 << 30))};
+    if (n <= 0 || n > 16384) throw ArgumentError("--size", s + " is outside 1 .. 16384");
+    return {static_cast<int>(n), static_cast<int>(n)};
   }
   if (parts.size() != 2) throw ArgumentError("--size", "expected WxH, e.g. 256x256");
   const int64_t w = parse_int(parts[0], "--size"), h = parse_int(parts[1], "--size");
@@ -268,9 +268,10 @@ int main(int argc, char** argv) {
   int device_index = -1;
   render->add_option("--pe", pe_spec, "opencl engine: PE count N or grid WxH (a power of two)")
       ->capture_default_str();
-  render->add_option("--device", device_index,
-                     "opencl engine: device index as `simdvol devices` lists (default: "
-                     "SIMDVOL_DEVICE, else the first CPU device)");
+  auto* device_opt =
+      render->add_option("--device", device_index,
+                         "opencl engine: device index as `simdvol devices` lists (default: "
+                         "SIMDVOL_DEVICE, else the first CPU device)");
   render->add_option("--phantom-size", phantom_size, "size of the built-in CT phantom")
       ->capture_default_str();
   render->add_option("--frames", frames, "turntable: number of frames")->capture_default_str();
@@ -369,6 +370,13 @@ int main(int argc, char** argv) {
       if (frames < 1 || frames > 100000)
         throw ArgumentError("--frames", std::to_string(frames) + " is outside 1..100000");
       if (!std::isfinite(step)) throw ArgumentError("--step", "must be finite");
+      // The last frame's angle, before any frame is rendered.
+      if (!std::isfinite(opt.view.phi + (frames - 1) * step))
+        throw ArgumentError("--step", "the last frame's angle (--view's PHI + " +
+                                          std::to_string(frames - 1) + " x --step) is not finite");
+      if (device_opt->count() > 0 && device_index < 0)
+        throw ArgumentError("--device", std::to_string(device_index) +
+                                            " is negative (an index as `simdvol devices` lists)");
       opt.composite.exact_opacity = exact_opacity;
       opt.composite.stratified = stratified;
       if (engine != "reference" && engine != "opencl")
@@ -402,6 +410,7 @@ int main(int argc, char** argv) {
       validate(eo, opt);
       const fs::path outp = out;
       check_output_path(outp, "-o");
+      check_image_extension(outp);
 
       Volume vol;
       if (rv.path.empty()) {
@@ -481,6 +490,10 @@ int main(int argc, char** argv) {
         throw ArgumentError("--size", std::to_string(phantom_n) + " is outside 2..1024");
       const fs::path p = phantom_out;
       check_output_path(p, "-o");
+      if (p.extension() != ".nrrd")
+        throw ArgumentError("-o", p.string() +
+                                      ": the phantom is written as an attached-header NRRD: give "
+                                      "a name ending in .nrrd");
       const Volume vol = phantom_kind == "shepp-logan" ? shepp_logan(phantom_n, phantom_ss)
                                                        : marschner_lobb(phantom_n);
       save_nrrd(vol, p);
@@ -502,6 +515,10 @@ int main(int argc, char** argv) {
       return run_mismatch_command(std::cout);
     }
   } catch (const Error& e) {
+    std::cerr << "simdvol: error: " << e.what() << "\n";
+    return 1;
+  } catch (const fs::filesystem_error& e) {
+    // A file-system call outside the checks (its message names the path).
     std::cerr << "simdvol: error: " << e.what() << "\n";
     return 1;
   } catch (const std::exception& e) {

@@ -8,7 +8,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -16,6 +15,7 @@
 #include "cli_commands.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/image.hpp"
+#include "simdvol/io.hpp"
 #include "simdvol/mismatch.hpp"
 #include "simdvol/view.hpp"
 
@@ -214,20 +214,7 @@ void write_csv(const fs::path& path, const MismatchReport& r2, const MismatchRep
               << "," << b * s->bin_width << "," << (b + 1) * s->bin_width << "," << h[b] << ","
               << h[b] / total << "\n";
       }
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary);
-    if (!f) throw FileError(path, "cannot open for writing");
-    f << out.str();
-    f.flush();
-    if (!f) throw FileError(path, "write failed");
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    throw FileError(path, "cannot rename the temporary file into place");
-  }
+  write_file_atomically(path, {out.str()});
 }
 
 }  // namespace
@@ -254,8 +241,14 @@ int run_mismatch_command(std::ostream& os) {
   if (o.size3 < 1 || o.size3 > 256)
     throw ArgumentError("--size3", std::to_string(o.size3) + " is outside 1..256");
   const ViewAngles view = parse_angles(o.view);
-  if (!o.plot.empty()) check_output_path(o.plot, "--plot");
+  if (!o.plot.empty()) {
+    check_output_path(o.plot, "--plot");
+    check_image_extension(o.plot);
+  }
   if (!o.csv.empty()) check_output_path(o.csv, "--csv");
+  if (!o.plot.empty() && !o.csv.empty() &&
+      fs::absolute(o.plot).lexically_normal() == fs::absolute(o.csv).lexically_normal())
+    throw ArgumentError("--plot and --csv", "both name " + o.csv + ": give two files");
 
   os << "Mismatch distance = |grid point used - T^-1 p_H| for every viewing-grid point p_H "
         "(centred integer coordinates).\n"

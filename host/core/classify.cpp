@@ -74,6 +74,9 @@ void validate_ramp(const Ramp& r, const std::string& what) {
     if (k > 0 && r.x[k] < r.x[k - 1])
       throw ArgumentError(what, "ramp x values must be ascending (" + fmt(r.x[k]) + " after " +
                                     fmt(r.x[k - 1]) + ")");
+    if (k > 0 && !std::isfinite(r.x[k] - r.x[k - 1]))
+      throw ArgumentError(what, "ramp x values " + fmt(r.x[k - 1]) + " and " + fmt(r.x[k]) +
+                                    " are too far apart for float arithmetic");
   }
 }
 
@@ -350,6 +353,9 @@ struct Parser {
   void append_x(std::vector<float>& xs, float x, const std::string& directive) const {
     if (!xs.empty() && !(x > xs.back()))
       fail(directive + " x values must be ascending (" + fmt(x) + " after " + fmt(xs.back()) + ")");
+    if (!xs.empty() && !std::isfinite(x - xs.back()))
+      fail(directive + " x values " + fmt(xs.back()) + " and " + fmt(x) +
+           " are too far apart for float arithmetic (their difference overflows)");
     xs.push_back(x);
   }
 };
@@ -359,8 +365,12 @@ struct Parser {
 Classifier load_classifier(const std::filesystem::path& path) {
   {
     std::error_code ec;
-    if (std::filesystem::is_directory(path, ec))
+    const auto st = std::filesystem::status(path, ec);
+    if (std::filesystem::is_directory(st))
       throw FileError(path, "is a directory, not a classifier file");
+    // A FIFO would block the read, a device (/dev/zero) fill the memory.
+    if (std::filesystem::exists(st) && !std::filesystem::is_regular_file(st))
+      throw FileError(path, "is not a regular file");
   }
   std::ifstream in(path);
   if (!in) throw FileError(path, "cannot open classifier file");
@@ -446,6 +456,16 @@ Classifier load_classifier(const std::filesystem::path& path) {
   }
   c.kind = Classifier::Kind::mixture;
   c.mixture.relative = relative_line != 0;
+  // The kernels keep 1 / (2 sigma^2) in float (a relative sigma is scaled by
+  // the volume's range first, so only an absolute one is checked here).
+  for (std::size_t k = 0; k < c.mixture.materials.size() && !c.mixture.relative; ++k) {
+    const double sigma = c.mixture.materials[k].sigma;
+    if (!std::isfinite(static_cast<float>(1.0 / (2.0 * sigma * sigma)))) {
+      ps.line = material_lines[k];
+      ps.fail("sigma " + fmt(c.mixture.materials[k].sigma) + " of '" + c.mixture.materials[k].name +
+              "' is too small for float arithmetic");
+    }
+  }
   // Sort by mean, keeping each material's line number for the messages.
   std::vector<std::size_t> order(c.mixture.materials.size());
   for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;

@@ -34,14 +34,16 @@ std::string lower(std::string s) {
   return s;
 }
 
-// A name beside `path` that keeps its extension, e.g. "out.tmp-3f2a-1.png".
+// A name beside `path` that keeps its extension, e.g. "out.tmp-3f2a-1.png",
+// after at most the first 64 bytes of its stem: a name near the file
+// system's limit (255 bytes) still has room for the tag.
 fs::path temp_path_for(const fs::path& path) {
   static std::atomic<unsigned> counter{0};
   static const unsigned salt = std::random_device{}();
   const unsigned n = counter.fetch_add(1);
   char tag[40];
   std::snprintf(tag, sizeof tag, ".tmp-%08x-%u", salt, n);
-  fs::path name = path.stem();
+  fs::path name = path.stem().string().substr(0, 64);
   name += tag;
   name += path.extension();
   return path.parent_path() / name;
@@ -239,6 +241,15 @@ void check_same_size(const Image& a, const Image& b, const char* what) {
                                   "x" + std::to_string(b.height()));
 }
 
+Format format_of(const fs::path& path) {
+  const std::string ext = lower(path.extension().string());
+  if (ext == ".png") return Format::png;
+  if (ext == ".exr") return Format::exr;
+  if (ext == ".tif" || ext == ".tiff") return Format::tiff;
+  throw FileError(path, "unknown image extension '" + path.extension().string() +
+                            "' (expected .png, .exr, .tif or .tiff)");
+}
+
 }  // namespace
 
 Image::Image(int width, int height) {
@@ -250,18 +261,12 @@ Image::Image(int width, int height) {
   px_.assign(static_cast<std::size_t>(width) * static_cast<std::size_t>(height), Rgba{});
 }
 
+void check_image_extension(const fs::path& path) {
+  (void)format_of(path);
+}
+
 void write_image(const Image& img, const fs::path& path) {
-  const std::string ext = lower(path.extension().string());
-  Format format;
-  if (ext == ".png")
-    format = Format::png;
-  else if (ext == ".exr")
-    format = Format::exr;
-  else if (ext == ".tif" || ext == ".tiff")
-    format = Format::tiff;
-  else
-    throw FileError(path, "unknown image extension '" + path.extension().string() +
-                              "' (expected .png, .exr, .tif or .tiff)");
+  const Format format = format_of(path);
   if (img.width() <= 0 || img.height() <= 0 ||
       img.pixels().size() != static_cast<std::size_t>(img.width()) * img.height())
     throw FileError(path, "cannot write an empty image");

@@ -21,6 +21,7 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <system_error>
 #include <vector>
 
@@ -980,6 +981,56 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
 
 // ================================================================ writer
 
+void write_file_atomically(const fs::path& path, std::initializer_list<std::string_view> parts) {
+  // A temporary file in the same directory (so the rename is atomic), named
+  // after at most the first 64 bytes of path's name: a name near the file
+  // system's limit (255 bytes) still has room for the suffix.
+  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  const std::string name = path.filename().string();
+  std::string tmpl = (dir / (name.substr(0, 64) + ".tmp-XXXXXX")).string();
+  std::vector<char> tbuf(tmpl.begin(), tmpl.end());
+  tbuf.push_back('\0');
+  const int fd = ::mkstemp(tbuf.data());
+  if (fd < 0)
+    throw FileError(path,
+                    "cannot create a temporary file in " + dir.string() + ": " + errno_text(errno));
+  const fs::path tmp(tbuf.data());
+  auto fail = [&](const std::string& problem) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw FileError(path, problem);
+  };
+  ::fchmod(fd, 0644);
+  auto write_all = [&](const char* p, std::size_t len) {
+    while (len > 0) {
+      const ssize_t w = ::write(fd, p, std::min<std::size_t>(len, std::size_t{1} << 30));
+      if (w < 0) {
+        if (errno == EINTR) continue;
+        return false;
+      }
+      p += w;
+      len -= static_cast<std::size_t>(w);
+    }
+    return true;
+  };
+  bool ok = true;
+  for (std::string_view part : parts) ok = ok && write_all(part.data(), part.size());
+  const int write_errno = errno;
+  if (!ok) {
+    ::close(fd);
+    fail("write failed: " + errno_text(write_errno));
+  }
+  if (::fsync(fd) != 0 && errno != EINVAL) {
+    const int e = errno;
+    ::close(fd);
+    fail("fsync failed: " + errno_text(e));
+  }
+  if (::close(fd) != 0) fail("close failed: " + errno_text(errno));
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) fail("cannot rename the temporary file into place: " + ec.message());
+}
+
 void save_nrrd(const Volume& vol, const std::filesystem::path& path) {
   if (vol.voxel_count() == 0) throw FileError(path, "cannot save an empty volume");
   const VoxelType t = vol.type();
@@ -1021,50 +1072,8 @@ void save_nrrd(const Volume& vol, const std::filesystem::path& path) {
               (std::endian::native == std::endian::little ? "little" : "big") + "\n";
   header += "encoding: raw\n\n";
 
-  // Atomic write: a temporary file in the same directory, then rename.
-  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
-  std::string tmpl = (dir / (path.filename().string() + ".tmp-XXXXXX")).string();
-  std::vector<char> tbuf(tmpl.begin(), tmpl.end());
-  tbuf.push_back('\0');
-  const int fd = ::mkstemp(tbuf.data());
-  if (fd < 0)
-    throw FileError(path,
-                    "cannot create a temporary file in " + dir.string() + ": " + errno_text(errno));
-  const fs::path tmp(tbuf.data());
-  auto fail = [&](const std::string& problem) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
-    throw FileError(path, problem);
-  };
-  ::fchmod(fd, 0644);
-  auto write_all = [&](const unsigned char* p, std::size_t len) {
-    while (len > 0) {
-      const ssize_t w = ::write(fd, p, std::min<std::size_t>(len, std::size_t{1} << 30));
-      if (w < 0) {
-        if (errno == EINTR) continue;
-        return false;
-      }
-      p += w;
-      len -= static_cast<std::size_t>(w);
-    }
-    return true;
-  };
-  const bool ok = write_all(reinterpret_cast<const unsigned char*>(header.data()), header.size()) &&
-                  write_all(bytes.data(), bytes.size());
-  const int write_errno = errno;
-  if (!ok) {
-    ::close(fd);
-    fail("write failed: " + errno_text(write_errno));
-  }
-  if (::fsync(fd) != 0 && errno != EINVAL) {
-    const int e = errno;
-    ::close(fd);
-    fail("fsync failed: " + errno_text(e));
-  }
-  if (::close(fd) != 0) fail("close failed: " + errno_text(errno));
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) fail("cannot rename the temporary file into place: " + ec.message());
+  write_file_atomically(
+      path, {header, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size())});
 }
 
 }  // namespace simdvol

@@ -84,7 +84,10 @@ void validate(const ShadeParams& p) {
   for (double v : {p.ka, p.kd, p.ks, p.shininess}) need_finite(v, "--phong");
   for (double v : {p.k1, p.k2}) need_finite(v, "--depth-cue");
   if (!finite3(p.light)) throw ArgumentError("--light", "must be finite");
-  if (dot3(p.light, p.light) <= 0.0) throw ArgumentError("--light", "must be a non-zero direction");
+  // hypot: |light| without overflow or underflow (1e200 and 1e-200 are
+  // directions too; their squares are not doubles).
+  if (!(std::hypot(p.light[0], p.light[1], p.light[2]) > 0.0))
+    throw ArgumentError("--light", "must be a non-zero direction");
   if (p.ka < 0 || p.kd < 0 || p.ks < 0)
     throw ArgumentError("--phong", "ka, kd and ks must be >= 0");
   if (p.shininess < 0) throw ArgumentError("--phong", "the exponent n must be >= 0");
@@ -127,7 +130,7 @@ ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const S
   }
 
   // L and H in viewing space (eq 4.2), V = (0, 0, -1) towards the observer.
-  const double ln = std::sqrt(dot3(p.light, p.light));
+  const double ln = std::hypot(p.light[0], p.light[1], p.light[2]);
   const Vec3 L{p.light[0] / ln, p.light[1] / ln, p.light[2] / ln};
   const Vec3 V{0.0, 0.0, -1.0};
   const Vec3 vl{V[0] + L[0], V[1] + L[1], V[2] + L[2]};

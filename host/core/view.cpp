@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <sstream>
+#include <string>
 
 #include "simdvol/error.hpp"
 
@@ -161,19 +163,41 @@ ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<doub
     diag2 += extent[a] * extent[a];
     g.longest = std::max(g.longest, extent[a]);
   }
+  const auto spacing_text = [&] {
+    std::ostringstream o;
+    o << sp[0] << "," << sp[1] << "," << sp[2];
+    return o.str();
+  };
+  if (!std::isfinite(diag2))
+    throw ArgumentError("volume", "voxel spacing " + spacing_text() +
+                                      ": its largest over its smallest is too large to render");
   g.radius = 0.5 * std::sqrt(diag2);
   g.span = framing == Framing::diagonal ? 2.0 * g.radius : g.longest;
 
-  int wi = out_width, hi = out_height;
+  double wd = out_width, hd = out_height;
   if (sampling == Sampling::pixel) {
     g.step = g.span / std::min(out_width, out_height);
   } else {
     g.step = 1.0;
     const double scale = std::min(out_width, out_height) / g.span;
-    wi = static_cast<int>(std::ceil(out_width / scale)) + 2;
-    hi = static_cast<int>(std::ceil(out_height / scale)) + 2;
+    wd = std::ceil(out_width / scale) + 2;
+    hd = std::ceil(out_height / scale) + 2;
   }
-  const int depth = std::max(1, static_cast<int>(std::ceil(2.0 * g.radius / g.step)));
+  const double dd = std::max(1.0, std::ceil(2.0 * g.radius / g.step));
+  // Voxel sampling steps at the smallest spacing: a strongly anisotropic
+  // volume (a spacing of 1e7 beside 1) would need an intermediate image and
+  // a depth far beyond memory. Bounds: 2^28 pixels (16384^2, as the largest
+  // output) and 2^24 samples per ray (as the largest volume dimension).
+  constexpr double kMaxPixels = double(int64_t{1} << 28), kMaxDepth = double(int64_t{1} << 24);
+  if (!(wd * hd <= kMaxPixels) || !(dd <= kMaxDepth)) {
+    std::ostringstream o;
+    o << dims[0] << "x" << dims[1] << "x" << dims[2] << " voxels of spacing " << spacing_text()
+      << " need a viewing grid of " << wd << " x " << hd << " x " << dd
+      << " samples (at most 2^28 pixels and 2^24 samples per ray)"
+      << (sampling == Sampling::voxel ? ": use --sampling pixel" : "");
+    throw ArgumentError("volume", o.str());
+  }
+  const int wi = static_cast<int>(wd), hi = static_cast<int>(hd), depth = static_cast<int>(dd);
 
   // Viewing position of sample (i, j, k): step * (i + 1/2 - W/2, j + 1/2 - H/2,
   // k + 1/2 - D/2); object index position X_a = (T^T p)_a * smin / s_a + n_a / 2.

@@ -39,6 +39,10 @@ class Image {
 /// module not found for .exr/.tif).
 void write_image(const Image& img, const std::filesystem::path& path);
 
+/// Throws FileError (as write_image would) unless `path` ends in an extension
+/// write_image writes: for checking an output name before the work.
+void check_image_extension(const std::filesystem::path& path);
+
 /// Reads an image written by write_image (any format OpenImageIO reads) as
 /// float RGBA; a missing alpha becomes 1. Throws FileError (also when the
 /// OpenImageIO module cannot be loaded).

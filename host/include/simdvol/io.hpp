@@ -7,7 +7,9 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <initializer_list>
 #include <optional>
+#include <string_view>
 
 #include "simdvol/volume.hpp"
 
@@ -46,6 +48,14 @@ Volume load_nifti(const std::filesystem::path& path);
 /// .raw which needs `raw`). Throws FileError for an unknown extension.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt);
+
+/// Writes `parts`, one after another, to a new temporary file in `path`'s
+/// directory (named after at most the first 64 bytes of path's name, so any
+/// legal path has room for it), then renames it over `path`: a failure
+/// leaves an existing file at `path` untouched and no temporary file behind.
+/// Throws FileError naming `path`.
+void write_file_atomically(const std::filesystem::path& path,
+                           std::initializer_list<std::string_view> parts);
 
 /// Writes an attached-header NRRD (raw encoding) in the volume's own type,
 /// atomically: a temporary file beside `path`, then rename.
