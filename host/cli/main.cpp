@@ -3,10 +3,12 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <future>
+#include <initializer_list>
 #include <iostream>
 #include <optional>
 #include <sstream>
@@ -97,8 +99,10 @@ struct VolumeArgs {
   std::string path;
   std::string raw_dims, raw_type = "u8", raw_endian = "little", raw_spacing;
   uint64_t raw_header = 0;
+  CLI::App* app = nullptr;
 
-  void add(CLI::App* app) {
+  void add(CLI::App* a) {
+    app = a;
     app->add_option("--raw-dims", raw_dims, "raw volumes: NX,NY,NZ");
     app->add_option("--raw-type", raw_type, "raw volumes: u8, u16, i16 or f32")
         ->capture_default_str();
@@ -109,7 +113,22 @@ struct VolumeArgs {
         ->check(kNotNegative);
   }
 
+  // The raw layout options do nothing for another kind of file (or for the
+  // built-in phantom): refused, not ignored.
+  void check_raw_options() const {
+    std::string lower_path = path;
+    for (char& c : lower_path) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    const bool is_raw = lower_path.size() > 4 && lower_path.ends_with(".raw");
+    for (const char* name :
+         {"--raw-dims", "--raw-type", "--raw-endian", "--raw-spacing", "--raw-header"})
+      if (!is_raw && app && app->count(name) > 0)
+        throw ArgumentError(
+            name, "applies only to .raw volumes" + (path.empty() ? std::string(" (no volume given)")
+                                                                 : " (" + path + " is not one)"));
+  }
+
   Volume load() const {
+    check_raw_options();
     std::optional<RawLayout> raw;
     if (!raw_dims.empty()) {
       RawLayout l;
@@ -408,12 +427,30 @@ int main(int argc, char** argv) {
         throw ArgumentError(eo.mc_scope != McScope::whole ? "--mc-scope" : "--allocate",
                             "per sub-ray Monte Carlo needs --engine opencl");
       validate(eo, opt);
+      // Options that do nothing with the chosen compositing or engine are
+      // refused, not ignored (as --mc-stratified without --exact-opacity).
+      const auto refuse_unless = [&](bool applies, std::initializer_list<const char*> names,
+                                     const char* where) {
+        for (const char* name : names)
+          if (!applies && render->count(name) > 0)
+            throw ArgumentError(name, std::string("applies only to ") + where);
+      };
+      refuse_unless(opt.composite.mode == CompositeMode::mc,
+                    {"--samples", "--seed", "--streams", "--exact-opacity", "--mc-scope"},
+                    "--composite mc");
+      refuse_unless(opt.composite.mode == CompositeMode::adaptive, {"--threshold"},
+                    "--composite adaptive");
+      refuse_unless(
+          engine == "opencl",
+          {"--pe", "--device", "--layout", "--balance-sweeps", "--no-skip-empty", "--no-skip-pes"},
+          "--engine opencl");
       const fs::path outp = out;
       check_output_path(outp, "-o");
       check_image_extension(outp);
 
       Volume vol;
       if (rv.path.empty()) {
+        rv.check_raw_options();
         if (phantom_size < 2 || phantom_size > 1024)
           throw ArgumentError("--phantom-size",
                               std::to_string(phantom_size) + " is outside 2..1024");
