@@ -241,6 +241,10 @@ int run_mismatch_command(std::ostream& os) {
   if (o.size3 < 1 || o.size3 > 256)
     throw ArgumentError("--size3", std::to_string(o.size3) + " is outside 1..256");
   const ViewAngles view = parse_angles(o.view);
+  // Given but empty ('--csv ""') is a mistake, not "no CSV".
+  if (g_cmd->count("--plot") > 0 && o.plot.empty())
+    throw ArgumentError("--plot", "empty output path");
+  if (g_cmd->count("--csv") > 0 && o.csv.empty()) throw ArgumentError("--csv", "empty output path");
   if (!o.plot.empty()) {
     check_output_path(o.plot, "--plot");
     check_image_extension(o.plot);

@@ -386,6 +386,8 @@ Classifier load_classifier(const std::filesystem::path& path) {
   std::string text;
   while (std::getline(in, text)) {
     ++ps.line;
+    // A UTF-8 byte-order mark (editors on Windows write one) is not text.
+    if (ps.line == 1 && text.starts_with("\xEF\xBB\xBF")) text.erase(0, 3);
     if (const auto hash = text.find('#'); hash != std::string::npos) text.erase(hash);
     std::istringstream ss(text);
     std::vector<std::string> tok;

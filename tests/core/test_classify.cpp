@@ -435,6 +435,24 @@ TEST_F(ClassifierFile, ParsesATransferFunction) {
   EXPECT_EQ(classify_voxel(c, {}, 12.0f, 12.5f, col), 0.25f);
 }
 
+// A UTF-8 byte-order mark and CRLF line ends (a file saved by a Windows
+// editor) parse as the plain file does; the mark made line 1 fail before.
+TEST_F(ClassifierFile, ParsesAFileWithAByteOrderMarkAndCrlf) {
+  const Classifier plain = load_classifier(write("density 0 0 24 1\ncolor 0 1 0.5 0.25\n"));
+  const Classifier bom =
+      load_classifier(write("\xEF\xBB\xBF"
+                            "density 0 0 24 1\r\ncolor 0 1 0.5 0.25\r\n"));
+  ASSERT_EQ(bom.kind, Classifier::Kind::transfer);
+  EXPECT_EQ(bom.transfer.density.x, plain.transfer.density.x);
+  EXPECT_EQ(bom.transfer.density.y, plain.transfer.density.y);
+  EXPECT_EQ(bom.transfer.red.y, plain.transfer.red.y);
+  EXPECT_EQ(bom.transfer.blue.y, plain.transfer.blue.y);
+  // Only at the start of the file: elsewhere the bytes are an unknown token.
+  EXPECT_THROW(load_classifier(write("density 0 0 24 1\n\xEF\xBB\xBF"
+                                     "color 0 1 1 1\n")),
+               FileError);
+}
+
 TEST_F(ClassifierFile, ParsesAMixtureAndSortsByMean) {
   const auto p = write(
       "relative\n"

@@ -292,6 +292,8 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render " + path("v16.raw") +
            " --raw-dims 16,16,16 --raw-spacing 1e300,1,1e-300 --sampling pixel -o " + path("x.png"),
        "its largest over its smallest is too large"},
+      {"mismatch --size 8 --size3 4 --csv ''", "--csv: empty output path"},
+      {"mismatch --size 8 --size3 4 --plot ''", "--plot: empty output path"},
       // Options that do nothing in the chosen mode are refused, not ignored.
       {"render --samples 8 -o " + path("x.png"), "--samples: applies only to --composite mc"},
       {"render --exact-opacity -o " + path("x.png"),
