@@ -50,6 +50,7 @@
 #include <limits>
 #include <sstream>
 
+#include "file_checks.hpp"
 #include "simdvol/error.hpp"
 
 namespace simdvol {
@@ -363,15 +364,7 @@ struct Parser {
 }  // namespace
 
 Classifier load_classifier(const std::filesystem::path& path) {
-  {
-    std::error_code ec;
-    const auto st = std::filesystem::status(path, ec);
-    if (std::filesystem::is_directory(st))
-      throw FileError(path, "is a directory, not a classifier file");
-    // A FIFO would block the read, a device (/dev/zero) fill the memory.
-    if (std::filesystem::exists(st) && !std::filesystem::is_regular_file(st))
-      throw FileError(path, "is not a regular file");
-  }
+  refuse_non_regular_file(path, "classifier file");
   std::ifstream in(path);
   if (!in) throw FileError(path, "cannot open classifier file");
 

@@ -25,6 +25,7 @@
 #include <system_error>
 #include <vector>
 
+#include "file_checks.hpp"
 #include "simdvol/error.hpp"
 
 extern "C" {
@@ -64,8 +65,7 @@ uint64_t require_regular_file(const fs::path& path) {
       throw FileError(path, "cannot access file: " + ec.message());
     throw FileError(path, "file not found (no such file)");
   }
-  refuse_directory(path);
-  if (!fs::is_regular_file(st)) throw FileError(path, "is not a regular file");
+  refuse_non_regular_file(path, "volume file");
   const uintmax_t size = fs::file_size(path, ec);
   if (ec) throw FileError(path, "cannot read file size: " + ec.message());
   if (size == 0) throw FileError(path, "file is empty (0 bytes)");
@@ -977,6 +977,13 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
   }
   throw FileError(path, "unknown volume file extension '" + path.extension().string() +
                             "' (expected .den, .nrrd, .nhdr, .nii, .nii.gz or .raw)");
+}
+
+void refuse_non_regular_file(const fs::path& path, const char* noun) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (fs::is_directory(st)) throw FileError(path, std::string("is a directory, not a ") + noun);
+  if (fs::exists(st) && !fs::is_regular_file(st)) throw FileError(path, "is not a regular file");
 }
 
 // ================================================================ writer
