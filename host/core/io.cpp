@@ -218,6 +218,18 @@ NrrdShape nrrd_shape(const fs::path& path, const Nrrd* n) {
     throw FileError(path, "dimension " + std::to_string(n->dim) +
                               " is not supported (a 3-D volume is expected)");
   }
+  // An axis whose kind says it holds components (RGB-color, a vector, a
+  // list, ...) rather than positions makes a colour or vector image, not a
+  // scalar volume; axes of no kind (most files) or a domain kind are taken.
+  for (int i = 0; i < 3; ++i) {
+    const int kind = n->axis[s.axes[i]].kind;
+    if (kind != nrrdKindUnknown && !nrrdKindIsDomain(kind))
+      throw FileError(path, "axis " + std::to_string(s.axes[i]) + " (size " +
+                                std::to_string(n->axis[s.axes[i]].size) + ") is of kind '" +
+                                airEnumStr(nrrdKind, kind) +
+                                "', not a spatial axis: the file holds a colour or vector "
+                                "image, not a scalar volume");
+  }
   for (int i = 0; i < 3; ++i) {
     const size_t sz = n->axis[s.axes[i]].size;
     if (sz > static_cast<size_t>(std::numeric_limits<int64_t>::max()))

@@ -615,6 +615,25 @@ TEST_F(IoTest, NrrdMalformed) {
                                 "encoding: raw\n\n"),
                     u8data));
   expect_file_error([&] { simdvol::load_nrrd(file("4d.nrrd")); }, file("4d.nrrd"), {"scalar"});
+  // An axis of a component kind: a colour image (x = 3 before), a vector
+  // field; the kinds of a scalar volume still load.
+  write_file(file("rgb.nrrd"),
+             concat(std::string("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 3 5 4\n"
+                                "kinds: RGB-color domain domain\nencoding: raw\n\n"),
+                    Bytes(60, 7)));
+  expect_file_error([&] { simdvol::load_nrrd(file("rgb.nrrd")); }, file("rgb.nrrd"),
+                    {"axis 0 (size 3) is of kind 'RGB-color'", "not a scalar volume"});
+  write_file(file("vec.nrrd"),
+             concat(std::string("NRRD0004\ntype: uchar\ndimension: 4\nsizes: 1 5 4 3\n"
+                                "kinds: none space space 3-vector\nencoding: raw\n\n"),
+                    Bytes(60, 7)));
+  expect_file_error([&] { simdvol::load_nrrd(file("vec.nrrd")); }, file("vec.nrrd"),
+                    {"axis 3 (size 3) is of kind '3-vector'"});
+  write_file(file("kinds.nrrd"),
+             concat(std::string("NRRD0004\ntype: uchar\ndimension: 4\nsizes: 5 4 3 1\n"
+                                "kinds: space domain time list\nencoding: raw\n\n"),
+                    Bytes(60, 7)));
+  EXPECT_EQ(simdvol::load_nrrd(file("kinds.nrrd")).dims(), (std::array<int64_t, 3>{5, 4, 3}));
   // Detached header whose data file is missing or short.
   write_file(file("nodata.nhdr"),
              nrrd_header(VoxelType::u8, false, "raw") + "data file: does-not-exist.raw\n");
