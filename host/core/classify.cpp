@@ -364,7 +364,7 @@ struct Parser {
 }  // namespace
 
 Classifier load_classifier(const std::filesystem::path& path) {
-  refuse_non_regular_file(path, "classifier file");
+  refuse_non_regular_file(path, "a classifier file");
   std::ifstream in(path);
   if (!in) throw FileError(path, "cannot open classifier file");
 

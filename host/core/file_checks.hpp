@@ -1,14 +1,23 @@
-// File checks shared by simdvol_core's readers (internal: not installed).
+// File checks shared by simdvol_core's readers and writers (internal: not
+// installed).
 #pragma once
 
 #include <filesystem>
 
 namespace simdvol {
 
-/// FileError "is a directory, not a <noun>" for a directory, and "is not a
-/// regular file" for any other existing file that is not one (a FIFO would
-/// block the read, a device such as /dev/zero fill the memory); nothing for
-/// a regular file or a missing one (each reader says "not found" its way).
+/// FileError "is a directory, not <noun>" (noun with its article: "a volume
+/// file") for a directory, and "is not a regular file" for any other
+/// existing file that is not one (a FIFO would block the read, a device such
+/// as /dev/zero fill the memory); nothing for a regular file or a missing
+/// one (each reader says "not found" its way).
 void refuse_non_regular_file(const std::filesystem::path& path, const char* noun);
+
+/// The file a writer replaces for `path`: path itself, or where its chain of
+/// symbolic links ends (followed as the kernel would, each relative link
+/// from its own directory; the end may not exist yet), so that writing an
+/// output through a link replaces the link's target and keeps the link.
+/// FileError after 40 links (a loop).
+std::filesystem::path write_target(const std::filesystem::path& path);
 
 }  // namespace simdvol

@@ -19,6 +19,7 @@
 #include <string>
 #include <system_error>
 
+#include "file_checks.hpp"
 #include "oiio_module.hpp"
 #include "simdvol/error.hpp"
 
@@ -271,12 +272,15 @@ void write_image(const Image& img, const fs::path& path) {
       img.pixels().size() != static_cast<std::size_t>(img.width()) * img.height())
     throw FileError(path, "cannot write an empty image");
 
-  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  // Written beside the file replaced: path, or its symbolic link's target
+  // (the link stays a link).
+  const fs::path target = write_target(path);
+  const fs::path dir = target.parent_path().empty() ? fs::path(".") : target.parent_path();
   std::error_code ec;
   if (!fs::is_directory(dir, ec))
     throw FileError(path, "output directory '" + dir.string() + "' does not exist");
 
-  const fs::path tmp = temp_path_for(path);
+  const fs::path tmp = temp_path_for(target);
   std::string problem;
   try {
     problem = write_file(img, tmp, format);
@@ -284,7 +288,7 @@ void write_image(const Image& img, const fs::path& path) {
     problem = e.what();
   }
   if (problem.empty()) {
-    fs::rename(tmp, path, ec);
+    fs::rename(tmp, target, ec);
     if (ec) problem = "cannot rename temporary file into place: " + ec.message();
   }
   if (!problem.empty()) {
@@ -296,7 +300,7 @@ void write_image(const Image& img, const fs::path& path) {
 
 Image read_image(const fs::path& path) {
   std::error_code ec;
-  if (fs::is_directory(path, ec)) throw FileError(path, "is a directory, not an image file");
+  refuse_non_regular_file(path, "an image file");
   if (!fs::is_regular_file(path, ec)) throw FileError(path, "no such image file");
   const OiioModule& m = oiio_module();
   if (!m.problem.empty()) throw FileError(path, m.problem);

@@ -65,7 +65,7 @@ uint64_t require_regular_file(const fs::path& path) {
       throw FileError(path, "cannot access file: " + ec.message());
     throw FileError(path, "file not found (no such file)");
   }
-  refuse_non_regular_file(path, "volume file");
+  refuse_non_regular_file(path, "a volume file");
   const uintmax_t size = fs::file_size(path, ec);
   if (ec) throw FileError(path, "cannot read file size: " + ec.message());
   if (size == 0) throw FileError(path, "file is empty (0 bytes)");
@@ -994,18 +994,33 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
 void refuse_non_regular_file(const fs::path& path, const char* noun) {
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
-  if (fs::is_directory(st)) throw FileError(path, std::string("is a directory, not a ") + noun);
+  if (fs::is_directory(st)) throw FileError(path, std::string("is a directory, not ") + noun);
   if (fs::exists(st) && !fs::is_regular_file(st)) throw FileError(path, "is not a regular file");
+}
+
+fs::path write_target(const fs::path& path) {
+  fs::path p = path;
+  for (int links = 0; links < 40; ++links) {
+    std::error_code ec;
+    if (!fs::is_symlink(fs::symlink_status(p, ec))) return p;
+    const fs::path to = fs::read_symlink(p, ec);
+    if (ec)
+      throw FileError(path, "cannot read the symbolic link " + p.string() + ": " + ec.message());
+    p = to.is_absolute() ? to : p.parent_path() / to;
+  }
+  throw FileError(path, "too many levels of symbolic links");
 }
 
 // ================================================================ writer
 
 void write_file_atomically(const fs::path& path, std::initializer_list<std::string_view> parts) {
-  // A temporary file in the same directory (so the rename is atomic), named
-  // after at most the first 64 bytes of path's name: a name near the file
-  // system's limit (255 bytes) still has room for the suffix.
-  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
-  const std::string name = path.filename().string();
+  // A temporary file in the same directory as the file replaced (path, or
+  // its symbolic link's target: so the rename is atomic and keeps the
+  // link), named after at most the first 64 bytes of its name: a name near
+  // the file system's limit (255 bytes) still has room for the suffix.
+  const fs::path target = write_target(path);
+  const fs::path dir = target.parent_path().empty() ? fs::path(".") : target.parent_path();
+  const std::string name = target.filename().string();
   std::string tmpl = (dir / (name.substr(0, 64) + ".tmp-XXXXXX")).string();
   std::vector<char> tbuf(tmpl.begin(), tmpl.end());
   tbuf.push_back('\0');
@@ -1046,7 +1061,7 @@ void write_file_atomically(const fs::path& path, std::initializer_list<std::stri
   }
   if (::close(fd) != 0) fail("close failed: " + errno_text(errno));
   std::error_code ec;
-  fs::rename(tmp, path, ec);
+  fs::rename(tmp, target, ec);
   if (ec) fail("cannot rename the temporary file into place: " + ec.message());
 }
 

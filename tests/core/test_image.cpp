@@ -13,6 +13,7 @@
 #include <set>
 #include <string>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "simdvol/error.hpp"
@@ -197,6 +198,19 @@ TEST_F(ImageFiles, OverwriteReplacesTheFile) {
   EXPECT_EQ(listing(dir_), (std::set<std::string>{"out.tif"}));
 }
 
+TEST_F(ImageFiles, WritesThroughASymbolicLink) {
+  // The link's target is replaced (the temporary beside it), the link kept.
+  fs::create_directory(dir_ / "real");
+  write_image(constant(4, 4, {0.1f, 0.2f, 0.3f, 0.4f}), dir_ / "real" / "out.tif");
+  fs::create_symlink("real/out.tif", dir_ / "link.tif");
+  const Image second = constant(6, 2, {0.5f, 0.6f, 0.7f, 0.8f});
+  write_image(second, dir_ / "link.tif");
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(dir_ / "link.tif")));
+  EXPECT_EQ(max_abs_diff(second, read_image(dir_ / "real" / "out.tif")), 0.0f);
+  EXPECT_EQ(listing(dir_ / "real"), (std::set<std::string>{"out.tif"}));
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"real", "link.tif"}));
+}
+
 TEST_F(ImageFiles, UnknownExtensionThrowsNamingThePath) {
   for (const char* name : {"out.bmp", "out.jpg", "out", "out.png.txt"}) {
     const fs::path p = dir_ / name;
@@ -268,6 +282,15 @@ TEST_F(ImageFiles, ReadErrorsAreFileErrors) {
   { std::ofstream(junk) << "this is not a png"; }
   EXPECT_THROW(read_image(junk), FileError);
   EXPECT_THROW(read_image(dir_), FileError);
+  // A FIFO is refused before anything opens it (opening would block).
+  const fs::path fifo = dir_ / "fifo.png";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  try {
+    read_image(fifo);
+    ADD_FAILURE() << "no FileError for a FIFO";
+  } catch (const FileError& e) {
+    EXPECT_NE(std::string(e.what()).find("is not a regular file"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -17,6 +17,7 @@
 #include <functional>
 #include <limits>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -722,6 +723,36 @@ TEST_F(IoTest, SaveNrrdIsAtomicAndLeavesNoTemporaries) {
   // An empty volume has nothing to save.
   expect_file_error([&] { simdvol::save_nrrd(Volume{}, file("e.nrrd")); }, file("e.nrrd"),
                     {"empty"});
+}
+
+TEST_F(IoTest, WritersWriteThroughSymbolicLinks) {
+  // An output that is a symbolic link: its target is replaced, the link
+  // stays (relative links from their own directory, chains, a link whose
+  // target does not exist yet); a loop is a FileError naming the output.
+  Volume a(kDims, VoxelType::f32);
+  a.data() = test_values(VoxelType::f32, kN);
+  fs::create_directory(file("real"));
+  write_file(file("real/vol.nrrd"), std::string("old contents"));
+  fs::create_symlink("real/vol.nrrd", file("link.nrrd"));  // relative to dir_
+  fs::create_symlink(file("link.nrrd"), file("chain.nrrd"));
+  simdvol::save_nrrd(a, file("chain.nrrd"));
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(file("chain.nrrd"))));
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(file("link.nrrd"))));
+  EXPECT_EQ(simdvol::load_nrrd(file("real/vol.nrrd")).data(), a.data());
+  fs::create_symlink("new.csv", file("real/dangling.csv"));
+  simdvol::write_file_atomically(file("real/dangling.csv"), {"a,", "b\n"});
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(file("real/dangling.csv"))));
+  const Bytes csv = read_file(file("real/new.csv"));
+  EXPECT_EQ(std::string(csv.begin(), csv.end()), "a,b\n");
+  // Nothing else left beside the targets.
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(file("real")))
+    names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"vol.nrrd", "dangling.csv", "new.csv"}));
+  fs::create_symlink("loop2.nrrd", file("loop1.nrrd"));
+  fs::create_symlink("loop1.nrrd", file("loop2.nrrd"));
+  expect_file_error([&] { simdvol::save_nrrd(a, file("loop1.nrrd")); }, file("loop1.nrrd"),
+                    {"too many levels of symbolic links"});
 }
 
 // ------------------------------------------------------------- NIfTI
