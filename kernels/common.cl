@@ -94,6 +94,18 @@ SV_FN int sv_pe_of_segment(__global const int* seg_off, const int log2p, const i
   return p;
 }
 
+/* The PE of position s >= seg_off[p], found by stepping on from p (a few
+ * PEs on, as a work-item's prefetch looks) and by the search past
+ * SV_PE_STEPS of them: sv_pe_of_segment's PE. */
+#ifndef SV_PE_STEPS
+#define SV_PE_STEPS 8
+#endif
+SV_FN int sv_pe_after(__global const int* seg_off, const int log2p, int p, const int s) {
+  for (int i = 0; i < SV_PE_STEPS; ++i, ++p)
+    if (seg_off[p + 1] > s) return p;
+  return sv_pe_of_segment(seg_off, log2p, s);
+}
+
 /* Work-group size of 1-D kernels; the host passes the same value as the
  * local size. */
 #ifndef WGS

@@ -593,13 +593,17 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
 #define SV_VOX_PF 256
 #endif
 SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, const int nseg,
-                                const int s0, __global const sv_view* view,
+                                const int s0, const int p0, __global const sv_view* view,
                                 __global const int* table, __global const float* vox, const int cs,
                                 __global const int4* origins, const int4 pe_cell, const int il) {
 #if SV_VOX_PF > 0
   const int sa = s0 + SV_VOX_PF;
   if (sa >= nseg || pe_cell.w <= 0) return;
+#ifdef SV_PE_SEARCH2
   const int q = sv_pe_of_segment(seg_off, log2p, sa);
+#else
+  const int q = sv_pe_after(seg_off, log2p, p0, sa);
+#endif
   const int a = seg_off[q], n = seg_off[q + 1] - a; /* n >= 1: sa is in q's range */
   /* This work-item's share [k0, k1) of K items: the same expression at both
    * ends, so the shares of consecutive work-items tile the items (double:
@@ -910,7 +914,8 @@ SV_FN_INLINE void sv_resample8(__global const sv_segment* segs, const int nseg,
   int li[8], lj[8], lk[8], ln[8], lo[8];
   long8 X[3];
   const int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X, 0, 0);
-  sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, view, table, vox, cs, origins, pe_cell, il);
+  sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, sv_pe_of_segment(seg_off, log2p, s0), view, table,
+                       vox, cs, origins, pe_cell, il);
 #pragma unroll
   for (int l = 0; l < 8; ++l) {
     const int pos = min(s0 + l, nseg - 1);
