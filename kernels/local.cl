@@ -122,24 +122,26 @@ SV_FN_INLINE void sv_resample_local8(
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
   const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
   /* Each step's reach is tested (and the step left out where no lane's
-   * sample is in reach) only in work-items whose lanes needed the trim: in
-   * the others (both ends of every lane in reach) a step rarely has no lane
-   * in reach, and the test cost about a seventh of the kernel's samples
-   * (perf). A step left in there adds +-0 to each lane's composite, which
-   * leaves it bit for bit as it was (it starts at +0 and never becomes -0).
+   * sample is in reach) only in work-items with a lane whose first or last
+   * sample is out of reach: in the others (both ends of every lane in
+   * reach) a step rarely has no lane in reach, and the test cost about a
+   * seventh of the kernel's samples (perf). A step left in there adds +-0
+   * to each lane's composite, which leaves it bit for bit as it was (it
+   * starts at +0 and never becomes -0).
    * -DSV_STEP_TEST_ALL tests every work-item's steps, for comparison:
    * simdvol-bench-options, resample + local, 15 and 20 frames: the phantom
    * 43.5 / 35.9 -> 39.2 / 33.2 ms, at (0, 45, 0) 40.0 -> 37.9, ch2 30.3 /
    * 31.9 -> 29.4 / 29.8, brainsmall 6.11 -> 5.79 ms; the same images. */
   int steps = skip;
   if (skip) {
-    /* The trim cuts a lane only before its first and after its last sample
-     * in reach: a lane whose first and last samples are both in reach keeps
-     * every sample, and where every lane's are, the walk over all T steps
-     * is not needed (about three work-items in four on the phantom,
-     * brainsmall and ch2 at view (20, 35, 10)). Skipping the trim changes
-     * no bit: a sample out of reach adds +-0, which leaves the composite as
-     * it was (resample.cl, empty-space skipping). resample + local,
+    /* (With -DSV_TRIM:) the trim cuts a lane only before its first and
+     * after its last sample in reach: a lane whose first and last samples
+     * are both in reach keeps every sample, and where every lane's are, the
+     * walk over all T steps is not needed (about three work-items in four
+     * on the phantom, brainsmall and ch2 at view (20, 35, 10)). Skipping
+     * the trim changes no bit: a sample out of reach adds +-0, which leaves
+     * the composite as it was (resample.cl, empty-space skipping). When
+     * every work-item trimmed, resample + local,
      * `simdvol render --view 20,35,10 --frames 6 --step 0 --times`, three
      * alternations: the 256^3 phantom 130.8-136.0 -> 127.7-130.1 ms,
      * brainsmall 15.1-16.7 -> 15.1-15.9 ms, ch2 102.8-120.9 -> 99.9-107.6
@@ -153,7 +155,19 @@ SV_FN_INLINE void sv_resample_local8(
     const int8 ends = sv_reach8(FX, nx, ny, nz, nbx, nby, reach, on) &
                       sv_reach8(FY, nx, ny, nz, nbx, nby, reach, on);
     if (any(on & ~ends)) {
+      /* Those work-items step their lanes as they are; -DSV_TRIM first cuts
+       * each lane to its first .. last sample in reach (sv_trim8: a walk
+       * over all T steps), as before 2026-12-04. Since the corner offsets
+       * go through memory (resample.cl) a step costs less than that walk
+       * saves: simdvol-bench-options --frames 12, 2-core Xeon (family 6,
+       * model 167), resample + local, -DSV_TRIM -> this, both orders: the
+       * 256^3 phantom at (20, 35, 10) 31.33 / 30.10 -> 30.26 / 29.19 ms, at
+       * (0, 45, 0) 28.66 / 30.04 -> 28.20 / 29.25, at (0, 30, 0) 26.62 ->
+       * 25.80, ch2 25.08 -> 24.85, brainsmall 4.19 -> 4.14; the same
+       * images (the samples it cut add +-0). */
+#ifdef SV_TRIM
       T = sv_trim8(X, &N, T, s_0, s_1, s_2, nx, ny, nz, nbx, nby, reach);
+#endif
 #ifndef SV_STEP_TEST_ALL
     } else {
       steps = 0;

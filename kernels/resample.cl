@@ -811,9 +811,9 @@ SV_FN void sv_step8(int8* F, uint8* L, int8 on, const long s0, const long s1, co
  * reach[b] = 0 every stencil value is +-0, so Neville gives +-0 in every
  * channel and over leaves the composite as it was, bit for bit (the
  * composite starts at +0 and never becomes -0: x + y = -0 needs x = y = -0).
- * The fused kernel first trims each lane to its first .. last sample in a
- * brick with reach (sv_trim8), then skips a step when no lane still
- * stepping is in one: the same bits as without skipping (tested). */
+ * The fused kernel skips a step when no lane still stepping is in one (and,
+ * with -DSV_TRIM, first trims each lane to its first .. last sample in a
+ * brick with reach, sv_trim8): the same bits as without skipping (tested). */
 #define SV_BRICK (1 << SV_BRICK_LOG2) /* SV_BRICK_LOG2: simdvol_shared.h */
 
 /* One work-item per (PE p, plane lz of its cell): 2-D range (cz, P). Scans
