@@ -7,10 +7,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <numeric>
 #include <random>
+#include <string>
 
 #include "simdvol/engine.hpp"
 #include "simdvol/local_cl.hpp"
@@ -1010,6 +1012,50 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
               EXPECT_EQ(st_on.samples, st_off.samples);
             }
           }
+}
+
+// The resample's earlier forms, kept as kernel switches for timing
+// comparisons, give the frame's image bit for bit: the corner offsets
+// extracted from their vectors instead of stored and loaded back
+// (SV_OFFS_EXTRACT; the default without AVX-512), loaded back once per use
+// (SV_OFFS_RELOAD), the lanes trimmed to their samples in reach before
+// stepping (SV_TRIM), the prefetch's PE found by a second search
+// (SV_PE_SEARCH2). Orders 1 (the interleaved order-1 sampler) and 3 (the
+// general one), an axis view and an oblique one, with balancing.
+TEST(RenderOpenClFrame, KernelSwitchesGiveTheSameImage) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  const char* old = std::getenv("SIMDVOL_CL_OPTIONS");
+  const std::string saved = old ? old : "";
+  const Volume vol = shepp_logan(45, 2);
+  for (int order : {1, 3})
+    for (const ViewAngles a : {ViewAngles{0, 0, 0}, ViewAngles{20, 35, 10}, ViewAngles{0, 45, 0}}) {
+      SCOPED_TRACE("order " + std::to_string(order) + " view (" + std::to_string(a.theta) + ", " +
+                   std::to_string(a.phi) + ", " + std::to_string(a.varphi) + ")");
+      RenderOptions opt;
+      opt.width = opt.height = 48, opt.view = a, opt.order = order;
+      opt.classifier = classifier_preset("ct");
+      EngineOptions eo;
+      eo.pes = 512;
+      eo.fused = true;  // interleaved voxel cells, as the CLI's frames
+      unsetenv("SIMDVOL_CL_OPTIONS");
+      const Image want = RenderEngine(*dp, eo).render(vol, opt);
+      // (one build of the frame's programs per switch set: all three of the
+      // default's later forms at once, and the reload alone)
+      for (const char* sw : {"-DSV_OFFS_EXTRACT -DSV_TRIM -DSV_PE_SEARCH2", "-DSV_OFFS_RELOAD"}) {
+        SCOPED_TRACE(sw);
+        setenv("SIMDVOL_CL_OPTIONS", sw, 1);
+        const Image got = RenderEngine(*dp, eo).render(vol, opt);
+        ASSERT_EQ(got.pixels().size(), want.pixels().size());
+        EXPECT_EQ(std::memcmp(got.pixels().data(), want.pixels().data(),
+                              got.pixels().size() * sizeof(Rgba)),
+                  0);
+      }
+    }
+  if (old)
+    setenv("SIMDVOL_CL_OPTIONS", saved.c_str(), 1);
+  else
+    unsetenv("SIMDVOL_CL_OPTIONS");
 }
 
 namespace {
