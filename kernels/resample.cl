@@ -486,7 +486,6 @@ SV_FN_INLINE void sv_sample8_il1(const int8* F, const uint8* L, int nx, int ny, 
     float16 q[4];
 #pragma unroll
     for (int r = 0; r < 4; ++r) {
-      const int8 o = rows[r];
       /* lanes 4h .. 4h + 3: v(f) and v(f + 1) of each, as sv_sample8_il
        * assembles a float16 from two float8 halves */
       float8 l0, l1, l2, l3;
@@ -502,6 +501,7 @@ SV_FN_INLINE void sv_sample8_il1(const int8* F, const uint8* L, int nx, int ny, 
       l2 = (float8)(vload4(0, vox + a2), vload4(0, vox + a2 + dxs[b + 2]));
       l3 = (float8)(vload4(0, vox + a3), vload4(0, vox + a3 + dxs[b + 3]));
 #else
+      const int8 o = rows[r]; /* (SV_LD4 without AVX-512: the extracts) */
       if (h == 0) {
         l0 = (float8)(SV_LD4(0));
         l1 = (float8)(SV_LD4(1));
