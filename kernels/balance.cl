@@ -8,9 +8,10 @@
  * of p and the segment t of the same ray in the face neighbour, in p's
  * segment order: an int2, or in the _n rounds (narrow links) one uint of
  * the two indices within p's and the neighbour's segments (sv_bal_link).
- * A round's pair (F, B) walks F's list along the round's axis twice (cap,
- * then cumulative shares); the share's floor division uses a double
- * estimate corrected exactly.
+ * A round's pair (F, B) gives its samples in equal shares over F's list
+ * along the round's axis (match.hpp): one walk over the entries whose share
+ * is not 0, and a second, greedy one only where some ray held less than its
+ * share.
  *
  * The rounds read and move the segments' bounds (k0, k1) in `kk`, 4 (or 8)
  * bytes per segment, not the 16-byte segments: a round touches segments all
@@ -28,23 +29,6 @@
 #ifndef SIMDVOL_COMMON_CL
 #include "common.cl"
 #endif
-
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-
-/* floor(a / b) for 0 <= a, 0 < b, given inv ~ 1 / b. */
-SV_FN long sv_floor_div(long a, long b, double inv) {
-  long q = (long)((double)a * inv);
-  long r = a - q * b;
-  while (r < 0) {
-    --q;
-    r += b;
-  }
-  while (r >= b) {
-    ++q;
-    r -= b;
-  }
-  return q;
-}
 
 SV_FN int sv_list_start(int4 o, int axis) {
   return axis == 0 ? o.y : (axis == 1 ? o.z : o.w);
@@ -78,22 +62,19 @@ SV_FN int2 sv_bal_link(global const int2* llist, const int nl, const int e, cons
   const uint w = ((global const uint*)llist)[e];
   return (int2)(sF + (int)(w & 0xffffu), sB + (int)(w >> 16));
 }
-/* The indices of 8 entries' giving segments (front_gives: F's, else B's). */
-SV_FN int8 sv_bal_give8(global const int2* llist, const int nl, const int e, const int sF,
-                        const int sB, const int front_gives) {
-  if (nl) {
-    const uint8 w = vload8(0, (global const uint*)llist + e);
-    return front_gives ? sF + convert_int8(w & 0xffffu) : sB + convert_int8(w >> 16);
-  }
-  const int16 L = vload16(0, (global const int*)(llist + e));
-  return front_gives ? L.even : L.odd;
-}
-
 /* A round's work-items walk their pair's links and bounds, scattered over
- * megabytes: the work-item SV_BAL_PF ahead (8; 0: none) prefetches its
- * pair's link list and the bounds the list points to (all of F's and B's,
- * below), where the pair moves samples in this round (its loads, which no
- * other pair of the round changes, differ by 2 or more). A hint only.
+ * megabytes: with SV_BAL_PF > 0 the work-item SV_BAL_PF ahead prefetches
+ * its pair's link list and the bounds the list points to (all of F's and
+ * B's, below), where the pair moves samples in this round (its loads, which
+ * no other pair of the round changes, differ by 2 or more). A hint only.
+ * Default 0 (none) since the equal shares of 2026-12-04, which visit only
+ * the entries with a share where the pair moves fewer samples than it has
+ * entries: simdvol-bench-options, 12-16 frames, balance 3.53 / 3.53 -> 3.29
+ * / 3.32 ms at (0, 45, 0), 1.80 -> 1.49 at (20, 35, 10), ch2 4.29 -> 4.02,
+ * brainsmall 0.90 -> 0.68 (8 -> 0; 4 and 16 as 8; prefetching only for the
+ * pairs that visit every entry, or only the visited entries' list lines,
+ * 3.8-3.9 ms at 45 deg: a 2-core Intel Xeon). With the proportional shares
+ * (two walks over every entry) 8 was the faster:
  * simdvol-bench-match --repeat 3 --random 0 (every PE), alternated twice:
  * balance at 30 / 45 deg 29.2 / 55.1 and 20.9 / 40.1 -> 23.7 / 31.3 and
  * 21.4 / 30.7 ms, at 0 deg 3.0 / 2.6 against 2.2 / 3.3 ms.
@@ -107,7 +88,7 @@ SV_FN int8 sv_bal_give8(global const int2* llist, const int nl, const int e, con
  * PE) 23.6 / 19.4 -> 16.7 / 17.0 ms at 30 deg, 38.5 / 40.0 -> 35.7 / 28.6
  * at 45. */
 #ifndef SV_BAL_PF
-#define SV_BAL_PF 8
+#define SV_BAL_PF 0
 #endif
 SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of, int4 splits,
                                int pes, int axis, int par, int dir, global const int4* lofs,
@@ -135,130 +116,61 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
 #endif
 }
 
-/* ---- the first walk (the cap), 8 entries at a time ----
- * PoCL runs a round's loops of varying trip count per work-item, in scalar
- * code. The first walk only sums the lengths k1 - k0 of the giving side's
- * segments: here 8 entries' lengths per step, from one 16-entry load of the
- * list and one 8-lane gather of their bound pairs (4 or 8 bytes each); the
- * last (e1 - e0) mod 8 entries one by one. The same integer sum, so the
- * same result. -DSV_BAL_SCALAR walks every entry one by one, for
- * comparison: simdvol-bench-options --view 0,45,0, 12 frames, alternated
- * four times, balance 17.1 / 16.1 / 16.3 / 16.2 -> 15.6 / 15.4 / 15.7 /
- * 14.7 ms; simdvol-bench-frame at 45 deg, alternated three times, every PE
- * 37.2 / 32.5 / 30.9 -> 29.6 / 27.4 / 27.4 ms, the active PEs 15.3 / 15.0 /
- * 14.1 -> 13.1 / 13.0 / 13.0 ms; at 30 deg and at (20, 35, 10) no
- * difference (a 2-core Intel Xeon, 2026-12-02). The second walk in 8 lanes too (a
- * prefix sum of the lengths, the 8 floor divisions in double8 corrected in
- * long8, the stores of the entries whose share is not 0 one by one) was
- * slower, 16.1 / 15.7 -> 21.0 / 21.1 ms: most entries of a moving pair
- * give a sample or more, so its time is that of the scattered stores. */
-#ifndef SV_BAL_SCALAR
-#define SV_BAL_VEC 1
-#else
-#define SV_BAL_VEC 0
-#endif
-
-#ifdef __clang__
-#pragma clang diagnostic ignored "-Wpsabi"
-#endif
-
-/* The lengths k1 - k0 of the segments idx: 16-bit bounds (short2, x = k0 in
- * the low half of each 32-bit pair) and 32-bit bounds (int2). */
-SV_FN int8 sv_bal_len8_16(global const short2* kk, const int8 idx) {
-  global const uint* w = (global const uint*)kk;
-  const uint8 g = (uint8)(w[idx.s0], w[idx.s1], w[idx.s2], w[idx.s3], w[idx.s4], w[idx.s5],
-                          w[idx.s6], w[idx.s7]);
-  const short16 h = as_short16(g);
-  return convert_int8(h.odd) - convert_int8(h.even);
-}
-SV_FN int8 sv_bal_len8_(global const int2* kk, const int8 idx) {
-  global const ulong* w = (global const ulong*)kk;
-  const ulong8 g = (ulong8)(w[idx.s0], w[idx.s1], w[idx.s2], w[idx.s3], w[idx.s4], w[idx.s5],
-                            w[idx.s6], w[idx.s7]);
-  const int16 h = as_int16(g);
-  return h.odd - h.even;
-}
-
-/* The sum of 8 lengths, in 64 bits. */
-SV_FN long sv_bal_sum8(const int8 n8) {
-  const int4 n4 = n8.lo + n8.hi;
-  return (long)(n4.x + n4.y) + (long)(n4.z + n4.w);
-}
-
-/* The second walk: each entry's share of `moved`, floor(moved C_r / cap) -
- * floor(moved C_{r-1} / cap) with C_r the lengths' running sum, moved to
- * the pair's other segment. The floors by their remainder: r = moved C_r -
- * cap floor(moved C_r / cap) in [0, cap), so an entry adds moved times its
- * length to r and gives floor(r / cap) (1 where r < 2 cap, else the
- * division), keeping r below cap: the same integers, without a division
- * per entry (moved C_r < 2^62 as before). A macro over the round's locals
- * (e0, e1, llist, kk, front_gives, moved, cap, inv). -DSV_BAL_DIVIDE takes
- * each floor by its division, for comparison: simdvol-bench-options, 12
- * frames, both orders, balance at (0, 45, 0) 10.7 / 11.2 -> 8.6 / 8.9 ms,
- * ch2 at (20, 35, 10) 9.4 / 9.3 -> 8.3 / 8.3 ms, the phantom there 3.1 /
- * 3.0 -> 3.0 / 2.9 ms (a 2-core Intel Xeon).
- * Where the pair moves few samples for its list (more than SV_BAL_SPARSE_K
- * = 32 entries per sample moved), most entries give nothing: the walk then
- * steps 8 entries at a time (their lengths as in the first walk) while r
- * stays below cap, and only a chunk in which r reaches cap is walked entry
- * by entry. r takes the same values at the chunks' ends, so the shares are
- * the same integers. -DSV_BAL_NO_SKIP walks every entry one by one, for
- * comparison: simdvol-bench-options, 12 frames, the phantom at (0, 45, 0),
- * balance 7.87 / 8.07 -> 7.34 / 7.40 ms (K = 32 / 16); ch2 at (20, 35, 10)
- * 7.50 / 7.58 against 7.57 / 7.51 (K = 32, the same; K = 8 was 0.3-0.45 ms
- * slower there: a chunk that gives is walked twice); a 2-core Intel Xeon,
- * 2026-12-02. */
-#ifndef SV_BAL_DIVIDE
-#if SV_BAL_VEC && !defined(SV_BAL_NO_SKIP)
-#ifndef SV_BAL_SPARSE_K
-#define SV_BAL_SPARSE_K 32
-#endif
-#define SV_BAL_SPARSE (e1 - e0 > SV_BAL_SPARSE_K * moved)
-#else
-#define SV_BAL_SPARSE 0
-#endif
-#define SV_BAL_SHARES(BT, B1, SFX, NL)                                                         \
-  long r = 0;                                                                                  \
-  const int sparse = SV_BAL_SPARSE;                                                            \
-  for (int e = e0; e < e1;) {                                                                  \
-    int stop = e1;                                                                             \
-    if (sparse) {                                                                              \
-      for (; e + 8 <= e1; e += 8) {                                                            \
-        const long nr = r + moved * sv_bal_sum8(sv_bal_len8_##SFX(                             \
-                                        kk, sv_bal_give8(llist, NL, e, sF, sB, front_gives))); \
-        if (nr >= cap) break;                                                                  \
-        r = nr;                                                                                \
-      }                                                                                        \
-      stop = min(e + 8, e1);                                                                   \
-    }                                                                                          \
-    for (; e < stop; ++e) {                                                                    \
-      const int2 st = sv_bal_link(llist, NL, e, sF, sB);                                       \
-      const BT g = kk[front_gives ? st.x : st.y];                                              \
-      r += moved * (long)(g.y - g.x);                                                          \
-      if (r < cap) continue;                                                                   \
-      const int give = r < 2 * cap ? 1 : (int)sv_floor_div(r, cap, inv);                       \
-      r -= (long)give * cap;                                                                   \
-      const int shift = front_gives ? -give : give;                                            \
-      kk[st.x].y = (B1)(kk[st.x].y + shift);                                                   \
-      kk[st.y].x = (B1)(kk[st.y].x + shift);                                                   \
-    }                                                                                          \
+/* ---- the shares ----
+ * W = the samples the pair moves, n = e1 - e0 the linked rays (F's list
+ * along the axis). Entry r (0-based) gives min(len_r, share_r), share_r =
+ * floor((r + 1) W / n) - floor(r W / n), in F's segment order (the
+ * reference's `transfer`, match.cpp):
+ * - W >= n: every entry, share_r = W / n plus 1 where the running remainder
+ *   of r (W mod n) passes n (no division per entry);
+ * - W < n: the shares are 0 or 1, and the entries with 1 are r_k = floor((k
+ *   n - 1) / W), k = 1 ... W, stepped in the same way: the walk touches W
+ *   entries, not n.
+ * Then, where the moved samples fall short of W (a ray held less than its
+ * share), the entries from the first on give what they still hold until W
+ * is reached. Until 2026-12-04 the shares were proportional to the lengths
+ * (cumulative shares of the cap): a first walk over every entry for the cap,
+ * then a second for the shares (docs/PERFORMANCE.md, "The equal shares").
+ * SV_BAL_GIVE: entry E gives up to SHARE samples (a macro over the round's
+ * locals llist, kk, sF, sB, front_gives, moved). */
+#define SV_BAL_GIVE(BT, B1, NL, E, SHARE)                 \
+  {                                                       \
+    const int2 st = sv_bal_link(llist, NL, (E), sF, sB);  \
+    const BT g = kk[front_gives ? st.x : st.y];           \
+    const int give = min((int)(SHARE), (int)(g.y - g.x)); \
+    if (give > 0) {                                       \
+      const int shift = front_gives ? -give : give;       \
+      kk[st.x].y = (B1)(kk[st.x].y + shift);              \
+      kk[st.y].x = (B1)(kk[st.y].x + shift);              \
+      moved += give;                                      \
+    }                                                     \
   }
-#else
-#define SV_BAL_SHARES(BT, B1, SFX, NL)                  \
-  long cum = 0, prev = 0;                               \
-  for (int e = e0; e < e1; ++e) {                       \
-    const int2 st = sv_bal_link(llist, NL, e, sF, sB);  \
-    const BT g = kk[front_gives ? st.x : st.y];         \
-    cum += g.y - g.x;                                   \
-    const long f = sv_floor_div(moved * cum, cap, inv); \
-    const int give = (int)(f - prev);                   \
-    prev = f;                                           \
-    if (give == 0) continue;                            \
-    const int shift = front_gives ? -give : give;       \
-    kk[st.x].y = (B1)(kk[st.x].y + shift);              \
-    kk[st.y].x = (B1)(kk[st.y].x + shift);              \
+#define SV_BAL_SHARES(BT, B1, NL)                 \
+  if (want < n) {                                 \
+    const int dq = n / want, dr = n % want;       \
+    int r = (n - 1) / want, rem = (n - 1) % want; \
+    for (int k = 0; k < want; ++k) {              \
+      SV_BAL_GIVE(BT, B1, NL, e0 + r, 1)          \
+      r += dq;                                    \
+      rem += dr;                                  \
+      if (rem >= want) {                          \
+        ++r;                                      \
+        rem -= want;                              \
+      }                                           \
+    }                                             \
+  } else {                                        \
+    const int q = want / n, dr = want % n;        \
+    int acc = 0;                                  \
+    for (int e = e0; e < e1; ++e) {               \
+      acc += dr;                                  \
+      const int over = acc >= n;                  \
+      acc -= over ? n : 0;                        \
+      SV_BAL_GIVE(BT, B1, NL, e, q + over)        \
+    }                                             \
+  }                                               \
+  for (int e = e0; e < e1 && moved < want; ++e) { \
+    SV_BAL_GIVE(BT, B1, NL, e, want - moved)      \
   }
-#endif
 
 /* The rounds of sweep s > 0 do nothing where sweep s - 1 moved no sample:
  * a sweep is the same rounds in the same order, so from a state one sweep
@@ -320,27 +232,13 @@ SV_FN long sv_bal_sum8(const int8 n8) {
     const int want = front_gives ? t : -t;                                                         \
     const int sF = lofs[F].x, sB = lofs[B].x; /* (narrow links: their first segments) */           \
     const int e0 = sv_list_start(lofs[F], axis), e1 = sv_list_start(lofs[F + 1], axis);            \
-    const int ev = SV_BAL_VEC ? e0 + ((e1 - e0) & ~7) : e0; /* the 8-entry chunks' end */          \
-    long cap = 0;                                                                                  \
-    if (SV_BAL_VEC) {                                                                              \
-      int8 c8 = (int8)(0);                                                                         \
-      for (int e = e0; e < ev; e += 8) {                                                           \
-        c8 += sv_bal_len8_##SFX(kk, sv_bal_give8(llist, NL, e, sF, sB, front_gives));              \
-      }                                                                                            \
-      cap = sv_bal_sum8(c8);                                                                       \
-    }                                                                                              \
-    for (int e = ev; e < e1; ++e) {                                                                \
-      const int2 st = sv_bal_link(llist, NL, e, sF, sB);                                           \
-      const BT g = kk[front_gives ? st.x : st.y];                                                  \
-      cap += g.y - g.x;                                                                            \
-    }                                                                                              \
-    const long moved = min(cap, (long)want);                                                       \
-    if (moved <= 0) return; /* (cap < 0 only from bounds not as matched: no hang) */               \
-    /* Cumulative shares: floor(moved C_r / cap) - floor(moved C_{r-1} / cap). */                  \
-    const double inv = 1.0 / (double)cap;                                                          \
-    SV_BAL_SHARES(BT, B1, SFX, NL)                                                                 \
-    loads[F] -= front_gives ? (int)moved : -(int)moved;                                            \
-    loads[B] += front_gives ? (int)moved : -(int)moved;                                            \
+    const int n = e1 - e0;                                                                         \
+    if (n <= 0) return;                                                                            \
+    int moved = 0;                                                                                 \
+    SV_BAL_SHARES(BT, B1, NL)                                                                      \
+    if (moved == 0) return;                                                                        \
+    loads[F] -= front_gives ? moved : -moved;                                                      \
+    loads[B] += front_gives ? moved : -moved;                                                      \
     SV_BAL_MOVED(moves, sweep);                                                                    \
   }
 

@@ -248,8 +248,12 @@ namespace {
 
 // Moves `t` samples across the face between F and B (B the face neighbour
 // along `a` that F's rays pass into): F gives when t > 0, B gives when t < 0;
-// capped by what the giver holds on the linked rays. Returns
-// the number moved (same sign as t).
+// capped by what the giver holds on the linked rays. Returns the number
+// moved (same sign as t). Equal shares (see match.hpp): with n linked rays
+// and W = |t|, linked ray r (0-based, in F's segment order) gives
+// min(len_r, floor((r + 1) W / n) - floor(r W / n)); the shortfall, where
+// some ray held less than its share, is then taken greedily in the same
+// order (each ray gives what it still holds, until W is reached).
 int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a, int64_t t) {
   if (t == 0) return 0;
   const bool front_gives = t > 0;
@@ -259,24 +263,28 @@ int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a
     return g.k1 - g.k0;
   };
   auto linked = [&](int64_t s) { return link[s] >= 0 && (link[s] & 3) == a; };
-  int64_t cap = 0;
-  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
-    if (linked(s)) cap += len(s);
-  const int64_t moved = std::min(cap, want);
-  if (moved == 0) return 0;
-  // Cumulative shares: with C_r the sum of len over the linked rays up to and
-  // including r, ray r gives floor(moved * C_r / cap) - floor(moved * C_{r-1}
-  // / cap) (between 0 and len_r since moved <= cap; the gives sum to moved).
-  int64_t c = 0, prev = 0;
-  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) {
-    if (!linked(s)) continue;
-    c += len(s);
-    const int64_t cum = moved * c / cap;
-    const int64_t give = cum - prev;
-    prev = cum;
-    const int64_t shift = front_gives ? -give : give;
+  auto give = [&](int64_t s, int64_t n) {
+    const int64_t shift = front_gives ? -n : n;
     m.segments[s].k1 = static_cast<sv_i32>(m.segments[s].k1 + shift);
     m.segments[link[s] >> 2].k0 = static_cast<sv_i32>(m.segments[link[s] >> 2].k0 + shift);
+  };
+  int64_t n = 0;
+  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) n += linked(s);
+  if (n == 0) return 0;
+  int64_t moved = 0, r = 0;
+  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) {
+    if (!linked(s)) continue;
+    const int64_t share = (r + 1) * want / n - r * want / n;
+    ++r;
+    const int64_t g = std::min(share, len(s));
+    if (g > 0) give(s, g);
+    moved += g;
+  }
+  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1] && moved < want; ++s) {
+    if (!linked(s)) continue;
+    const int64_t g = std::min(want - moved, len(s));
+    if (g > 0) give(s, g);
+    moved += g;
   }
   return front_gives ? moved : -moved;
 }

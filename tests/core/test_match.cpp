@@ -2,6 +2,10 @@
 // balancing: the serial references.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <climits>
+#include <cstdint>
+#include <cstdlib>
 #include <random>
 #include <string>
 
@@ -137,6 +141,122 @@ TEST(Balance, InvariantsHoldAndLoadsImprove) {
       expect_balanced_invariants(m, b, v, split, name(va, pes));
       EXPECT_LE(b.max_load(), m.max_load()) << name(va, pes);
     }
+  }
+}
+
+TEST(Balance, OneRoundGivesEqualSharesOverTheLinkedRays) {
+  // Two PEs stacked along the viewing direction (the axis view looks down
+  // z, the split cuts z): every ray crosses their face, so each of the
+  // giver's n segments is linked. One sweep is one round; the heavier PE
+  // gives W = floor(|L0 - L1| / 2) samples, its ray r (in (j, i) order)
+  // floor((r + 1) W / n) - floor(r W / n) of them (match.hpp), every ray
+  // long enough here. Voxel sampling of 4 x 4 x 13: W = 8 < n = 16 (shares
+  // 0 or 1); pixel sampling to 52 x 52 (4 samples per voxel along each
+  // axis): W >= n (shares q or q + 1).
+  struct Case {
+    Sampling sampling;
+    int size;
+  };
+  for (const Case c : {Case{Sampling::voxel, 4}, Case{Sampling::pixel, 52}}) {
+    const Dims3 dims{4, 4, 13};
+    const ViewGeometry v = geometry(dims, {0, 0, 0}, c.size, c.size, c.sampling);
+    const KdSplit split = kd_split(dims, 2);
+    ASSERT_EQ(split.splits()[2], 2);
+    const Matching m = match_reference(v, split);
+    const std::vector<int32_t> link = balance_links(m, v, split);
+    const int64_t giver = m.loads[0] > m.loads[1] ? 0 : 1;
+    const int64_t n = m.seg_offset[giver + 1] - m.seg_offset[giver];
+    const int64_t W = std::abs(m.loads[0] - m.loads[1]) / 2;
+    ASSERT_GT(W, 0) << c.size;
+    ASSERT_EQ(W < n, c.sampling == Sampling::voxel) << W << " " << n;
+    const Matching b = balance_reference(m, v, split, 1);
+    EXPECT_EQ(b.loads[giver], m.loads[giver] - W) << c.size;
+    EXPECT_EQ(b.loads[1 - giver], m.loads[1 - giver] + W) << c.size;
+    for (int64_t r = 0; r < n; ++r) {
+      const int64_t s = m.seg_offset[giver] + r;
+      ASSERT_GE(link[s], 0) << "size " << c.size << " ray " << r;
+      const int64_t share = (r + 1) * W / n - r * W / n;
+      const int64_t got =
+          (m.segments[s].k1 - m.segments[s].k0) - (b.segments[s].k1 - b.segments[s].k0);
+      EXPECT_EQ(got, share) << "size " << c.size << " ray " << r;
+    }
+  }
+}
+
+TEST(Balance, EqualSharesNotProportionalToTheRaysLengths) {
+  // An oblique view: the giver's 16 linked rays hold 2 to 6 samples, W = 28
+  // (shares of 1 or 2, none longer than its ray), and each ray gives its
+  // equal share all the same
+  // (shares proportional to the lengths gave the long rays more, until
+  // 2026-12-04).
+  const Dims3 dims{17, 8, 8};
+  const ViewGeometry v = geometry(dims, {0, 15, 0}, 24, 24);
+  const KdSplit split = kd_split(dims, 2);
+  ASSERT_EQ(split.splits()[0], 2);
+  const Matching m = match_reference(v, split);
+  const std::vector<int32_t> link = balance_links(m, v, split);
+  const int64_t F = v.grid.step[0][2] > 0 ? 0 : 1;
+  const int64_t W = std::abs(m.loads[0] - m.loads[1]) / 2;
+  const int64_t giver = m.loads[0] > m.loads[1] ? 0 : 1;
+  std::vector<int64_t> seg;  // the giver's linked segments, in F's order
+  for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
+    if (link[s] >= 0) seg.push_back(giver == F ? s : link[s] >> 2);
+  const int64_t n = static_cast<int64_t>(seg.size());
+  ASSERT_GT(n, 0);
+  ASSERT_GT(W, 0);
+  int64_t shortest = INT64_MAX, longest = 0;
+  for (const int64_t s : seg) {
+    shortest = std::min<int64_t>(shortest, m.segments[s].k1 - m.segments[s].k0);
+    longest = std::max<int64_t>(longest, m.segments[s].k1 - m.segments[s].k0);
+  }
+  ASSERT_GE(shortest, (W + n - 1) / n) << "a ray shorter than a share";
+  ASSERT_GE(longest, 2 * shortest) << "the lengths differ too little";
+  const Matching b = balance_reference(m, v, split, 1);
+  for (int64_t r = 0; r < n; ++r) {
+    const int64_t s = seg[static_cast<std::size_t>(r)];
+    const int64_t share = (r + 1) * W / n - r * W / n;
+    const int64_t got =
+        (m.segments[s].k1 - m.segments[s].k0) - (b.segments[s].k1 - b.segments[s].k0);
+    EXPECT_EQ(got, share) << "ray " << r << " of " << n << ", W " << W;
+  }
+}
+
+TEST(Balance, ShortRaysGiveWhatTheyHoldAndTheRestMakeUpTheShortfall) {
+  // Sweeps until no pair moves: the loads of face neighbours then differ by
+  // at most 1, or the heavier one's linked rays are empty (it gave all it
+  // could). Oblique views on a small volume, where many rays are short.
+  const Dims3 dims{9, 7, 11};
+  for (const ViewAngles va : {ViewAngles{0, 40, 0}, ViewAngles{25, 60, 10}}) {
+    const ViewGeometry v = geometry(dims, va, 16, 16);
+    const KdSplit split = kd_split(dims, 8);
+    const Matching m = match_reference(v, split);
+    const Matching b = balance_reference(m, v, split, 64);
+    const Matching c = balance_reference(m, v, split, 65);
+    EXPECT_EQ(c.loads, b.loads) << name(va, 8) << ": 64 sweeps did not settle";
+    const std::vector<int32_t> link = balance_links(m, v, split);
+    for (int64_t p = 0; p < 8; ++p)
+      for (int a = 0; a < 3; ++a) {
+        const int64_t dir = v.grid.step[a][2];
+        Dims3 cp = split.cell_index(p);
+        if (dir == 0 || cp[a] + 1 >= split.splits()[a]) continue;
+        cp[a] += 1;
+        const int64_t q = split.pe_of_cell(cp);
+        const int64_t F = dir > 0 ? p : q, B = dir > 0 ? q : p;
+        // what each side holds on the rays F's list links across this face
+        int64_t holdF = 0, holdB = 0;
+        for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s)
+          if (link[s] >= 0 && (link[s] & 3) == a) {
+            holdF += b.segments[s].k1 - b.segments[s].k0;
+            holdB += b.segments[link[s] >> 2].k1 - b.segments[link[s] >> 2].k0;
+          }
+        const int64_t d = b.loads[F] - b.loads[B];
+        if (d >= 2) {
+          EXPECT_EQ(holdF, 0) << name(va, 8) << " F " << F << " B " << B;
+        }
+        if (d <= -2) {
+          EXPECT_EQ(holdB, 0) << name(va, 8) << " F " << F << " B " << B;
+        }
+      }
   }
 }
 

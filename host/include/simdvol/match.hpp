@@ -25,14 +25,18 @@
 // matching. The schedule is a fixed number of sweeps; each sweep is 6 rounds
 // (axis x, y, z) x (parity 0, 1); in round (a, par) the pairs are the face
 // neighbours along a with cell indices (2m + par, 2m + 1 + par). A pair with
-// loads L_F, L_B and d = L_F - L_B transfers t = floor(|d| / 2) samples from
-// the heavier to the lighter PE (capped by what the giver holds on the
-// linked rays, cap = sum of len_r), spread over the linked rays in F's
-// segment order by cumulative shares: with C_r = len summed over the linked
-// rays up to and including r, ray r gives floor(t' C_r / cap) -
-// floor(t' C_{r-1} / cap) samples (t' = min(t, cap); each share lies in
-// [0, len_r] and they sum to t'). Integer only: the device result is
-// identical.
+// loads L_F, L_B and d = L_F - L_B transfers W = floor(|d| / 2) samples from
+// the heavier to the lighter PE, capped by what the giver holds on the
+// linked rays, in equal shares: with n linked rays in F's segment order,
+// ray r gives min(len_r, floor((r + 1) W / n) - floor(r W / n)) (the shares
+// sum to W and differ by at most 1); where some rays held less than their
+// share, the shortfall is then taken greedily in the same order, each ray
+// giving what it still holds, until W is reached or the rays are empty.
+// (Until 2026-12-04 the shares were proportional to the rays' lengths,
+// floor(W' C_r / cap) - floor(W' C_{r-1} / cap): the same amounts moved,
+// W' = min(W, cap), but two walks over the links per pair; the utilisation
+// after 8 sweeps is the same to 3 decimals, docs/PERFORMANCE.md.) Integer
+// only: the device result is identical.
 #pragma once
 
 #include <array>
