@@ -697,3 +697,43 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_act
       for (int x = b0[0]; x <= b1[0]; ++x) r |= reach[(z * bricks.y + y) * bricks.x + x];
   active[p] = r != 0;
 }
+
+/* ---- simdvol_zero_uncovered: the footprint pixels no segment covers ----
+ * The direct local kernels (local.cl) write every segment's pixel, an empty
+ * segment's too, so before them only the pixels of a footprint without a
+ * segment need zeros (simdvol_zero4 zeroes them all). Per work-item the 8
+ * candidate rows g = 8 w ... 8 w + 7 of one PE (as simdvol_match_rows):
+ * rowsum[g] = (count, load, first i, last i) of the row's segments; a row
+ * whose segments are contiguous (count = last - first + 1) gets zeros left
+ * of first and right of last within the footprint rects[p], any other row
+ * (none, or holes) zeros throughout. rect_off[p]: the footprint's first
+ * pixel (local.cl). Balancing moves no segment's (i, j), so the rows of the
+ * matching are those of the balanced segments. At 0, 30 and 45 deg about y
+ * every footprint pixel of the 256^3 phantom has a segment; at (20, 35, 10)
+ * 30 % have none. */
+__kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_zero_uncovered(
+    global const sv_rect* cand, global const sv_rect* rects, global const int4* rowsum, int pes,
+    int H, global const int* rect_off, global float4* foot) {
+  const int g0 = (int)get_global_id(0) * 8;
+  const int p = g0 / H, row0 = g0 - p * H;
+  if (p >= pes) return;
+  const sv_rect r = rects[p];
+  if (r.w <= 0 || r.h <= 0) return;
+  const int j0 = cand[p].j0 + row0;
+  if (j0 + 7 < r.j0 || j0 >= r.j0 + r.h) return;
+  global float4* base = foot + rect_off[p];
+  for (int l = 0; l < 8; ++l) {
+    const int j = j0 + l;
+    if (j < r.j0 || j >= r.j0 + r.h) continue;
+    const int4 s = rowsum[g0 + l];
+    global float4* row = base + (size_t)(j - r.j0) * r.w;
+#ifndef SV_ZERO_ALL
+    const int whole = s.x <= 0 || s.x != s.w - s.z + 1;
+#else
+    const int whole = 1; /* every pixel, for comparison */
+#endif
+    const int a = whole ? r.w : s.z - r.i0, b = whole ? r.w : s.w + 1 - r.i0;
+    for (int x = 0; x < a; ++x) row[x] = (float4)(0.0f);
+    for (int x = b; x < r.w; ++x) row[x] = (float4)(0.0f);
+  }
+}

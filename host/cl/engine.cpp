@@ -322,7 +322,8 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   bool via_swap = true;  // direct and per sub-ray mc: footprints -> swap -> display
   if (mode == CompositeMode::direct) {
     fp.emplace(make_footprints(device, segs.host_rects));
-    e_zero = enqueue_zero_footprints(device, *fp);
+    // The fused kernel writes every segment's pixel: only the others zeroed.
+    e_zero = enqueue_zero_uncovered(device, dm, *fp);
     e_local =
         enqueue_resample_local(device, segs, tables, *S.rgba, opt.order, *fp, LocalKernel::vector8,
                                occupancy ? &*occupancy : nullptr, lanes ? &*lanes : nullptr);

@@ -1,6 +1,8 @@
 // The match and balance stages on the device (see match_cl.hpp).
 #include "simdvol/match_cl.hpp"
 
+#include "simdvol/local_cl.hpp"
+
 #include <algorithm>
 #include <array>
 #include <climits>
@@ -270,6 +272,17 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
 }
 
 }  // namespace
+
+cl::Event enqueue_zero_uncovered(Device& device, const DeviceMatching& m, DeviceFootprints& fp) {
+  if (static_cast<int64_t>(fp.rect_offset.size()) != m.pes + 1)
+    throw ArgumentError("footprints", "made for another PE count than the matching");
+  const std::string name = "simdvol_zero_uncovered";
+  cl::Kernel k = device.kernel("match", name, match_defines());
+  set_args(k, name, m.candidates, m.rects, m.rowsum, static_cast<cl_int>(m.pes),
+           static_cast<cl_int>(m.rows), fp.offsets, fp.pixels);
+  const std::size_t items = static_cast<std::size_t>(std::max<int64_t>(m.pes * m.rows / 8, 1));
+  return device.run(k, name, cl::NDRange(items), cl::NDRange(kWgs));  // (run rounds up)
+}
 
 bool balance_bounds16(int64_t depth) {
   return depth <= 32767;

@@ -953,6 +953,79 @@ TEST(LocalCl, DeferredBalanceUnpackGivesTheSameBits) {
   EXPECT_GT(coloured, 9);  // and the footprints are not all empty
 }
 
+// Zeroing only the footprint pixels without a segment (simdvol_zero_uncovered)
+// before the fused kernel gives the footprints of zeroing them all, bit for
+// bit, from footprints full of NaN; without it the NaN stay (the test can
+// fail), in the cases with uncovered pixels: oblique views, rows with holes
+// (8,192 PEs: cells of 2-3 voxels), the PE mask of empty-space skipping.
+TEST(LocalCl, ZeroUncoveredGivesTheSameFootprints) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Dims3 dims{41, 35, 29};
+  const Volume vol(dims, VoxelType::f32);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  int uncovered_cases = 0, hole_rows = 0, masked = 0;
+  for (int64_t pes : {int64_t(1), int64_t(64), int64_t(8192)}) {
+    const std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes + 7));
+    const VoxelLayout L4 = make_voxel_layout(make_cell_layout(dims, pes, 1), true);
+    VoxelBuffer vb4(dev, L4);
+    vb4.write(dev, voxels_to_cells(v, L4));
+    const KdSplit split = kd_split(dims, pes);
+    for (const ViewAngles& a : {ViewAngles{0, 0, 0}, ViewAngles{0, 45, 0}, ViewAngles{20, 35, 10},
+                                ViewAngles{-63, 118, 27}})
+      for (const bool mask : {false, true}) {
+        SCOPED_TRACE("P " + std::to_string(pes) + " view " + std::to_string(a.theta) + "," +
+                     std::to_string(a.phi) + "," + std::to_string(a.varphi) +
+                     (mask ? " masked" : ""));
+        const ViewGeometry view = make_view(vol, a, 48, 40, Sampling::voxel);
+        const DeviceOccupancy occ = enqueue_occupancy(dev, vb4, 1);
+        DeviceMatching dm =
+            mask ? enqueue_match(dev, view, split, BrickReach{&occ.reach, occ.bricks})
+                 : enqueue_match(dev, view, split);
+        enqueue_balance(dev, dm, view, split, kBalanceSweeps, BalanceBounds::automatic,
+                        BalanceUnpack::deferred);
+        const LocalSegments segs = device_segments(dev, dm);
+        const Matching m = dm.read(dev);
+        if (mask) masked += std::count(m.active.begin(), m.active.end(), 0) > 0;
+        int64_t area = 0;
+        for (const sv_rect& r : m.rects) area += int64_t(r.w) * r.h;
+        const bool uncovered = area > static_cast<int64_t>(m.segments.size());
+        uncovered_cases += uncovered;
+        for (int64_t p = 0; p < m.pes(); ++p) {  // rows whose segments have a gap
+          for (int64_t s = m.seg_offset[p]; s + 1 < m.seg_offset[p + 1]; ++s)
+            hole_rows +=
+                m.segments[s + 1].j == m.segments[s].j && m.segments[s + 1].i > m.segments[s].i + 1;
+        }
+        const ResampleTables t4 = make_resample_tables(dev, L4, view);
+        const SegmentOrder lanes = enqueue_segment_order(dev, segs);
+        DeviceFootprints all = make_footprints(dev, segs.host_rects);
+        DeviceFootprints some = make_footprints(dev, segs.host_rects);
+        DeviceFootprints none = make_footprints(dev, segs.host_rects);
+        const std::size_t bytes = static_cast<std::size_t>(std::max<int64_t>(all.size(), 1)) * 16;
+        for (DeviceFootprints* f : {&all, &some, &none})
+          cl_check(dev.queue().enqueueFillBuffer(f->pixels, nan, 0, bytes), "fill");
+        enqueue_zero_footprints(dev, all);
+        enqueue_zero_uncovered(dev, dm, some);
+        for (DeviceFootprints* f : {&all, &some, &none})
+          enqueue_resample_local(dev, segs, t4, vb4, 1, *f, LocalKernel::vector8, &occ, &lanes);
+        const Footprints want = read_footprints(dev, all);
+        EXPECT_TRUE(same_bits(read_footprints(dev, some), want));
+        if (uncovered) {
+          EXPECT_FALSE(same_bits(read_footprints(dev, none), want));
+        }
+      }
+  }
+  EXPECT_GT(uncovered_cases, 6);
+  EXPECT_GT(hole_rows, 0);
+  EXPECT_GT(masked, 0);
+  // footprints of another PE count
+  const ViewGeometry view = make_view(vol, {}, 16, 16, Sampling::voxel);
+  DeviceMatching dm = enqueue_match(dev, view, kd_split(dims, 8));
+  DeviceFootprints f4 = make_footprints(dev, std::vector<sv_rect>(4));
+  EXPECT_THROW(enqueue_zero_uncovered(dev, dm, f4), ArgumentError);
+}
+
 // The engine with and without skip_empty, skip_pes and order_lanes: the
 // same image, bit for bit, where no balancing regroups the samples into
 // other sub-rays (0 sweeps, every PE matched, or whole-ray adaptive

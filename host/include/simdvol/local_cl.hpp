@@ -124,6 +124,13 @@ struct DeviceFootprints {
 DeviceFootprints make_footprints(Device& device, const std::vector<sv_rect>& rects);
 /// Zero-fills the footprints.
 cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp);
+/// Zero-fills only the footprint pixels that no segment of `m` covers
+/// (match.cl: simdvol_zero_uncovered), which is enough before the direct
+/// local kernels (enqueue_resample_local, enqueue_local): they write every
+/// segment's pixel, an empty segment's too. `fp` must be made from m's
+/// rectangles (device_segments(device, m).host_rects); balancing moves no
+/// segment's pixel. ArgumentError if fp holds another PE count.
+cl::Event enqueue_zero_uncovered(Device& device, const DeviceMatching& m, DeviceFootprints& fp);
 /// Reads the footprints back (blocking) as local.hpp's Footprints.
 Footprints read_footprints(Device& device, const DeviceFootprints& fp);
 
