@@ -4,7 +4,7 @@
 // serial reference doing the same work in the same run.
 //
 //   simdvol-bench-frame [--size N] [--pes P] [--order K] [--runs R]
-//                       [--views 0,30,45] [--no-reference]
+//                       [--views 0,30,45] [--no-reference] [--kernels]
 //
 // The N^3 Shepp-Logan CT phantom (shepp_logan(N, 4), default 256), preset
 // "ct", shaded and classified on the device (fused launch) once; per view
@@ -15,7 +15,8 @@
 // stage, interleaved, median device time. Also reported: samples, segments,
 // the gather loads ((K+1)^3 voxels x 4 channels per sample) against the
 // ~9 G loads/s floor of POCL.md, the bytes the fused kernel must touch, and
-// the X-Net reads of the reference (remote stencil voxels).
+// the X-Net reads of the reference (remote stencil voxels). --kernels also
+// prints, per view, each kernel of the frame path's sum' (median ms).
 //
 //   simdvol-bench-frame --whole [--pes P] [--order K] [--runs R] [--brain PATH]
 //
@@ -73,7 +74,7 @@ double ev_ms(const cl::Event& e) {
 constexpr const char* kProgram = "simdvol-bench-frame";
 constexpr const char* kUsage =
     "usage: simdvol-bench-frame [--size N] [--pes P] [--order K] [--runs R] [--views a,b,c]\n"
-    "                           [--no-reference]\n"
+    "                           [--no-reference] [--kernels]\n"
     "       simdvol-bench-frame --whole [--pes P] [--order K] [--runs R] [--brain PATH]\n"
     "  N: 8..1024 (the N^3 phantom to N x N); P: a power of two in 1..1048576; K: 0..3;\n"
     "  R: 1..1000; views: angles phi in -360..360 (degrees)\n";
@@ -82,7 +83,7 @@ struct Options {
   bool whole = false;
   int size = 256, runs = 5, order = 1;
   int64_t pes = 8192;
-  bool reference = true;
+  bool reference = true, kernels = false;
   std::vector<double> views{0, 30, 45};
   std::string brain = "data/brainsmall.den";
 };
@@ -106,12 +107,15 @@ Options parse_args(int argc, char** argv) {
     } else if (args.is("--brain")) {
       if (!o.whole) throw ArgumentError(args.option(), "only used with --whole");
       o.brain = args.value();
-    } else if (args.is("--size") || args.is("--views") || args.is("--no-reference")) {
+    } else if (args.is("--size") || args.is("--views") || args.is("--no-reference") ||
+               args.is("--kernels")) {
       if (o.whole) throw ArgumentError(args.option(), "not used with --whole");
       if (args.is("--size"))
         o.size = static_cast<int>(args.integer(8, 1024));
       else if (args.is("--views"))
         o.views = args.number_list(-360, 360);
+      else if (args.is("--kernels"))
+        o.kernels = true;
       else
         o.reference = false;
     } else {
@@ -246,6 +250,7 @@ int main(int argc, char** argv) try {
       "fused", "fused1", "occ", "skip", "ordered", "ordered4", "ref m+b", "ref r+l", "ref/dev",
       "Gld/s", "xnet rd", "xnet max", "occ'", "active", "match'", "balance'", "rsloc'", "sum",
       "sum'");
+  std::string kernel_lines;  // --kernels, printed after the table
   for (const double phi : views) {
     const ViewAngles angles{0.0, phi, 0.0};
     const ViewGeometry view = make_view(vol, angles, size, size, Sampling::voxel);
@@ -374,6 +379,7 @@ int main(int argc, char** argv) try {
     // kernel without marking runs just before it, each run) + the zero fill
     // and the reach.
     std::vector<double> t_match2, t_bal2, t_rl2, t_occ2;
+    std::vector<std::pair<std::string, std::vector<double>>> kernel_ms;  // --kernels
     double active = 0;
     for (int r = 0; r <= runs; ++r) {
       Device::ReuseScope reuse(device);  // as above
@@ -390,7 +396,7 @@ int main(int argc, char** argv) try {
       const LocalSegments ls = device_segments(device, dm);
       const SegmentOrder lanes = enqueue_segment_order(device, ls);
       DeviceFootprints fp2 = make_footprints(device, ls.host_rects);
-      const cl::Event ez = enqueue_zero_footprints(device, fp2);
+      const cl::Event ez = enqueue_zero_uncovered(device, dm, fp2);
       const cl::Event eo = enqueue_resample_local(device, ls, tables4, rgba4, order, fp2,
                                                   LocalKernel::vector8, &occ, &lanes);
       device.finish();
@@ -408,7 +414,34 @@ int main(int argc, char** argv) try {
       for (const cl::Event& e : occ.events) occ_ms += ev_ms(e);
       t_match2.push_back(static_cast<double>(events_ns(dm.match_events)) * 1e-6);
       t_bal2.push_back(static_cast<double>(events_ns(dm.balance_events)) * 1e-6);
-      const double occ2 = std::max(0.0, ev_ms(e_mark) - ev_ms(e_plain)) + occ_ms;
+      const double mark = std::max(0.0, ev_ms(e_mark) - ev_ms(e_plain));
+      if (o.kernels) {
+        // each kernel's time in this run (a name's launches summed)
+        std::vector<std::pair<std::string, double>> run;
+        const auto add = [&run](const std::string& name, double ms) {
+          for (auto& [n, t] : run)
+            if (n == name) {
+              t += ms;
+              return;
+            }
+          run.emplace_back(name, ms);
+        };
+        add("marks", mark);
+        add("occupancy fill", ev_ms(occ.events.at(0)));
+        add("occupancy_reach", ev_ms(occ.events.at(1)));
+        for (const auto* evs : {&dm.match_events, &dm.balance_events})
+          for (const StageEvent& se : *evs) add(se.name, ev_ms(se.event));
+        add("segment_order", ev_ms(lanes.event));
+        add("zero_uncovered", ev_ms(ez));
+        add("resample_local", ev_ms(eo));
+        for (const auto& [n, t] : run) {
+          auto it = std::find_if(kernel_ms.begin(), kernel_ms.end(),
+                                 [&n = n](const auto& k) { return k.first == n; });
+          if (it == kernel_ms.end()) it = kernel_ms.insert(kernel_ms.end(), {n, {}});
+          it->second.push_back(t);
+        }
+      }
+      const double occ2 = mark + occ_ms;
       t_occ2.push_back(occ2);
       t_rl2.push_back(occ2 + ev_ms(lanes.event) + ev_ms(ez) + ev_ms(eo));
     }
@@ -439,6 +472,21 @@ int main(int argc, char** argv) try {
         median(t_occ2), active, median(t_match2), median(t_bal2), median(t_rl2),
         median(t_match) + median(t_bal) + median(t_occ2) + median(t_ord4) + median(t_zero),
         median(t_match2) + median(t_bal2) + median(t_rl2));
+    if (o.kernels) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "\nview %.0f, sum' by kernel (median ms over the runs):", phi);
+      kernel_lines += buf;
+      double total = 0;
+      for (std::size_t k = 0; k < kernel_ms.size(); ++k) {
+        const double t = median(kernel_ms[k].second);
+        std::snprintf(buf, sizeof buf, "%s %s %.2f", k == 0 ? "" : ",", kernel_ms[k].first.c_str(),
+                      t);
+        kernel_lines += buf;
+        total += t;
+      }
+      std::snprintf(buf, sizeof buf, " (sum of the medians %.1f)", total);
+      kernel_lines += buf;
+    }
   }
   std::printf(
       "\nms from profiling events; match/balance: device stages (enqueue_match, enqueue_balance, "
@@ -461,7 +509,13 @@ int main(int argc, char** argv) try {
       "active = the fraction of PEs whose cell has something in reach; match', balance' = their "
       "matching and balancing (its unpack deferred, as in the engine's direct frames: the order "
       "and the fused kernel read the balanced bounds; `balance` unpacks); rsloc' = occ' + order + "
-      "zero + the fused kernel on their segments; sum' = the three.\n");
+      "the zero fill of the footprint pixels without a segment (simdvol_zero_uncovered) + the "
+      "fused kernel on their segments; sum' = the three.\n");
+  if (o.kernels)
+    std::printf(
+        "%s\n(marks: what marking adds to the fused shade + classify; balance_round: "
+        "all the rounds)\n",
+        kernel_lines.c_str());
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "%s: %s\n", kProgram, e.what());

@@ -41,6 +41,7 @@ expect_bad(FRAME --runs --runs 0)
 expect_bad(FRAME --size --size 12abc)
 expect_bad(FRAME --views --views 0,,30)
 expect_bad(FRAME --pes --whole --pes 1000)
+expect_bad(FRAME --kernels --whole --kernels)
 expect_bad(FRAME --frob --frob)
 
 expect_bad(MATCH --repeat --repeat -1)
