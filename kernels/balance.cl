@@ -10,8 +10,8 @@
  * the two indices within p's and the neighbour's segments (sv_bal_link).
  * A round's pair (F, B) gives its samples in equal shares over F's list
  * along the round's axis (match.hpp): one walk over the entries whose share
- * is not 0, and a second, greedy one only where some ray held less than its
- * share.
+ * is not 0 (the first ones), and a second, greedy one only where some ray
+ * held less than its share.
  *
  * The rounds read and move the segments' bounds (k0, k1) in `kk`, 4 (or 8)
  * bytes per segment, not the 16-byte segments: a round touches segments all
@@ -118,19 +118,26 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
 
 /* ---- the shares ----
  * W = the samples the pair moves, n = e1 - e0 the linked rays (F's list
- * along the axis). Entry r (0-based) gives min(len_r, share_r), share_r =
- * floor((r + 1) W / n) - floor(r W / n), in F's segment order (the
- * reference's `transfer`, match.cpp):
- * - W >= n: every entry, share_r = W / n plus 1 where the running remainder
- *   of r (W mod n) passes n (no division per entry);
- * - W < n: the shares are 0 or 1, and the entries with 1 are r_k = floor((k
- *   n - 1) / W), k = 1 ... W, stepped in the same way: the walk touches W
- *   entries, not n.
+ * along the axis), entry r (0-based, in F's segment order) gives min(len_r,
+ * share_r) (the reference's `transfer`, match.cpp):
+ * - W >= n: share_r = floor((r + 1) W / n) - floor(r W / n), W / n plus 1
+ *   where the running remainder of r (W mod n) passes n (no division per
+ *   entry): the extra samples spread evenly over the list;
+ * - W < n: the first W entries, one sample each: a pair that moves a few
+ *   samples reads a few consecutive list entries and bounds.
  * Then, where the moved samples fall short of W (a ray held less than its
  * share), the entries from the first on give what they still hold until W
- * is reached. Until 2026-12-04 the shares were proportional to the lengths
- * (cumulative shares of the cap): a first walk over every entry for the cap,
- * then a second for the shares (docs/PERFORMANCE.md, "The equal shares").
+ * is reached.
+ * simdvol-bench-options --view 0,45,0, 12 frames, three alternations:
+ * balance 3.31 / 3.27 / 3.33 ms with the shares spread evenly for every W
+ * (W scattered entries where W < n), 3.00 / 3.02 / 2.89 as here; in three
+ * alternations before, 3.44 / 3.37 / 3.29 spread evenly against 3.18 /
+ * 3.17 / 3.26 with the first W mod n entries given the extra sample for
+ * every W. The utilisation the same to 0.001 for all three (a 2-core Intel
+ * Xeon, 2026-12-04). Until 2026-12-04 the shares were proportional to the
+ * lengths (cumulative shares of the cap): a first walk over every entry for
+ * the cap, then a second for the shares (docs/PERFORMANCE.md, "The equal
+ * shares").
  * SV_BAL_GIVE: entry E gives up to SHARE samples (a macro over the round's
  * locals llist, kk, sF, sB, front_gives, moved). */
 #define SV_BAL_GIVE(BT, B1, NL, E, SHARE)                 \
@@ -147,16 +154,8 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
   }
 #define SV_BAL_SHARES(BT, B1, NL)                 \
   if (want < n) {                                 \
-    const int dq = n / want, dr = n % want;       \
-    int r = (n - 1) / want, rem = (n - 1) % want; \
-    for (int k = 0; k < want; ++k) {              \
-      SV_BAL_GIVE(BT, B1, NL, e0 + r, 1)          \
-      r += dq;                                    \
-      rem += dr;                                  \
-      if (rem >= want) {                          \
-        ++r;                                      \
-        rem -= want;                              \
-      }                                           \
+    for (int e = e0; e < e0 + want; ++e) {        \
+      SV_BAL_GIVE(BT, B1, NL, e, 1)               \
     }                                             \
   } else {                                        \
     const int q = want / n, dr = want % n;        \

@@ -251,9 +251,10 @@ namespace {
 // capped by what the giver holds on the linked rays. Returns the number
 // moved (same sign as t). Equal shares (see match.hpp): with n linked rays
 // and W = |t|, linked ray r (0-based, in F's segment order) gives
-// min(len_r, floor((r + 1) W / n) - floor(r W / n)); the shortfall, where
-// some ray held less than its share, is then taken greedily in the same
-// order (each ray gives what it still holds, until W is reached).
+// min(len_r, share_r): share_r = floor((r + 1) W / n) - floor(r W / n) for
+// W >= n, 1 for r < W (else 0) for W < n; the shortfall, where some ray
+// held less than its share, is then taken greedily in the same order (each
+// ray gives what it still holds, until W is reached).
 int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a, int64_t t) {
   if (t == 0) return 0;
   const bool front_gives = t > 0;
@@ -274,7 +275,7 @@ int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a
   int64_t moved = 0, r = 0;
   for (int64_t s = m.seg_offset[F]; s < m.seg_offset[F + 1]; ++s) {
     if (!linked(s)) continue;
-    const int64_t share = (r + 1) * want / n - r * want / n;
+    const int64_t share = want >= n ? (r + 1) * want / n - r * want / n : (r < want ? 1 : 0);
     ++r;
     const int64_t g = std::min(share, len(s));
     if (g > 0) give(s, g);

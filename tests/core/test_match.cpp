@@ -149,10 +149,11 @@ TEST(Balance, OneRoundGivesEqualSharesOverTheLinkedRays) {
   // z, the split cuts z): every ray crosses their face, so each of the
   // giver's n segments is linked. One sweep is one round; the heavier PE
   // gives W = floor(|L0 - L1| / 2) samples, its ray r (in (j, i) order)
-  // floor((r + 1) W / n) - floor(r W / n) of them (match.hpp), every ray
-  // long enough here. Voxel sampling of 4 x 4 x 13: W = 8 < n = 16 (shares
-  // 0 or 1); pixel sampling to 52 x 52 (4 samples per voxel along each
-  // axis): W >= n (shares q or q + 1).
+  // floor((r + 1) W / n) - floor(r W / n) of them where W >= n, and 1 if r
+  // < W where W < n (match.hpp), every ray long enough here. Voxel sampling
+  // of 4 x 4 x 13: W = 8 < n = 16 (the first 8 rays give 1, the others 0);
+  // pixel sampling to 52 x 52 (4 samples per voxel along each axis): W >= n
+  // (shares q or q + 1, the larger spread evenly).
   struct Case {
     Sampling sampling;
     int size;
@@ -175,7 +176,7 @@ TEST(Balance, OneRoundGivesEqualSharesOverTheLinkedRays) {
     for (int64_t r = 0; r < n; ++r) {
       const int64_t s = m.seg_offset[giver] + r;
       ASSERT_GE(link[s], 0) << "size " << c.size << " ray " << r;
-      const int64_t share = (r + 1) * W / n - r * W / n;
+      const int64_t share = W >= n ? (r + 1) * W / n - r * W / n : (r < W ? 1 : 0);
       const int64_t got =
           (m.segments[s].k1 - m.segments[s].k0) - (b.segments[s].k1 - b.segments[s].k0);
       EXPECT_EQ(got, share) << "size " << c.size << " ray " << r;
@@ -203,7 +204,7 @@ TEST(Balance, EqualSharesNotProportionalToTheRaysLengths) {
     if (link[s] >= 0) seg.push_back(giver == F ? s : link[s] >> 2);
   const int64_t n = static_cast<int64_t>(seg.size());
   ASSERT_GT(n, 0);
-  ASSERT_GT(W, 0);
+  ASSERT_GE(W, n);
   int64_t shortest = INT64_MAX, longest = 0;
   for (const int64_t s : seg) {
     shortest = std::min<int64_t>(shortest, m.segments[s].k1 - m.segments[s].k0);
@@ -214,7 +215,7 @@ TEST(Balance, EqualSharesNotProportionalToTheRaysLengths) {
   const Matching b = balance_reference(m, v, split, 1);
   for (int64_t r = 0; r < n; ++r) {
     const int64_t s = seg[static_cast<std::size_t>(r)];
-    const int64_t share = (r + 1) * W / n - r * W / n;
+    const int64_t share = (r + 1) * W / n - r * W / n;  // W >= n
     const int64_t got =
         (m.segments[s].k1 - m.segments[s].k0) - (b.segments[s].k1 - b.segments[s].k0);
     EXPECT_EQ(got, share) << "ray " << r << " of " << n << ", W " << W;

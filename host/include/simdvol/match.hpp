@@ -28,10 +28,13 @@
 // loads L_F, L_B and d = L_F - L_B transfers W = floor(|d| / 2) samples from
 // the heavier to the lighter PE, capped by what the giver holds on the
 // linked rays, in equal shares: with n linked rays in F's segment order,
-// ray r gives min(len_r, floor((r + 1) W / n) - floor(r W / n)) (the shares
-// sum to W and differ by at most 1); where some rays held less than their
-// share, the shortfall is then taken greedily in the same order, each ray
-// giving what it still holds, until W is reached or the rays are empty.
+// ray r gives min(len_r, share_r), share_r = floor((r + 1) W / n) -
+// floor(r W / n) where W >= n (the shares sum to W and differ by at most 1,
+// the larger ones spread evenly), and where W < n the first W rays one
+// sample each (a pair moving a few samples touches a few consecutive
+// links); where some rays held less than their share, the shortfall is then
+// taken greedily in the same order, each ray giving what it still holds,
+// until W is reached or the rays are empty.
 // (Until 2026-12-04 the shares were proportional to the rays' lengths,
 // floor(W' C_r / cap) - floor(W' C_{r-1} / cap): the same amounts moved,
 // W' = min(W, cap), but two walks over the links per pair; the utilisation
