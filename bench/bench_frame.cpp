@@ -67,6 +67,14 @@ double median(std::vector<double> v) {
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
+// The value named `name` in a list kept in first-seen order (added if new).
+template <class V>
+V& slot(std::vector<std::pair<std::string, V>>& list, const std::string& name) {
+  for (auto& [n, v] : list)
+    if (n == name) return v;
+  return list.emplace_back(name, V{}).second;
+}
+
 double ev_ms(const cl::Event& e) {
   return static_cast<double>(event_ns(e)) * 1e-6;
 }
@@ -418,14 +426,7 @@ int main(int argc, char** argv) try {
       if (o.kernels) {
         // each kernel's time in this run (a name's launches summed)
         std::vector<std::pair<std::string, double>> run;
-        const auto add = [&run](const std::string& name, double ms) {
-          for (auto& [n, t] : run)
-            if (n == name) {
-              t += ms;
-              return;
-            }
-          run.emplace_back(name, ms);
-        };
+        const auto add = [&run](const std::string& name, double ms) { slot(run, name) += ms; };
         add("marks", mark);
         add("occupancy fill", ev_ms(occ.events.at(0)));
         add("occupancy_reach", ev_ms(occ.events.at(1)));
@@ -434,12 +435,7 @@ int main(int argc, char** argv) try {
         add("segment_order", ev_ms(lanes.event));
         add("zero_uncovered", ev_ms(ez));
         add("resample_local", ev_ms(eo));
-        for (const auto& [n, t] : run) {
-          auto it = std::find_if(kernel_ms.begin(), kernel_ms.end(),
-                                 [&n = n](const auto& k) { return k.first == n; });
-          if (it == kernel_ms.end()) it = kernel_ms.insert(kernel_ms.end(), {n, {}});
-          it->second.push_back(t);
-        }
+        for (const auto& [n, t] : run) slot(kernel_ms, n).push_back(t);
       }
       const double occ2 = mark + occ_ms;
       t_occ2.push_back(occ2);

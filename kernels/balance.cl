@@ -9,9 +9,9 @@
  * segment order: an int2, or in the _n rounds (narrow links) one uint of
  * the two indices within p's and the neighbour's segments (sv_bal_link).
  * A round's pair (F, B) gives its samples in equal shares over F's list
- * along the round's axis (match.hpp): one walk over the entries whose share
- * is not 0 (the first ones), and a second, greedy one only where some ray
- * held less than its share.
+ * along the round's axis (match.hpp, "the shares" below): one walk over the
+ * entries whose share is not 0, and a second, greedy one only where some
+ * ray held less than its share.
  *
  * The rounds read and move the segments' bounds (k0, k1) in `kk`, 4 (or 8)
  * bytes per segment, not the 16-byte segments: a round touches segments all
