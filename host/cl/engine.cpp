@@ -302,6 +302,12 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   enqueue_balance(device, dm, view, split, eo.balance_sweeps, BalanceBounds::automatic,
                   mode == CompositeMode::direct ? BalanceUnpack::deferred : BalanceUnpack::now);
   const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
+  // The swap plan's buffer mapped while the queue has nothing to run: the
+  // host writes the plan into it while the device resamples, and no copy
+  // waits between the resample and the swap (upload_swap_plan).
+  if (mode == CompositeMode::direct ||
+      (mode == CompositeMode::mc && eo.mc_scope == McScope::subray))
+    map_swap_plan(device, S.swap_plan);
   // The tables of the cells' layout, made once with them (the origin table
   // is the layout's, already on the device); the frame's view uploaded.
   if (!S.tables)

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <string>
 
@@ -49,13 +50,17 @@ cl::Kernel swap_kernel(Device& device, const std::string& name) {
 
 }  // namespace
 
-void swap_chunk_table_into(const std::vector<int64_t>& off, std::vector<cl_int2>& t) {
-  if (off.size() < 2) throw ArgumentError("offsets", "need P + 1 entries");
-  std::size_t n = 0;
+namespace {
+
+// The chunk table of the level with offsets `off`: its entry count, and the
+// entries written from e on.
+int64_t chunk_count(const std::vector<int64_t>& off) {
+  int64_t n = 0;
   for (std::size_t p = 0; p + 1 < off.size(); ++p)
-    n += static_cast<std::size_t>((off[p + 1] - off[p] + kSwapChunk - 1) / kSwapChunk);
-  t.resize(n);
-  cl_int2* e = t.data();
+    n += (off[p + 1] - off[p] + kSwapChunk - 1) / kSwapChunk;
+  return n;
+}
+void write_chunk_table(const std::vector<int64_t>& off, cl_int2* e) {
   for (std::size_t p = 0; p + 1 < off.size(); ++p)
     for (int64_t s = 0; s < off[p + 1] - off[p]; s += kSwapChunk) {
       e->s[0] = static_cast<cl_int>(p);
@@ -64,36 +69,19 @@ void swap_chunk_table_into(const std::vector<int64_t>& off, std::vector<cl_int2>
     }
 }
 
+}  // namespace
+
+void swap_chunk_table_into(const std::vector<int64_t>& off, std::vector<cl_int2>& t) {
+  if (off.size() < 2) throw ArgumentError("offsets", "need P + 1 entries");
+  t.resize(static_cast<std::size_t>(chunk_count(off)));
+  write_chunk_table(off, t.data());
+}
+
 std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& off) {
   std::vector<cl_int2> t;
   swap_chunk_table_into(off, t);
   return t;
 }
-
-namespace {
-
-// Writes v to buffer b, blocking or not: b is kept if it holds v, else
-// replaced (blocking: by a copy of v, as upload(); else by a scratch
-// buffer, then written). An empty table writes nothing (the
-// buffer holds at least one element: kernels take no null buffer).
-template <class T>
-void stage(Device& device, cl::Buffer& b, const std::vector<T>& v, bool blocking,
-           const char* what) {
-  const std::size_t bytes = std::max<std::size_t>(v.size(), 1) * sizeof(T);
-  std::size_t have = 0;
-  if (b()) have = buffer_size(b, "clGetMemObjectInfo(CL_MEM_SIZE)");
-  if (have < bytes && blocking) {
-    b = upload(device, v, what);
-    return;
-  }
-  if (have < bytes) b = device.scratch_buffer(CL_MEM_READ_ONLY, bytes, what);
-  if (v.empty()) return;
-  cl_check(device.queue().enqueueWriteBuffer(b, blocking ? CL_TRUE : CL_FALSE, 0,
-                                             v.size() * sizeof(T), v.data()),
-           "clEnqueueWriteBuffer(swap plan)");
-}
-
-}  // namespace
 
 DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan) {
   DeviceSwapPlan d;
@@ -109,29 +97,130 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
     if (plan.level_size(L) > kInt32Max)
       throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 pixels");
   const auto levels = static_cast<std::size_t>(N + 1);
-  d.offsets32.resize(levels);
-  d.chunk_tables.resize(static_cast<std::size_t>(N));
+  const auto pes = static_cast<std::size_t>(int64_t(1) << N);
+  // The chunk counts first (they size the chunk tables).
   d.chunk_count.assign(static_cast<std::size_t>(N), 0);
   for (int L = 1; L <= N; ++L) {
-    auto& t = d.chunk_tables[static_cast<std::size_t>(L - 1)];
-    swap_chunk_table_into(plan.offset[static_cast<std::size_t>(L)], t);
-    if (static_cast<int64_t>(t.size()) * kSwapChunk > kInt32Max)
+    const int64_t n = chunk_count(plan.offset[static_cast<std::size_t>(L)]);
+    if (n * kSwapChunk > kInt32Max)
       throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 work-items");
-    d.chunk_count[static_cast<std::size_t>(L - 1)] = static_cast<int64_t>(t.size());
+    d.chunk_count[static_cast<std::size_t>(L - 1)] = n;
   }
-  d.rects.resize(levels);
-  d.offsets.resize(levels);
-  d.chunks.resize(static_cast<std::size_t>(N));
-  for (std::size_t L = 0; L < levels; ++L) {
-    stage(device, d.rects[L], plan.held[L], blocking, "swap rectangles");
-    d.offsets32[L].assign(plan.offset[L].begin(), plan.offset[L].end());
-    stage(device, d.offsets[L], d.offsets32[L], blocking, "swap offsets");
-    if (L > 0) stage(device, d.chunks[L - 1], d.chunk_tables[L - 1], blocking, "swap chunk table");
+  // The regions, in the order rects[0..N], offsets[0..N], chunks[0..N-1],
+  // xpe, ype: each at least one element, at an aligned offset.
+  // (CL_DEVICE_MEM_BASE_ADDR_ALIGN is in bits; PoCL's is 1,024.)
+  cl_uint align_bits = 0;
+  cl_check(device.device().getInfo(CL_DEVICE_MEM_BASE_ADDR_ALIGN, &align_bits),
+           "clGetDeviceInfo(CL_DEVICE_MEM_BASE_ADDR_ALIGN)");
+  const std::size_t align = std::max<std::size_t>(128, align_bits / 8);
+  std::vector<std::size_t> regions;
+  regions.reserve(2 * (3 * levels + 2));
+  std::size_t at = 0;
+  auto cut = [&](std::size_t bytes) {
+    regions.push_back(at);
+    regions.push_back(bytes);
+    at = (at + bytes + align - 1) / align * align;
+  };
+  for (std::size_t L = 0; L < levels; ++L)
+    cut(std::max<std::size_t>(plan.held[L].size(), 1) * sizeof(SwapRect));
+  for (std::size_t L = 0; L < levels; ++L) cut((pes + 1) * sizeof(cl_int));
+  for (std::size_t k = 0; k + 1 < levels; ++k)
+    cut(static_cast<std::size_t>(std::max<int64_t>(d.chunk_count[k], 1)) * sizeof(cl_int2));
+  cut(std::max<std::size_t>(plan.xpe.size(), 1) * sizeof(cl_int));
+  cut(std::max<std::size_t>(plan.ype.size(), 1) * sizeof(cl_int));
+  const std::size_t total = at;
+  // The tables at their regions (the gaps are never read): straight into
+  // the mapped buffer where map_swap_plan mapped one large enough, else
+  // into the host image that one write copies.
+  const bool into_map = d.mapped != nullptr && total <= d.mapped_bytes;
+  if (d.mapped != nullptr && !into_map) unmap_swap_plan(device, d);
+  unsigned char* base = nullptr;
+  if (into_map) {
+    base = static_cast<unsigned char*>(d.mapped);
+  } else {
+    d.staging.resize(total / sizeof(cl_int));
+    base = reinterpret_cast<unsigned char*>(d.staging.data());
   }
-  d.xpe32.assign(plan.xpe.begin(), plan.xpe.end());
-  d.ype32.assign(plan.ype.begin(), plan.ype.end());
-  stage(device, d.xpe, d.xpe32, blocking, "display x table");
-  stage(device, d.ype, d.ype32, blocking, "display y table");
+  std::size_t r = 0;
+  for (std::size_t L = 0; L < levels; ++L, r += 2)
+    if (!plan.held[L].empty())
+      std::memcpy(base + regions[r], plan.held[L].data(), plan.held[L].size() * sizeof(SwapRect));
+  for (std::size_t L = 0; L < levels; ++L, r += 2) {
+    auto* o = reinterpret_cast<cl_int*>(base + regions[r]);
+    const std::vector<int64_t>& off = plan.offset[L];
+    for (std::size_t p = 0; p < off.size() && p <= pes; ++p) o[p] = static_cast<cl_int>(off[p]);
+  }
+  for (std::size_t k = 0; k + 1 < levels; ++k, r += 2)
+    write_chunk_table(plan.offset[k + 1], reinterpret_cast<cl_int2*>(base + regions[r]));
+  for (const std::vector<int64_t>* t : {&plan.xpe, &plan.ype}) {
+    auto* o = reinterpret_cast<cl_int*>(base + regions[r]);
+    for (std::size_t i = 0; i < t->size(); ++i) o[i] = static_cast<cl_int>((*t)[i]);
+    r += 2;
+  }
+  // The buffer (kept while large enough; host-allocated, so that mapping it
+  // copies nothing on a CPU device) and its regions (cut again where they
+  // moved or the buffer is new).
+  bool fresh = false;
+  if (!into_map) {
+    std::size_t have = 0;
+    if (d.packed()) have = buffer_size(d.packed, "clGetMemObjectInfo(CL_MEM_SIZE)");
+    fresh = have < total;
+    if (fresh)
+      d.packed =
+          device.scratch_buffer(CL_MEM_READ_ONLY | CL_MEM_ALLOC_HOST_PTR, total, "swap plan");
+  }
+  if (fresh || regions != d.regions) {
+    auto sub = [&](std::size_t i) {
+      cl_buffer_region reg{regions[2 * i], regions[2 * i + 1]};
+      cl_int err = CL_SUCCESS;
+      cl::Buffer b =
+          d.packed.createSubBuffer(CL_MEM_READ_ONLY, CL_BUFFER_CREATE_TYPE_REGION, &reg, &err);
+      if (err != CL_SUCCESS) throw CLError("clCreateSubBuffer(swap plan)", err);
+      return b;
+    };
+    d.rects.resize(levels);
+    d.offsets.resize(levels);
+    d.chunks.resize(levels - 1);
+    std::size_t i = 0;
+    for (std::size_t L = 0; L < levels; ++L) d.rects[L] = sub(i++);
+    for (std::size_t L = 0; L < levels; ++L) d.offsets[L] = sub(i++);
+    for (std::size_t k = 0; k + 1 < levels; ++k) d.chunks[k] = sub(i++);
+    d.xpe = sub(i++);
+    d.ype = sub(i++);
+    d.regions = std::move(regions);
+  }
+  if (into_map) {
+    cl::Event e = unmap_swap_plan(device, d);
+    if (blocking) cl_check(e.wait(), "clWaitForEvents(swap plan)");
+  } else {
+    cl_check(device.queue().enqueueWriteBuffer(d.packed, blocking ? CL_TRUE : CL_FALSE, 0, total,
+                                               d.staging.data()),
+             "clEnqueueWriteBuffer(swap plan)");
+  }
+}
+
+bool map_swap_plan(Device& device, DeviceSwapPlan& d) {
+  if (d.mapped != nullptr) return true;
+  if (!d.packed()) return false;
+  const std::size_t bytes = buffer_size(d.packed, "clGetMemObjectInfo(CL_MEM_SIZE)");
+  cl_int err = CL_SUCCESS;
+  void* p = device.queue().enqueueMapBuffer(d.packed, CL_TRUE, CL_MAP_WRITE_INVALIDATE_REGION, 0,
+                                            bytes, nullptr, nullptr, &err);
+  if (err != CL_SUCCESS) throw CLError("clEnqueueMapBuffer(swap plan)", err);
+  d.mapped = p;
+  d.mapped_bytes = bytes;
+  return true;
+}
+
+cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d) {
+  cl::Event e;
+  if (d.mapped == nullptr) return e;
+  void* p = d.mapped;
+  d.mapped = nullptr;
+  d.mapped_bytes = 0;
+  cl_check(device.queue().enqueueUnmapMemObject(d.packed, p, nullptr, &e),
+           "clEnqueueUnmapMemObject(swap plan)");
+  return e;
 }
 
 cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, const cl::Buffer& in,

@@ -257,6 +257,67 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
   EXPECT_EQ(n, 3 * 6 * 2);
 }
 
+// The engine's upload: the plan's buffer mapped while the queue is idle
+// (map_swap_plan), the tables written into it on the host, then unmapped;
+// where they do not fit, unmapped and written by a copy into a larger
+// buffer. Either way the swap and the display equal those of a plan
+// uploaded on its own, bit for bit.
+TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 d{29, 23, 17};
+  DeviceSwapPlan reused;
+  struct Case {
+    int64_t P;
+    ViewAngles va;
+    int mapped;  // map_swap_plan's answer
+    int same;  // 1: the tables fit in the mapped buffer (the buffer kept), 0: a new one, -1: either
+  };
+  const Case cases[] = {{8, {30, 45, 0}, 0, 0},   {8192, {30, 45, 0}, 1, 0},
+                        {512, {30, 45, 0}, 1, 1}, {8192, {-23.5, 71.25, 133}, 1, -1},
+                        {1, {0, 0, 0}, 1, 1},     {2048, {0, 0, 0}, 1, 1}};
+  int wrote_into_map = 0;
+  for (const Case& c : cases) {
+    SCOPED_TRACE("P " + std::to_string(c.P));
+    const ViewGeometry view = make_view(d, {1, 1, 1}, c.va, 45, 37, Sampling::voxel);
+    const KdSplit split = kd_split(d, c.P);
+    const Matching m = balance_reference(match_reference(view, split), view, split);
+    const Footprints f = footprints_reference(m, random_composites(m, unsigned(c.P)));
+    DeviceFootprints fp = make_footprints(dev, m.rects);
+    if (!f.pixels.empty())
+      cl_check(dev.queue().enqueueWriteBuffer(fp.pixels, CL_TRUE, 0, f.pixels.size() * sizeof(Rgba),
+                                              f.pixels.data()),
+               "write");
+    const SwapPlan plan = plan_swap(m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack);
+    // On its own: a fresh DeviceSwapPlan, a blocking write.
+    const DeviceSwapPlan alone = upload_swap_plan(dev, plan);
+    const DeviceSwapRun want_run = enqueue_swap(dev, alone, fp);
+    const int N = plan.stages();
+    const std::vector<Rgba> want = read_rgba(dev, want_run.last, plan.level_size(N));
+    // The engine's way.
+    const cl_mem before = reused.packed();
+    EXPECT_EQ(map_swap_plan(dev, reused), c.mapped != 0);
+    EXPECT_EQ(reused.mapped != nullptr, c.mapped != 0);
+    plan_swap_into(reused.plan, m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack);
+    upload_swap_plan(dev, reused, false);
+    EXPECT_EQ(reused.mapped, nullptr);
+    if (c.same >= 0) {
+      EXPECT_EQ(reused.packed() == before, c.same == 1);
+    }
+    wrote_into_map += c.mapped && reused.packed() == before;
+    const DeviceSwapRun run = enqueue_swap(dev, reused, fp);
+    EXPECT_TRUE(bitwise_equal(read_rgba(dev, run.last, plan.level_size(N)), want));
+    cl::Buffer im, im_alone;
+    enqueue_display(dev, reused, run.last, im);
+    enqueue_display(dev, alone, want_run.last, im_alone);
+    EXPECT_TRUE(
+        bitwise_equal(read_device_image(dev, im, view.width(), view.height()).pixels(),
+                      read_device_image(dev, im_alone, view.width(), view.height()).pixels()));
+  }
+  EXPECT_GE(wrote_into_map, 3);
+  // Unmapping a plan that is not mapped enqueues nothing.
+  EXPECT_EQ(unmap_swap_plan(dev, reused)(), nullptr);
+}
+
 // A plan whose output x stride is finer than an input's (plan_swap never
 // makes one: its strides only grow) takes the stage kernel's per-pixel
 // path; it too equals the reference bit for bit. Level k + 1 of a real plan

@@ -27,7 +27,8 @@
 
 namespace simdvol {
 
-/// A SwapPlan with its tables on the device.
+/// A SwapPlan with its tables on the device: every table a sub-buffer of
+/// one buffer (`packed`), written by one command per frame.
 struct DeviceSwapPlan {
   SwapPlan plan;
   std::vector<cl::Buffer> rects;     ///< per level: SwapRect[P] (int8)
@@ -35,21 +36,43 @@ struct DeviceSwapPlan {
   std::vector<cl::Buffer> chunks;    ///< per stage: cl_int2 per chunk
   std::vector<int64_t> chunk_count;  ///< per stage
   cl::Buffer xpe, ype;               ///< display tables (cl_int)
-  /// The host side of the tables that are not in `plan` (the offsets and
-  /// display tables as cl_int, the chunk tables): the source of the writes.
-  std::vector<std::vector<cl_int>> offsets32;
-  std::vector<std::vector<cl_int2>> chunk_tables;
-  std::vector<cl_int> xpe32, ype32;
+  /// The buffer the tables above are regions of, and its host image (the
+  /// source of the write): each table at an offset aligned to the device's
+  /// CL_DEVICE_MEM_BASE_ADDR_ALIGN, at least one element each.
+  cl::Buffer packed;
+  std::vector<cl_int> staging;
+  std::vector<std::size_t> regions;  ///< (offset, bytes) of each table, as cut last
+  void* mapped = nullptr;            ///< `packed` mapped for writing (map_swap_plan), or null
+  std::size_t mapped_bytes = 0;
 };
-/// Uploads `plan` (blocking copies of small tables). ArgumentError if a
-/// level exceeds 2^31 - 1 pixels.
+/// Uploads `plan` (a blocking write). ArgumentError if a level exceeds
+/// 2^31 - 1 pixels.
 DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan);
-/// Uploads d.plan into d's buffers, reusing them (and d's host tables)
-/// where they are large enough: a DeviceSwapPlan kept from frame to frame
-/// (the engine's) takes no fresh memory. With blocking false the writes are
-/// only enqueued: d must then stay alive and unchanged until the queue has
-/// run them (a later blocking call or finish). ArgumentError as above.
+/// Uploads d.plan into d's buffers, reusing them (and d's host image) where
+/// they are large enough: a DeviceSwapPlan kept from frame to frame (the
+/// engine's) takes no fresh memory. One write command for all the tables
+/// (each table a write of its own had cost the device about 1.4 ms per
+/// frame of the 256^3 phantom at 8,192 PEs: docs/PERFORMANCE.md). With
+/// blocking false the write is only enqueued: d must then stay alive and
+/// unchanged until the queue has run it (a later blocking call or finish).
+/// ArgumentError as above.
+///
+/// Where map_swap_plan mapped d's buffer before and the tables fit in it,
+/// they are written into the mapped memory on the host and the buffer is
+/// unmapped (enqueued; waited for if blocking): no copy on the device, which
+/// on a CPU device maps host memory as it is. Else it is unmapped and
+/// written as above.
 void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking);
+/// Maps d's buffer (kept from an earlier upload) for the next
+/// upload_swap_plan to write into: a blocking map, so call it where the
+/// queue has nothing left to run (the engine: after it read the footprint
+/// sizes, before it enqueues the resample, while the host plans the swap
+/// the device resamples). False where d has no buffer yet (the first
+/// upload writes). Nothing may use d's tables until the upload unmaps it.
+bool map_swap_plan(Device& device, DeviceSwapPlan& d);
+/// Enqueues the unmap of a mapped d (map_swap_plan); a null event where d
+/// is not mapped.
+cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d);
 
 /// Pixels per chunk of the swap stage (SV_SWAP_CHUNK in swap.cl).
 inline constexpr int64_t kSwapChunk = 16;
