@@ -687,11 +687,31 @@ cl::Event Device::run(const cl::Kernel& kernel, const std::string& what, const c
   cl::Event event;
   cl_int err = queue_.enqueueNDRangeKernel(kernel, cl::NullRange, rounded, local, nullptr, &event);
   if (err != CL_SUCCESS) throw CLError("clEnqueueNDRangeKernel(" + what + ")", err);
+  if (log_) launches_.push_back({what, event});
   return event;
+}
+
+void Device::log_launches(bool on) {
+  log_ = on;
+  launches_.clear();
+}
+
+std::vector<Device::Launch> Device::take_launches() {
+  std::vector<Launch> v;
+  v.swap(launches_);
+  return v;
 }
 
 void Device::finish() {
   cl_check(queue_.finish(), "clFinish");
+}
+
+std::array<std::uint64_t, 2> event_span_ns(const cl::Event& event) {
+  cl_ulong start = 0, end = 0;
+  if (event.getProfilingInfo(CL_PROFILING_COMMAND_START, &start) != CL_SUCCESS ||
+      event.getProfilingInfo(CL_PROFILING_COMMAND_END, &end) != CL_SUCCESS || end < start)
+    return {0, 0};
+  return {start, end};
 }
 
 std::uint64_t event_ns(const cl::Event& event) {

@@ -153,6 +153,28 @@ int64_t EngineStats::max_load() const {
   return loads.empty() ? 0 : *std::max_element(loads.begin(), loads.end());
 }
 
+void summarise_kernels(EngineTimes& t) {
+  t.kernels_ms = t.span_ms = t.longest_wait_ms = 0;
+  t.longest_wait_before.clear();
+  std::uint64_t first = 0, last = 0;
+  bool any = false;
+  for (const KernelSpan& k : t.kernels) {
+    if (k.end_ns == 0) continue;
+    t.kernels_ms += static_cast<double>(k.end_ns - k.start_ns) * 1e-6;
+    if (any && k.start_ns > last) {
+      const double wait = static_cast<double>(k.start_ns - last) * 1e-6;
+      if (wait > t.longest_wait_ms) {
+        t.longest_wait_ms = wait;
+        t.longest_wait_before = k.kernel;
+      }
+    }
+    if (!any) first = k.start_ns;
+    last = std::max(last, k.end_ns);
+    any = true;
+  }
+  if (any) t.span_ms = static_cast<double>(last - first) * 1e-6;
+}
+
 Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTimes* times,
                            EngineStats* stats) {
   State& S = *s_;
@@ -183,6 +205,8 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   const sv_classify_params cp = classify_params(opt.classifier, values, view.step);
   const CompositeMode mode = opt.composite.mode;
 
+  // Every launch logged for the frame's timeline (EngineTimes::kernels).
+  device.log_launches(times != nullptr);
   const auto t0 = std::chrono::steady_clock::now();
   // The frame's scratch buffers (matching, footprints, swap levels, ...) come
   // from the buffers the previous frames released, without page faults.
@@ -460,6 +484,12 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     times->warp_ms = ms(e_warp);
     times->composite_ms = times->swap_ms + times->display_ms + times->warp_ms;
     times->device_wall_ms = ms_since(t0);
+    for (const Device::Launch& l : device.take_launches()) {
+      const auto [start, end] = event_span_ns(l.event);
+      times->kernels.push_back({l.kernel, start, end});
+    }
+    device.log_launches(false);
+    summarise_kernels(*times);
   }
   if (stats) {
     *stats = EngineStats{};

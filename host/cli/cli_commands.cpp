@@ -4,6 +4,8 @@
 #include <cmath>
 #include <iomanip>
 #include <iostream>
+#include <locale>
+#include <sstream>
 #include <vector>
 
 #include "simdvol/device.hpp"
@@ -87,6 +89,34 @@ int print_devices(std::ostream& os) {
   const std::vector<DeviceInfo> devices = list_devices();
   os << describe_devices(devices, choose_device(devices));
   return 0;
+}
+
+std::string kernel_trace_json(const std::vector<std::vector<KernelSpan>>& frames) {
+  std::uint64_t t0 = 0;
+  bool any = false;
+  for (const auto& f : frames)
+    for (const KernelSpan& k : f)
+      if (k.end_ns != 0 && (!any || k.start_ns < t0)) {
+        t0 = k.start_ns;
+        any = true;
+      }
+  std::ostringstream os;
+  os.imbue(std::locale::classic());
+  os << std::fixed << std::setprecision(3);
+  os << "{\"displayTimeUnit\": \"ms\", \"traceEvents\": [";
+  const char* sep = "\n";
+  for (std::size_t f = 0; f < frames.size(); ++f)
+    for (const KernelSpan& k : frames[f]) {
+      if (k.end_ns == 0) continue;
+      // Kernel names are C identifiers: nothing to escape.
+      os << sep << "{\"name\": \"" << k.kernel << "\", \"cat\": \"kernel\", \"ph\": \"X\", \"ts\": "
+         << static_cast<double>(k.start_ns - t0) * 1e-3
+         << ", \"dur\": " << static_cast<double>(k.end_ns - k.start_ns) * 1e-3
+         << ", \"pid\": 1, \"tid\": 1, \"args\": {\"frame\": " << f << "}}";
+      sep = ",\n";
+    }
+  os << "\n]}\n";
+  return os.str();
 }
 
 }  // namespace simdvol

@@ -296,6 +296,10 @@ int main(int argc, char** argv) {
   render->add_option("--frames", frames, "turntable: number of frames")->capture_default_str();
   render->add_option("--step", step, "turntable: degrees of PHI per frame")->capture_default_str();
   render->add_flag("--times", show_times, "print per-stage times");
+  std::string trace;
+  render->add_option("--trace", trace,
+                     "opencl: write every frame's kernels, in order on the device's clock, as a "
+                     "Chrome trace (.json; chrome://tracing, ui.perfetto.dev)");
   render->add_option("-o,--output", out, "output image (.png, .exr, .tif)")->capture_default_str();
 
   // info
@@ -440,13 +444,24 @@ int main(int argc, char** argv) {
                     "--composite mc");
       refuse_unless(opt.composite.mode == CompositeMode::adaptive, {"--threshold"},
                     "--composite adaptive");
-      refuse_unless(
-          engine == "opencl",
-          {"--pe", "--device", "--layout", "--balance-sweeps", "--no-skip-empty", "--no-skip-pes"},
-          "--engine opencl");
+      refuse_unless(engine == "opencl",
+                    {"--pe", "--device", "--layout", "--balance-sweeps", "--no-skip-empty",
+                     "--no-skip-pes", "--trace"},
+                    "--engine opencl");
       const fs::path outp = out;
       check_output_path(outp, "-o");
       check_image_extension(outp);
+      const fs::path tracep = trace;
+      if (render->count("--trace") > 0) {
+        check_output_path(tracep, "--trace");
+        if (tracep.extension() != ".json")
+          throw ArgumentError("--trace", tracep.string() +
+                                             ": the trace is JSON: give a name "
+                                             "ending in .json");
+        if (tracep.lexically_normal() == outp.lexically_normal())
+          throw ArgumentError("--trace", "names the same file as -o");
+      }
+      std::vector<std::vector<KernelSpan>> traced;
 
       Volume vol;
       if (rv.path.empty()) {
@@ -480,6 +495,7 @@ int main(int argc, char** argv) {
           EngineTimes t;
           EngineStats st;
           img = gpu->render(vol, opt, &t, show_times ? &st : nullptr);
+          if (!trace.empty()) traced.push_back(std::move(t.kernels));
           if (show_times) {
             std::ostringstream os;
             os << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
@@ -494,8 +510,13 @@ int main(int argc, char** argv) {
             const auto busy =
                 std::count_if(st.loads.begin(), st.loads.end(), [](int64_t l) { return l > 0; });
             os << "), display " << t.display_ms << " ms, warp " << t.warp_ms << " ms; frame wall "
-               << t.device_wall_ms << " ms; " << st.samples << " samples on " << busy << " of "
-               << st.loads.size() << " PEs, utilisation " << st.utilisation() << "\n";
+               << t.device_wall_ms << " ms; kernels " << t.kernels_ms << " ms in a " << t.span_ms
+               << " ms span";
+            if (t.longest_wait_ms > 0)
+              os << " (longest wait " << t.longest_wait_ms << " ms, before "
+                 << t.longest_wait_before << ")";
+            os << "; " << st.samples << " samples on " << busy << " of " << st.loads.size()
+               << " PEs, utilisation " << st.utilisation() << "\n";
             std::cerr << os.str();
           }
         } else {
@@ -516,6 +537,7 @@ int main(int argc, char** argv) {
       }
       writing.get();
       progress(frames, frames);
+      if (!trace.empty()) write_file_atomically(tracep, {kernel_trace_json(traced)});
       if (frames == 1) std::cout << "wrote " << fs::absolute(outp).string() << "\n";
       if (frames > 1)
         std::cout << "wrote " << frames << " frames: " << fs::absolute(numbered(outp, 0, frames))

@@ -136,3 +136,67 @@ TEST(EngineStats, BalanceSweepsOption) {
   for (int sweeps : {-1, kMaxBalanceSweeps + 1})
     EXPECT_THROW(render_opencl(dev, vol, opt, engine_options(sweeps)), ArgumentError);
 }
+
+// EngineTimes::kernels: every kernel of the frame in launch order, each
+// starting after the one before ended (the queue is in order); the stages'
+// times are sums of some of them, so the kernels' sum is at least the
+// fused shade + classify's and the resample + local's and at most the span;
+// a frame rendered without `times` logs nothing for the next one.
+TEST(EngineTimes, KernelsOfTheFrameInOrder) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 1);
+  EngineOptions eo = engine_options();
+  eo.reuse_layout = true;
+  RenderEngine engine(dev, eo);
+  EngineTimes t;
+  engine.render(vol, frame_options(), nullptr);  // not logged
+  engine.render(vol, frame_options(), &t);
+  ASSERT_GE(t.kernels.size(), 10u);
+  std::vector<std::string> names;
+  for (std::size_t i = 0; i < t.kernels.size(); ++i) {
+    const KernelSpan& k = t.kernels[i];
+    names.push_back(k.kernel);
+    ASSERT_GT(k.end_ns, 0u) << k.kernel;
+    EXPECT_LE(k.start_ns, k.end_ns) << k.kernel;
+    if (i > 0) {
+      EXPECT_GE(k.start_ns, t.kernels[i - 1].end_ns) << k.kernel;
+    }
+  }
+  for (const char* want :
+       {"simdvol_shade_classify16_il", "simdvol_match_rows", "simdvol_match_fill",
+        "simdvol_resample_local_v8_ilc", "simdvol_display", "simdvol_warp"})
+    EXPECT_NE(std::find(names.begin(), names.end(), want), names.end()) << want;
+  // The layout was kept from the first frame: not launched again.
+  EXPECT_EQ(std::find(names.begin(), names.end(), "simdvol_layout"), names.end());
+  EXPECT_EQ(names.back(), "simdvol_warp");
+  EXPECT_GE(t.kernels_ms, t.classify_ms);
+  EXPECT_GE(t.kernels_ms, t.swap_ms + t.display_ms + t.warp_ms);
+  EXPECT_LE(t.kernels_ms, t.span_ms + 1e-9);
+  EXPECT_LE(t.span_ms, t.device_wall_ms);
+  EXPECT_GE(t.longest_wait_ms, 0.0);
+}
+
+// summarise_kernels on spans made up here: the sum of the durations, first
+// start to last end, and the longest wait with the kernel after it; spans
+// without profiling times (0, 0) count for nothing.
+TEST(EngineTimes, SummaryOfKernelSpans) {
+  EngineTimes t;
+  t.kernels = {{"a", 1000000, 3000000},
+               {"b", 3500000, 4000000},
+               {"none", 0, 0},
+               {"c", 7000000, 7250000},
+               {"d", 7250000, 9000000}};
+  summarise_kernels(t);
+  EXPECT_DOUBLE_EQ(t.kernels_ms, 2.0 + 0.5 + 0.25 + 1.75);
+  EXPECT_DOUBLE_EQ(t.span_ms, 8.0);
+  EXPECT_DOUBLE_EQ(t.longest_wait_ms, 3.0);
+  EXPECT_EQ(t.longest_wait_before, "c");
+  t.kernels = {{"x", 5, 5}};
+  summarise_kernels(t);
+  EXPECT_DOUBLE_EQ(t.kernels_ms, 0.0);
+  EXPECT_DOUBLE_EQ(t.span_ms, 0.0);
+  EXPECT_EQ(t.longest_wait_before, "");
+  t.kernels.clear();
+  summarise_kernels(t);
+  EXPECT_DOUBLE_EQ(t.span_ms, 0.0);
+}

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <regex>
 #include <set>
 #include <string>
 
@@ -166,6 +167,53 @@ TEST_F(Cli, SkipPesLeavesPesOutWithTheSameImage) {
   EXPECT_GT(sum, 1.0);
 }
 
+// --trace: every frame's kernels as a Chrome trace, one event per line;
+// within a frame each kernel starts after the one before ended (one
+// in-order queue), the second frame after the first, and the frames hold
+// the stages' kernels; --times sums them up.
+TEST_F(Cli, TraceHoldsEveryFramesKernelsInOrder) {
+  const Result r =
+      run("render --phantom-size 32 --size 40x40 --pe 64 --frames 2 --step 5 "
+          "--times --trace " +
+          path("t.json") + " -o " + path("t.png"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find(" ms span"), std::string::npos) << r.output;
+  std::ifstream in(path("t.json"));
+  std::string line;
+  ASSERT_TRUE(std::getline(in, line));
+  EXPECT_EQ(line, "{\"displayTimeUnit\": \"ms\", \"traceEvents\": [");
+  const std::regex ev(
+      R"re(\{"name": "(simdvol_[a-z0-9_]+)", "cat": "kernel", "ph": "X", "ts": ([0-9]+\.[0-9]{3}), "dur": ([0-9]+\.[0-9]{3}), "pid": 1, "tid": 1, "args": \{"frame": ([01])\}\},?)re");
+  std::vector<std::set<std::string>> names(2);
+  double end = -1;
+  int events = 0, frame = 0;
+  bool closed = false;
+  while (std::getline(in, line)) {
+    if (line == "]}") {
+      closed = true;
+      break;
+    }
+    std::smatch m;
+    ASSERT_TRUE(std::regex_match(line, m, ev)) << line;
+    const double ts = std::stod(m[2]), dur = std::stod(m[3]);
+    const int f = std::stoi(m[4]);
+    EXPECT_GE(f, frame) << line;
+    frame = f;
+    EXPECT_GE(ts + 0.0015, end) << line;  // (each figure rounded to 1 ns)
+    end = ts + dur;
+    names[static_cast<std::size_t>(f)].insert(m[1]);
+    ++events;
+  }
+  EXPECT_TRUE(closed);
+  EXPECT_GE(events, 20);
+  for (const auto& n : names)
+    for (const char* want :
+         {"simdvol_shade_classify16_il", "simdvol_match_fill", "simdvol_display", "simdvol_warp"})
+      EXPECT_EQ(n.count(want), 1u) << want;
+  EXPECT_EQ(names[0].count("simdvol_layout"), 1u);  // the second frame keeps the layout
+  EXPECT_EQ(names[1].count("simdvol_layout"), 0u);
+}
+
 // --light, --phong and --depth-cue reach the shading of both engines: each
 // engine's PNG equals the reference rendered here with those ShadeParams
 // set field by field (to the PNG's 8-bit rounding), and differs from the
@@ -236,6 +284,10 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render " + path("vol.raw") + " --raw-dims 2,2,2 --raw-header -5 -o " + path("x.png"),
        "--raw-header"},
       {"render --composite mc --allocate -o " + path("x.png"), "--allocate"},
+      {"render --trace " + path("t.txt") + " -o " + path("x.png"), ".json"},
+      {"render --trace " + path("x.png") + " -o " + path("x.png"), "--trace"},
+      {"render --engine reference --trace " + path("t.json") + " -o " + path("x.png"), "--trace"},
+      {"render --trace " + path("no/t.json") + " -o " + path("x.png"), "--trace"},
       {"render --composite mc --mc-stratified -o " + path("x.png"), "--mc-stratified"},
       {"render --engine reference --composite mc --mc-scope subray -o " + path("x.png"),
        "--mc-scope"},

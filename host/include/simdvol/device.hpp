@@ -43,6 +43,7 @@
 // returned error codes itself (cl_check) and throws its own errors.
 #include <CL/opencl.hpp>
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -282,6 +283,18 @@ class Device {
   /// clFinish on the queue.
   void finish();
 
+  /// One kernel launch of run() while the launch log is on.
+  struct Launch {
+    std::string kernel;  ///< run()'s `what`
+    cl::Event event;
+  };
+  /// Starts (clearing it) or stops the log of run()'s launches, for a
+  /// timeline of the device's work (RenderEngine::render with `times`).
+  void log_launches(bool on);
+  /// The launches logged since log_launches(true), in launch order; the log
+  /// is left empty (and on, if it was).
+  std::vector<Launch> take_launches();
+
  private:
   void describe_self(int index, int platform_index, const std::string& platform);
   cl::Buffer allocate(cl_mem_flags flags, std::size_t bytes, std::size_t fresh_bytes,
@@ -298,6 +311,8 @@ class Device {
     std::size_t from_disk = 0;
   };
   std::unique_ptr<Cache> cache_;
+  bool log_ = false;
+  std::vector<Launch> launches_;
   struct Pool;
   std::unique_ptr<Pool> pool_;
 };
@@ -326,5 +341,8 @@ void set_args(cl::Kernel& kernel, const std::string& what, const Args&... args) 
 /// Duration of a profiled event in nanoseconds (end - start); 0 if the
 /// information is not available.
 std::uint64_t event_ns(const cl::Event& event);
+/// Start and end of a profiled event on the device's clock (ns); (0, 0) if
+/// the information is not available.
+std::array<std::uint64_t, 2> event_span_ns(const cl::Event& event);
 
 }  // namespace simdvol

@@ -40,6 +40,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "simdvol/device.hpp"
@@ -53,6 +54,12 @@ namespace simdvol {
 
 /// Per-stage times of one render_opencl call. Device stages: kernel time
 /// from the profiling events (0 when the queue does not profile).
+/// One kernel of a frame on the device's clock (profiling events).
+struct KernelSpan {
+  std::string kernel;
+  std::uint64_t start_ns = 0, end_ns = 0;  ///< the device's clock (0, 0: no profiling)
+};
+
 struct EngineTimes {
   double layout_ms = 0;          ///< flat volume -> PE-major cells with halo
   double shade_ms = 0;           ///< 0 when fused
@@ -77,8 +84,21 @@ struct EngineTimes {
   double warp_ms = 0;                 ///< intermediate -> output (voxel sampling)
   double composite_ms = 0;            ///< swap + display + warp
   double device_wall_ms = 0;  ///< host wall time of the device part (allocation, builds, transfers)
-  RenderTimes host{};         ///< unused (0): no stage runs on the host
+  /// Every kernel the frame launched, in launch order (the queue is in
+  /// order, so they run one after the other): where the device waited.
+  std::vector<KernelSpan> kernels;
+  double kernels_ms = 0;  ///< their durations summed
+  double span_ms = 0;     ///< first kernel's start to last kernel's end
+  /// The longest time between one kernel's end and the next one's start
+  /// (copies, maps and host waits in between), and the kernel it preceded.
+  double longest_wait_ms = 0;
+  std::string longest_wait_before;
+  RenderTimes host{};  ///< unused (0): no stage runs on the host
 };
+
+/// Fills t.kernels_ms, t.span_ms and the longest wait from t.kernels (in
+/// launch order; spans of (0, 0), without profiling, are left out).
+void summarise_kernels(EngineTimes& t);
 
 /// What one frame did beyond its times (RenderEngine::render's `stats`, for
 /// the benchmarks; collecting them costs a read of P ints and the swap's
