@@ -6,7 +6,7 @@
 # identical) either way, no balance time without sweeps, the same samples
 # (fewer with skip-pes, which leaves out the PEs with nothing in reach);
 # the layout once (the default): the warm-up frame's layout timed, none in
-# the timed frames;
+# the timed frames; the kernels' sum within their span within the wall;
 # then that a bad option value exits 2 naming the option
 # and leaves no JSON behind.
 file(REMOVE ${OUT})
@@ -108,6 +108,17 @@ foreach(i RANGE ${last})
   endif()
   if(NOT wall GREATER 0 OR NOT match GREATER 0 OR NOT rs GREATER 0)
     message(FATAL_ERROR "${id}: wall ${wall}, match ${match}, resample_local ${rs} ms")
+  endif()
+  # The frame's kernels summed, within their span, within the frame's wall
+  # time: each holds frame by frame, so also for the medians (x <= y in
+  # every frame keeps the order of the sorted values).
+  get(kern cases ${i} kernels_ms median)
+  get(span cases ${i} kernel_span_ms median)
+  get(wait cases ${i} longest_wait_ms median)
+  if(NOT kern GREATER 0 OR kern GREATER span OR span GREATER wall OR wait LESS 0
+     OR wait GREATER span)
+    message(FATAL_ERROR "${id}: kernels ${kern} ms, span ${span} ms, wall ${wall} ms, "
+                        "longest wait ${wait} ms")
   endif()
   if(comp STREQUAL "direct")
     if(NOT swapped OR bytes LESS 16)

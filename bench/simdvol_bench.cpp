@@ -492,6 +492,9 @@ struct Harness {
       r.devsum.push_back(device_sum(t));
       for (const auto& s : kStages) r.stage[s.name].push_back(t.*s.field);
       r.stage["occupancy"].push_back(t.occupancy_ms);  // inside resample_local
+      r.stage["kernels"].push_back(t.kernels_ms);      // EngineTimes::kernels
+      r.stage["span"].push_back(t.span_ms);
+      r.stage["longest_wait"].push_back(t.longest_wait_ms);
       r.swap_stages.resize(t.swap_stage_ms.size());
       for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
         r.swap_stages[k].push_back(t.swap_stage_ms[k]);
@@ -531,6 +534,12 @@ struct Harness {
       j["stages_ms"] = js;
       // Empty-space skipping's brick occupancy: part of resample_local.
       j["occupancy_ms"] = summary_json(summarize(stage["occupancy"]));
+      // The frame's kernels summed, their span (first start to last end)
+      // and the longest wait between two (EngineTimes): how much of the
+      // frame the device spent idle.
+      j["kernels_ms"] = summary_json(summarize(stage["kernels"]));
+      j["kernel_span_ms"] = summary_json(summarize(stage["span"]));
+      j["longest_wait_ms"] = summary_json(summarize(stage["longest_wait"]));
       json sw = json::array();
       for (const auto& v : r.swap_stages) sw.push_back(median(v));
       j["swap_stage_ms"] = sw;
