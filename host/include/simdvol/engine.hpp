@@ -52,14 +52,14 @@
 
 namespace simdvol {
 
-/// Per-stage times of one render_opencl call. Device stages: kernel time
-/// from the profiling events (0 when the queue does not profile).
 /// One kernel of a frame on the device's clock (profiling events).
 struct KernelSpan {
   std::string kernel;
   std::uint64_t start_ns = 0, end_ns = 0;  ///< the device's clock (0, 0: no profiling)
 };
 
+/// Per-stage times of one render_opencl call. Device stages: kernel time
+/// from the profiling events (0 when the queue does not profile).
 struct EngineTimes {
   double layout_ms = 0;          ///< flat volume -> PE-major cells with halo
   double shade_ms = 0;           ///< 0 when fused
