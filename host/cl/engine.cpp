@@ -332,6 +332,18 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   if (mode == CompositeMode::direct ||
       (mode == CompositeMode::mc && eo.mc_scope == McScope::subray))
     map_swap_plan(device, S.swap_plan);
+  // (Unmapped again if the frame ends in an error before the upload does.)
+  struct UnmapOnError {
+    Device& device;
+    DeviceSwapPlan& plan;
+    ~UnmapOnError() {
+      if (plan.mapped == nullptr) return;
+      try {
+        unmap_swap_plan(device, plan);
+      } catch (...) {  // (the frame's own error is the one to report)
+      }
+    }
+  } unmap_on_error{device, S.swap_plan};
   // The tables of the cells' layout, made once with them (the origin table
   // is the layout's, already on the device); the frame's view uploaded.
   if (!S.tables)

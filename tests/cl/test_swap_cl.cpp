@@ -316,6 +316,29 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
   EXPECT_GE(wrote_into_map, 3);
   // Unmapping a plan that is not mapped enqueues nothing.
   EXPECT_EQ(unmap_swap_plan(dev, reused)(), nullptr);
+  // Mapped and then unmapped without an upload (a frame that ended in an
+  // error: the engine unmaps it), the next upload writes by a copy, and
+  // the swap is right.
+  ASSERT_TRUE(map_swap_plan(dev, reused));
+  EXPECT_NE(unmap_swap_plan(dev, reused)(), nullptr);
+  EXPECT_EQ(reused.mapped, nullptr);
+  {
+    const ViewGeometry view = make_view(d, {1, 1, 1}, {30, 45, 0}, 45, 37, Sampling::voxel);
+    const KdSplit split = kd_split(d, 512);
+    const Matching m = balance_reference(match_reference(view, split), view, split);
+    const Footprints f = footprints_reference(m, random_composites(m, 7u));
+    DeviceFootprints fp = make_footprints(dev, m.rects);
+    cl_check(dev.queue().enqueueWriteBuffer(fp.pixels, CL_TRUE, 0, f.pixels.size() * sizeof(Rgba),
+                                            f.pixels.data()),
+             "write");
+    const SwapPlan plan = plan_swap(m.rects, split, view, pe_grid(512), SwapLayout::cut_and_stack);
+    std::vector<Rgba> level = f.pixels;
+    for (int k = 0; k < plan.stages(); ++k) level = swap_stage_reference(plan, k, level);
+    plan_swap_into(reused.plan, m.rects, split, view, pe_grid(512), SwapLayout::cut_and_stack);
+    upload_swap_plan(dev, reused, false);
+    const DeviceSwapRun run = enqueue_swap(dev, reused, fp);
+    EXPECT_TRUE(bitwise_equal(read_rgba(dev, run.last, plan.level_size(plan.stages())), level));
+  }
 }
 
 // A plan whose output x stride is finer than an input's (plan_swap never
