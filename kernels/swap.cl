@@ -5,19 +5,23 @@
  * rect[p] = (x0, y0, nx, ny, sx, sy, lx, ly) (sx = 1 << lx, sy = 1 << ly)
  * densely, row-major, from off[p] (off has P + 1 entries).
  *
- * simdvol_swap_stage: stage k, one work-item per chunk of up to 16 pixels
- * of one PE of the output level (1-D, local size 64): chunk c is (PE, first
- * pixel) from the host's table (each PE's pixels cut into whole chunks, so
- * no search). For each pixel the work-item reads its own level-k rectangle
- * and its partner's (p ^ 2^k; 0 where absent: the partner's read is the
- * X-Net transfer) and writes over(front, back), p in front when bit k of p
- * equals `front`. (One work-item per pixel, as before, spent ~13 ns per
- * pixel on the chunk lookup, a division and the rectangles' loads.) Where
- * the output's x stride is a multiple of both inputs' (in every plan of
- * plan_swap, both layouts: a level's strides never shrink), the chunk goes
- * row by row and steps each input's column instead of indexing both
- * rectangles per pixel (the same pixels); a plan made otherwise takes the
- * per-pixel path.
+ * simdvol_swap_stage: stage k, one work-item per PE p of the output level
+ * (1-D, local size 64): every pixel of p's rectangle there, reading its own
+ * level-k rectangle and its partner's (p ^ 2^k; 0 where absent: the
+ * partner's read is the X-Net transfer) and writing over(front, back), p in
+ * front when bit k of p equals `front`. (One work-item per pixel, at first,
+ * spent ~13 ns per pixel on finding its PE, a division and the rectangles'
+ * loads; one per 16 pixels of a PE, from a chunk table the host made and
+ * uploaded per stage, after that: simdvol-bench-swap --swap-only, 2-core
+ * Intel Xeon (family 6, model 167), the 13 stages one launch each, two
+ * alternations: the 256^3 phantom at 256^2 10.49 / 10.31 -> 8.10 / 7.99
+ * ms, at 512^2 with pixel sampling 50.15 / 50.14 -> 38.26 / 40.05,
+ * brainsmall 2.42 / 2.52 -> 2.12 / 2.18; the frame's stages after the
+ * fused launch 2.50 -> 2.11 ms on the phantom.) Where the output's x
+ * stride is a multiple of both inputs' (in every plan of plan_swap, both
+ * layouts: a level's strides never shrink), a PE's pixels go row by row
+ * and step each input's column instead of indexing both rectangles per
+ * pixel (the same pixels); a plan made otherwise takes the per-pixel path.
  *
  * simdvol_swap_stages: stages k0 .. k0 + m - 1 in one launch, a work-group
  * per group of 2^m PEs whose partners in those stages are all inside it
@@ -35,8 +39,6 @@
 #endif
 
 #pragma OPENCL FP_CONTRACT OFF
-
-#define SV_SWAP_CHUNK 16
 
 SV_FN float4 sv_swap_over(const float4 f, const float4 b) {
   const float t = 1.0f - f.w;
@@ -122,15 +124,14 @@ SV_SWAP_PIXELS(sv_swap_pixels_lg, __local, __global)
 __kernel void simdvol_swap_stage(__global const float4* in, __global const int8* in_rect,
                                  __global const int* in_off, __global float4* out,
                                  __global const int8* out_rect, __global const int* out_off,
-                                 __global const int2* chunks, const int nchunks, const int k,
-                                 const int front) {
-  const int c = (int)get_global_id(0);
-  if (c >= nchunks) return;
-  const int2 e = chunks[c];
-  const int p = e.x, q = p ^ (1 << k);
-  const int n = min(SV_SWAP_CHUNK, out_off[p + 1] - out_off[p] - e.y);
-  sv_swap_pixels(in, in_rect[p], in_off[p], in_rect[q], in_off[q], out, out_rect[p], out_off[p],
-                 e.y, n, p, k, front);
+                                 const int pes, const int k, const int front) {
+  const int p = (int)get_global_id(0);
+  if (p >= pes) return;
+  const int q = p ^ (1 << k);
+  const int n = out_off[p + 1] - out_off[p];
+  if (n <= 0) return;
+  sv_swap_pixels(in, in_rect[p], in_off[p], in_rect[q], in_off[q], out, out_rect[p], out_off[p], 0,
+                 n, p, k, front);
 }
 
 /* simdvol_swap_stages: stages k0 .. k0 + m - 1 (1 <= m <= 6) in one launch.

@@ -50,39 +50,6 @@ cl::Kernel swap_kernel(Device& device, const std::string& name) {
 
 }  // namespace
 
-namespace {
-
-// The chunk table of the level with offsets `off`: its entry count, and the
-// entries written from e on.
-int64_t chunk_count(const std::vector<int64_t>& off) {
-  int64_t n = 0;
-  for (std::size_t p = 0; p + 1 < off.size(); ++p)
-    n += (off[p + 1] - off[p] + kSwapChunk - 1) / kSwapChunk;
-  return n;
-}
-void write_chunk_table(const std::vector<int64_t>& off, cl_int2* e) {
-  for (std::size_t p = 0; p + 1 < off.size(); ++p)
-    for (int64_t s = 0; s < off[p + 1] - off[p]; s += kSwapChunk) {
-      e->s[0] = static_cast<cl_int>(p);
-      e->s[1] = static_cast<cl_int>(s);
-      ++e;
-    }
-}
-
-}  // namespace
-
-void swap_chunk_table_into(const std::vector<int64_t>& off, std::vector<cl_int2>& t) {
-  if (off.size() < 2) throw ArgumentError("offsets", "need P + 1 entries");
-  t.resize(static_cast<std::size_t>(chunk_count(off)));
-  write_chunk_table(off, t.data());
-}
-
-std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& off) {
-  std::vector<cl_int2> t;
-  swap_chunk_table_into(off, t);
-  return t;
-}
-
 DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan) {
   DeviceSwapPlan d;
   d.plan = std::move(plan);
@@ -98,23 +65,15 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
       throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 pixels");
   const auto levels = static_cast<std::size_t>(N + 1);
   const auto pes = static_cast<std::size_t>(int64_t(1) << N);
-  // The chunk counts first (they size the chunk tables).
-  d.chunk_count.assign(static_cast<std::size_t>(N), 0);
-  for (int L = 1; L <= N; ++L) {
-    const int64_t n = chunk_count(plan.offset[static_cast<std::size_t>(L)]);
-    if (n * kSwapChunk > kInt32Max)
-      throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 work-items");
-    d.chunk_count[static_cast<std::size_t>(L - 1)] = n;
-  }
-  // The regions, in the order rects[0..N], offsets[0..N], chunks[0..N-1],
-  // xpe, ype: each at least one element, at an aligned offset.
+  // The regions, in the order rects[0..N], offsets[0..N], xpe, ype: each
+  // at least one element, at an aligned offset.
   // (CL_DEVICE_MEM_BASE_ADDR_ALIGN is in bits; PoCL's is 1,024.)
   cl_uint align_bits = 0;
   cl_check(device.device().getInfo(CL_DEVICE_MEM_BASE_ADDR_ALIGN, &align_bits),
            "clGetDeviceInfo(CL_DEVICE_MEM_BASE_ADDR_ALIGN)");
   const std::size_t align = std::max<std::size_t>(128, align_bits / 8);
   std::vector<std::size_t> regions;
-  regions.reserve(2 * (3 * levels + 2));
+  regions.reserve(2 * (2 * levels + 2));
   std::size_t at = 0;
   auto cut = [&](std::size_t bytes) {
     regions.push_back(at);
@@ -124,8 +83,6 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
   for (std::size_t L = 0; L < levels; ++L)
     cut(std::max<std::size_t>(plan.held[L].size(), 1) * sizeof(SwapRect));
   for (std::size_t L = 0; L < levels; ++L) cut((pes + 1) * sizeof(cl_int));
-  for (std::size_t k = 0; k + 1 < levels; ++k)
-    cut(static_cast<std::size_t>(std::max<int64_t>(d.chunk_count[k], 1)) * sizeof(cl_int2));
   cut(std::max<std::size_t>(plan.xpe.size(), 1) * sizeof(cl_int));
   cut(std::max<std::size_t>(plan.ype.size(), 1) * sizeof(cl_int));
   const std::size_t total = at;
@@ -150,8 +107,6 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
     const std::vector<int64_t>& off = plan.offset[L];
     for (std::size_t p = 0; p < off.size() && p <= pes; ++p) o[p] = static_cast<cl_int>(off[p]);
   }
-  for (std::size_t k = 0; k + 1 < levels; ++k, r += 2)
-    write_chunk_table(plan.offset[k + 1], reinterpret_cast<cl_int2*>(base + regions[r]));
   for (const std::vector<int64_t>* t : {&plan.xpe, &plan.ype}) {
     auto* o = reinterpret_cast<cl_int*>(base + regions[r]);
     for (std::size_t i = 0; i < t->size(); ++i) o[i] = static_cast<cl_int>((*t)[i]);
@@ -180,11 +135,9 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
     };
     d.rects.resize(levels);
     d.offsets.resize(levels);
-    d.chunks.resize(levels - 1);
     std::size_t i = 0;
     for (std::size_t L = 0; L < levels; ++L) d.rects[L] = sub(i++);
     for (std::size_t L = 0; L < levels; ++L) d.offsets[L] = sub(i++);
-    for (std::size_t k = 0; k + 1 < levels; ++k) d.chunks[k] = sub(i++);
     d.xpe = sub(i++);
     d.ype = sub(i++);
     d.regions = std::move(regions);
@@ -229,12 +182,10 @@ cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, con
   const std::string name = "simdvol_swap_stage";
   cl::Kernel kern = swap_kernel(device, name);
   const auto kk = static_cast<std::size_t>(k);
-  const cl_int n = static_cast<cl_int>(d.chunk_count[kk]);
+  const std::size_t pes = std::size_t(1) << d.plan.stages();
   set_args(kern, name, in, d.rects[kk], d.offsets[kk], out, d.rects[kk + 1], d.offsets[kk + 1],
-           d.chunks[kk], n, static_cast<cl_int>(k), static_cast<cl_int>(d.plan.front[kk]));
-  return device.run(kern, name,
-                    cl::NDRange(round_up(static_cast<std::size_t>(std::max(n, 1)), kBlock)),
-                    cl::NDRange(kBlock));
+           static_cast<cl_int>(pes), static_cast<cl_int>(k), static_cast<cl_int>(d.plan.front[kk]));
+  return device.run(kern, name, cl::NDRange(round_up(pes, kBlock)), cl::NDRange(kBlock));
 }
 
 int64_t swap_group_pixels(const SwapPlan& plan, int k0, int m, int L) {

@@ -3,12 +3,11 @@
 //
 // The plan is computed on the host from the footprint rectangles (which the
 // host already reads to size the footprints) and uploaded once per frame:
-// per level the strided rectangles and offsets, per stage the chunk table of
-// the output pixels ((PE, first pixel) per 16 pixels of one PE). The first
-// six stages run in one launch (a work-group per 64 consecutive PEs, whose
-// partners in those stages are all inside it; barriers between the stages;
-// the five levels between in the work-group's local memory, fewer stages
-// where they would not fit), the later ones one launch per stage (the
+// per level the strided rectangles and offsets. The first six stages run in
+// one launch (a work-group per 64 consecutive PEs, whose partners in those
+// stages are all inside it; barriers between the stages; the five levels
+// between in the work-group's local memory, fewer stages where they would
+// not fit), the later ones one launch per stage (a work-item per PE; the
 // partner's rectangle is read directly: the whole level is one buffer), no
 // waits between them; the levels written to memory take turns in two
 // buffer slots (ping-pong), each sized by its largest level. Every
@@ -31,11 +30,9 @@ namespace simdvol {
 /// one buffer (`packed`), written by one command per frame.
 struct DeviceSwapPlan {
   SwapPlan plan;
-  std::vector<cl::Buffer> rects;     ///< per level: SwapRect[P] (int8)
-  std::vector<cl::Buffer> offsets;   ///< per level: cl_int[P + 1]
-  std::vector<cl::Buffer> chunks;    ///< per stage: cl_int2 per chunk
-  std::vector<int64_t> chunk_count;  ///< per stage
-  cl::Buffer xpe, ype;               ///< display tables (cl_int)
+  std::vector<cl::Buffer> rects;    ///< per level: SwapRect[P] (int8)
+  std::vector<cl::Buffer> offsets;  ///< per level: cl_int[P + 1]
+  cl::Buffer xpe, ype;              ///< display tables (cl_int)
   /// The buffer the tables above are regions of, and its host image (the
   /// source of the write): each table at an offset aligned to the device's
   /// CL_DEVICE_MEM_BASE_ADDR_ALIGN, at least one element each.
@@ -73,14 +70,6 @@ bool map_swap_plan(Device& device, DeviceSwapPlan& d);
 /// Enqueues the unmap of a mapped d (map_swap_plan); a null event where d
 /// is not mapped.
 cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d);
-
-/// Pixels per chunk of the swap stage (SV_SWAP_CHUNK in swap.cl).
-inline constexpr int64_t kSwapChunk = 16;
-/// The chunk table of one level (for tests): for each PE p in order, and
-/// each s = 0, 16, ... < its pixel count, the pair (p, s).
-std::vector<cl_int2> swap_chunk_table(const std::vector<int64_t>& offset);
-/// swap_chunk_table into `table` (its storage reused).
-void swap_chunk_table_into(const std::vector<int64_t>& offset, std::vector<cl_int2>& table);
 
 /// The level buffers of a swap run.
 /// The most swap stages one launch runs (simdvol_swap_stages: a work-group
