@@ -140,6 +140,8 @@ DeviceInfo query_device(const cl::Device& d) {
       device_query<CL_DEVICE_MAX_MEM_ALLOC_SIZE, cl_ulong>(d, "CL_DEVICE_MAX_MEM_ALLOC_SIZE");
   info.max_work_group_size =
       device_query<CL_DEVICE_MAX_WORK_GROUP_SIZE, std::size_t>(d, "CL_DEVICE_MAX_WORK_GROUP_SIZE");
+  info.base_addr_align_bytes =  // (the query answers in bits)
+      device_query<CL_DEVICE_MEM_BASE_ADDR_ALIGN, cl_uint>(d, "CL_DEVICE_MEM_BASE_ADDR_ALIGN") / 8;
   return info;
 }
 
@@ -715,10 +717,8 @@ std::array<std::uint64_t, 2> event_span_ns(const cl::Event& event) {
 }
 
 std::uint64_t event_ns(const cl::Event& event) {
-  cl_ulong start = 0, end = 0;
-  if (event.getProfilingInfo(CL_PROFILING_COMMAND_START, &start) != CL_SUCCESS) return 0;
-  if (event.getProfilingInfo(CL_PROFILING_COMMAND_END, &end) != CL_SUCCESS) return 0;
-  return end > start ? end - start : 0;
+  const auto [start, end] = event_span_ns(event);
+  return end - start;
 }
 
 }  // namespace simdvol

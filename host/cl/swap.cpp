@@ -67,11 +67,7 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
   const auto pes = static_cast<std::size_t>(int64_t(1) << N);
   // The regions, in the order rects[0..N], offsets[0..N], xpe, ype: each
   // at least one element, at an aligned offset.
-  // (CL_DEVICE_MEM_BASE_ADDR_ALIGN is in bits; PoCL's is 1,024.)
-  cl_uint align_bits = 0;
-  cl_check(device.device().getInfo(CL_DEVICE_MEM_BASE_ADDR_ALIGN, &align_bits),
-           "clGetDeviceInfo(CL_DEVICE_MEM_BASE_ADDR_ALIGN)");
-  const std::size_t align = std::max<std::size_t>(128, align_bits / 8);
+  const std::size_t align = std::max<std::size_t>(128, device.info().base_addr_align_bytes);
   std::vector<std::size_t> regions;
   regions.reserve(2 * (2 * levels + 2));
   std::size_t at = 0;

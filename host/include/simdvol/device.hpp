@@ -124,6 +124,7 @@ struct DeviceInfo {
   std::uint64_t global_mem_bytes = 0;
   std::uint64_t max_alloc_bytes = 0;
   std::size_t max_work_group_size = 0;
+  std::size_t base_addr_align_bytes = 0;  ///< CL_DEVICE_MEM_BASE_ADDR_ALIGN (in bytes)
 };
 
 /// Every device of every platform, platforms in ICD order, indices 0, 1, ...
