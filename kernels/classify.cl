@@ -655,6 +655,22 @@ SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, floa
     sv_store16(blk, vstride, e0, r, g, b, a);
 }
 
+/* sv_shade_classify16's transparent chunks: with use_live, `out` holds
+ * what this kernel wrote in the frame before for the same cells,
+ * classification and gradient scale (the lighting may differ;
+ * enqueue_shade_classify's `live`), so a chunk found transparent holds its
+ * zeros already and is left as it is, as the PEs flagged 0 are. The 256^3
+ * phantom at (20, 35, 10), simdvol-bench-options --frames 15, two
+ * alternations with -DSV_STORE_KEPT_ZEROS (which stores them again, for
+ * comparison): shade + classify 13.97 / 13.96 -> 13.38 / 13.35 ms (a 2-core
+ * Intel Xeon, 2026-12-05); brainsmall and ch2 within noise. */
+#ifndef SV_STORE_KEPT_ZEROS
+#define SV_ZERO_CHUNK() \
+  if (!use_live) sv_store16_zero(dst, vstride, e0, il)
+#else
+#define SV_ZERO_CHUNK() sv_store16_zero(dst, vstride, e0, il)
+#endif
+
 /* simdvol_shade_classify16: the fused kernel on 16-position chunks
  * (simdvol_shade16 then simdvol_classify16 without the voxel cells in
  * between); range and arguments as simdvol_shade16 plus cp.
@@ -697,7 +713,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
     const float16 d = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v);
     if (!any((d != 0.0f) & ~isnan(v) & in)) {
-      sv_store16_zero(dst, vstride, e0, il);
+      SV_ZERO_CHUNK();
       return;
     }
     /* The alpha needs only the gradient's magnitude: a chunk whose alpha is
@@ -713,7 +729,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
     const float16 a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
 #ifndef SV_NO_EARLY_ALPHA
     if (!any((a0 >= FLT_MIN) & ~isnan(v) & in)) {
-      sv_store16_zero(dst, vstride, e0, il);
+      SV_ZERO_CHUNK();
       return;
     }
 #endif
@@ -722,13 +738,13 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   } else {
     /* A chunk whose alpha is 0 without the mixture (sv_mixture_zero16). */
     if (!any(in & ~sv_mixture_zero16(cp, v))) {
-      sv_store16_zero(dst, vstride, e0, il);
+      SV_ZERO_CHUNK();
       return;
     }
     float16 cr, cg, cb;
     const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
     if (!any((a0 > 0.0f) & ~isnan(v) & in)) {
-      sv_store16_zero(dst, vstride, e0, il);
+      SV_ZERO_CHUNK();
       return;
     }
     sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
@@ -788,6 +804,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
 #endif
   }
 }
+#undef SV_ZERO_CHUNK
 
 __kernel void simdvol_shade_classify16(
     __global const float* restrict cells, __global float* restrict out,

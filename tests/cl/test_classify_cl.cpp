@@ -352,6 +352,108 @@ TEST(ClassifyKernel, SmallFractionsAtAMaterialBoundary) {
   EXPECT_GT(small, 20);  // the range reaches fractions far below float's 1 - p
 }
 
+// The fused kernel's `live` (a kept volume's next frame): the PEs flagged
+// 0 and the chunks of 16 positions it finds transparent in the others are
+// left as they are in `out`, every other chunk shaded again. On cells that
+// hold the same kernel's result under another lighting (another view), the
+// result equals a fresh call's bit for bit; on cells that hold NaN, those
+// PEs and chunks keep it (what the kernel leaves alone), and every other
+// chunk is the fresh call's. Interleaved cells (the engine's) and planar,
+// a mixture (ct) and a transfer function (knots: its density is 0 in air).
+TEST(ClassifyKernel, LiveLeavesUnflaggedPesAndTransparentChunks) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 2);
+  const ViewGeometry va = make_view(vol, kViews[1], 48, 48, Sampling::voxel);
+  const ViewGeometry vb = make_view(vol, kViews[2], 48, 48, Sampling::voxel);
+  const sv_shade_params sa = shade_params(make_shade_frame(vol, va, {}), {});
+  const sv_shade_params sb = shade_params(make_shade_frame(vol, vb, {}), {});
+  PeArray array(dev, pe_grid(64));
+  CellBuffer cells = array.layout(vol, 1);
+  for (const char* name : {"ct", "knots"}) {
+    for (bool il : {true, false}) {
+      SCOPED_TRACE(std::string(name) + (il ? " interleaved" : " planar"));
+      const Classifier c = by_name(name);
+      const sv_classify_params cp = classify_params(c, range_for(c, vol), 1.0);
+      const VoxelLayout L = make_voxel_layout(cells.layout(), il);
+      VoxelBuffer fresh(dev, L), kept(dev, L), poisoned(dev, L);
+      enqueue_shade_classify(dev, cells, sb, cp, fresh);
+      enqueue_shade_classify(dev, cells, sa, cp, kept);
+      dev.finish();
+      const std::vector<Rgba> want = fresh.read<Rgba>(dev);
+      // Flag 0 exactly the PEs whose blocks are all zeros (every voxel
+      // transparent), but for the first such PE (a transparent PE may be
+      // flagged 1).
+      const int64_t P = L.pes(), S = L.stride;
+      ASSERT_EQ(static_cast<int64_t>(want.size()), P * S);
+      const auto zero = [](const Rgba& x) { return x.r == 0 && x.g == 0 && x.b == 0 && x.a == 0; };
+      std::vector<cl_uchar> flags(static_cast<std::size_t>(P), 1);
+      int unflagged = 0;
+      bool first = true;
+      for (int64_t p = 0; p < P; ++p) {
+        const auto b = want.begin() + p * S;
+        if (std::all_of(b, b + S, zero)) {
+          if (!first) {
+            flags[static_cast<std::size_t>(p)] = 0;
+            ++unflagged;
+          }
+          first = false;
+        }
+      }
+      ASSERT_GT(unflagged, 0);
+      ASSERT_LT(unflagged, P - 1);
+      cl::Buffer live(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, flags.size(),
+                      flags.data());
+      // Over the other lighting's result: the fresh call's bits everywhere.
+      enqueue_shade_classify(dev, cells, sb, cp, kept, ShadeKernel::vec16, nullptr, &live);
+      dev.finish();
+      const std::vector<Rgba> got = kept.read<Rgba>(dev);
+      EXPECT_EQ(std::memcmp(got.data(), want.data(), got.size() * sizeof(Rgba)), 0);
+      // Over NaN: what the kernel leaves alone keeps it.
+      const float nan = std::nanf("");
+      poisoned.write(dev, std::vector<Rgba>(want.size(), Rgba{nan, nan, nan, nan}));
+      enqueue_shade_classify(dev, cells, sb, cp, poisoned, ShadeKernel::vec16, nullptr, &live);
+      dev.finish();
+      const std::vector<Rgba> mixed = poisoned.read<Rgba>(dev);
+      const auto is_nan = [](const Rgba& x) {
+        return std::isnan(x.r) && std::isnan(x.g) && std::isnan(x.b) && std::isnan(x.a);
+      };
+      const auto same = [](const Rgba* a, const Rgba* b, int64_t n) {
+        return std::memcmp(a, b, static_cast<std::size_t>(n) * sizeof(Rgba)) == 0;
+      };
+      int64_t kept_chunks = 0, shaded_chunks = 0, bad = 0;
+      for (int64_t p = 0; p < P; ++p) {
+        const Rgba* g = mixed.data() + p * S;
+        const Rgba* w = want.data() + p * S;
+        if (!flags[static_cast<std::size_t>(p)]) {
+          bad += !std::all_of(g, g + S, is_nan);
+          continue;
+        }
+        if (!il) {  // planar: a chunk's positions are not adjacent Rgba
+          bad +=
+              !std::all_of(g, g + S, [&](const Rgba& x) { return is_nan(x) || !std::isnan(x.a); });
+          continue;
+        }
+        for (int64_t e = 0; e < S; e += 16) {
+          const bool nan_chunk = std::all_of(g + e, g + e + 16, is_nan);
+          if (nan_chunk) {
+            // left alone: only a transparent chunk (the fresh call's zeros)
+            ++kept_chunks;
+            bad += !std::all_of(w + e, w + e + 16, zero);
+          } else {
+            ++shaded_chunks;
+            bad += !same(g + e, w + e, 16);
+          }
+        }
+      }
+      EXPECT_EQ(bad, 0);
+      if (il) {
+        EXPECT_GT(kept_chunks, 0);  // transparent chunks in flagged PEs
+        EXPECT_GT(shaded_chunks, 0);
+      }
+    }
+  }
+}
+
 TEST(ClassifyKernel, NanVoxelsAreTransparent) {
   SIMDVOL_TEST_DEVICE(dev);
   Volume vol = testing::random_volume({12, 10, 9}, -200.0f, 1500.0f, {1, 1, 1}, 13);

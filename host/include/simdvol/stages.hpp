@@ -207,10 +207,12 @@ struct DeviceOccupancy;  // local_cl.hpp
 /// brick occupancy of what it writes, as enqueue_occupancy's scan would.
 /// With `live` (cl_uchar per PE; vec16 only, else ArgumentError; fewer than
 /// P flags: ArgumentError) the PEs flagged 0 are left as they are in `out`
-/// (no loads, stores or marks): pass it only where each such PE's cell in
-/// `out` already holds what this call would write there, all zeros with
-/// every voxel transparent (the engine passes the previous frame's PE mask
-/// of the same volume and classification: match.hpp's inactive PEs).
+/// (no loads, stores or marks), and so are the chunks of 16 positions the
+/// call finds transparent in the other PEs: pass it only where `out` holds
+/// what this call wrote for the same cells, classification and gradient
+/// scale (under any lighting), and each PE flagged 0 has every voxel
+/// transparent (the engine passes the previous frame's PE mask of the same
+/// volume and classification: match.hpp's inactive PEs).
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
                                  VoxelBuffer& out, ShadeKernel variant = ShadeKernel::vec16,
