@@ -516,7 +516,9 @@ int main(int argc, char** argv) {
               os << " (longest wait " << t.longest_wait_ms << " ms, before "
                  << t.longest_wait_before << ")";
             os << "; " << st.samples << " samples on " << busy << " of " << st.loads.size()
-               << " PEs, utilisation " << st.utilisation() << "\n";
+               << " PEs, utilisation " << st.utilisation();
+            if (st.unshaded_pes > 0) os << ", shade left out " << st.unshaded_pes << " PEs";
+            os << "\n";
             std::cerr << os.str();
           }
         } else {

@@ -11,6 +11,7 @@
 #include <random>
 #include <regex>
 #include <set>
+#include <sstream>
 #include <string>
 
 #include "simdvol/image.hpp"
@@ -165,6 +166,32 @@ TEST_F(Cli, SkipPesLeavesPesOutWithTheSameImage) {
     sum += ia.pixels()[k].r;
   }
   EXPECT_GT(sum, 1.0);
+}
+
+// --times names the PEs a frame's shade left out: none in a turntable's
+// first frame (every cell shaded), the kept volume's transparent cells in
+// the next ones (RenderEngine's live mask), never every PE.
+TEST_F(Cli, TimesNameThePesTheShadeLeftOut) {
+  const Result r =
+      run("render --phantom-size 32 --size 40x40 --pe 64 --view 20,35,10 --frames 3 --step 10 "
+          "--times -o " +
+          path("t.png"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::vector<long> left;
+  std::istringstream lines(r.output);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("frame ", 0) != 0) continue;
+    const std::size_t at = line.find(", shade left out ");
+    left.push_back(at == std::string::npos ? 0 : std::stol(line.substr(at + 17)));
+    if (at != std::string::npos) {
+      EXPECT_NE(line.find(" PEs", at + 17), std::string::npos) << line;
+    }
+  }
+  ASSERT_EQ(left.size(), 3u) << r.output;
+  EXPECT_EQ(left[0], 0);
+  EXPECT_GT(left[1], 0);
+  EXPECT_LT(left[1], 64);
+  EXPECT_EQ(left[2], left[1]);
 }
 
 // --trace: every frame's kernels as a Chrome trace, one event per line;
