@@ -45,7 +45,9 @@ cl::Buffer params_buffer(Device& device, const void* p, std::size_t bytes, const
 // The fused program: shade.cl followed by classify.cl (which then also
 // compiles simdvol_shade_classify), with the classifier's specialisation.
 cl::Kernel fused_kernel(Device& device, const std::string& name, const Defines& defines) {
-  cl::Program program = device.build(program_source("shade", defines, {"classify"}));
+  cl::Program program =
+      device.build_keyed(program_key("source", "shade", defines, {"classify"}),
+                         [&] { return program_source("shade", defines, {"classify"}); });
   cl_int err = CL_SUCCESS;
   cl::Kernel k(program, name.c_str(), &err);
   if (err != CL_SUCCESS) throw CLError("clCreateKernel(" + name + ")", err);

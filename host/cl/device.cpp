@@ -311,6 +311,28 @@ std::string stage_program_source(std::string_view stage, const Defines& defines)
   return program_source(kFrameGroup[0], defines, {kFrameGroup[1], kFrameGroup[2], kFrameGroup[3]});
 }
 
+std::string program_key(std::string_view kind, std::string_view stage, const Defines& defines,
+                        std::initializer_list<std::string_view> then) {
+  std::string key;
+  auto part = [&](std::string_view t) {
+    key += std::to_string(t.size());
+    key += ':';
+    key += t;
+  };
+  part(kind);
+  part(stage);
+  key += std::to_string(defines.size());
+  key += 'd';
+  for (const auto& [name, value] : defines) {
+    part(name);
+    part(value);
+  }
+  key += std::to_string(then.size());
+  key += 't';
+  for (std::string_view t : then) part(t);
+  return key;
+}
+
 void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const std::string& what,
                       const std::string& hint) {
   if (bytes == 0) throw ArgumentError(what, "buffer of 0 bytes");
@@ -555,9 +577,26 @@ std::size_t Device::programs_from_disk() const {
   return cache_->from_disk;
 }
 
+cl::Program Device::build_keyed(const std::string& key, const std::function<std::string()>& source,
+                                const std::string& options) {
+  std::string k = key;
+  k += '\0';
+  k += build_options(options);  // SIMDVOL_CL_OPTIONS may change between calls
+  {
+    std::lock_guard<std::mutex> lock(cache_->mutex);
+    if (auto it = cache_->by_key.find(k); it != cache_->by_key.end()) return it->second;
+  }
+  cl::Program program = build(source(), options);
+  std::lock_guard<std::mutex> lock(cache_->mutex);
+  cache_->by_key.emplace(std::move(k), program);
+  return program;
+}
+
 cl::Program Device::program(std::string_view stage, const Defines& defines,
                             const std::string& options) {
-  return build(stage_program_source(stage, defines), options);
+  return build_keyed(
+      program_key("stage", stage, defines), [&] { return stage_program_source(stage, defines); },
+      options);
 }
 
 cl::Kernel Device::kernel(std::string_view stage, const std::string& name, const Defines& defines,

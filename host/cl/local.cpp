@@ -30,8 +30,10 @@ cl::Kernel stage_kernel(Device& device, const std::string& name, int order) {
   if (order < 0 || order > kMaxOrder)
     throw ArgumentError("order", "interpolation order " + std::to_string(order) +
                                      " is outside 0.." + std::to_string(kMaxOrder));
+  const Defines defines{{"ORDER", std::to_string(order)}};
   cl::Program program =
-      device.build(program_source("resample", {{"ORDER", std::to_string(order)}}, {"local"}));
+      device.build_keyed(program_key("source", "resample", defines, {"local"}),
+                         [&] { return program_source("resample", defines, {"local"}); });
   cl_int err = CL_SUCCESS;
   cl::Kernel k(program, name.c_str(), &err);
   if (err != CL_SUCCESS) throw CLError("clCreateKernel(" + name + ")", err);

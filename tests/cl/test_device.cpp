@@ -214,6 +214,50 @@ TEST(DeviceTest, ProgramCacheKeyedBySourceAndOptions) {
   EXPECT_EQ(dev.cached_programs(), 3u);
 }
 
+// build_keyed: a program found by its key is returned without assembling
+// its source again (the frame's launches ask for their programs by key);
+// the key and the options (SIMDVOL_CL_OPTIONS included) choose the
+// program, and two keys whose sources are the same share one program.
+// program_key keeps apart arguments that concatenate alike.
+TEST(DeviceTest, ProgramsFoundByKeyWithoutTheirSource) {
+  SIMDVOL_REQUIRE_OPENCL();
+  EnvGuard env("SIMDVOL_CL_OPTIONS");
+  unsetenv("SIMDVOL_CL_OPTIONS");
+  Device dev;
+  int made = 0;
+  const auto layout = [&] {
+    ++made;
+    return stage_program_source("layout");
+  };
+  const std::string key = program_key("stage", "layout", {});
+  cl::Program a = dev.build_keyed(key, layout);
+  EXPECT_EQ(made, 1);
+  cl::Program b = dev.build_keyed(key, layout);
+  EXPECT_EQ(made, 1);  // found by the key: no source assembled
+  EXPECT_EQ(a(), b());
+  EXPECT_EQ(dev.program("layout")(), a());  // program() keys its stage so
+  EXPECT_EQ(dev.program("swap")(), a());    // another key, the same source
+  EXPECT_EQ(dev.cached_programs(), 1u);
+  dev.build_keyed(key, layout, "-cl-fast-relaxed-math");
+  EXPECT_EQ(made, 2);
+  setenv("SIMDVOL_CL_OPTIONS", "-DSIMDVOL_TEST_VALUE=3", 1);
+  cl::Program c = dev.build_keyed(key, layout);
+  EXPECT_EQ(made, 3);  // the environment's options are part of the key
+  EXPECT_NE(c(), a());
+  unsetenv("SIMDVOL_CL_OPTIONS");
+  EXPECT_EQ(dev.build_keyed(key, layout)(), a());
+  EXPECT_EQ(made, 3);
+  EXPECT_EQ(dev.cached_programs(), 3u);
+
+  const std::string k0 = program_key("source", "shade", {{"A", "BC"}}, {"classify"});
+  EXPECT_NE(k0, program_key("source", "shade", {{"AB", "C"}}, {"classify"}));
+  EXPECT_NE(k0, program_key("source", "shade", {{"A", "BC"}}, {}));
+  EXPECT_NE(k0, program_key("stage", "shade", {{"A", "BC"}}, {"classify"}));
+  EXPECT_NE(k0, program_key("source", "shade", {{"A", "BC"}, {"D", ""}}, {"classify"}));
+  EXPECT_NE(program_key("source", "a", {}, {"bc"}), program_key("source", "ab", {}, {"c"}));
+  EXPECT_EQ(k0, program_key("source", "shade", {{"A", "BC"}}, {"classify"}));
+}
+
 // layout, match, balance and swap are one program (stage_program_source):
 // the four files in that order after shared and common, the defines once; a
 // frame's kernels of the four stages (both widths of the balance bounds)

@@ -47,6 +47,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <initializer_list>
 #include <map>
 #include <memory>
@@ -167,6 +168,12 @@ std::string program_source(std::string_view stage, const Defines& defines,
 /// whatever its size, and a frame uses all three. Each file also builds on
 /// its own (program_source).
 std::string stage_program_source(std::string_view stage, const Defines& defines = {});
+/// A key for Device::build_keyed naming program_source(stage, defines, then)
+/// (`then` empty: program_source(stage, defines)) or, with a `kind` of
+/// "stage", stage_program_source(stage, defines): each part with its length,
+/// so that different arguments never give the same key.
+std::string program_key(std::string_view kind, std::string_view stage, const Defines& defines,
+                        std::initializer_list<std::string_view> then = {});
 
 /// Where Device::build keeps program binaries: $SIMDVOL_CACHE_DIR; nullopt
 /// (not kept) when it is unset, empty or "off". Files are named by a hash
@@ -220,7 +227,14 @@ class Device {
   /// binary on disk (program_cache_dir()). Throws BuildError with the build
   /// log on failure.
   cl::Program build(const std::string& source, const std::string& options = "");
-  /// build(stage_program_source(stage, defines), options).
+  /// build(source(), options), found first by `key` (program_key(): a short
+  /// text that determines what `source` assembles), so that a program built
+  /// before is returned without assembling and comparing its source again
+  /// (the frame's launches ask for their programs some 90 times a frame).
+  cl::Program build_keyed(const std::string& key, const std::function<std::string()>& source,
+                          const std::string& options = "");
+  /// build(stage_program_source(stage, defines), options), by
+  /// build_keyed(program_key(stage, defines), ...).
   cl::Program program(std::string_view stage, const Defines& defines = {},
                       const std::string& options = "");
   /// A fresh kernel `name` from program(stage, defines, options).
@@ -309,6 +323,7 @@ class Device {
   struct Cache {
     std::mutex mutex;
     std::map<std::pair<std::string, std::string>, cl::Program> programs;
+    std::map<std::string, cl::Program> by_key;  // build_keyed: (key, options)
     std::size_t from_disk = 0;
   };
   std::unique_ptr<Cache> cache_;
