@@ -323,15 +323,23 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // local) read the balanced bounds where the rounds left them: no unpack
   // pass over the segments (BalanceUnpack::deferred; about a third of the
   // balance stage).
+  // The footprint sizes (the segment count and the rectangles) read as soon
+  // as the matching has them: balancing moves no segment's ray. The host
+  // waits for them while the device balances, and enqueues what follows
+  // before the balance ends (waiting for the balance too left the device
+  // idle between it and the segment order: 0.2 ms a frame on the phantom,
+  // 0.6 on brainsmall).
+  SegmentReads reads = start_segments(device, dm);
   enqueue_balance(device, dm, view, split, eo.balance_sweeps, BalanceBounds::automatic,
                   mode == CompositeMode::direct ? BalanceUnpack::deferred : BalanceUnpack::now);
-  const LocalSegments segs = device_segments(device, dm);  // waits: footprint sizes
-  // The swap plan's buffer mapped while the queue has nothing to run: the
+  cl_check(device.queue().flush(), "clFlush");
+  const LocalSegments segs = finish_segments(reads, dm);  // waits: footprint sizes
+  // The swap plan's buffer mapped behind the balance (not blocking): the
   // host writes the plan into it while the device resamples, and no copy
   // waits between the resample and the swap (upload_swap_plan).
   if (mode == CompositeMode::direct ||
       (mode == CompositeMode::mc && eo.mc_scope == McScope::subray))
-    map_swap_plan(device, S.swap_plan);
+    map_swap_plan(device, S.swap_plan, false);
   // (Unmapped again if the frame ends in an error before the upload does.)
   struct UnmapOnError {
     Device& device;

@@ -169,7 +169,28 @@ const cl::Buffer& bounds_arg(const LocalSegments& segs) {
 
 }  // namespace
 
-LocalSegments device_segments(Device& device, const DeviceMatching& m) {
+SegmentReads start_segments(Device& device, const DeviceMatching& m) {
+  SegmentReads r;
+  r.pes = m.pes;
+  r.seg_offset = m.seg_offset;
+  r.count = std::make_unique<cl_int>(0);
+  r.host_rects.resize(static_cast<std::size_t>(m.pes));
+  cl_check(device.queue().enqueueReadBuffer(m.seg_offset, CL_FALSE,
+                                            static_cast<std::size_t>(m.pes) * sizeof(cl_int),
+                                            sizeof(cl_int), r.count.get(), nullptr, &r.count_read),
+           "clEnqueueReadBuffer(segment count)");
+  cl_check(
+      device.queue().enqueueReadBuffer(m.rects, CL_FALSE, 0, r.host_rects.size() * sizeof(sv_rect),
+                                       r.host_rects.data(), nullptr, &r.rects_read),
+      "clEnqueueReadBuffer(footprint rectangles)");
+  return r;
+}
+
+LocalSegments finish_segments(SegmentReads& r, const DeviceMatching& m) {
+  if (!r.count || r.pes != m.pes || r.seg_offset() != m.seg_offset())
+    throw ArgumentError("segments", "finished on another matching than they were started on");
+  cl_check(r.count_read.wait(), "clWaitForEvents(segment count)");
+  cl_check(r.rects_read.wait(), "clWaitForEvents(footprint rectangles)");
   LocalSegments s;
   s.pes = m.pes;
   s.segments = m.segments;
@@ -177,17 +198,15 @@ LocalSegments device_segments(Device& device, const DeviceMatching& m) {
   s.rects = m.rects;
   s.bounds_pending = m.unpack_pending;
   if (m.unpack_pending) s.bounds = m.bounds;
-  s.host_rects.resize(static_cast<std::size_t>(m.pes));
-  cl_int count = 0;
-  cl_check(device.queue().enqueueReadBuffer(m.seg_offset, CL_FALSE,
-                                            static_cast<std::size_t>(m.pes) * sizeof(cl_int),
-                                            sizeof(cl_int), &count),
-           "clEnqueueReadBuffer(segment count)");
-  cl_check(device.queue().enqueueReadBuffer(
-               m.rects, CL_TRUE, 0, s.host_rects.size() * sizeof(sv_rect), s.host_rects.data()),
-           "clEnqueueReadBuffer(footprint rectangles)");
-  s.count = count;
+  s.host_rects = std::move(r.host_rects);
+  s.count = *r.count;
+  r.count.reset();  // finished: a second finish is refused
   return s;
+}
+
+LocalSegments device_segments(Device& device, const DeviceMatching& m) {
+  SegmentReads r = start_segments(device, m);
+  return finish_segments(r, m);
 }
 
 cl::Buffer upload_sample_offsets(Device& device, const Matching& m) {

@@ -89,6 +89,7 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
   if (d.mapped != nullptr && !into_map) unmap_swap_plan(device, d);
   unsigned char* base = nullptr;
   if (into_map) {
+    if (d.map_done()) cl_check(d.map_done.wait(), "clWaitForEvents(swap plan map)");
     base = static_cast<unsigned char*>(d.mapped);
   } else {
     d.staging.resize(total / sizeof(cl_int));
@@ -148,16 +149,19 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
   }
 }
 
-bool map_swap_plan(Device& device, DeviceSwapPlan& d) {
+bool map_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
   if (d.mapped != nullptr) return true;
   if (!d.packed()) return false;
   const std::size_t bytes = buffer_size(d.packed, "clGetMemObjectInfo(CL_MEM_SIZE)");
   cl_int err = CL_SUCCESS;
-  void* p = device.queue().enqueueMapBuffer(d.packed, CL_TRUE, CL_MAP_WRITE_INVALIDATE_REGION, 0,
-                                            bytes, nullptr, nullptr, &err);
+  cl::Event done;
+  void* p = device.queue().enqueueMapBuffer(d.packed, blocking ? CL_TRUE : CL_FALSE,
+                                            CL_MAP_WRITE_INVALIDATE_REGION, 0, bytes, nullptr,
+                                            blocking ? nullptr : &done, &err);
   if (err != CL_SUCCESS) throw CLError("clEnqueueMapBuffer(swap plan)", err);
   d.mapped = p;
   d.mapped_bytes = bytes;
+  d.map_done = done;
   return true;
 }
 
@@ -167,6 +171,7 @@ cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d) {
   void* p = d.mapped;
   d.mapped = nullptr;
   d.mapped_bytes = 0;
+  d.map_done = cl::Event();
   cl_check(device.queue().enqueueUnmapMemObject(d.packed, p, nullptr, &e),
            "clEnqueueUnmapMemObject(swap plan)");
   return e;

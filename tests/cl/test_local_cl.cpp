@@ -868,6 +868,54 @@ TEST(LocalCl, SegmentOrderSortsWithinPeBlocks) {
       ArgumentError);
 }
 
+// The engine reads the footprint sizes before the balance (start_segments)
+// and takes them after it (finish_segments): the same count, rectangles and
+// bounds state as device_segments after the balance, and as the serial
+// matching's; finishing on another matching, or twice, is refused.
+TEST(LocalCl, SegmentsReadBeforeTheBalanceAreTheBalancedOnes) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Dims3 dims{41, 35, 29};
+  const Volume vol(dims, VoxelType::f32);
+  int moved = 0;
+  for (int64_t pes : {int64_t(1), int64_t(64), int64_t(8192)})
+    for (const ViewAngles& a : {ViewAngles{0, 45, 0}, ViewAngles{20, 35, 10}}) {
+      SCOPED_TRACE("P " + std::to_string(pes) + " view " + std::to_string(a.phi));
+      const ViewGeometry view = make_view(vol, a, 48, 40, Sampling::voxel);
+      const KdSplit split = kd_split(dims, pes);
+      DeviceMatching dm = enqueue_match(dev, view, split);
+      SegmentReads reads = start_segments(dev, dm);
+      enqueue_balance(dev, dm, view, split, kBalanceSweeps, BalanceBounds::automatic,
+                      BalanceUnpack::deferred);
+      const LocalSegments got = finish_segments(reads, dm);
+      EXPECT_THROW(finish_segments(reads, dm), ArgumentError);  // finished already
+      const LocalSegments want = device_segments(dev, dm);
+      EXPECT_EQ(got.count, want.count);
+      EXPECT_EQ(got.bounds_pending, want.bounds_pending);
+      EXPECT_EQ(got.bounds_pending, dm.unpack_pending);
+      ASSERT_EQ(got.host_rects.size(), want.host_rects.size());
+      EXPECT_EQ(std::memcmp(got.host_rects.data(), want.host_rects.data(),
+                            got.host_rects.size() * sizeof(sv_rect)),
+                0);
+      const Matching ref = balance_reference(match_reference(view, split), view, split);
+      moved += ref.loads != match_reference(view, split).loads;
+      EXPECT_EQ(got.count, static_cast<int64_t>(ref.segments.size()));
+      ASSERT_EQ(got.host_rects.size(), ref.rects.size());
+      for (std::size_t p = 0; p < ref.rects.size(); ++p) {
+        EXPECT_EQ(got.host_rects[p].i0, ref.rects[p].i0) << p;
+        EXPECT_EQ(got.host_rects[p].j0, ref.rects[p].j0) << p;
+        EXPECT_EQ(got.host_rects[p].w, ref.rects[p].w) << p;
+        EXPECT_EQ(got.host_rects[p].h, ref.rects[p].h) << p;
+      }
+      DeviceMatching other = enqueue_match(dev, view, split);
+      SegmentReads elsewhere = start_segments(dev, other);
+      EXPECT_THROW(finish_segments(elsewhere, dm), ArgumentError);
+      EXPECT_NO_THROW(finish_segments(elsewhere, other));
+    }
+  EXPECT_GT(moved, 0);  // the balance moved samples in some case
+}
+
 // Segments whose balance left its unpack pending (BalanceUnpack::deferred,
 // the engine's direct frames): the segment order and the fused float8
 // kernel read the balanced bounds from the 16-bit copy and give the same

@@ -242,10 +242,10 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
   EXPECT_EQ(n, 3 * 6 * 2);
 }
 
-// The engine's upload: the plan's buffer mapped while the queue is idle
-// (map_swap_plan), the tables written into it on the host, then unmapped;
-// where they do not fit, unmapped and written by a copy into a larger
-// buffer. Either way the swap and the display equal those of a plan
+// The engine's upload: the plan's buffer mapped (map_swap_plan: blocking
+// while the queue is idle, or enqueued behind other work), the tables
+// written into it on the host, then unmapped; where they do not fit,
+// unmapped and written by a copy into a larger buffer. Either way the swap and the display equal those of a plan
 // uploaded on its own, bit for bit.
 TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
   SIMDVOL_TEST_DEVICE(dev);
@@ -278,13 +278,18 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
     const DeviceSwapRun want_run = enqueue_swap(dev, alone, fp);
     const int N = plan.stages();
     const std::vector<Rgba> want = read_rgba(dev, want_run.last, plan.level_size(N));
-    // The engine's way.
+    // The engine's way: the map not blocking (enqueued behind a swap of the
+    // plan on its own, so that it waits for it) in every other case.
+    const bool blocking = (&c - cases) % 2 == 0;
     const cl_mem before = reused.packed();
-    EXPECT_EQ(map_swap_plan(dev, reused), c.mapped != 0);
+    if (!blocking) enqueue_swap(dev, alone, fp);
+    EXPECT_EQ(map_swap_plan(dev, reused, blocking), c.mapped != 0);
     EXPECT_EQ(reused.mapped != nullptr, c.mapped != 0);
+    EXPECT_EQ(reused.map_done() != nullptr, c.mapped != 0 && !blocking);
     plan_swap_into(reused.plan, m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack);
     upload_swap_plan(dev, reused, false);
     EXPECT_EQ(reused.mapped, nullptr);
+    EXPECT_EQ(reused.map_done(), nullptr);
     if (c.same >= 0) {
       EXPECT_EQ(reused.packed() == before, c.same == 1);
     }

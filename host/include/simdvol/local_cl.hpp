@@ -17,6 +17,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "simdvol/device.hpp"
@@ -57,7 +58,28 @@ LocalSegments upload_segments(Device& device, const Matching& m);
 /// The segments of a device matching (enqueue_match, enqueue_balance) without
 /// copying them: reads back the segment count and the rectangles (blocking;
 /// the footprints' sizes are needed on the host to allocate them).
+/// finish_segments(start_segments(device, m), m).
 LocalSegments device_segments(Device& device, const DeviceMatching& m);
+
+/// device_segments in two halves, so that its reads wait for the matching
+/// only: start_segments enqueues the reads of the segment count and the
+/// rectangles (not blocking); finish_segments waits for those two and takes
+/// the rest from m as it is then. A balance enqueued between the two
+/// (enqueue_balance) moves no segment's ray, so the count and the
+/// rectangles read are its segments' too: the engine balances in between,
+/// and enqueues the resample before the device has finished the balance.
+/// The reads' host memory lives in the SegmentReads (keep it until
+/// finish_segments). ArgumentError from finish_segments where m is not the
+/// matching the reads were started on.
+struct SegmentReads {
+  int64_t pes = 0;
+  cl::Buffer seg_offset;            ///< the matching's (to check finish_segments' m)
+  std::unique_ptr<cl_int> count;    ///< read into (a stable address)
+  std::vector<sv_rect> host_rects;  ///< read into
+  cl::Event count_read, rects_read;
+};
+SegmentReads start_segments(Device& device, const DeviceMatching& m);
+LocalSegments finish_segments(SegmentReads& reads, const DeviceMatching& m);
 
 /// sample_offsets(m) (int32) on the device, for enqueue_resample/enqueue_local.
 cl::Buffer upload_sample_offsets(Device& device, const Matching& m);

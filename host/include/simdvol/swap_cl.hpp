@@ -41,6 +41,7 @@ struct DeviceSwapPlan {
   std::vector<std::size_t> regions;  ///< (offset, bytes) of each table, as cut last
   void* mapped = nullptr;            ///< `packed` mapped for writing (map_swap_plan), or null
   std::size_t mapped_bytes = 0;
+  cl::Event map_done;  ///< a non-blocking map's event (upload_swap_plan waits for it)
 };
 /// Uploads `plan` (a blocking write). ArgumentError if a level exceeds
 /// 2^31 - 1 pixels.
@@ -61,12 +62,14 @@ DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan);
 /// written as above.
 void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking);
 /// Maps d's buffer (kept from an earlier upload) for the next
-/// upload_swap_plan to write into: a blocking map, so call it where the
-/// queue has nothing left to run (the engine: after it read the footprint
-/// sizes, before it enqueues the resample, while the host plans the swap
-/// the device resamples). False where d has no buffer yet (the first
-/// upload writes). Nothing may use d's tables until the upload unmaps it.
-bool map_swap_plan(Device& device, DeviceSwapPlan& d);
+/// upload_swap_plan to write into. Blocking, it waits for the queue before
+/// it, so call it where the queue has nothing left to run; not blocking,
+/// the map is enqueued (d.map_done) and upload_swap_plan waits for it
+/// before it writes (the engine: enqueued after the balance and before the
+/// resample, so that the host writes the plan while the device resamples).
+/// False where d has no buffer yet (the first upload writes). Nothing may
+/// use d's tables until the upload unmaps it.
+bool map_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking = true);
 /// Enqueues the unmap of a mapped d (map_swap_plan); a null event where d
 /// is not mapped.
 cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d);
