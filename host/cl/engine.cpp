@@ -459,11 +459,17 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     // The swap plan on the host while the device resamples (flushed first:
     // PoCL starts enqueued commands on a flush).
     cl_check(device.queue().flush(), "clFlush");
+    // (Planned while the device may still balance: the plan's time leaves
+    // out the wait for the map behind the balance.)
     const auto tp = std::chrono::steady_clock::now();
     plan_swap_into(S.swap_plan.plan, segs.host_rects, split, view, grid, eo.layout);
+    plan_ms = ms_since(tp);
+    if (S.swap_plan.map_done())
+      cl_check(S.swap_plan.map_done.wait(), "clWaitForEvents(swap plan map)");
+    const auto tu = std::chrono::steady_clock::now();
     upload_swap_plan(device, S.swap_plan, false);
     const DeviceSwapPlan& plan = S.swap_plan;
-    plan_ms = ms_since(tp);
+    plan_ms += ms_since(tu);
     const DeviceSwapRun run = enqueue_swap(device, plan, *fp);
     e_display = enqueue_display(device, plan, run.last, intermediate);
     if (view.sampling == Sampling::pixel) {
