@@ -245,8 +245,8 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
 // The engine's upload: the plan's buffer mapped (map_swap_plan: blocking
 // while the queue is idle, or enqueued behind other work), the tables
 // written into it on the host, then unmapped; where they do not fit,
-// unmapped and written by a copy into a larger buffer. Either way the swap and the display equal those of a plan
-// uploaded on its own, bit for bit.
+// unmapped and written by a copy into a larger buffer. Either way the swap and the display equal
+// those of a plan uploaded on its own, bit for bit.
 TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
   SIMDVOL_TEST_DEVICE(dev);
   const Dims3 d{29, 23, 17};
