@@ -57,16 +57,15 @@ DeviceSwapPlan upload_swap_plan(Device& device, SwapPlan plan) {
   return d;
 }
 
-void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
-  const SwapPlan& plan = d.plan;
-  const int N = plan.stages();
-  for (int L = 0; L <= N; ++L)
-    if (plan.level_size(L) > kInt32Max)
-      throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 pixels");
+namespace {
+// The tables' regions in the plan's buffer, in the order rects[0..N],
+// offsets[0..N], xpe, ype: (offset, bytes) each, at least one element, at
+// offsets aligned to the device's base-address alignment; *total = the
+// buffer's size.
+std::vector<std::size_t> plan_regions(Device& device, int N, std::size_t width, std::size_t height,
+                                      std::size_t* total) {
   const auto levels = static_cast<std::size_t>(N + 1);
   const auto pes = static_cast<std::size_t>(int64_t(1) << N);
-  // The regions, in the order rects[0..N], offsets[0..N], xpe, ype: each
-  // at least one element, at an aligned offset.
   const std::size_t align = std::max<std::size_t>(128, device.info().base_addr_align_bytes);
   std::vector<std::size_t> regions;
   regions.reserve(2 * (2 * levels + 2));
@@ -76,12 +75,45 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
     regions.push_back(bytes);
     at = (at + bytes + align - 1) / align * align;
   };
-  for (std::size_t L = 0; L < levels; ++L)
-    cut(std::max<std::size_t>(plan.held[L].size(), 1) * sizeof(SwapRect));
+  for (std::size_t L = 0; L < levels; ++L) cut(pes * sizeof(SwapRect));
   for (std::size_t L = 0; L < levels; ++L) cut((pes + 1) * sizeof(cl_int));
-  cut(std::max<std::size_t>(plan.xpe.size(), 1) * sizeof(cl_int));
-  cut(std::max<std::size_t>(plan.ype.size(), 1) * sizeof(cl_int));
-  const std::size_t total = at;
+  cut(std::max<std::size_t>(width, 1) * sizeof(cl_int));
+  cut(std::max<std::size_t>(height, 1) * sizeof(cl_int));
+  *total = at;
+  return regions;
+}
+}  // namespace
+
+bool swap_plan_held_in_map(Device& device, DeviceSwapPlan& d, int stages, int width, int height,
+                           std::vector<SwapRect*>& held_out) {
+  held_out.clear();
+  d.held_in_map = false;
+  if (d.mapped == nullptr || stages < 0 || width < 1 || height < 1) return false;
+  std::size_t total = 0;
+  const std::vector<std::size_t> regions = plan_regions(
+      device, stages, static_cast<std::size_t>(width), static_cast<std::size_t>(height), &total);
+  if (total > d.mapped_bytes) return false;
+  if (d.map_done()) cl_check(d.map_done.wait(), "clWaitForEvents(swap plan map)");
+  auto* base = static_cast<unsigned char*>(d.mapped);
+  for (int L = 0; L <= stages; ++L)
+    held_out.push_back(
+        reinterpret_cast<SwapRect*>(base + regions[2 * static_cast<std::size_t>(L)]));
+  d.held_in_map = true;
+  d.held_for = {stages, width, height};
+  return true;
+}
+
+void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
+  const SwapPlan& plan = d.plan;
+  const int N = plan.stages();
+  for (int L = 0; L <= N; ++L)
+    if (plan.level_size(L) > kInt32Max)
+      throw ArgumentError("swap", "level " + std::to_string(L) + " exceeds 2^31 - 1 pixels");
+  const auto levels = static_cast<std::size_t>(N + 1);
+  const auto pes = static_cast<std::size_t>(int64_t(1) << N);
+  std::size_t total = 0;
+  std::vector<std::size_t> regions = plan_regions(device, N, static_cast<std::size_t>(plan.width),
+                                                  static_cast<std::size_t>(plan.height), &total);
   // The tables at their regions (the gaps are never read): straight into
   // the mapped buffer where map_swap_plan mapped one large enough, else
   // into the host image that one write copies.
@@ -95,10 +127,19 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
     d.staging.resize(total / sizeof(cl_int));
     base = reinterpret_cast<unsigned char*>(d.staging.data());
   }
+  // (A plan made with held_out has its rectangles in the mapping already
+  // and plan.held empty: swap_plan_held_in_map.)
+  const bool held_kept =
+      std::all_of(plan.held.begin(), plan.held.end(),
+                  [&](const std::vector<SwapRect>& h) { return h.size() == pes; });
+  if (!held_kept &&
+      !(into_map && d.held_in_map && d.held_for == std::array<int, 3>{N, plan.width, plan.height}))
+    throw ArgumentError("swap plan",
+                        "its rectangles are neither kept nor in the mapped buffer for its size");
+  d.held_in_map = false;
   std::size_t r = 0;
   for (std::size_t L = 0; L < levels; ++L, r += 2)
-    if (!plan.held[L].empty())
-      std::memcpy(base + regions[r], plan.held[L].data(), plan.held[L].size() * sizeof(SwapRect));
+    if (held_kept) std::memcpy(base + regions[r], plan.held[L].data(), pes * sizeof(SwapRect));
   for (std::size_t L = 0; L < levels; ++L, r += 2) {
     auto* o = reinterpret_cast<cl_int*>(base + regions[r]);
     const std::vector<int64_t>& off = plan.offset[L];

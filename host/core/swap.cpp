@@ -143,7 +143,8 @@ SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
 }
 
 void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdSplit& split,
-                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout) {
+                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout,
+                    SwapRect* const* held_out) {
   const int64_t P = static_cast<int64_t>(rects.size());
   if (P != split.pes() || P != grid.count())
     throw ArgumentError("rects", "one footprint per PE of the split and the grid expected");
@@ -201,7 +202,10 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
     }
     auto& held = plan.held[static_cast<std::size_t>(L)];
     auto& off = plan.offset[static_cast<std::size_t>(L)];
-    held.resize(static_cast<std::size_t>(P));
+    if (held_out)
+      held.clear();  // (the level's rectangles go to held_out[L])
+    else
+      held.resize(static_cast<std::size_t>(P));
     off.resize(static_cast<std::size_t>(P + 1));
     off[0] = 0;
     // Cut-and-stack: per axis the values x = v (mod 2^j) of [lo, hi).
@@ -211,7 +215,7 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
     const int64_t by = cut ? 0 : int64_t(1) << (B[1] - j[1]);
     const int64_t* vx = v[0].data();
     const int64_t* vy = v[1].data();
-    SwapRect* h = held.data();
+    SwapRect* h = held_out ? held_out[L] : held.data();
     int64_t* o = off.data();
     int64_t total = 0;
     for (int64_t p = 0; p < P; ++p) {

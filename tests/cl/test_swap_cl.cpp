@@ -260,7 +260,7 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
   const Case cases[] = {{8, {30, 45, 0}, 0, 0},   {8192, {30, 45, 0}, 1, 0},
                         {512, {30, 45, 0}, 1, 1}, {8192, {-23.5, 71.25, 133}, 1, -1},
                         {1, {0, 0, 0}, 1, 1},     {2048, {0, 0, 0}, 1, 1}};
-  int wrote_into_map = 0;
+  int wrote_into_map = 0, planned_in_map = 0;
   for (const Case& c : cases) {
     SCOPED_TRACE("P " + std::to_string(c.P));
     const ViewGeometry view = make_view(d, {1, 1, 1}, c.va, 45, 37, Sampling::voxel);
@@ -286,7 +286,21 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
     EXPECT_EQ(map_swap_plan(dev, reused, blocking), c.mapped != 0);
     EXPECT_EQ(reused.mapped != nullptr, c.mapped != 0);
     EXPECT_EQ(reused.map_done() != nullptr, c.mapped != 0 && !blocking);
-    plan_swap_into(reused.plan, m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack);
+    // Where not blocking, the rectangles planned straight into the mapping
+    // where the plan fits in it (swap_plan_held_in_map), as the engine does.
+    std::vector<SwapRect*> held_out;
+    const bool in_map =
+        !blocking && swap_plan_held_in_map(dev, reused, N, view.width(), view.height(), held_out);
+    if (c.mapped == 0) {
+      EXPECT_FALSE(in_map);
+    }
+    if (c.same == 1 && !blocking) {
+      EXPECT_TRUE(in_map);
+    }
+    planned_in_map += in_map;
+    plan_swap_into(reused.plan, m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack,
+                   in_map ? held_out.data() : nullptr);
+    EXPECT_EQ(reused.plan.held[0].empty(), in_map);
     upload_swap_plan(dev, reused, false);
     EXPECT_EQ(reused.mapped, nullptr);
     EXPECT_EQ(reused.map_done(), nullptr);
@@ -304,6 +318,23 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
                       read_device_image(dev, im_alone, view.width(), view.height()).pixels()));
   }
   EXPECT_GE(wrote_into_map, 3);
+  EXPECT_GE(planned_in_map, 1);
+  // A plan whose rectangles went to a mapping given out for another size
+  // (or to none) is refused by the upload, not sent with the tables wrong.
+  {
+    const ViewGeometry view = make_view(d, {1, 1, 1}, {30, 45, 0}, 45, 37, Sampling::voxel);
+    const KdSplit split = kd_split(d, 512);
+    const Matching m = match_reference(view, split);
+    ASSERT_TRUE(map_swap_plan(dev, reused));
+    std::vector<SwapRect*> held_out;
+    ASSERT_TRUE(
+        swap_plan_held_in_map(dev, reused, split.bits, view.width(), view.height() - 1, held_out));
+    plan_swap_into(reused.plan, m.rects, split, view, pe_grid(512), SwapLayout::cut_and_stack,
+                   held_out.data());
+    EXPECT_THROW(upload_swap_plan(dev, reused, false), ArgumentError);
+    unmap_swap_plan(dev, reused);
+    EXPECT_THROW(upload_swap_plan(dev, reused, false), ArgumentError);  // held empty, no map
+  }
   // Unmapping a plan that is not mapped enqueues nothing.
   EXPECT_EQ(unmap_swap_plan(dev, reused)(), nullptr);
   // Mapped and then unmapped without an upload (a frame that ended in an

@@ -280,6 +280,25 @@ TEST(SwapReference, EqualsDepthOrderCompositeAllP) {
           check_plan(plan, m.rects, g);
           plan_swap_into(reused, m.rects, split, view, g, L);
           EXPECT_TRUE(same_plan(reused, plan));
+          // The rectangles written to held_out instead (the engine's mapped
+          // tables): the same, plan.held empty, the rest of the plan the same.
+          {
+            const std::size_t levels = plan.held.size();
+            std::vector<std::vector<SwapRect>> out(levels,
+                                                   std::vector<SwapRect>(std::size_t(P) + 1));
+            for (auto& o : out) o.back() = SwapRect{-7, -7, -7, -7, -7, -7, -7, -7};  // guard
+            std::vector<SwapRect*> ptr;
+            for (auto& o : out) ptr.push_back(o.data());
+            plan_swap_into(reused, m.rects, split, view, g, L, ptr.data());
+            for (std::size_t l = 0; l < levels; ++l) {
+              EXPECT_TRUE(reused.held[l].empty());
+              EXPECT_TRUE(std::equal(plan.held[l].begin(), plan.held[l].end(), out[l].begin()));
+              EXPECT_EQ(out[l].back(), (SwapRect{-7, -7, -7, -7, -7, -7, -7, -7}));
+            }
+            SwapPlan without = plan;
+            for (auto& h : without.held) h.clear();
+            EXPECT_TRUE(same_plan(reused, without));
+          }
           const Image got = display_reference(plan, swap_reference(plan, f));
           EXPECT_LE(max_abs_diff(want, got), 2e-6f);
           ++checked;

@@ -41,7 +41,9 @@ struct DeviceSwapPlan {
   std::vector<std::size_t> regions;  ///< (offset, bytes) of each table, as cut last
   void* mapped = nullptr;            ///< `packed` mapped for writing (map_swap_plan), or null
   std::size_t mapped_bytes = 0;
-  cl::Event map_done;  ///< a non-blocking map's event (upload_swap_plan waits for it)
+  cl::Event map_done;             ///< a non-blocking map's event (upload_swap_plan waits for it)
+  bool held_in_map = false;       ///< swap_plan_held_in_map gave the mapping's rectangle tables out
+  std::array<int, 3> held_for{};  ///< for a plan of (stages, width, height)
 };
 /// Uploads `plan` (a blocking write). ArgumentError if a level exceeds
 /// 2^31 - 1 pixels.
@@ -73,6 +75,17 @@ bool map_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking = true);
 /// Enqueues the unmap of a mapped d (map_swap_plan); a null event where d
 /// is not mapped.
 cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d);
+/// Where d is mapped (map_swap_plan) and a plan of `stages` stages for a
+/// width x height intermediate image fits in the mapping: waits for the
+/// map, points held_out[L] at level L's rectangle table in the mapped
+/// memory (2^stages rectangles each) and returns true; plan_swap_into(...,
+/// held_out.data()) then writes the rectangles there and the next
+/// upload_swap_plan writes only the rest (no copy of 3.7 MB a frame on the
+/// 256^3 phantom). False (held_out empty) where d is not mapped or the plan
+/// would not fit: plan with plan.held kept. upload_swap_plan throws
+/// ArgumentError for a plan whose plan.held is empty otherwise.
+bool swap_plan_held_in_map(Device& device, DeviceSwapPlan& d, int stages, int width, int height,
+                           std::vector<SwapRect*>& held_out);
 
 /// The level buffers of a swap run.
 /// The most swap stages one launch runs (simdvol_swap_stages: a work-group
