@@ -169,6 +169,12 @@ const cl::Buffer& bounds_arg(const LocalSegments& segs) {
 
 }  // namespace
 
+SegmentReads::~SegmentReads() {
+  if (!count) return;  // finished, or moved from
+  for (cl::Event* e : {&count_read, &rects_read})
+    if ((*e)()) e->wait();  // (an error here cannot be reported: the frame's own is)
+}
+
 SegmentReads start_segments(Device& device, const DeviceMatching& m) {
   SegmentReads r;
   r.pes = m.pes;

@@ -871,7 +871,8 @@ TEST(LocalCl, SegmentOrderSortsWithinPeBlocks) {
 // The engine reads the footprint sizes before the balance (start_segments)
 // and takes them after it (finish_segments): the same count, rectangles and
 // bounds state as device_segments after the balance, and as the serial
-// matching's; finishing on another matching, or twice, is refused.
+// matching's; finishing on another matching, or twice, is refused, and
+// one dropped unfinished waits for its reads.
 TEST(LocalCl, SegmentsReadBeforeTheBalanceAreTheBalancedOnes) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
@@ -909,6 +910,11 @@ TEST(LocalCl, SegmentsReadBeforeTheBalanceAreTheBalancedOnes) {
         EXPECT_EQ(got.host_rects[p].h, ref.rects[p].h) << p;
       }
       DeviceMatching other = enqueue_match(dev, view, split);
+      {  // dropped unfinished (a frame's error): it waits for its reads
+        SegmentReads dropped = start_segments(dev, other);
+        enqueue_balance(dev, other, view, split);
+      }
+      dev.finish();
       SegmentReads elsewhere = start_segments(dev, other);
       EXPECT_THROW(finish_segments(elsewhere, dm), ArgumentError);
       EXPECT_NO_THROW(finish_segments(elsewhere, other));

@@ -71,12 +71,21 @@ LocalSegments device_segments(Device& device, const DeviceMatching& m);
 /// The reads' host memory lives in the SegmentReads (keep it until
 /// finish_segments). ArgumentError from finish_segments where m is not the
 /// matching the reads were started on.
+/// Dropped unfinished (an error between the two), it waits for its reads,
+/// so that they never write into freed memory.
 struct SegmentReads {
   int64_t pes = 0;
   cl::Buffer seg_offset;            ///< the matching's (to check finish_segments' m)
-  std::unique_ptr<cl_int> count;    ///< read into (a stable address)
+  std::unique_ptr<cl_int> count;    ///< read into (a stable address); null once finished
   std::vector<sv_rect> host_rects;  ///< read into
   cl::Event count_read, rects_read;
+
+  SegmentReads() = default;
+  SegmentReads(SegmentReads&&) = default;
+  SegmentReads& operator=(SegmentReads&&) = delete;
+  SegmentReads(const SegmentReads&) = delete;
+  SegmentReads& operator=(const SegmentReads&) = delete;
+  ~SegmentReads();
 };
 SegmentReads start_segments(Device& device, const DeviceMatching& m);
 LocalSegments finish_segments(SegmentReads& reads, const DeviceMatching& m);
