@@ -319,10 +319,6 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.live->cp = cp;
     std::memcpy(S.live->grad, sp.grad_scale, sizeof S.live->grad);
   }
-  // Direct compositing's kernels (the segment order, the fused resample +
-  // local) read the balanced bounds where the rounds left them: no unpack
-  // pass over the segments (BalanceUnpack::deferred; about a third of the
-  // balance stage).
   // The footprint sizes (the segment count and the rectangles) read as soon
   // as the matching has them: balancing moves no segment's ray. The host
   // waits for them while the device balances, and enqueues what follows
@@ -330,16 +326,6 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // idle between it and the segment order: 0.2 ms a frame on the phantom,
   // 0.6 on brainsmall).
   SegmentReads reads = start_segments(device, dm);
-  // The swap plan's buffer mapped behind them (not blocking): the host
-  // writes the plan into it while the device balances and resamples, and
-  // no copy waits between the resample and the swap (upload_swap_plan).
-  if (mode == CompositeMode::direct ||
-      (mode == CompositeMode::mc && eo.mc_scope == McScope::subray))
-    map_swap_plan(device, S.swap_plan, false);
-  enqueue_balance(device, dm, view, split, eo.balance_sweeps, BalanceBounds::automatic,
-                  mode == CompositeMode::direct ? BalanceUnpack::deferred : BalanceUnpack::now);
-  cl_check(device.queue().flush(), "clFlush");
-  const LocalSegments segs = finish_segments(reads, dm);  // waits: footprint sizes
   // (Unmapped again if the frame ends in an error before the upload does.)
   struct UnmapOnError {
     Device& device;
@@ -352,6 +338,20 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       }
     }
   } unmap_on_error{device, S.swap_plan};
+  // The swap plan's buffer mapped behind them (not blocking): the host
+  // writes the plan into it while the device balances and resamples, and
+  // no copy waits between the resample and the swap (upload_swap_plan).
+  if (mode == CompositeMode::direct ||
+      (mode == CompositeMode::mc && eo.mc_scope == McScope::subray))
+    map_swap_plan(device, S.swap_plan, false);
+  // Direct compositing's kernels (the segment order, the fused resample +
+  // local) read the balanced bounds where the rounds left them: no unpack
+  // pass over the segments (BalanceUnpack::deferred; about a third of the
+  // balance stage).
+  enqueue_balance(device, dm, view, split, eo.balance_sweeps, BalanceBounds::automatic,
+                  mode == CompositeMode::direct ? BalanceUnpack::deferred : BalanceUnpack::now);
+  cl_check(device.queue().flush(), "clFlush");
+  const LocalSegments segs = finish_segments(reads, dm);  // waits: footprint sizes
   // The tables of the cells' layout, made once with them (the origin table
   // is the layout's, already on the device); the frame's view uploaded.
   if (!S.tables)
