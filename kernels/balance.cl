@@ -205,6 +205,19 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
  *
  * _round: one round, the pairs along `axis` whose lower cell index has
  * parity `par`; dir = sign of the depth step along the axis (non-zero).
+ * Each work-item takes SV_BAL_PES consecutive PEs (simdvol_shared.h; the
+ * pair of each PE that is its front cell's), one after the other: most of
+ * the 48 rounds of 8 sweeps find their sweep settled and return at once,
+ * and with one PE per work-item those launches of 8,192 work-items had
+ * cost 20-30 us each. `simdvol render --frames 8 --step 0 --trace`, the
+ * balance from its first round to the segment order (medians of 6 frames;
+ * 1 -> 16 PEs per work-item): brainsmall 1.05 -> 0.65-0.76 ms, the 256^3
+ * phantom at (20, 35, 10) 2.28 -> 1.97-2.13, at (0, 45, 0) 4.11 -> 3.98-4.02,
+ * ch2 4.65 -> 4.26-4.63 (4 and 32 in between or worse; a 2-core Intel Xeon,
+ * 2026-12-05). The sweeps after the first two in one launch of one
+ * work-group (a barrier between rounds) were faster where they were settled
+ * (brainsmall 0.68, the phantom 1.88 ms) and slower where they were not
+ * (one core: 4.4-4.7 ms at (0, 45, 0), 5.5 on ch2): not kept.
  * _roundn, _round16n: the same on narrow link lists (one uint per entry,
  * sv_bal_link), which the host takes where the matching wrote them
  * (DeviceMatching::links_narrow).
@@ -218,27 +231,29 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
       global int* loads, global int* moves, int sweep) {                                           \
     /* A sweep that moved nothing left a state no later sweep changes. */                          \
     if (SV_BAL_SETTLED(moves, sweep)) return;                                                      \
-    const int p = (int)get_global_id(0);                                                           \
-    sv_balance_prefetch(cidx, pe_of, splits, pes, axis, par, dir, lofs, llist, NL,                 \
-                        (global const uchar*)kk, (int)sizeof(BT), loads, p);                       \
-    const int2 fb = sv_balance_pair(cidx, pe_of, splits, pes, axis, par, dir, p);                  \
-    if (fb.x < 0) return;                                                                          \
-    const int F = fb.x, B = fb.y;                                                                  \
-    const int diff = loads[F] - loads[B];                                                          \
-    const int t = diff / 2; /* truncates towards 0 */                                              \
-    if (t == 0) return;                                                                            \
-    const int front_gives = t > 0;                                                                 \
-    const int want = front_gives ? t : -t;                                                         \
-    const int sF = lofs[F].x, sB = lofs[B].x; /* (narrow links: their first segments) */           \
-    const int e0 = sv_list_start(lofs[F], axis), e1 = sv_list_start(lofs[F + 1], axis);            \
-    const int n = e1 - e0;                                                                         \
-    if (n <= 0) return;                                                                            \
-    int moved = 0;                                                                                 \
-    SV_BAL_SHARES(BT, B1, NL)                                                                      \
-    if (moved == 0) return;                                                                        \
-    loads[F] -= front_gives ? moved : -moved;                                                      \
-    loads[B] += front_gives ? moved : -moved;                                                      \
-    SV_BAL_MOVED(moves, sweep);                                                                    \
+    const int p0 = (int)get_global_id(0) * SV_BAL_PES;                                             \
+    for (int p = p0; p < p0 + SV_BAL_PES && p < pes; ++p) {                                        \
+      sv_balance_prefetch(cidx, pe_of, splits, pes, axis, par, dir, lofs, llist, NL,               \
+                          (global const uchar*)kk, (int)sizeof(BT), loads, p);                     \
+      const int2 fb = sv_balance_pair(cidx, pe_of, splits, pes, axis, par, dir, p);                \
+      if (fb.x < 0) continue;                                                                      \
+      const int F = fb.x, B = fb.y;                                                                \
+      const int diff = loads[F] - loads[B];                                                        \
+      const int t = diff / 2; /* truncates towards 0 */                                            \
+      if (t == 0) continue;                                                                        \
+      const int front_gives = t > 0;                                                               \
+      const int want = front_gives ? t : -t;                                                       \
+      const int sF = lofs[F].x, sB = lofs[B].x; /* (narrow links: their first segments) */         \
+      const int e0 = sv_list_start(lofs[F], axis), e1 = sv_list_start(lofs[F + 1], axis);          \
+      const int n = e1 - e0;                                                                       \
+      if (n <= 0) continue;                                                                        \
+      int moved = 0;                                                                               \
+      SV_BAL_SHARES(BT, B1, NL)                                                                    \
+      if (moved == 0) continue;                                                                    \
+      loads[F] -= front_gives ? moved : -moved;                                                    \
+      loads[B] += front_gives ? moved : -moved;                                                    \
+      SV_BAL_MOVED(moves, sweep);                                                                  \
+    }                                                                                              \
   }
 
 #define SV_BALANCE_PACK(SFX, BT, B1)                                                             \

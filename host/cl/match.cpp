@@ -373,7 +373,9 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
     set_args(round, round_name, m.cidx, m.pe_of, splits, npes, cl_int(r.axis), cl_int(r.par),
              cl_int(r.dir), m.link_offset, m.link_list, kk, m.loads, moves, cl_int(r.sweep));
     m.balance_events.push_back(
-        {"balance_round", device.run(round, round_name, cl::NDRange(P), cl::NDRange(kWgs))});
+        {"balance_round",
+         device.run(round, round_name, cl::NDRange((P + SV_BAL_PES - 1) / SV_BAL_PES),
+                    cl::NDRange(kWgs))});
   }
   // The fill's 16-bit copy may stay the only current one (deferred).
   if (filled && unpack == BalanceUnpack::deferred) {
