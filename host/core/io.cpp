@@ -897,9 +897,9 @@ Volume load_nifti(const std::filesystem::path& path) {
   struct NimDeleter {
     void operator()(nifti_image* p) const { nifti_image_free(p); }
   };
-  std::unique_ptr<nifti_image, NimDeleter> nim(nifti_image_read(path.c_str(), 1));
+  // The header first; the voxels after the checks below.
+  std::unique_ptr<nifti_image, NimDeleter> nim(nifti_image_read(path.c_str(), 0));
   if (!nim) throw FileError(path, "niftilib could not read the file (corrupt or truncated)");
-  if (!nim->data) throw FileError(path, "niftilib read no voxel data (truncated?)");
   const std::array<int64_t, 3> dims{nim->nx, nim->ny, nim->nz};
   if (dims != info.dims)
     throw FileError(path, "niftilib dims " + dims_text(dims) + " disagree with the header " +
@@ -908,6 +908,34 @@ Volume load_nifti(const std::filesystem::path& path) {
     throw FileError(path, "holds more than one volume (nt > 1)");
   const std::size_t n = checked_count(path, dims, static_cast<std::size_t>(nim->nbyper));
   if (nim->nvox != n) throw FileError(path, "voxel count disagrees with the dims");
+  // niftilib's reader (nifti_read_buffer) replaces every NaN and Inf of a
+  // float volume by 0 as it reads, without a word: a background masked
+  // with NaN would become voxels of value 0, which a classification may
+  // make opaque. Float voxels are read as the file stores them instead
+  // (znzlib, .nii and .nii.gz alike, from the image's offset, swapped as
+  // niftilib swaps them); NaN voxels then render transparent
+  // (docs/HARDENING.md). Other types through niftilib.
+  std::vector<unsigned char> stored;
+  const void* d = nullptr;
+  if (nim->datatype == DT_FLOAT32 || nim->datatype == DT_FLOAT64) {
+    const std::size_t bytes = n * static_cast<std::size_t>(nim->nbyper);
+    stored.resize(bytes);
+    znzFile fp = znzopen(path.c_str(), "rb", nifti_is_gzfile(path.c_str()));
+    if (znz_isnull(fp)) throw FileError(path, "could not be opened for its voxels");
+    const bool at = nim->iname_offset >= 0 && znzseek(fp, nim->iname_offset, SEEK_SET) >= 0;
+    const std::size_t got = at ? znzread(stored.data(), 1, bytes, fp) : 0;
+    znzclose(fp);
+    if (got != bytes)
+      throw FileError(path, "holds " + std::to_string(got) + " of the " + std::to_string(bytes) +
+                                " bytes of voxel data its header promises (truncated?)");
+    if (nim->byteorder != nifti_short_order() && nim->nbyper > 1)
+      nifti_swap_Nbytes(n, nim->nbyper, stored.data());
+    d = stored.data();
+  } else {
+    if (nifti_image_load(nim.get()) != 0 || !nim->data)
+      throw FileError(path, "niftilib read no voxel data (truncated?)");
+    d = nim->data;
+  }
 
   const double slope = nim->scl_slope, inter = nim->scl_inter;
   const bool scaled = std::isfinite(slope) && slope != 0.0 &&
@@ -934,7 +962,6 @@ Volume load_nifti(const std::filesystem::path& path) {
       {static_cast<double>(nim->dx), static_cast<double>(nim->dy), static_cast<double>(nim->dz)});
   Volume vol(dims, vtype, spacing);
   float* out = vol.data().data();
-  const void* d = nim->data;
   switch (nim->datatype) {
     case DT_UINT8:
       nifti_copy<uint8_t>(d, n, out, slope, inter_used, scaled);

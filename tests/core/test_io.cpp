@@ -817,6 +817,56 @@ TEST_F(IoTest, NiftiRoundTripEveryTypeNiiAndNiiGz) {
   }
 }
 
+// NaN and Inf in a float NIfTI load as stored (niftilib's own reader makes
+// them 0), in .nii and .nii.gz, float32 and float64, and in a file written
+// big-endian (swapped as niftilib swaps); NaN voxels then render
+// transparent (test_extremes.cpp).
+TEST_F(IoTest, NiftiKeepsNonFiniteFloats) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<float> v(5 * 4 * 3);
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = 0.25f * static_cast<float>(i) - 3.0f;
+  v[0] = nan;
+  v[7] = inf;
+  v[33] = -inf;
+  v[59] = nan;
+  const auto check = [&](const simdvol::Volume& got) {
+    ASSERT_EQ(got.data().size(), v.size());
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      if (std::isnan(v[i]))
+        EXPECT_TRUE(std::isnan(got.data()[i])) << i;
+      else
+        EXPECT_EQ(got.data()[i], v[i]) << i;
+    }
+  };
+  for (const char* ext : {".nii", ".nii.gz"}) {
+    SCOPED_TRACE(ext);
+    write_nifti(file(std::string("f32") + ext), DT_FLOAT32, {5, 4, 3, 1}, v);
+    check(simdvol::load_nifti(file(std::string("f32") + ext)));
+    write_nifti(file(std::string("f64") + ext), DT_FLOAT64, {5, 4, 3, 1}, as<double>(v));
+    check(simdvol::load_nifti(file(std::string("f64") + ext)));
+    // A big-endian file (niftilib writes native order only: its header
+    // swapped by swap_nifti_header, its voxels by nifti_swap_Nbytes).
+    if (std::string(ext) == ".nii") {
+      const fs::path be = file("be.nii");
+      const int dims[8] = {3, 5, 4, 3, 1, 1, 1, 1};
+      nifti_image* nim = nifti_make_new_nim(dims, DT_FLOAT32, 1);
+      ASSERT_NE(nim, nullptr);
+      nifti_1_header h = nifti_convert_nim2nhdr(nim);
+      nifti_image_free(nim);
+      const int offset = static_cast<int>(h.vox_offset);
+      swap_nifti_header(&h, 1);
+      std::vector<float> data = v;
+      nifti_swap_Nbytes(data.size(), 4, data.data());
+      std::string bytes(reinterpret_cast<const char*>(&h), sizeof h);
+      bytes.resize(static_cast<std::size_t>(offset), '\0');  // (no extension)
+      bytes.append(reinterpret_cast<const char*>(data.data()), data.size() * sizeof(float));
+      write_file(be, bytes);
+      check(simdvol::load_nifti(be));
+    }
+  }
+}
+
 TEST_F(IoTest, NiftiAppliesSlopeAndIntercept) {
   const auto u8 = test_values(VoxelType::u8, kN);
   write_nifti(file("scaled.nii"), DT_UINT8, {5, 4, 3, 1}, as<uint8_t>(u8), {1, 1, 1}, 2.0f, -1.0f);
