@@ -925,6 +925,8 @@ Volume load_nifti(const std::filesystem::path& path) {
     const bool at = nim->iname_offset >= 0 && znzseek(fp, nim->iname_offset, SEEK_SET) >= 0;
     const std::size_t got = at ? znzread(stored.data(), 1, bytes, fp) : 0;
     znzclose(fp);
+    if (got > bytes)  // (znzread of a .gz passes gzread's -1 on as a size_t)
+      throw FileError(path, "its voxel data could not be read (corrupt compressed data?)");
     if (got != bytes)
       throw FileError(path, "holds " + std::to_string(got) + " of the " + std::to_string(bytes) +
                                 " bytes of voxel data its header promises (truncated?)");

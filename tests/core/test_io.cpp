@@ -845,6 +845,22 @@ TEST_F(IoTest, NiftiKeepsNonFiniteFloats) {
     check(simdvol::load_nifti(file(std::string("f32") + ext)));
     write_nifti(file(std::string("f64") + ext), DT_FLOAT64, {5, 4, 3, 1}, as<double>(v));
     check(simdvol::load_nifti(file(std::string("f64") + ext)));
+    // Cut short: refused, naming the file (a plain file's size is checked
+    // against its header first; a .gz is found short as it is read).
+    {
+      const fs::path cut = file(std::string("cut") + ext);
+      write_nifti(file(std::string("whole") + ext), DT_FLOAT32, {5, 4, 3, 1}, v);
+      std::ifstream in(file(std::string("whole") + ext), std::ios::binary);
+      std::string all((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      all.resize(all.size() - 37);
+      write_file(cut, all);
+      EXPECT_THROW(simdvol::load_nifti(cut), simdvol::FileError);
+      try {
+        simdvol::load_nifti(cut);
+      } catch (const simdvol::FileError& e) {
+        EXPECT_NE(std::string(e.what()).find(cut.string()), std::string::npos) << e.what();
+      }
+    }
     // A big-endian file (niftilib writes native order only: its header
     // swapped by swap_nifti_header, its voxels by nifti_swap_Nbytes).
     if (std::string(ext) == ".nii") {
