@@ -63,7 +63,8 @@ SV_FN int2 sv_bal_link(global const int2* llist, const int nl, const int e, cons
   return (int2)(sF + (int)(w & 0xffffu), sB + (int)(w >> 16));
 }
 /* A round's work-items walk their pair's links and bounds, scattered over
- * megabytes: with SV_BAL_PF > 0 the work-item SV_BAL_PF ahead prefetches
+ * megabytes: with SV_BAL_PF > 0 the PE SV_BAL_PF ahead (each of a work-item's
+ * SV_BAL_PES PEs in turn; until 2026-12-05 a work-item per PE) prefetches
  * its pair's link list and the bounds the list points to (all of F's and
  * B's, below), where the pair moves samples in this round (its loads, which
  * no other pair of the round changes, differ by 2 or more). A hint only.

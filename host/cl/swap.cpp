@@ -87,7 +87,7 @@ std::vector<std::size_t> plan_regions(Device& device, int N, std::size_t width, 
 bool swap_plan_held_in_map(Device& device, DeviceSwapPlan& d, int stages, int width, int height,
                            std::vector<SwapRect*>& held_out) {
   held_out.clear();
-  d.held_in_map = false;
+  d.held_for.reset();
   if (d.mapped == nullptr || stages < 0 || width < 1 || height < 1) return false;
   std::size_t total = 0;
   const std::vector<std::size_t> regions = plan_regions(
@@ -98,8 +98,7 @@ bool swap_plan_held_in_map(Device& device, DeviceSwapPlan& d, int stages, int wi
   for (int L = 0; L <= stages; ++L)
     held_out.push_back(
         reinterpret_cast<SwapRect*>(base + regions[2 * static_cast<std::size_t>(L)]));
-  d.held_in_map = true;
-  d.held_for = {stages, width, height};
+  d.held_for = std::array<int, 3>{stages, width, height};
   return true;
 }
 
@@ -132,11 +131,10 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
   const bool held_kept =
       std::all_of(plan.held.begin(), plan.held.end(),
                   [&](const std::vector<SwapRect>& h) { return h.size() == pes; });
-  if (!held_kept &&
-      !(into_map && d.held_in_map && d.held_for == std::array<int, 3>{N, plan.width, plan.height}))
+  if (!held_kept && !(into_map && d.held_for == std::array<int, 3>{N, plan.width, plan.height}))
     throw ArgumentError("swap plan",
                         "its rectangles are neither kept nor in the mapped buffer for its size");
-  d.held_in_map = false;
+  d.held_for.reset();
   std::size_t r = 0;
   for (std::size_t L = 0; L < levels; ++L, r += 2)
     if (held_kept) std::memcpy(base + regions[r], plan.held[L].data(), pes * sizeof(SwapRect));

@@ -17,6 +17,7 @@
 #include <array>
 
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "simdvol/device.hpp"
@@ -41,9 +42,10 @@ struct DeviceSwapPlan {
   std::vector<std::size_t> regions;  ///< (offset, bytes) of each table, as cut last
   void* mapped = nullptr;            ///< `packed` mapped for writing (map_swap_plan), or null
   std::size_t mapped_bytes = 0;
-  cl::Event map_done;             ///< a non-blocking map's event (upload_swap_plan waits for it)
-  bool held_in_map = false;       ///< swap_plan_held_in_map gave the mapping's rectangle tables out
-  std::array<int, 3> held_for{};  ///< for a plan of (stages, width, height)
+  cl::Event map_done;  ///< a non-blocking map's event (upload_swap_plan waits for it)
+  /// Set where swap_plan_held_in_map gave the mapping's rectangle tables
+  /// out: for a plan of (stages, width, height).
+  std::optional<std::array<int, 3>> held_for;
 };
 /// Uploads `plan` (a blocking write). ArgumentError if a level exceeds
 /// 2^31 - 1 pixels.
@@ -67,8 +69,9 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking);
 /// upload_swap_plan to write into. Blocking, it waits for the queue before
 /// it, so call it where the queue has nothing left to run; not blocking,
 /// the map is enqueued (d.map_done) and upload_swap_plan waits for it
-/// before it writes (the engine: enqueued after the balance and before the
-/// resample, so that the host writes the plan while the device resamples).
+/// before it writes (the engine: enqueued behind the footprint reads,
+/// before the balance, so that the host writes the plan while the device
+/// balances and resamples).
 /// False where d has no buffer yet (the first upload writes). Nothing may
 /// use d's tables until the upload unmaps it.
 bool map_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking = true);
