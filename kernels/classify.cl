@@ -665,11 +665,29 @@ SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, floa
  * comparison): shade + classify 13.97 / 13.96 -> 13.38 / 13.35 ms (a 2-core
  * Intel Xeon, 2026-12-05); brainsmall and ch2 within noise. */
 #ifndef SV_STORE_KEPT_ZEROS
-#define SV_ZERO_CHUNK() \
-  if (!use_live) sv_store16_zero(dst, vstride, e0, il)
+#define SV_ZERO_CHUNK()                                   \
+  {                                                       \
+    if (kc_mode == 1) SV_VSTORE16((float16)(0.0f), kq);   \
+    if (!use_live) sv_store16_zero(dst, vstride, e0, il); \
+  }
 #else
-#define SV_ZERO_CHUNK() sv_store16_zero(dst, vstride, e0, il)
+#define SV_ZERO_CHUNK()                                 \
+  {                                                     \
+    if (kc_mode == 1) SV_VSTORE16((float16)(0.0f), kq); \
+    sv_store16_zero(dst, vstride, e0, il);              \
+  }
 #endif
+/* The kept classification of a chunk (kc_mode 1): a0 where lit, else 0,
+ * and each colour times 1 / a0 (sv_classify16_lit's cr * inv). */
+#define SV_KEEP_CLASS(a0, cr, cg, cb)                          \
+  if (kc_mode == 1) {                                          \
+    const int16 lit_ = ((a0) >= FLT_MIN) & ~isnan(v) & in;     \
+    const float16 inv_ = 1.0f / (a0);                          \
+    SV_VSTORE16(select(z, (a0), lit_), kq);                    \
+    SV_VSTORE16(select(z, (cr)*inv_, lit_), kq + vstride);     \
+    SV_VSTORE16(select(z, (cg)*inv_, lit_), kq + 2 * vstride); \
+    SV_VSTORE16(select(z, (cb)*inv_, lit_), kq + 3 * vstride); \
+  }
 
 /* simdvol_shade_classify16: the fused kernel on 16-position chunks
  * (simdvol_shade16 then simdvol_classify16 without the voxel cells in
@@ -682,7 +700,8 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
                                __constant const sv_shade_params* sp,
                                __constant const sv_classify_params* cp, __global volatile uint* occ,
                                const int nbx, const int nby, const int mark,
-                               __global const uchar* live, const int use_live, const int il) {
+                               __global const uchar* live, const int use_live,
+                               __global float* restrict kc, const int kc_mode, const int il) {
   const int e0 = 16 * (int)get_global_id(0);
   const int p = (int)get_global_id(1);
   if (p >= pes || e0 >= vstride) return;
@@ -700,55 +719,91 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   sv_chunk_rows(origins, cell, block, p, e0, rb, fx, fy, fz, ok);
   __global const float* c = cells + sv_block_start(block, p);
   __global float* dst = out + (size_t)p * 4 * (size_t)vstride;
+  /* the chunk's planes of the kept classification (kc_mode 1, 2) */
+  __global float* kq = kc + (size_t)p * 4 * (size_t)vstride + e0;
   const int16 in = SV_ROWS16(ok) != 0.0f;
   sv_prefetch_ahead(c, rb);
-  const float16 v = SV_LD16(c, rb, 0);
   const float16 z = 0.0f;
   float16 id, is, mag, r, g, b, a;
-  /* Empty space: a voxel is (0, 0, 0, 0) unless its alpha before lighting is
-   * > 0 and its value not NaN (sv_classify16_lit), whatever the shading; a
-   * chunk with no such voxel is stored as zeros without being shaded (the
-   * same bits). The mixture's alpha needs only v; the transfer function's is
-   * density(v) * gradient(|g|), 0 where density(v) is. */
-  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
-    const float16 d = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v);
-    if (!any((d != 0.0f) & ~isnan(v) & in)) {
-      SV_ZERO_CHUNK();
-      return;
-    }
-    /* The alpha needs only the gradient's magnitude: a chunk whose alpha is
-     * transparent in every voxel (sv_classify16_lit's test) is stored as
-     * zeros without its lighting (the same bits). brainsmall.den with the
-     * volpack preset (its background noise has density > 0 and |g| below
-     * the gradient ramp), simdvol-bench-shade --volume ... --runs 25,
-     * alternated three times with SV_NO_EARLY_ALPHA (which leaves it out,
-     * for comparison): fused 3.77-5.07 -> 3.64-4.29 ms, with the brick
-     * marking 4.46-6.01 -> 4.01-4.55 ms. */
-    float16 gx, gy, gz, g2, cr, cg, cb;
-    sv_grad_rows(sp, c, block, rb, &gx, &gy, &gz, &g2, &mag);
-    const float16 a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
-#ifndef SV_NO_EARLY_ALPHA
-    if (!any((a0 >= FLT_MIN) & ~isnan(v) & in)) {
-      SV_ZERO_CHUNK();
-      return;
-    }
-#endif
-    sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
-    sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
-  } else {
-    /* A chunk whose alpha is 0 without the mixture (sv_mixture_zero16). */
-    if (!any(in & ~sv_mixture_zero16(cp, v))) {
-      SV_ZERO_CHUNK();
-      return;
-    }
-    float16 cr, cg, cb;
-    const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
-    if (!any((a0 > 0.0f) & ~isnan(v) & in)) {
+  if (kc_mode == 2) {
+    /* The kept classification: a0 where the voxel is lit (alpha >= FLT_MIN,
+     * its value not NaN, inside the cell), else 0, and each colour over a0;
+     * the lighting as below, the same expressions (sv_classify16_lit), so
+     * the same bits. A mixture's classification (an exp and the
+     * materials' selects per voxel) was about a third of this kernel
+     * (a probe without it: 13.7 -> 8.9 ms on the 256^3 phantom); reading
+     * 16 bytes a lit voxel instead, scripts/bench-ab against 377a9cd (a
+     * 2-core Intel Xeon, 2026-12-05): shade + classify 14.17 -> 11.36 ms
+     * (0.809) on the phantom at (20, 35, 10), 13.72 -> 11.37 at (0, 45,
+     * 0), ch2 19.04 -> 16.30; frame wall 0.957 / 0.941 / 0.957. A
+     * transfer function's ramps cost less than those reads (brainsmall's
+     * volpack preset: 1.88 -> 2.10 ms), so the engine keeps only a
+     * mixture's. */
+    const float16 k0 = SV_VLOAD16(kq);
+    if (!any(k0 > 0.0f)) {
       SV_ZERO_CHUNK();
       return;
     }
     sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
-    sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
+#ifdef SV_STEP_ONE
+    const float16 a1 = k0;
+#else
+    const float16 a1 = cp->step_is_one ? k0 : sv_step_alpha16(k0, cp->opacity_step);
+#endif
+    const int16 lit = k0 > 0.0f;
+    r = select(z, a1 * fmin(1.0f, SV_VLOAD16(kq + vstride) * id + is), lit);
+    g = select(z, a1 * fmin(1.0f, SV_VLOAD16(kq + 2 * vstride) * id + is), lit);
+    b = select(z, a1 * fmin(1.0f, SV_VLOAD16(kq + 3 * vstride) * id + is), lit);
+    a = select(z, a1, lit);
+  } else {
+    const float16 v = SV_LD16(c, rb, 0);
+    /* Empty space: a voxel is (0, 0, 0, 0) unless its alpha before lighting is
+     * > 0 and its value not NaN (sv_classify16_lit), whatever the shading; a
+     * chunk with no such voxel is stored as zeros without being shaded (the
+     * same bits). The mixture's alpha needs only v; the transfer function's is
+     * density(v) * gradient(|g|), 0 where density(v) is. */
+    if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
+      const float16 d = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v);
+      if (!any((d != 0.0f) & ~isnan(v) & in)) {
+        SV_ZERO_CHUNK();
+        return;
+      }
+      /* The alpha needs only the gradient's magnitude: a chunk whose alpha is
+       * transparent in every voxel (sv_classify16_lit's test) is stored as
+       * zeros without its lighting (the same bits). brainsmall.den with the
+       * volpack preset (its background noise has density > 0 and |g| below
+       * the gradient ramp), simdvol-bench-shade --volume ... --runs 25,
+       * alternated three times with SV_NO_EARLY_ALPHA (which leaves it out,
+       * for comparison): fused 3.77-5.07 -> 3.64-4.29 ms, with the brick
+       * marking 4.46-6.01 -> 4.01-4.55 ms. */
+      float16 gx, gy, gz, g2, cr, cg, cb;
+      sv_grad_rows(sp, c, block, rb, &gx, &gy, &gz, &g2, &mag);
+      const float16 a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
+#ifndef SV_NO_EARLY_ALPHA
+      if (!any((a0 >= FLT_MIN) & ~isnan(v) & in)) {
+        SV_ZERO_CHUNK();
+        return;
+      }
+#endif
+      SV_KEEP_CLASS(a0, cr, cg, cb)
+      sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
+      sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
+    } else {
+      /* A chunk whose alpha is 0 without the mixture (sv_mixture_zero16). */
+      if (!any(in & ~sv_mixture_zero16(cp, v))) {
+        SV_ZERO_CHUNK();
+        return;
+      }
+      float16 cr, cg, cb;
+      const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+      if (!any((a0 > 0.0f) & ~isnan(v) & in)) {
+        SV_ZERO_CHUNK();
+        return;
+      }
+      SV_KEEP_CLASS(a0, cr, cg, cb)
+      sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
+      sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
+    }
   }
   sv_store16_rgba(dst, vstride, e0, select(z, r, in), select(z, g, in), select(z, b, in),
                   select(z, a, in), il);
@@ -805,15 +860,17 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   }
 }
 #undef SV_ZERO_CHUNK
+#undef SV_KEEP_CLASS
 
 __kernel void simdvol_shade_classify16(
     __global const float* restrict cells, __global float* restrict out,
     __global const int4* restrict origins, int4 dims, int4 cell, int4 block, int pes, int vstride,
     __constant const sv_shade_params* sp, __constant const sv_classify_params* cp,
     __global volatile uint* occ, const int nbx, const int nby, const int mark,
-    __global const uchar* live, const int use_live) {
+    __global const uchar* live, const int use_live, __global float* restrict kc,
+    const int kc_mode) {
   sv_shade_classify16(cells, out, origins, dims, cell, block, pes, vstride, sp, cp, occ, nbx, nby,
-                      mark, live, use_live, 0);
+                      mark, live, use_live, kc, kc_mode, 0);
 }
 
 __kernel void simdvol_shade_classify16_il(
@@ -821,9 +878,10 @@ __kernel void simdvol_shade_classify16_il(
     __global const int4* restrict origins, int4 dims, int4 cell, int4 block, int pes, int vstride,
     __constant const sv_shade_params* sp, __constant const sv_classify_params* cp,
     __global volatile uint* occ, const int nbx, const int nby, const int mark,
-    __global const uchar* live, const int use_live) {
+    __global const uchar* live, const int use_live, __global float* restrict kc,
+    const int kc_mode) {
   sv_shade_classify16(cells, out, origins, dims, cell, block, pes, vstride, sp, cp, occ, nbx, nby,
-                      mark, live, use_live, 1);
+                      mark, live, use_live, kc, kc_mode, 1);
 }
 #endif
 

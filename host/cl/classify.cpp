@@ -173,7 +173,7 @@ cl::Event enqueue_classify_in_place(Device& device, VoxelBuffer& voxels,
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
                                  VoxelBuffer& out, ShadeKernel variant, DeviceOccupancy* mark,
-                                 const cl::Buffer* live) {
+                                 const cl::Buffer* live, KeptClassification* kept) {
   const CellLayout& C = cells.layout();
   const VoxelLayout& V = out.layout();
   if (C.halo < 1) throw ArgumentError("cells", "the shade stage needs a halo of at least 1");
@@ -202,6 +202,16 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
       throw ArgumentError("live", "holds " + std::to_string(have) + " flags for " +
                                       std::to_string(C.pes()) + " PEs");
   }
+  if (kept && !vec)
+    throw ArgumentError("kept classification", "only the float16 fused kernel keeps it");
+  if (kept) {
+    const std::size_t need = static_cast<std::size_t>(V.pes()) * 4 * V.stride * sizeof(float);
+    const std::size_t have =
+        kept->planes() ? buffer_size(kept->planes, "clGetMemObjectInfo(kept)") : std::size_t(0);
+    if (have < need)
+      throw ArgumentError("kept classification",
+                          "holds " + std::to_string(have) + " bytes for " + std::to_string(need));
+  }
   cl::Kernel k = fused_kernel(device, name, defines);
   set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
            cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
@@ -209,11 +219,15 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
   if (vec) {
     // Without marking the occupancy argument is never read, nor `live`
     // without a mask: any buffer will do.
+    // (nor the kept classification without one: kc_mode 0)
     set_args_from(k, name, 10, mark ? mark->occupied : cbuf, mark ? mark->bricks[0] : cl_int(0),
                   mark ? mark->bricks[1] : cl_int(0), cl_int(mark ? 1 : 0), live ? *live : cbuf,
-                  cl_int(live ? 1 : 0));
+                  cl_int(live ? 1 : 0), kept ? kept->planes : cbuf,
+                  cl_int(kept ? (kept->filled ? 2 : 1) : 0));
     const detail::PlaneRange r = detail::chunk_range(V);
-    return device.run(k, name, r.global, r.local);
+    cl::Event e = device.run(k, name, r.global, r.local);
+    if (kept) kept->filled = true;
+    return e;
   }
   const detail::CellRange r = detail::cell_range(V);
   return device.run(k, name, r.global, r.local);

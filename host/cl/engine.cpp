@@ -70,6 +70,25 @@ void validate(const EngineOptions& eo, const RenderOptions& opt) {
 // as they are (enqueue_shade_classify's `live`); and its brick occupancy and
 // reach (for its order), the same in a frame under the same conditions: no
 // marks, no reach kernel.
+// The kept classification of the volume in the cells (KeptClassification)
+// and what it was made for: the classification (its opacity step aside,
+// applied after) and the gradient scale (the transfer function's |g|).
+struct KeptClass {
+  KeptClassification kept;
+  sv_classify_params cp{};
+  float grad[4]{};
+  static sv_classify_params key(sv_classify_params c) {
+    c.step_is_one = 0;
+    c.opacity_step = 0.0f;
+    return c;
+  }
+  bool holds_for(const sv_classify_params& c, const sv_shade_params& sp) const {
+    const sv_classify_params k = key(c);
+    return std::memcmp(&cp, &k, sizeof k) == 0 &&
+           std::memcmp(grad, sp.grad_scale, sizeof grad) == 0;
+  }
+};
+
 struct LiveCells {
   cl::Buffer mask;
   std::optional<DeviceOccupancy> occupancy;
@@ -122,6 +141,10 @@ struct RenderEngine::State {
   // The previous frame's PE mask while `rgba` holds zeros in the cells of
   // the PEs it flags 0 (LiveCells); none while the cells change.
   std::optional<LiveCells> live;
+  // The kept classification of the volume in `cells` (EngineOptions::
+  // keep_classification); its buffer stays while the cells do, its
+  // `filled` is cleared where the cells or the classification change.
+  std::optional<KeptClass> kept_class;
   // Sized by the frame, grown on demand.
   Scratch pe_total, total, sample_off, samples, image;
   // The swap plan, its host vectors and device tables reused from frame to
@@ -218,6 +241,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.tables.reset();
     S.laid_out.clear();
     S.live.reset();
+    S.kept_class.reset();
     const CellLayout cl_layout = S.array->cell_layout(vol.dims(), 1);
     // The fused shade + classify writes interleaved cells (a corner's RGBA
     // in one 16-byte load for the resample); the two-launch path classifies
@@ -284,12 +308,38 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     occupancy = live->occupancy;
     occupancy->events.clear();
   }
+  // The kept classification, where the volume is kept: made in the first
+  // such frame, read in the later ones of the same classification and
+  // gradient scale. For a mixture (its Gaussians' exp per voxel), not for
+  // a transfer function, whose ramps cost less than the kept planes' reads
+  // (docs/PERFORMANCE.md).
+  KeptClassification* kept = nullptr;
+  if (eo.fused && eo.reuse_layout && eo.keep_classification && cp.kind == SV_CLASSIFY_MIXTURE) {
+    if (!S.kept_class) {
+      const VoxelLayout& V = S.rgba->layout();
+      const std::size_t bytes = static_cast<std::size_t>(V.pes()) * 4 * V.stride * sizeof(float);
+      if (bytes <= device.info().max_alloc_bytes) {
+        S.kept_class.emplace();
+        S.kept_class->kept.planes =
+            device.buffer(CL_MEM_READ_WRITE, bytes, nullptr, "kept classification");
+      }
+    }
+    if (S.kept_class) {
+      if (!keep || !S.kept_class->holds_for(cp, sp)) {
+        S.kept_class->kept.filled = false;
+        S.kept_class->cp = KeptClass::key(cp);
+        std::memcpy(S.kept_class->grad, sp.grad_scale, sizeof S.kept_class->grad);
+      }
+      kept = &S.kept_class->kept;
+    }
+  }
+  const bool kept_read = kept && kept->filled;
   if (eo.fused) {
     if (need_reach && !reuse_occupancy)
       occupancy.emplace(make_occupancy(device, S.rgba->layout(), opt.order));
     e_classify = enqueue_shade_classify(device, *S.cells, sp, cp, *S.rgba, ShadeKernel::vec16,
                                         occupancy && !reuse_occupancy ? &*occupancy : nullptr,
-                                        use_live ? &live->mask : nullptr);
+                                        use_live ? &live->mask : nullptr, kept);
   } else {
     // Classified over the shading: no second voxel buffer, and a voxel
     // moves 32 bytes instead of 48 (enqueue_classify_in_place).
@@ -528,6 +578,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     for (int64_t l : stats->loads) stats->samples += l;
     stats->segments = segs.count;
     stats->swapped = swapped;
+    stats->classification_kept = kept_read;
     if (swapped) stats->swap = swap_cost(S.swap_plan.plan, split, view, grid);
     if (live_used()) {
       std::vector<cl_uchar> live(static_cast<std::size_t>(dm.pes));

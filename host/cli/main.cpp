@@ -518,6 +518,7 @@ int main(int argc, char** argv) {
             os << "; " << st.samples << " samples on " << busy << " of " << st.loads.size()
                << " PEs, utilisation " << st.utilisation();
             if (st.unshaded_pes > 0) os << ", shade left out " << st.unshaded_pes << " PEs";
+            if (st.classification_kept) os << ", classification kept";
             os << "\n";
             std::cerr << os.str();
           }

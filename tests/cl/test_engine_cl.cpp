@@ -286,6 +286,73 @@ TEST(RenderEngine, TransparentCellsStayUnshadedBetweenFrames) {
   }
 }
 
+// The kept classification (EngineOptions::keep_classification): a
+// turntable's engine lights it in the frames after the first of the same
+// volume, mixture classification and gradient scale, and every frame equals
+// the frame of an engine that classifies every time, bit for bit: across
+// views, orders and sampling modes (another opacity step), after the
+// classification changes and back (made again), for another volume of the
+// same dims (made again); never for a transfer function, whose frames leave
+// the kept one as it is (the mixture's again after them: kept).
+TEST(RenderEngine, KeptClassificationEqualsClassifyingAgain) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 2);
+  Volume tissue = vol;
+  for (float& x : tissue.data()) x = x * 0.5f + 20.0f;
+  Classifier hazy = classifier_preset("ct");
+  hazy.mixture.materials[0].opacity = 0.01f;  // air
+  Classifier ramps;
+  ramps.kind = Classifier::Kind::transfer;
+  ramps.transfer.density = {{0.0f, 200.0f, 1000.0f}, {0.0f, 0.2f, 0.8f}};
+  struct Frame {
+    const Volume* vol;
+    double phi;
+    int order;
+    Sampling sampling;
+    const Classifier* c;
+    bool kept;
+  };
+  const Classifier ct = classifier_preset("ct");
+  const Frame frames[] = {{&vol, 0, 1, Sampling::voxel, &ct, false},
+                          {&vol, 23, 1, Sampling::voxel, &ct, true},
+                          {&vol, 40, 3, Sampling::pixel, &ct, true},
+                          {&vol, 55, 1, Sampling::voxel, &hazy, false},
+                          {&vol, 70, 0, Sampling::voxel, &hazy, true},
+                          {&vol, 85, 1, Sampling::voxel, &ct, false},
+                          {&vol, 100, 1, Sampling::voxel, &ramps, false},
+                          {&vol, 115, 1, Sampling::voxel, &ramps, false},
+                          {&vol, 130, 1, Sampling::voxel, &ct, true},  // still ct's
+                          {&tissue, 145, 1, Sampling::voxel, &ct, false},
+                          {&tissue, 160, 2, Sampling::voxel, &ct, true}};
+  EngineOptions eo;
+  eo.pes = 256;
+  eo.fused = true;
+  eo.reuse_layout = true;
+  EngineOptions again = eo;
+  again.keep_classification = false;
+  RenderEngine engine(dev, eo), every(dev, again);
+  for (const Frame& f : frames) {
+    SCOPED_TRACE("phi " + std::to_string(f.phi));
+    RenderOptions opt;
+    opt.width = opt.height = 40;
+    opt.view = {20, f.phi, 10};
+    opt.order = f.order;
+    opt.sampling = f.sampling;
+    opt.classifier = *f.c;
+    EngineStats sa, sb;
+    const Image a = engine.render(*f.vol, opt, nullptr, &sa);
+    const Image b = every.render(*f.vol, opt, nullptr, &sb);
+    EXPECT_EQ(sa.classification_kept, f.kept);
+    EXPECT_FALSE(sb.classification_kept);
+    ASSERT_EQ(a.pixels().size(), b.pixels().size());
+    EXPECT_EQ(std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(Rgba)),
+              0);
+    float alpha = 0;
+    for (const Rgba& p : a.pixels()) alpha += p.a;
+    EXPECT_GT(alpha, 1.0f);  // not an empty frame
+  }
+}
+
 // A relative classification (the MRI preset: materials at fractions of the
 // value range) takes the range of the volume it renders. A turntable's
 // engine keeps it for the kept volume only (the same object, data pointer

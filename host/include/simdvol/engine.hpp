@@ -118,6 +118,9 @@ struct EngineStats {
   /// also keeps the previous frame's brick occupancy and reach where the
   /// order is the same (no marks, no reach kernel: the same bricks).
   int64_t unshaded_pes = 0;
+  /// The shade + classify lit the kept classification of the volume
+  /// (EngineOptions::keep_classification) instead of classifying again.
+  bool classification_kept = false;
   /// SIMD utilisation after balancing: mean load / max load over all P PEs,
   /// the skipped ones included (1 when idle).
   double utilisation() const;
@@ -178,6 +181,15 @@ struct EngineOptions {
   /// reference's either way, to float rounding (the samples composite in
   /// other groupings). 0 .. kMaxBalanceSweeps (--balance-sweeps).
   int balance_sweeps = kBalanceSweeps;
+  /// With fused and reuse_layout: the fused shade + classify keeps each
+  /// voxel's classification (its alpha and colour before lighting, which
+  /// depend on the value, the gradient's magnitude and the classification,
+  /// not on the view or the light) in a buffer the size of the voxel cells,
+  /// and the later frames of the same volume, classification and gradient
+  /// scale light it instead of classifying again (enqueue_shade_classify's
+  /// `kept`; the same image bit for bit). Off, or where the buffer would
+  /// pass the device's largest allocation: every frame classifies.
+  bool keep_classification = true;
 };
 
 /// Checks the options against each other and `opt`; ArgumentError naming

@@ -213,10 +213,25 @@ struct DeviceOccupancy;  // local_cl.hpp
 /// scale (under any lighting), and each PE flagged 0 has every voxel
 /// transparent (the engine passes the previous frame's PE mask of the same
 /// volume and classification: match.hpp's inactive PEs).
+/// With `kept` (vec16 only, else ArgumentError; a buffer of fewer than 4 *
+/// stride floats per PE of out's layout: ArgumentError): the classification
+/// before lighting, kept for the frames after. Where kept->filled is false
+/// the call classifies and writes it (per position: alpha where the voxel
+/// is lit, i.e. alpha >= FLT_MIN, value not NaN, inside the volume's cell,
+/// else 0; and each colour over that alpha; four planes per PE block as
+/// planar voxel cells) and sets filled; where it is true the call reads it
+/// instead of classifying (the same bits in `out`). Pass a filled one only
+/// where a call wrote it from the same cells (values), classification (the
+/// opacity step aside: it is applied after) and gradient scale.
+struct KeptClassification {
+  cl::Buffer planes;    ///< 4 * stride floats per PE of the voxel layout
+  bool filled = false;  ///< written by a call (the next one reads it)
+};
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
                                  VoxelBuffer& out, ShadeKernel variant = ShadeKernel::vec16,
-                                 DeviceOccupancy* mark = nullptr, const cl::Buffer* live = nullptr);
+                                 DeviceOccupancy* mark = nullptr, const cl::Buffer* live = nullptr,
+                                 KeptClassification* kept = nullptr);
 
 /// Gathers the in-volume voxels of `voxels` into `flat` (a buffer of at
 /// least dims-product 16-byte elements, x fastest).
