@@ -317,8 +317,12 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   if (eo.fused && eo.reuse_layout && eo.keep_classification && cp.kind == SV_CLASSIFY_MIXTURE) {
     if (!S.kept_class) {
       const VoxelLayout& V = S.rgba->layout();
+      // As large as the voxel cells: kept where both together take at most
+      // half the device's memory (on a CPU device, the host's).
       const std::size_t bytes = static_cast<std::size_t>(V.pes()) * 4 * V.stride * sizeof(float);
-      if (bytes <= device.info().max_alloc_bytes) {
+      const DeviceInfo& info = device.info();
+      if (bytes <= info.max_alloc_bytes &&
+          (info.global_mem_bytes == 0 || 4 * std::uint64_t(bytes) <= info.global_mem_bytes)) {
         S.kept_class.emplace();
         S.kept_class->kept.planes =
             device.buffer(CL_MEM_READ_WRITE, bytes, nullptr, "kept classification");

@@ -188,7 +188,8 @@ struct EngineOptions {
   /// and the later frames of the same volume, classification and gradient
   /// scale light it instead of classifying again (enqueue_shade_classify's
   /// `kept`; the same image bit for bit). Off, or where the buffer would
-  /// pass the device's largest allocation: every frame classifies.
+  /// pass the device's largest allocation or, with the voxel cells of the
+  /// same size, half its memory: every frame classifies.
   bool keep_classification = true;
 };
 
