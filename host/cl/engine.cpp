@@ -145,6 +145,7 @@ struct RenderEngine::State {
   // keep_classification); its buffer stays while the cells do, its
   // `filled` is cleared where the cells or the classification change.
   std::optional<KeptClass> kept_class;
+  bool kept_class_refused = false;  // its allocation failed for these cells
   // Sized by the frame, grown on demand.
   Scratch pe_total, total, sample_off, samples, image;
   // The swap plan, its host vectors and device tables reused from frame to
@@ -242,6 +243,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.laid_out.clear();
     S.live.reset();
     S.kept_class.reset();
+    S.kept_class_refused = false;
     const CellLayout cl_layout = S.array->cell_layout(vol.dims(), 1);
     // The fused shade + classify writes interleaved cells (a corner's RGBA
     // in one 16-byte load for the resample); the two-launch path classifies
@@ -321,11 +323,18 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       // half the device's memory (on a CPU device, the host's).
       const std::size_t bytes = static_cast<std::size_t>(V.pes()) * 4 * V.stride * sizeof(float);
       const DeviceInfo& info = device.info();
-      if (bytes <= info.max_alloc_bytes &&
+      if (!S.kept_class_refused && bytes <= info.max_alloc_bytes &&
           (info.global_mem_bytes == 0 || 4 * std::uint64_t(bytes) <= info.global_mem_bytes)) {
-        S.kept_class.emplace();
-        S.kept_class->kept.planes =
-            device.buffer(CL_MEM_READ_WRITE, bytes, nullptr, "kept classification");
+        try {
+          cl::Buffer planes =
+              device.buffer(CL_MEM_READ_WRITE, bytes, nullptr, "kept classification");
+          S.kept_class.emplace();
+          S.kept_class->kept.planes = std::move(planes);
+        } catch (const CLError&) {
+          // No room for it: the frames classify, as without it (not asked
+          // again for these cells).
+          S.kept_class_refused = true;
+        }
       }
     }
     if (S.kept_class) {
