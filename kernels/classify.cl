@@ -667,26 +667,35 @@ SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, floa
 #ifndef SV_STORE_KEPT_ZEROS
 #define SV_ZERO_CHUNK()                                   \
   {                                                       \
-    if (kc_mode == 1) SV_VSTORE16((float16)(0.0f), kq);   \
+    if (kc_op == 1) SV_VSTORE16((float16)(0.0f), kq);     \
     if (!use_live) sv_store16_zero(dst, vstride, e0, il); \
   }
 #else
-#define SV_ZERO_CHUNK()                                 \
-  {                                                     \
-    if (kc_mode == 1) SV_VSTORE16((float16)(0.0f), kq); \
-    sv_store16_zero(dst, vstride, e0, il);              \
+#define SV_ZERO_CHUNK()                               \
+  {                                                   \
+    if (kc_op == 1) SV_VSTORE16((float16)(0.0f), kq); \
+    sv_store16_zero(dst, vstride, e0, il);            \
   }
 #endif
 /* The kept classification of a chunk (kc_mode 1): a0 where lit, else 0,
  * and each colour times 1 / a0 (sv_classify16_lit's cr * inv). */
 #define SV_KEEP_CLASS(a0, cr, cg, cb)                          \
-  if (kc_mode == 1) {                                          \
+  if (kc_op == 1) {                                            \
     const int16 lit_ = ((a0) >= FLT_MIN) & ~isnan(v) & in;     \
     const float16 inv_ = 1.0f / (a0);                          \
     SV_VSTORE16(select(z, (a0), lit_), kq);                    \
     SV_VSTORE16(select(z, (cr)*inv_, lit_), kq + vstride);     \
     SV_VSTORE16(select(z, (cg)*inv_, lit_), kq + 2 * vstride); \
     SV_VSTORE16(select(z, (cb)*inv_, lit_), kq + 3 * vstride); \
+  }
+/* ... and its gradient (kc_mode | 4): gx, gy, gz, and |g| where the voxel
+ * has a surface (sv_light16: g2 >= 1e-12), else -1. */
+#define SV_KEEP_GRAD(gx, gy, gz, g2, m)                                           \
+  if (kc_op == 1 && kc_grad) {                                                    \
+    SV_VSTORE16((gx), kq + 4 * vstride);                                          \
+    SV_VSTORE16((gy), kq + 5 * vstride);                                          \
+    SV_VSTORE16((gz), kq + 6 * vstride);                                          \
+    SV_VSTORE16(select((float16)(-1.0f), (m), (g2) >= 1e-12f), kq + 7 * vstride); \
   }
 
 /* simdvol_shade_classify16: the fused kernel on 16-position chunks
@@ -719,13 +728,15 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   sv_chunk_rows(origins, cell, block, p, e0, rb, fx, fy, fz, ok);
   __global const float* c = cells + sv_block_start(block, p);
   __global float* dst = out + (size_t)p * 4 * (size_t)vstride;
-  /* the chunk's planes of the kept classification (kc_mode 1, 2) */
-  __global float* kq = kc + (size_t)p * 4 * (size_t)vstride + e0;
+  /* the kept classification (kc_mode & 3: 1 written, 2 read; kc_mode & 4:
+   * with the gradient) and the chunk's planes of it */
+  const int kc_op = kc_mode & 3, kc_grad = (kc_mode & 4) != 0;
+  __global float* kq = kc + (size_t)p * (kc_grad ? 8 : 4) * (size_t)vstride + e0;
   const int16 in = SV_ROWS16(ok) != 0.0f;
   sv_prefetch_ahead(c, rb);
   const float16 z = 0.0f;
   float16 id, is, mag, r, g, b, a;
-  if (kc_mode == 2) {
+  if (kc_op == 2) {
     /* The kept classification: a0 where the voxel is lit (alpha >= FLT_MIN,
      * its value not NaN, inside the cell), else 0, and each colour over a0;
      * the lighting as below, the same expressions (sv_classify16_lit), so
@@ -744,7 +755,16 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
       SV_ZERO_CHUNK();
       return;
     }
-    sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
+    if (kc_grad) {
+      /* the kept gradient: the same lighting (sv_light16 tests g2 only
+       * against 1e-12) */
+      const float16 ms = SV_VLOAD16(kq + 7 * vstride);
+      sv_light_rows(sp, fx, fy, fz, SV_VLOAD16(kq + 4 * vstride), SV_VLOAD16(kq + 5 * vstride),
+                    SV_VLOAD16(kq + 6 * vstride), select(z, (float16)(1.0f), ms >= 0.0f), ms, &id,
+                    &is);
+    } else {
+      sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
+    }
 #ifdef SV_STEP_ONE
     const float16 a1 = k0;
 #else
@@ -786,6 +806,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
       }
 #endif
       SV_KEEP_CLASS(a0, cr, cg, cb)
+      SV_KEEP_GRAD(gx, gy, gz, g2, mag)
       sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
       sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
     } else {
@@ -801,7 +822,11 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
         return;
       }
       SV_KEEP_CLASS(a0, cr, cg, cb)
-      sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
+      /* (sv_shade_rows, its gradient kept on the way) */
+      float16 gx, gy, gz, g2;
+      sv_grad_rows(sp, c, block, rb, &gx, &gy, &gz, &g2, &mag);
+      SV_KEEP_GRAD(gx, gy, gz, g2, mag)
+      sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
       sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
     }
   }
@@ -861,6 +886,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
 }
 #undef SV_ZERO_CHUNK
 #undef SV_KEEP_CLASS
+#undef SV_KEEP_GRAD
 
 __kernel void simdvol_shade_classify16(
     __global const float* restrict cells, __global float* restrict out,

@@ -205,7 +205,8 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
   if (kept && !vec)
     throw ArgumentError("kept classification", "only the float16 fused kernel keeps it");
   if (kept) {
-    const std::size_t need = static_cast<std::size_t>(V.pes()) * 4 * V.stride * sizeof(float);
+    const std::size_t need =
+        static_cast<std::size_t>(V.pes()) * (kept->gradient ? 8 : 4) * V.stride * sizeof(float);
     const std::size_t have =
         kept->planes() ? buffer_size(kept->planes, "clGetMemObjectInfo(kept)") : std::size_t(0);
     if (have < need)
@@ -223,10 +224,15 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
     set_args_from(k, name, 10, mark ? mark->occupied : cbuf, mark ? mark->bricks[0] : cl_int(0),
                   mark ? mark->bricks[1] : cl_int(0), cl_int(mark ? 1 : 0), live ? *live : cbuf,
                   cl_int(live ? 1 : 0), kept ? kept->planes : cbuf,
-                  cl_int(kept ? (kept->filled ? 2 : 1) : 0));
+                  cl_int(kept ? (kept->filled && kept->filled_gradient == kept->gradient ? 2 : 1) |
+                                    (kept->gradient ? 4 : 0)
+                              : 0));
     const detail::PlaneRange r = detail::chunk_range(V);
     cl::Event e = device.run(k, name, r.global, r.local);
-    if (kept) kept->filled = true;
+    if (kept) {
+      kept->filled = true;
+      kept->filled_gradient = kept->gradient;
+    }
     return e;
   }
   const detail::CellRange r = detail::cell_range(V);

@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 
+#include "chunk_ranges.hpp"
 #include "simdvol/layout.hpp"
 #include "simdvol/local.hpp"
 #include "simdvol/local_cl.hpp"
@@ -319,17 +320,27 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   if (eo.fused && eo.reuse_layout && eo.keep_classification && cp.kind == SV_CLASSIFY_MIXTURE) {
     if (!S.kept_class) {
       const VoxelLayout& V = S.rgba->layout();
-      // As large as the voxel cells: kept where both together take at most
-      // half the device's memory (on a CPU device, the host's).
-      const std::size_t bytes = static_cast<std::size_t>(V.pes()) * 4 * V.stride * sizeof(float);
+      // The gradient too where the cells' rows take the shade's general
+      // path (an x extent other than 4, 8 or a multiple of 16: each of the
+      // six neighbours' loads takes a row-by-row select there); elsewhere
+      // its 16 bytes a lit voxel cost more than the neighbours' loads
+      // (docs/PERFORMANCE.md).
+      const bool gradient = detail::shade_row_width(V.cell()[0]) == 1;
+      // As large as the voxel cells (twice with the gradient): kept where
+      // it and the cells together take at most half the device's memory
+      // (on a CPU device, the host's).
+      const std::size_t cells = static_cast<std::size_t>(V.pes()) * 4 * V.stride * sizeof(float);
+      const std::size_t bytes = gradient ? 2 * cells : cells;
       const DeviceInfo& info = device.info();
       if (!S.kept_class_refused && bytes <= info.max_alloc_bytes &&
-          (info.global_mem_bytes == 0 || 4 * std::uint64_t(bytes) <= info.global_mem_bytes)) {
+          (info.global_mem_bytes == 0 ||
+           2 * (std::uint64_t(cells) + bytes) <= info.global_mem_bytes)) {
         try {
           cl::Buffer planes =
               device.buffer(CL_MEM_READ_WRITE, bytes, nullptr, "kept classification");
           S.kept_class.emplace();
           S.kept_class->kept.planes = std::move(planes);
+          S.kept_class->kept.gradient = gradient;
         } catch (const CLError&) {
           // No room for it: the frames classify, as without it (not asked
           // again for these cells).

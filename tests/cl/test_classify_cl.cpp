@@ -459,8 +459,10 @@ TEST(ClassifyKernel, LiveLeavesUnflaggedPesAndTransparentChunks) {
 // it, under another lighting and another opacity step, with the cells'
 // brick occupancy marked, writes a fresh call's bits and marks its bricks.
 // Its alpha plane holds the voxel's alpha (opacity step 1) where lit and
-// +0 elsewhere: the output's alpha bit for bit. Odd dims (padding lanes),
-// NaN voxels, interleaved and planar cells, a mixture (ct)
+// +0 elsewhere: the output's alpha bit for bit. With and without the
+// gradient kept (and a change of that setting after a fill: written
+// again), odd dims (padding lanes; cells whose rows take the shade's
+// general path), NaN voxels, interleaved and planar cells, a mixture (ct)
 // and a transfer function (knots).
 TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
   SIMDVOL_TEST_DEVICE(dev);
@@ -478,62 +480,81 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
     PeArray array(dev, pe_grid(64));
     CellBuffer cells = array.layout(*v, 1);
     for (const char* name : {"ct", "knots"})
-      for (bool il : {true, false}) {
-        SCOPED_TRACE(std::string(name) + (il ? " interleaved" : " planar") + " " +
-                     std::to_string(v->dims()[0]));
-        const Classifier c = by_name(name);
-        const sv_classify_params c1 = classify_params(c, range_for(c, *v), 1.0);
-        const sv_classify_params c7 = classify_params(c, range_for(c, *v), 0.7);
-        const VoxelLayout L = make_voxel_layout(cells.layout(), il);
-        const std::size_t bytes = static_cast<std::size_t>(L.pes()) * 4 * L.stride * F4;
-        KeptClassification kept;
-        kept.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE, bytes);
-        VoxelBuffer fresh(dev, L), filling(dev, L), reading(dev, L);
-        enqueue_shade_classify(dev, cells, sa, c1, fresh);
-        enqueue_shade_classify(dev, cells, sa, c1, filling, ShadeKernel::vec16, nullptr, nullptr,
-                               &kept);
-        EXPECT_TRUE(kept.filled);
-        dev.finish();
-        const std::vector<Rgba> want1 = fresh.read<Rgba>(dev);
-        const std::vector<Rgba> got1 = filling.read<Rgba>(dev);
-        EXPECT_EQ(std::memcmp(got1.data(), want1.data(), got1.size() * sizeof(Rgba)), 0)
-            << "the filling call";
-        // The alpha plane: the output's alpha (step 1) bit for bit.
-        std::vector<float> planes(bytes / F4);
-        cl_check(dev.queue().enqueueReadBuffer(kept.planes, CL_TRUE, 0, bytes, planes.data()),
-                 "read");
-        const int64_t S = L.stride;
-        int64_t lit = 0, alpha_bad = 0;
-        for (int64_t p = 0; p < L.pes(); ++p)
-          for (int64_t e = 0; e < S; ++e) {
-            const float k = planes[static_cast<std::size_t>(p * 4 * S + e)];
-            const Rgba& w = want1[static_cast<std::size_t>(p * S + e)];
-            alpha_bad += std::memcmp(&k, &w.a, sizeof k) != 0;
-            lit += k > 0;
-          }
-        EXPECT_EQ(alpha_bad, 0);
-        EXPECT_GT(lit, 0);
-        // Read back under another lighting and opacity step, marking.
-        VoxelBuffer fresh7(dev, L);
-        DeviceOccupancy m_fresh = make_occupancy(dev, L, 1), m_kept = make_occupancy(dev, L, 1);
-        enqueue_shade_classify(dev, cells, sb, c7, fresh7, ShadeKernel::vec16, &m_fresh);
-        enqueue_shade_classify(dev, cells, sb, c7, reading, ShadeKernel::vec16, &m_kept, nullptr,
-                               &kept);
-        dev.finish();
-        const std::vector<Rgba> want7 = fresh7.read<Rgba>(dev);
-        const std::vector<Rgba> got7 = reading.read<Rgba>(dev);
-        EXPECT_EQ(std::memcmp(got7.data(), want7.data(), got7.size() * sizeof(Rgba)), 0)
-            << "the reading call";
-        EXPECT_NE(std::memcmp(want7.data(), want1.data(), want7.size() * sizeof(Rgba)), 0)
-            << "the second call must differ from the first for this test";
-        const auto n = static_cast<std::size_t>(m_kept.count());
-        std::vector<cl_uint> a(n), b(n);
-        cl_check(dev.queue().enqueueReadBuffer(m_kept.occupied, CL_TRUE, 0, n * 4, a.data()),
-                 "read");
-        cl_check(dev.queue().enqueueReadBuffer(m_fresh.occupied, CL_TRUE, 0, n * 4, b.data()),
-                 "read");
-        EXPECT_EQ(a, b) << "bricks marked";
-      }
+      for (bool il : {true, false})
+        for (bool grad : {false, true}) {
+          SCOPED_TRACE(std::string(name) + (il ? " interleaved" : " planar") +
+                       (grad ? " with the gradient " : " ") + std::to_string(v->dims()[0]));
+          const Classifier c = by_name(name);
+          const sv_classify_params c1 = classify_params(c, range_for(c, *v), 1.0);
+          const sv_classify_params c7 = classify_params(c, range_for(c, *v), 0.7);
+          const VoxelLayout L = make_voxel_layout(cells.layout(), il);
+          const std::size_t bytes =
+              static_cast<std::size_t>(L.pes()) * (grad ? 8 : 4) * L.stride * F4;
+          KeptClassification kept;
+          kept.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE, bytes);
+          kept.gradient = grad;
+          VoxelBuffer fresh(dev, L), filling(dev, L), reading(dev, L);
+          enqueue_shade_classify(dev, cells, sa, c1, fresh);
+          enqueue_shade_classify(dev, cells, sa, c1, filling, ShadeKernel::vec16, nullptr, nullptr,
+                                 &kept);
+          EXPECT_TRUE(kept.filled);
+          dev.finish();
+          const std::vector<Rgba> want1 = fresh.read<Rgba>(dev);
+          const std::vector<Rgba> got1 = filling.read<Rgba>(dev);
+          EXPECT_EQ(std::memcmp(got1.data(), want1.data(), got1.size() * sizeof(Rgba)), 0)
+              << "the filling call";
+          // The alpha plane: the output's alpha (step 1) bit for bit.
+          std::vector<float> planes(bytes / F4);
+          cl_check(dev.queue().enqueueReadBuffer(kept.planes, CL_TRUE, 0, bytes, planes.data()),
+                   "read");
+          const int64_t S = L.stride;
+          int64_t lit = 0, alpha_bad = 0;
+          for (int64_t p = 0; p < L.pes(); ++p)
+            for (int64_t e = 0; e < S; ++e) {
+              const float k = planes[static_cast<std::size_t>(p * (grad ? 8 : 4) * S + e)];
+              const Rgba& w = want1[static_cast<std::size_t>(p * S + e)];
+              alpha_bad += std::memcmp(&k, &w.a, sizeof k) != 0;
+              lit += k > 0;
+            }
+          EXPECT_EQ(alpha_bad, 0);
+          EXPECT_GT(lit, 0);
+          // Read back under another lighting and opacity step, marking.
+          VoxelBuffer fresh7(dev, L);
+          DeviceOccupancy m_fresh = make_occupancy(dev, L, 1), m_kept = make_occupancy(dev, L, 1);
+          enqueue_shade_classify(dev, cells, sb, c7, fresh7, ShadeKernel::vec16, &m_fresh);
+          enqueue_shade_classify(dev, cells, sb, c7, reading, ShadeKernel::vec16, &m_kept, nullptr,
+                                 &kept);
+          dev.finish();
+          const std::vector<Rgba> want7 = fresh7.read<Rgba>(dev);
+          const std::vector<Rgba> got7 = reading.read<Rgba>(dev);
+          EXPECT_EQ(std::memcmp(got7.data(), want7.data(), got7.size() * sizeof(Rgba)), 0)
+              << "the reading call";
+          EXPECT_NE(std::memcmp(want7.data(), want1.data(), want7.size() * sizeof(Rgba)), 0)
+              << "the second call must differ from the first for this test";
+          const auto n = static_cast<std::size_t>(m_kept.count());
+          std::vector<cl_uint> a(n), b(n);
+          cl_check(dev.queue().enqueueReadBuffer(m_kept.occupied, CL_TRUE, 0, n * 4, a.data()),
+                   "read");
+          cl_check(dev.queue().enqueueReadBuffer(m_fresh.occupied, CL_TRUE, 0, n * 4, b.data()),
+                   "read");
+          EXPECT_EQ(a, b) << "bricks marked";
+          // The gradient asked for after a fill without it (or dropped after
+          // one with it): the call writes the planes again, the same bits.
+          kept.gradient = !grad;
+          if (!grad) kept.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE, 2 * bytes);
+          VoxelBuffer again(dev, L), read_again(dev, L);
+          enqueue_shade_classify(dev, cells, sb, c7, again, ShadeKernel::vec16, nullptr, nullptr,
+                                 &kept);
+          EXPECT_TRUE(kept.filled && kept.filled_gradient == !grad);
+          enqueue_shade_classify(dev, cells, sa, c1, read_again, ShadeKernel::vec16, nullptr,
+                                 nullptr, &kept);
+          dev.finish();
+          const std::vector<Rgba> g7 = again.read<Rgba>(dev), g1 = read_again.read<Rgba>(dev);
+          EXPECT_EQ(std::memcmp(g7.data(), want7.data(), g7.size() * sizeof(Rgba)), 0)
+              << "refilled with the other gradient setting";
+          EXPECT_EQ(std::memcmp(g1.data(), want1.data(), g1.size() * sizeof(Rgba)), 0)
+              << "read with the other gradient setting";
+        }
   }
   // Refused: a buffer too small for the layout, a kernel that does not keep it.
   PeArray array(dev, pe_grid(64));

@@ -292,13 +292,21 @@ TEST(RenderEngine, TransparentCellsStayUnshadedBetweenFrames) {
 // the frame of an engine that classifies every time, bit for bit: across
 // views, orders and sampling modes (another opacity step), after the
 // classification changes and back (made again), for another volume of the
-// same dims (made again); never for a transfer function, whose frames leave
+// same dims (made again), for a volume of other dims whose cells' rows take
+// the shade's general path (its gradient kept too); never for a transfer
+// function, whose frames leave
 // the kept one as it is (the mixture's again after them: kept).
 TEST(RenderEngine, KeptClassificationEqualsClassifyingAgain) {
   SIMDVOL_TEST_DEVICE(dev);
   const Volume vol = shepp_logan(32, 2);
   Volume tissue = vol;
   for (float& x : tissue.data()) x = x * 0.5f + 20.0f;
+  // Cells whose rows take the shade's general path: the gradient kept too.
+  const Volume odd = simdvol::testing::random_volume({36, 36, 20}, -200.0f, 1500.0f, {1, 1, 1}, 5);
+  {
+    const int64_t cx = kd_split(odd.dims(), 256).cell[0];
+    ASSERT_TRUE(cx != 4 && cx != 8 && cx % 16 != 0) << "cells " << cx << " wide";
+  }
   Classifier hazy = classifier_preset("ct");
   hazy.mixture.materials[0].opacity = 0.01f;  // air
   Classifier ramps;
@@ -323,7 +331,9 @@ TEST(RenderEngine, KeptClassificationEqualsClassifyingAgain) {
                           {&vol, 115, 1, Sampling::voxel, &ramps, false},
                           {&vol, 130, 1, Sampling::voxel, &ct, true},  // still ct's
                           {&tissue, 145, 1, Sampling::voxel, &ct, false},
-                          {&tissue, 160, 2, Sampling::voxel, &ct, true}};
+                          {&tissue, 160, 2, Sampling::voxel, &ct, true},
+                          {&odd, 175, 1, Sampling::voxel, &ct, false},
+                          {&odd, 190, 1, Sampling::voxel, &ct, true}};
   EngineOptions eo;
   eo.pes = 256;
   eo.fused = true;

@@ -187,7 +187,9 @@ struct EngineOptions {
   /// not on the view or the light) in a buffer the size of the voxel cells,
   /// and the later frames of the same volume, classification and gradient
   /// scale light it instead of classifying again (enqueue_shade_classify's
-  /// `kept`; the same image bit for bit). Off, or where the buffer would
+  /// `kept`; the same image bit for bit; for cells whose rows take the
+  /// shade's general path, an x extent other than 4, 8 or a multiple of 16,
+  /// the gradient too, twice the buffer). Off, or where the buffer would
   /// pass the device's largest allocation or, with the voxel cells of the
   /// same size, half its memory: every frame classifies.
   bool keep_classification = true;

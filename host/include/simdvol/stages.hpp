@@ -214,7 +214,8 @@ struct DeviceOccupancy;  // local_cl.hpp
 /// transparent (the engine passes the previous frame's PE mask of the same
 /// volume and classification: match.hpp's inactive PEs).
 /// With `kept` (vec16 only, else ArgumentError; a buffer of fewer than 4 *
-/// stride floats per PE of out's layout: ArgumentError): the classification
+/// stride floats per PE of out's layout, 8 with its gradient:
+/// ArgumentError): the classification
 /// before lighting, kept for the frames after. Where kept->filled is false
 /// the call classifies and writes it (per position: alpha where the voxel
 /// is lit, i.e. alpha >= FLT_MIN, value not NaN, inside the volume's cell,
@@ -224,8 +225,13 @@ struct DeviceOccupancy;  // local_cl.hpp
 /// where a call wrote it from the same cells (values), classification (the
 /// opacity step aside: it is applied after) and gradient scale.
 struct KeptClassification {
-  cl::Buffer planes;    ///< 4 * stride floats per PE of the voxel layout
-  bool filled = false;  ///< written by a call (the next one reads it)
+  cl::Buffer planes;  ///< 4 * stride floats per PE of the voxel layout (8 with gradient)
+  /// Also the gradient (planes 4..7: gx, gy, gz scaled as the shading's, and
+  /// |g| where the voxel has a surface, else -1), which the reading call
+  /// lights instead of taking the six neighbours again.
+  bool gradient = false;
+  bool filled = false;           ///< written by a call (the next one reads it)
+  bool filled_gradient = false;  ///< `gradient` when it was written
 };
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
