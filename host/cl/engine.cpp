@@ -64,13 +64,6 @@ void validate(const EngineOptions& eo, const RenderOptions& opt) {
                                                 std::to_string(kMaxBalanceSweeps));
 }
 
-// What the previous frame left in the voxel cells, for the next frame of the
-// same volume: its PE mask (DeviceMatching::active), under whose 0 flags the
-// cells hold zeros for classification `cp` and gradient scale `grad` (the
-// transfer function's |g|), so the fused shade + classify leaves those cells
-// as they are (enqueue_shade_classify's `live`); and its brick occupancy and
-// reach (for its order), the same in a frame under the same conditions: no
-// marks, no reach kernel.
 // The kept classification of the volume in the cells (KeptClassification)
 // and what it was made for: the classification (its opacity step aside,
 // applied after) and the gradient scale (the transfer function's |g|).
@@ -90,6 +83,13 @@ struct KeptClass {
   }
 };
 
+// What the previous frame left in the voxel cells, for the next frame of the
+// same volume: its PE mask (DeviceMatching::active), under whose 0 flags the
+// cells hold zeros for classification `cp` and gradient scale `grad` (the
+// transfer function's |g|), so the fused shade + classify leaves those cells
+// as they are (enqueue_shade_classify's `live`); and its brick occupancy and
+// reach (for its order), the same in a frame under the same conditions: no
+// marks, no reach kernel.
 struct LiveCells {
   cl::Buffer mask;
   std::optional<DeviceOccupancy> occupancy;
