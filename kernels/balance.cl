@@ -22,9 +22,9 @@
  * 16-bit ones beside the segments), simdvol_balance_unpack writes them back
  * after the last.
  *
- * Tables: cidx (int4[P], cell index of each PE), pe_of (int[P], the PE of
- * cell (ix, iy, iz) at (iz * sy + iy) * sx + ix), splits (int4, cells per
- * axis).
+ * The pairs: the host lists them per (axis, parity) once per matching
+ * (DeviceMatching::pairs: (the PE of cell index c, the PE of c + 1) along
+ * the axis, c = 2 m + parity); a round takes its list.
  */
 #ifndef SIMDVOL_COMMON_CL
 #include "common.cl"
@@ -34,22 +34,13 @@ SV_FN int sv_list_start(int4 o, int axis) {
   return axis == 0 ? o.y : (axis == 1 ? o.z : o.w);
 }
 
-/* The pair of PE p in a round: F (front) and B (back), or -1 if p has none. */
-SV_FN int2 sv_balance_pair(global const int4* cidx, global const int* pe_of, int4 splits, int pes,
-                           int axis, int par, int dir, int p) {
-  if (p >= pes) return (int2)(-1);
-  int4 c = cidx[p];
-  const int sa = axis == 0 ? splits.x : (axis == 1 ? splits.y : splits.z);
-  const int ca = axis == 0 ? c.x : (axis == 1 ? c.y : c.z);
-  if ((ca & 1) != par || ca + 1 >= sa) return (int2)(-1);
-  if (axis == 0)
-    c.x += 1;
-  else if (axis == 1)
-    c.y += 1;
-  else
-    c.z += 1;
-  const int q = pe_of[(c.z * splits.y + c.y) * splits.x + c.x];
-  return dir > 0 ? (int2)(p, q) : (int2)(q, p);
+/* A round's pair (F, B) = (front, back) from its entry (the PE of the
+ * lower cell along the round's axis, the PE of the cell above it): dir = the
+ * sign of the depth step along the axis. The host lists each (axis,
+ * parity)'s pairs once per split (DeviceMatching::pairs, match_cl.hpp): the
+ * pairs of cell indices (2 m + par, 2 m + 1 + par) along the axis. */
+SV_FN int2 sv_balance_fb(const int2 lu, int dir) {
+  return dir > 0 ? lu : (int2)(lu.y, lu.x);
 }
 
 /* Link entry e of a list: (segment of F, linked segment of B), from an
@@ -63,9 +54,10 @@ SV_FN int2 sv_bal_link(global const int2* llist, const int nl, const int e, cons
   return (int2)(sF + (int)(w & 0xffffu), sB + (int)(w >> 16));
 }
 /* A round's work-items walk their pair's links and bounds, scattered over
- * megabytes: with SV_BAL_PF > 0 the PE SV_BAL_PF ahead (each of a work-item's
- * SV_BAL_PES PEs in turn; until 2026-12-05 a work-item per PE) prefetches
- * its pair's link list and the bounds the list points to (all of F's and
+ * megabytes: with SV_BAL_PF > 0 the pair SV_BAL_PF ahead in the round's list
+ * (each of a work-item's SV_BAL_PES pairs in turn; until 2026-12-05 a
+ * work-item per PE) has its link list prefetched and the bounds the list
+ * points to (all of F's and
  * B's, below), where the pair moves samples in this round (its loads, which
  * no other pair of the round changes, differ by 2 or more). A hint only.
  * Default 0 (none) since the equal shares of 2026-12-04, which visit only
@@ -91,13 +83,14 @@ SV_FN int2 sv_bal_link(global const int2* llist, const int nl, const int e, cons
 #ifndef SV_BAL_PF
 #define SV_BAL_PF 0
 #endif
-SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of, int4 splits,
-                               int pes, int axis, int par, int dir, global const int4* lofs,
-                               global const int2* llist, const int nl, global const uchar* kk,
-                               int kb, global const int* loads, int p) {
+SV_FN void sv_balance_prefetch(global const int2* pairs, int npairs, int dir,
+                               global const int4* lofs, global const int2* llist, const int nl,
+                               global const uchar* kk, int kb, global const int* loads, int i,
+                               int axis) {
 #if SV_BAL_PF > 0
-  const int2 fb = sv_balance_pair(cidx, pe_of, splits, pes, axis, par, dir, p + SV_BAL_PF);
-  if (fb.x < 0 || (loads[fb.x] - loads[fb.y]) / 2 == 0) return;
+  if (i + SV_BAL_PF >= npairs) return;
+  const int2 fb = sv_balance_fb(pairs[i + SV_BAL_PF], dir);
+  if ((loads[fb.x] - loads[fb.y]) / 2 == 0) return;
   const int4 f0 = lofs[fb.x], f1 = lofs[fb.x + 1];
   const int e0 = sv_list_start(f0, axis), e1 = sv_list_start(f1, axis);
   if (e1 <= e0) return;
@@ -205,12 +198,18 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
  * one more build of 40-60 ms per render.
  *
  * _round: one round, the pairs along `axis` whose lower cell index has
- * parity `par`; dir = sign of the depth step along the axis (non-zero).
- * Each work-item takes SV_BAL_PES consecutive PEs (simdvol_shared.h; the
- * pair of each PE that is its front cell's), one after the other: most of
- * the 48 rounds of 8 sweeps find their sweep settled and return at once,
- * and with one PE per work-item those launches of 8,192 work-items had
- * cost 20-30 us each. `simdvol render --frames 8 --step 0 --trace`, the
+ * parity `par` (entries first .. first + npairs - 1 of the pair list); dir
+ * = sign of the depth step along the axis (non-zero). Each work-item takes
+ * SV_BAL_PES consecutive pairs (simdvol_shared.h), one after the other.
+ * Until the third session of 2026-12-05 each took SV_BAL_PES consecutive
+ * PEs and found each PE's pair from its cell index (and skipped the PEs
+ * without one, half of them): most pairs of a round move nothing, so that
+ * search was most of a round. scripts/bench-ab (4 pairs), the balance:
+ * the 256^3 phantom at (20, 35, 10) 1.84 -> 0.96 ms, brainsmall 0.64 ->
+ * 0.29, (0, 45, 0) 3.96 -> 3.38, ch2 4.16 -> 3.48 (a 2-core Intel Xeon).
+ * Before that, with one PE per work-item, those launches of 8,192
+ * work-items had cost 20-30 us each. `simdvol render --frames 8 --step 0
+ * --trace`, the
  * balance from its first round to the segment order (medians of 6 frames;
  * 1 -> 16 PEs per work-item): brainsmall 1.05 -> 0.65-0.76 ms, the 256^3
  * phantom at (20, 35, 10) 2.28 -> 1.97-2.13, at (0, 45, 0) 4.11 -> 3.98-4.02,
@@ -227,17 +226,17 @@ SV_FN void sv_balance_prefetch(global const int4* cidx, global const int* pe_of,
  * _unpack: after the last round, the bounds back into the segments. */
 #define SV_BALANCE_ROUND(SFX, NSFX, BT, B1, NL)                                                    \
   __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_balance_round##SFX##NSFX( \
-      global const int4* cidx, global const int* pe_of, int4 splits, int pes, int axis, int par,   \
-      int dir, global const int4* lofs, global const int2* llist, global BT* kk,                   \
-      global int* loads, global int* moves, int sweep) {                                           \
+      global const int2* pair_list, int first, int npairs, int axis, int dir,                      \
+      global const int4* lofs, global const int2* llist, global BT* kk, global int* loads,         \
+      global int* moves, int sweep) {                                                              \
     /* A sweep that moved nothing left a state no later sweep changes. */                          \
     if (SV_BAL_SETTLED(moves, sweep)) return;                                                      \
-    const int p0 = (int)get_global_id(0) * SV_BAL_PES;                                             \
-    for (int p = p0; p < p0 + SV_BAL_PES && p < pes; ++p) {                                        \
-      sv_balance_prefetch(cidx, pe_of, splits, pes, axis, par, dir, lofs, llist, NL,               \
-                          (global const uchar*)kk, (int)sizeof(BT), loads, p);                     \
-      const int2 fb = sv_balance_pair(cidx, pe_of, splits, pes, axis, par, dir, p);                \
-      if (fb.x < 0) continue;                                                                      \
+    global const int2* pairs = pair_list + first;                                                  \
+    const int i0 = (int)get_global_id(0) * SV_BAL_PES;                                             \
+    for (int i = i0; i < i0 + SV_BAL_PES && i < npairs; ++i) {                                     \
+      sv_balance_prefetch(pairs, npairs, dir, lofs, llist, NL, (global const uchar*)kk,            \
+                          (int)sizeof(BT), loads, i, axis);                                        \
+      const int2 fb = sv_balance_fb(pairs[i], dir);                                                \
       const int F = fb.x, B = fb.y;                                                                \
       const int diff = loads[F] - loads[B];                                                        \
       const int t = diff / 2; /* truncates towards 0 */                                            \

@@ -114,8 +114,8 @@ SV_FN float sv_uniform(sv_u64 seed, sv_u32 ray, sv_u32 sample, sv_u32 step) {
  * int per SV_BAL_MOVES_STRIDE, a cache line each, so that the flag a round
  * reads (the sweep before) shares no line with the one it writes. */
 #define SV_BAL_MOVES_STRIDE 16
-/* The PEs one balance round work-item takes (balance.cl: _round; the host
- * launches ceil(P / SV_BAL_PES) work-items). */
+/* The pairs one balance round work-item takes (balance.cl: _round; the host
+ * launches ceil(pairs / SV_BAL_PES) work-items). */
 #define SV_BAL_PES 16
 #define SV_MAX_KNOTS 32
 #define SV_CLASSIFY_MIXTURE 0

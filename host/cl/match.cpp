@@ -126,9 +126,27 @@ void upload_pe_tables(Device& device, const KdSplit& split, DeviceMatching& m) {
     cidx[p] = int4(c[0], c[1], c[2], 0);
     pe_of[(c[2] * sp[1] + c[1]) * sp[0] + c[0]] = static_cast<cl_int>(p);
   }
+  // The balance rounds' pairs, per (axis, parity): (the PE of cell index c,
+  // the PE of c + 1) along the axis for c = 2 m + parity.
+  std::vector<cl_int2> pairs;
+  pairs.reserve(static_cast<std::size_t>(pes) * 3);
+  for (int a = 0; a < 3; ++a)
+    for (int par = 0; par < 2; ++par) {
+      m.pair_first[static_cast<std::size_t>(2 * a + par)] = static_cast<cl_int>(pairs.size());
+      for (int64_t p = 0; p < pes; ++p) {
+        Dims3 c = split.cell_index(p);
+        if ((c[a] & 1) != par || c[a] + 1 >= sp[a]) continue;
+        c[a] += 1;
+        pairs.push_back(
+            cl_int2{{static_cast<cl_int>(p), pe_of[(c[2] * sp[1] + c[1]) * sp[0] + c[0]]}});
+      }
+    }
+  m.pair_first[6] = static_cast<cl_int>(pairs.size());
+  if (pairs.empty()) pairs.push_back(cl_int2{{0, 0}});  // (a buffer is never empty)
   const auto ro = CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR;
   m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
   m.pe_of = device.buffer(ro, pe_of.size() * sizeof(cl_int), pe_of.data(), "PE of cell");
+  m.pairs = device.buffer(ro, pairs.size() * sizeof(cl_int2), pairs.data(), "balance pairs");
 }
 
 }  // namespace
@@ -314,9 +332,7 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   if (sweeps > 0 && !m.linked)
     throw ArgumentError("matching",
                         "made without balance links (MatchLinks::skip): balancing needs them");
-  const std::size_t P = static_cast<std::size_t>(m.pes);
   const Dims3 sp = split.splits();
-  const cl_int4 splits = int4(sp[0], sp[1], sp[2], 0);
   const cl_int npes = static_cast<cl_int>(m.pes);
   const int64_t depth = view.grid.grid[2];
   bool narrow = bounds == BalanceBounds::narrow;
@@ -370,11 +386,15 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
            "clEnqueueFillBuffer(balance moves)");
   for (const Round& r : rounds) {
     cl::Kernel round = device.kernel("balance", round_name, defs);
-    set_args(round, round_name, m.cidx, m.pe_of, splits, npes, cl_int(r.axis), cl_int(r.par),
-             cl_int(r.dir), m.link_offset, m.link_list, kk, m.loads, moves, cl_int(r.sweep));
+    const std::size_t list = static_cast<std::size_t>(2 * r.axis + r.par);
+    const cl_int first = m.pair_first[list], npairs = m.pair_first[list + 1] - first;
+    if (npairs == 0) continue;
+    set_args(round, round_name, m.pairs, first, npairs, cl_int(r.axis), cl_int(r.dir),
+             m.link_offset, m.link_list, kk, m.loads, moves, cl_int(r.sweep));
     m.balance_events.push_back(
         {"balance_round",
-         device.run(round, round_name, cl::NDRange((P + SV_BAL_PES - 1) / SV_BAL_PES),
+         device.run(round, round_name,
+                    cl::NDRange((static_cast<std::size_t>(npairs) + SV_BAL_PES - 1) / SV_BAL_PES),
                     cl::NDRange(kWgs))});
   }
   // The fill's 16-bit copy may stay the only current one (deferred).

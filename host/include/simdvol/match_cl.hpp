@@ -100,9 +100,14 @@ struct DeviceMatching {
   int64_t capacity = 0;  ///< segments allocated (>= the segment count)
   int64_t rows =
       0;  ///< H, rows per PE in the row tables (largest candidate height, rounded up to 8)
-  cl::Buffer candidates;   ///< sv_rect[P], match_candidates()
-  cl::Buffer cidx;         ///< cl_int4[P] cell index of each PE (w = 0)
-  cl::Buffer pe_of;        ///< cl_int[P] PE of cell (ix, iy, iz) at (iz * sy + iy) * sx + ix
+  cl::Buffer candidates;  ///< sv_rect[P], match_candidates()
+  cl::Buffer cidx;        ///< cl_int4[P] cell index of each PE (w = 0)
+  cl::Buffer pe_of;       ///< cl_int[P] PE of cell (ix, iy, iz) at (iz * sy + iy) * sx + ix
+  /// cl_int2 per balance pair: (the PE of cell index c, the PE of c + 1)
+  /// along an axis, c = 2 m + parity; the pairs of (axis a, parity par) are
+  /// entries pair_first[2 a + par] .. pair_first[2 a + par + 1] - 1.
+  cl::Buffer pairs;
+  std::array<cl_int, 7> pair_first{};
   cl::Buffer view;         ///< sv_view
   cl::Buffer geometry;     ///< float[20] row geometry (zonogon strips)
   cl::Buffer steps;        ///< cl_long[9] exact stepping constants per axis
