@@ -134,7 +134,8 @@ void upload_pe_tables(Device& device, const KdSplit& split, DeviceMatching& m) {
     for (int par = 0; par < 2; ++par) {
       m.pair_first[static_cast<std::size_t>(2 * a + par)] = static_cast<cl_int>(pairs.size());
       for (int64_t p = 0; p < pes; ++p) {
-        Dims3 c = split.cell_index(p);
+        const cl_int4& ci = cidx[static_cast<std::size_t>(p)];
+        Dims3 c{ci.s[0], ci.s[1], ci.s[2]};
         if ((c[a] & 1) != par || c[a] + 1 >= sp[a]) continue;
         c[a] += 1;
         pairs.push_back(
