@@ -57,9 +57,9 @@ SV_FN int2 sv_bal_link(global const int2* llist, const int nl, const int e, cons
  * megabytes: with SV_BAL_PF > 0 the pair SV_BAL_PF ahead in the round's list
  * (each of a work-item's SV_BAL_PES pairs in turn; until 2026-12-05 a
  * work-item per PE) has its link list prefetched and the bounds the list
- * points to (all of F's and
- * B's, below), where the pair moves samples in this round (its loads, which
- * no other pair of the round changes, differ by 2 or more). A hint only.
+ * points to (all of F's and B's, below), where the pair moves samples in
+ * this round (its loads, which no other pair of the round changes, differ
+ * by 2 or more). A hint only.
  * Default 0 (none) since the equal shares of 2026-12-04, which visit only
  * the entries with a share where the pair moves fewer samples than it has
  * entries: simdvol-bench-options, 12-16 frames, balance 3.53 / 3.53 -> 3.29
@@ -209,8 +209,8 @@ SV_FN void sv_balance_prefetch(global const int2* pairs, int npairs, int dir,
  * 0.29, (0, 45, 0) 3.96 -> 3.38, ch2 4.16 -> 3.48 (a 2-core Intel Xeon).
  * Before that, with one PE per work-item, those launches of 8,192
  * work-items had cost 20-30 us each. `simdvol render --frames 8 --step 0
- * --trace`, the
- * balance from its first round to the segment order (medians of 6 frames;
+ * --trace`, the balance from its first round to the segment order
+ * (medians of 6 frames;
  * 1 -> 16 PEs per work-item): brainsmall 1.05 -> 0.65-0.76 ms, the 256^3
  * phantom at (20, 35, 10) 2.28 -> 1.97-2.13, at (0, 45, 0) 4.11 -> 3.98-4.02,
  * ch2 4.65 -> 4.26-4.63 (4 and 32 in between or worse; a 2-core Intel Xeon,
