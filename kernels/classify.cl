@@ -371,21 +371,32 @@ SV_FN float16 sv_step_alpha16(float16 a, float s) {
 /* The lit premultiplied RGBA of 16 voxels from the classifier's alpha `a`
  * and premultiplied material colour (cr, cg, cb) (sv_classify16's second
  * half). */
-SV_FN void sv_classify16_lit(__constant const sv_classify_params* cp, float16 a, float16 cr,
-                             float16 cg, float16 cb, float16 id, float16 is, float16 v, float16* r,
-                             float16* g, float16* b, float16* alpha) {
+/* The lit premultiplied RGBA of 16 voxels from the alpha `a` before the
+ * opacity step, where `ok` (else 0), and each colour over that alpha (q =
+ * c * (1 / a)): the second half of sv_classify16_lit, and what the fused
+ * kernel's kept classification is lit by (kc_mode 2), so both give the same
+ * bits. */
+SV_FN void sv_lit16(__constant const sv_classify_params* cp, float16 a, int16 ok, float16 qr,
+                    float16 qg, float16 qb, float16 id, float16 is, float16* r, float16* g,
+                    float16* b, float16* alpha) {
 #ifdef SV_STEP_ONE
   const float16 a1 = a;
 #else
   const float16 a1 = cp->step_is_one ? a : sv_step_alpha16(a, cp->opacity_step);
 #endif
+  const float16 z = 0.0f;
+  *r = select(z, a1 * fmin(1.0f, qr * id + is), ok);
+  *g = select(z, a1 * fmin(1.0f, qg * id + is), ok);
+  *b = select(z, a1 * fmin(1.0f, qb * id + is), ok);
+  *alpha = select(z, a1, ok);
+}
+
+SV_FN void sv_classify16_lit(__constant const sv_classify_params* cp, float16 a, float16 cr,
+                             float16 cg, float16 cb, float16 id, float16 is, float16 v, float16* r,
+                             float16* g, float16* b, float16* alpha) {
   const int16 ok = (a >= FLT_MIN) & ~isnan(v); /* else transparent, as sv_classify_voxel */
   const float16 inv = 1.0f / a;
-  const float16 z = 0.0f;
-  *r = select(z, a1 * fmin(1.0f, cr * inv * id + is), ok);
-  *g = select(z, a1 * fmin(1.0f, cg * inv * id + is), ok);
-  *b = select(z, a1 * fmin(1.0f, cb * inv * id + is), ok);
-  *alpha = select(z, a1, ok);
+  sv_lit16(cp, a, ok, cr * inv, cg * inv, cb * inv, id, is, r, g, b, alpha);
 }
 
 SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, float16 is,
@@ -665,18 +676,13 @@ SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, floa
  * comparison): shade + classify 13.97 / 13.96 -> 13.38 / 13.35 ms (a 2-core
  * Intel Xeon, 2026-12-05); brainsmall and ch2 within noise. */
 #ifndef SV_STORE_KEPT_ZEROS
-#define SV_ZERO_CHUNK()                                   \
-  {                                                       \
-    if (kc_op == 1) SV_VSTORE16((float16)(0.0f), kq);     \
-    if (!use_live) sv_store16_zero(dst, vstride, e0, il); \
-  }
-#else
-#define SV_ZERO_CHUNK()                               \
-  {                                                   \
-    if (kc_op == 1) SV_VSTORE16((float16)(0.0f), kq); \
-    sv_store16_zero(dst, vstride, e0, il);            \
-  }
+#define SV_STORE_KEPT_ZEROS 0
 #endif
+#define SV_ZERO_CHUNK()                                                          \
+  {                                                                              \
+    if (kc_op == 1) SV_VSTORE16((float16)(0.0f), kq);                            \
+    if (!use_live || SV_STORE_KEPT_ZEROS) sv_store16_zero(dst, vstride, e0, il); \
+  }
 /* The kept classification of a chunk (kc_mode 1): a0 where lit, else 0,
  * and each colour times 1 / a0 (sv_classify16_lit's cr * inv). */
 #define SV_KEEP_CLASS(a0, cr, cg, cb)                          \
@@ -765,16 +771,8 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
     } else {
       sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
     }
-#ifdef SV_STEP_ONE
-    const float16 a1 = k0;
-#else
-    const float16 a1 = cp->step_is_one ? k0 : sv_step_alpha16(k0, cp->opacity_step);
-#endif
-    const int16 lit = k0 > 0.0f;
-    r = select(z, a1 * fmin(1.0f, SV_VLOAD16(kq + vstride) * id + is), lit);
-    g = select(z, a1 * fmin(1.0f, SV_VLOAD16(kq + 2 * vstride) * id + is), lit);
-    b = select(z, a1 * fmin(1.0f, SV_VLOAD16(kq + 3 * vstride) * id + is), lit);
-    a = select(z, a1, lit);
+    sv_lit16(cp, k0, k0 > 0.0f, SV_VLOAD16(kq + vstride), SV_VLOAD16(kq + 2 * vstride),
+             SV_VLOAD16(kq + 3 * vstride), id, is, &r, &g, &b, &a);
   } else {
     const float16 v = SV_LD16(c, rb, 0);
     /* Empty space: a voxel is (0, 0, 0, 0) unless its alpha before lighting is

@@ -64,22 +64,32 @@ void validate(const EngineOptions& eo, const RenderOptions& opt) {
                                                 std::to_string(kMaxBalanceSweeps));
 }
 
-// The kept classification of the volume in the cells (KeptClassification)
-// and what it was made for: the classification (its opacity step aside,
-// applied after) and the gradient scale (the transfer function's |g|).
-struct KeptClass {
-  KeptClassification kept;
+// What a kept state of the cells was made for: the classification and the
+// gradient scale (the transfer function's |g|), both of which decide every
+// voxel's alpha and colour before lighting.
+struct ClassifiedFor {
   sv_classify_params cp{};
   float grad[4]{};
+  void set(const sv_classify_params& c, const sv_shade_params& sp) {
+    cp = c;
+    std::memcpy(grad, sp.grad_scale, sizeof grad);
+  }
+  bool holds_for(const sv_classify_params& c, const sv_shade_params& sp) const {
+    return std::memcmp(&cp, &c, sizeof c) == 0 &&
+           std::memcmp(grad, sp.grad_scale, sizeof grad) == 0;
+  }
+};
+
+// The kept classification of the volume in the cells (KeptClassification)
+// and what it was made for: the classification with its opacity step left
+// out (applied after, `key`) and the gradient scale.
+struct KeptClass {
+  KeptClassification kept;
+  ClassifiedFor made_for;
   static sv_classify_params key(sv_classify_params c) {
     c.step_is_one = 0;
     c.opacity_step = 0.0f;
     return c;
-  }
-  bool holds_for(const sv_classify_params& c, const sv_shade_params& sp) const {
-    const sv_classify_params k = key(c);
-    return std::memcmp(&cp, &k, sizeof k) == 0 &&
-           std::memcmp(grad, sp.grad_scale, sizeof grad) == 0;
   }
 };
 
@@ -93,12 +103,7 @@ struct KeptClass {
 struct LiveCells {
   cl::Buffer mask;
   std::optional<DeviceOccupancy> occupancy;
-  sv_classify_params cp{};
-  float grad[4]{};
-  bool holds_for(const sv_classify_params& c, const sv_shade_params& sp) const {
-    return std::memcmp(&cp, &c, sizeof c) == 0 &&
-           std::memcmp(grad, sp.grad_scale, sizeof grad) == 0;
-  }
+  ClassifiedFor made_for;
 };
 
 // Which volume something on the device was made from, while reuse_layout
@@ -300,7 +305,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // change, set once this frame's mask is enqueued (the next frame's shade
   // reads it after).
   std::optional<LiveCells> live;
-  if (eo.fused && keep && S.live && S.live->holds_for(cp, sp)) live = std::move(S.live);
+  if (eo.fused && keep && S.live && S.live->made_for.holds_for(cp, sp)) live = std::move(S.live);
   S.live.reset();
   const bool use_live = live.has_value();
   const cl::Buffer live_used = use_live ? live->mask : cl::Buffer();  // for the stats
@@ -329,12 +334,12 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       // As large as the voxel cells (twice with the gradient): kept where
       // it and the cells together take at most half the device's memory
       // (on a CPU device, the host's).
-      const std::size_t cells = static_cast<std::size_t>(V.pes()) * 4 * V.stride * sizeof(float);
-      const std::size_t bytes = gradient ? 2 * cells : cells;
+      const std::size_t voxel_bytes = static_cast<std::size_t>(V.bytes());
+      const std::size_t bytes = gradient ? 2 * voxel_bytes : voxel_bytes;
       const DeviceInfo& info = device.info();
       if (!S.kept_class_refused && bytes <= info.max_alloc_bytes &&
           (info.global_mem_bytes == 0 ||
-           2 * (std::uint64_t(cells) + bytes) <= info.global_mem_bytes)) {
+           2 * (std::uint64_t(voxel_bytes) + bytes) <= info.global_mem_bytes)) {
         try {
           cl::Buffer planes =
               device.buffer(CL_MEM_READ_WRITE, bytes, nullptr, "kept classification");
@@ -349,10 +354,9 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       }
     }
     if (S.kept_class) {
-      if (!keep || !S.kept_class->holds_for(cp, sp)) {
+      if (!keep || !S.kept_class->made_for.holds_for(KeptClass::key(cp), sp)) {
         S.kept_class->kept.filled = false;
-        S.kept_class->cp = KeptClass::key(cp);
-        std::memcpy(S.kept_class->grad, sp.grad_scale, sizeof S.kept_class->grad);
+        S.kept_class->made_for.set(KeptClass::key(cp), sp);
       }
       kept = &S.kept_class->kept;
     }
@@ -390,8 +394,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     S.live.emplace();
     S.live->mask = dm.active;
     S.live->occupancy = occupancy;
-    S.live->cp = cp;
-    std::memcpy(S.live->grad, sp.grad_scale, sizeof S.live->grad);
+    S.live->made_for.set(cp, sp);
   }
   // The footprint sizes (the segment count and the rectangles) read as soon
   // as the matching has them: balancing moves no segment's ray. The host

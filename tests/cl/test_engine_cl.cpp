@@ -44,6 +44,21 @@ float max_diff(const Image& a, const Image& b) {
   return d;
 }
 
+// Images equal bit for bit (the sign of a zero and NaN payloads too).
+bool same_bits(const Image& a, const Image& b) {
+  return a.pixels().size() == b.pixels().size() &&
+         std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(Rgba)) == 0;
+}
+
+// A turntable's engine: 256 PEs, the fused shade + classify, the layout kept.
+EngineOptions turntable_options() {
+  EngineOptions eo;
+  eo.pes = 256;
+  eo.fused = true;
+  eo.reuse_layout = true;
+  return eo;
+}
+
 // The per-sub-ray reference: the serial pipeline up to the samples, then
 // mc_sub_reference, composite_segments and the warp.
 Image subray_reference(const Volume& vol, const RenderOptions& opt, int64_t pes, bool allocate) {
@@ -227,10 +242,7 @@ TEST(RenderEngine, TransparentCellsStayUnshadedBetweenFrames) {
   const Frame frames[] = {{0, 1, false, false},  {23, 1, false, true},  {40, 3, false, true},
                           {55, 1, true, false},  {70, 1, false, false}, {85, 1, false, true},
                           {100, 2, true, false}, {115, 2, true, false}};
-  EngineOptions eo;
-  eo.pes = 256;
-  eo.fused = true;
-  eo.reuse_layout = true;
+  EngineOptions eo = turntable_options();
   RenderEngine engine(dev, eo);
   int64_t most = 0;
   for (const Frame& f : frames) {
@@ -270,8 +282,7 @@ TEST(RenderEngine, TransparentCellsStayUnshadedBetweenFrames) {
     const Image a = engine.render(tissue, opt, nullptr, &st);
     const Image b = render_opencl(dev, tissue, opt, eo);
     EXPECT_EQ(st.unshaded_pes, 0);
-    EXPECT_EQ(std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(Rgba)),
-              0);
+    EXPECT_TRUE(same_bits(a, b));
   }
   // Without the layout kept, every frame shades every cell.
   eo.reuse_layout = false;
@@ -334,10 +345,7 @@ TEST(RenderEngine, KeptClassificationEqualsClassifyingAgain) {
                           {&tissue, 160, 2, Sampling::voxel, &ct, true},
                           {&odd, 175, 1, Sampling::voxel, &ct, false},
                           {&odd, 190, 1, Sampling::voxel, &ct, true}};
-  EngineOptions eo;
-  eo.pes = 256;
-  eo.fused = true;
-  eo.reuse_layout = true;
+  const EngineOptions eo = turntable_options();
   EngineOptions again = eo;
   again.keep_classification = false;
   RenderEngine engine(dev, eo), every(dev, again);
@@ -354,9 +362,7 @@ TEST(RenderEngine, KeptClassificationEqualsClassifyingAgain) {
     const Image b = every.render(*f.vol, opt, nullptr, &sb);
     EXPECT_EQ(sa.classification_kept, f.kept);
     EXPECT_FALSE(sb.classification_kept);
-    ASSERT_EQ(a.pixels().size(), b.pixels().size());
-    EXPECT_EQ(std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(Rgba)),
-              0);
+    EXPECT_TRUE(same_bits(a, b));
     float alpha = 0;
     for (const Rgba& p : a.pixels()) alpha += p.a;
     EXPECT_GT(alpha, 1.0f);  // not an empty frame
@@ -382,10 +388,6 @@ TEST(RenderEngine, RelativeClassificationTakesEachVolumesRange) {
   opt.view = {20, 35, 10};
   opt.classifier = classifier_preset("mri");
   ASSERT_TRUE(opt.classifier.kind == Classifier::Kind::mixture && opt.classifier.mixture.relative);
-  auto same = [](const Image& a, const Image& b) {
-    return a.pixels().size() == b.pixels().size() &&
-           std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(Rgba)) == 0;
-  };
   for (const bool keep : {true, false}) {
     SCOPED_TRACE(keep ? "reuse_layout" : "no reuse_layout");
     EngineOptions eo;
@@ -396,25 +398,25 @@ TEST(RenderEngine, RelativeClassificationTakesEachVolumesRange) {
     float alpha = 0;
     for (const Rgba& p : one.pixels()) alpha += p.a;
     EXPECT_GT(alpha, 1.0f);  // not an empty frame
-    EXPECT_TRUE(same(engine.render(vol, opt), one));
-    EXPECT_TRUE(same(engine.render(vol, opt), one));  // the kept range
-    EXPECT_TRUE(same(engine.render(scaled, opt), render_opencl(dev, scaled, opt, eo)));
-    EXPECT_TRUE(same(engine.render(vol, opt), one));
+    EXPECT_TRUE(same_bits(engine.render(vol, opt), one));
+    EXPECT_TRUE(same_bits(engine.render(vol, opt), one));  // the kept range
+    EXPECT_TRUE(same_bits(engine.render(scaled, opt), render_opencl(dev, scaled, opt, eo)));
+    EXPECT_TRUE(same_bits(engine.render(vol, opt), one));
     if (keep) {
       // The same object given other storage (a new data pointer, the key's
       // part that a caller replacing the voxels changes): laid out and its
       // range taken again.
       Volume v = vol;
-      EXPECT_TRUE(same(engine.render(v, opt), one));
+      EXPECT_TRUE(same_bits(engine.render(v, opt), one));
       std::vector<float> d = scaled.data();
       v.data().swap(d);
-      EXPECT_TRUE(same(engine.render(v, opt), render_opencl(dev, scaled, opt, eo)));
+      EXPECT_TRUE(same_bits(engine.render(v, opt), render_opencl(dev, scaled, opt, eo)));
     } else {
       // The same object changed in place (allowed without reuse_layout).
       Volume v = vol;
-      EXPECT_TRUE(same(engine.render(v, opt), one));
+      EXPECT_TRUE(same_bits(engine.render(v, opt), one));
       for (float& x : v.data()) x = 3.0f * x + 50.0f;
-      EXPECT_TRUE(same(engine.render(v, opt), render_opencl(dev, scaled, opt, eo)));
+      EXPECT_TRUE(same_bits(engine.render(v, opt), render_opencl(dev, scaled, opt, eo)));
     }
   }
 }
