@@ -694,14 +694,13 @@ SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, floa
     SV_VSTORE16(select(z, (cg)*inv_, lit_), kq + 2 * vstride); \
     SV_VSTORE16(select(z, (cb)*inv_, lit_), kq + 3 * vstride); \
   }
-/* ... and its gradient (kc_mode | 4): gx, gy, gz, and |g| where the voxel
- * has a surface (sv_light16: g2 >= 1e-12), else -1. */
-#define SV_KEEP_GRAD(gx, gy, gz, g2, m)                                           \
-  if (kc_op == 1 && kc_grad) {                                                    \
-    SV_VSTORE16((gx), kq + 4 * vstride);                                          \
-    SV_VSTORE16((gy), kq + 5 * vstride);                                          \
-    SV_VSTORE16((gz), kq + 6 * vstride);                                          \
-    SV_VSTORE16(select((float16)(-1.0f), (m), (g2) >= 1e-12f), kq + 7 * vstride); \
+/* ... and its gradient (kc_mode | 4): gx, gy, gz (g2 and |g| are taken
+ * from them again, sv_grad_len16). */
+#define SV_KEEP_GRAD(gx, gy, gz)         \
+  if (kc_op == 1 && kc_grad) {           \
+    SV_VSTORE16((gx), kq + 4 * vstride); \
+    SV_VSTORE16((gy), kq + 5 * vstride); \
+    SV_VSTORE16((gz), kq + 6 * vstride); \
   }
 
 /* simdvol_shade_classify16: the fused kernel on 16-position chunks
@@ -737,9 +736,11 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   /* the kept classification (kc_mode & 3: 1 written, 2 read; kc_mode & 4:
    * with the gradient) and the chunk's planes of it */
   const int kc_op = kc_mode & 3, kc_grad = (kc_mode & 4) != 0;
-  __global float* kq = kc + (size_t)p * (kc_grad ? 8 : 4) * (size_t)vstride + e0;
+  __global float* kq = kc + (size_t)p * (kc_grad ? 7 : 4) * (size_t)vstride + e0;
   const int16 in = SV_ROWS16(ok) != 0.0f;
-  sv_prefetch_ahead(c, rb);
+  /* (the cells' values are not read where the kept gradient is, so not
+   * prefetched there) */
+  if (kc_op != 2 || !kc_grad) sv_prefetch_ahead(c, rb);
   const float16 z = 0.0f;
   float16 id, is, mag, r, g, b, a;
   if (kc_op == 2) {
@@ -762,12 +763,13 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
       return;
     }
     if (kc_grad) {
-      /* the kept gradient: the same lighting (sv_light16 tests g2 only
-       * against 1e-12) */
-      const float16 ms = SV_VLOAD16(kq + 7 * vstride);
-      sv_light_rows(sp, fx, fy, fz, SV_VLOAD16(kq + 4 * vstride), SV_VLOAD16(kq + 5 * vstride),
-                    SV_VLOAD16(kq + 6 * vstride), select(z, (float16)(1.0f), ms >= 0.0f), ms, &id,
-                    &is);
+      /* the kept gradient, its length by the shading's expression: the
+       * same lighting */
+      const float16 gx = SV_VLOAD16(kq + 4 * vstride), gy = SV_VLOAD16(kq + 5 * vstride),
+                    gz = SV_VLOAD16(kq + 6 * vstride);
+      float16 g2;
+      sv_grad_len16(gx, gy, gz, &g2, &mag);
+      sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
     } else {
       sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
     }
@@ -804,7 +806,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
       }
 #endif
       SV_KEEP_CLASS(a0, cr, cg, cb)
-      SV_KEEP_GRAD(gx, gy, gz, g2, mag)
+      SV_KEEP_GRAD(gx, gy, gz)
       sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
       sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
     } else {
@@ -823,7 +825,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
       /* (sv_shade_rows, its gradient kept on the way) */
       float16 gx, gy, gz, g2;
       sv_grad_rows(sp, c, block, rb, &gx, &gy, &gz, &g2, &mag);
-      SV_KEEP_GRAD(gx, gy, gz, g2, mag)
+      SV_KEEP_GRAD(gx, gy, gz)
       sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
       sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
     }

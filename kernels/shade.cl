@@ -243,6 +243,16 @@ SV_FN float16 sv_pow16(float16 x, float y) {
   return select(r, (float16)(y == 0.0f ? 1.0f : 0.0f), x < FLT_MIN);
 }
 
+/* The squared length g2 of a gradient (0 where it is not finite: a NaN/inf
+ * neighbour, no surface) and its length: one expression for the shading
+ * and the kept gradient's reading (classify.cl), so the same bits. */
+SV_FN_INLINE void sv_grad_len16(const float16 gx, const float16 gy, const float16 gz, float16* g2,
+                                float16* mag) {
+  const float16 q = gx * gx + gy * gy + gz * gz;
+  *g2 = select((float16)(0.0f), q, isfinite(q));
+  *mag = sqrt(*g2);
+}
+
 /* sv_shade_voxel on 16 lanes: neighbours x-/x+, y-/y+, z-/z+ and global
  * voxel coordinates (ix, iy, iz). The same float operations in the same
  * order. */
@@ -254,9 +264,7 @@ SV_FN void sv_grad16(__constant const sv_shade_params* sp, float16 xm, float16 x
   *gx = 0.5f * (xp - xm) * sp->grad_scale[0];
   *gy = 0.5f * (yp - ym) * sp->grad_scale[1];
   *gz = 0.5f * (zp - zm) * sp->grad_scale[2];
-  const float16 q = *gx * *gx + *gy * *gy + *gz * *gz;
-  *g2 = select((float16)(0.0f), q, isfinite(q)); /* a NaN/inf neighbour: no surface */
-  *mag = sqrt(*g2);
+  sv_grad_len16(*gx, *gy, *gz, g2, mag);
 }
 
 /* Its second half, the lighting (Id, Is) from sv_grad16's results at global

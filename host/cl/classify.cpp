@@ -205,7 +205,7 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
   if (kept && !vec)
     throw ArgumentError("kept classification", "only the float16 fused kernel keeps it");
   if (kept) {
-    const std::size_t need = static_cast<std::size_t>((kept->gradient ? 2 : 1) * V.bytes());
+    const std::size_t need = static_cast<std::size_t>(KeptClassification::bytes(V, kept->gradient));
     const std::size_t have =
         kept->planes() ? buffer_size(kept->planes, "clGetMemObjectInfo(kept)") : std::size_t(0);
     if (have < need)

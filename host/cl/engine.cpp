@@ -328,14 +328,14 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
       // The gradient too where the cells' rows take the shade's general
       // path (an x extent other than 4, 8 or a multiple of 16: each of the
       // six neighbours' loads takes a row-by-row select there); elsewhere
-      // its 16 bytes a lit voxel cost more than the neighbours' loads
+      // its 12 bytes a lit voxel cost more than the neighbours' loads
       // (docs/PERFORMANCE.md).
       const bool gradient = detail::shade_row_width(V.cell()[0]) == 1;
-      // As large as the voxel cells (twice with the gradient): kept where
-      // it and the cells together take at most half the device's memory
-      // (on a CPU device, the host's).
+      // As large as the voxel cells (7 / 4 of them with the gradient): kept
+      // where it and the cells together take at most half the device's
+      // memory (on a CPU device, the host's).
       const std::size_t voxel_bytes = static_cast<std::size_t>(V.bytes());
-      const std::size_t bytes = gradient ? 2 * voxel_bytes : voxel_bytes;
+      const std::size_t bytes = static_cast<std::size_t>(KeptClassification::bytes(V, gradient));
       const DeviceInfo& info = device.info();
       if (!S.kept_class_refused && bytes <= info.max_alloc_bytes &&
           (info.global_mem_bytes == 0 ||

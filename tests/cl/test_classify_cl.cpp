@@ -488,8 +488,8 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
           const sv_classify_params c1 = classify_params(c, range_for(c, *v), 1.0);
           const sv_classify_params c7 = classify_params(c, range_for(c, *v), 0.7);
           const VoxelLayout L = make_voxel_layout(cells.layout(), il);
-          const std::size_t bytes =
-              static_cast<std::size_t>(L.pes()) * (grad ? 8 : 4) * L.stride * F4;
+          const std::size_t bytes = static_cast<std::size_t>(KeptClassification::bytes(L, grad));
+          ASSERT_EQ(bytes, static_cast<std::size_t>(L.pes()) * (grad ? 7 : 4) * L.stride * F4);
           KeptClassification kept;
           kept.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE, bytes);
           kept.gradient = grad;
@@ -511,7 +511,7 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
           int64_t lit = 0, alpha_bad = 0;
           for (int64_t p = 0; p < L.pes(); ++p)
             for (int64_t e = 0; e < S; ++e) {
-              const float k = planes[static_cast<std::size_t>(p * (grad ? 8 : 4) * S + e)];
+              const float k = planes[static_cast<std::size_t>(p * (grad ? 7 : 4) * S + e)];
               const Rgba& w = want1[static_cast<std::size_t>(p * S + e)];
               alpha_bad += std::memcmp(&k, &w.a, sizeof k) != 0;
               lit += k > 0;
@@ -541,7 +541,9 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
           // The gradient asked for after a fill without it (or dropped after
           // one with it): the call writes the planes again, the same bits.
           kept.gradient = !grad;
-          if (!grad) kept.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE, 2 * bytes);
+          if (!grad)
+            kept.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE,
+                                     static_cast<std::size_t>(KeptClassification::bytes(L, true)));
           VoxelBuffer again(dev, L), read_again(dev, L);
           enqueue_shade_classify(dev, cells, sb, c7, again, ShadeKernel::vec16, nullptr, nullptr,
                                  &kept);
@@ -570,6 +572,14 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
   EXPECT_THROW(
       enqueue_shade_classify(dev, cells, sa, cp, out, ShadeKernel::vec16, nullptr, nullptr, &small),
       ArgumentError);
+  KeptClassification short_gradient;  // room for the four planes, not the gradient's three
+  short_gradient.planes =
+      cl::Buffer(dev.context(), CL_MEM_READ_WRITE,
+                 static_cast<std::size_t>(KeptClassification::bytes(L, true)) - 4);
+  short_gradient.gradient = true;
+  EXPECT_THROW(enqueue_shade_classify(dev, cells, sa, cp, out, ShadeKernel::vec16, nullptr, nullptr,
+                                      &short_gradient),
+               ArgumentError);
   KeptClassification none;
   EXPECT_THROW(
       enqueue_shade_classify(dev, cells, sa, cp, out, ShadeKernel::vec16, nullptr, nullptr, &none),
@@ -580,7 +590,7 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
   EXPECT_THROW(enqueue_shade_classify(dev, cells, sa, cp, out, ShadeKernel::range3d, nullptr,
                                       nullptr, &enough),
                ArgumentError);
-  EXPECT_FALSE(small.filled || none.filled || enough.filled);
+  EXPECT_FALSE(small.filled || short_gradient.filled || none.filled || enough.filled);
 }
 
 TEST(ClassifyKernel, NanVoxelsAreTransparent) {

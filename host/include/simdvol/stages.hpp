@@ -225,13 +225,19 @@ struct DeviceOccupancy;  // local_cl.hpp
 /// where a call wrote it from the same cells (values), classification (the
 /// opacity step aside: it is applied after) and gradient scale.
 struct KeptClassification {
-  cl::Buffer planes;  ///< 4 * stride floats per PE of the voxel layout (8 with gradient)
-  /// Also the gradient (planes 4..7: gx, gy, gz scaled as the shading's, and
-  /// |g| where the voxel has a surface, else -1), which the reading call
-  /// lights instead of taking the six neighbours again.
+  cl::Buffer planes;  ///< 4 * stride floats per PE of the voxel layout (7 with gradient)
+  /// Also the gradient (planes 4..6: gx, gy, gz scaled as the shading's;
+  /// the reading call takes |g| from them by the shading's expression),
+  /// which the reading call lights instead of taking the six neighbours
+  /// again.
   bool gradient = false;
   bool filled = false;           ///< written by a call (the next one reads it)
   bool filled_gradient = false;  ///< `gradient` when it was written
+  /// The bytes `planes` needs for voxel layout V: 4 planes of V.stride
+  /// floats per PE, 7 with the gradient.
+  static std::uint64_t bytes(const VoxelLayout& V, bool gradient) {
+    return V.bytes() / 4 * (gradient ? 7u : 4u);
+  }
 };
 cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
                                  const sv_shade_params& shade, const sv_classify_params& classify,
