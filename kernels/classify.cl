@@ -600,7 +600,7 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
   const float nh = fabs(gx * sp->halfway[0] + gy * sp->halfway[1] + gz * sp->halfway[2]) / m;
   const int surface = g2 >= 1e-12f;
   float id = surface ? sp->ka + cue * sp->kd * nl : sp->ka;
-  float is = surface ? cue * sp->ks * sv_pow(nh, sp->shininess) : 0.0f;
+  float is = surface ? cue * sp->ks * sv_spec_pow(sp, nh) : 0.0f;
   id = sp->enabled ? id : 1.0f;
   is = sp->enabled ? is : 0.0f;
   float r, g, b, a;

@@ -128,9 +128,10 @@ typedef struct sv_shade_params {
   float grad_scale[4]; /* min spacing / spacing per axis ([3] unused) */
   float depth_offset;
   float ka, kd, ks;
-  float shininess; /* Phong exponent n */
-  float k1, k2;    /* depth cue 1 / (k1 + k2 d) */
-  sv_i32 enabled;  /* 0: Id = 1, Is = 0 */
+  float shininess;  /* Phong exponent n */
+  float k1, k2;     /* depth cue 1 / (k1 + k2 d) */
+  sv_i32 enabled;   /* 0: Id = 1, Is = 0 */
+  float spec_floor; /* |N.H| below it: |N.H|^n counts as 0 (specular_floor, shade.hpp) */
 } sv_shade_params;
 
 /* The materials of a mixture, one array per quantity (not an array of

@@ -11,7 +11,7 @@
 
 namespace simdvol {
 
-static_assert(sizeof(sv_shade_params) == 24 * 4, "sv_shade_params must be plain floats/ints");
+static_assert(sizeof(sv_shade_params) == 25 * 4, "sv_shade_params must be plain floats/ints");
 
 namespace {
 
@@ -115,6 +115,7 @@ sv_shade_params shade_params(const ShadeFrame& f, const ShadeParams& p) {
   s.k1 = finite_float(p.k1, "k1");
   s.k2 = finite_float(p.k2, "k2");
   s.enabled = p.enabled ? 1 : 0;
+  s.spec_floor = specular_floor(p.shininess);
   return s;
 }
 

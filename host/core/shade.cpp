@@ -52,6 +52,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "simdvol/error.hpp"
@@ -150,8 +151,15 @@ ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const S
   return f;
 }
 
+float specular_floor(double shininess) {
+  if (!(shininess > 0.0)) return 0.0f;
+  const double t = std::exp2(-100.0 / shininess);
+  return std::max(static_cast<float>(t), std::numeric_limits<float>::min());
+}
+
 std::vector<ShadeSample> shade(const Volume& vol, const ViewGeometry& view, const ShadeParams& p) {
   const ShadeFrame f = make_shade_frame(vol, view, p);
+  const double floor = specular_floor(p.shininess);
   std::vector<ShadeSample> out(vol.voxel_count());
   for (int64_t z = 0; z < vol.nz(); ++z)
     for (int64_t y = 0; y < vol.ny(); ++y)
@@ -179,7 +187,8 @@ std::vector<ShadeSample> shade(const Volume& vol, const ViewGeometry& view, cons
         const double nl = std::fabs(dot3(g, f.light_obj)) / mag;
         const double nh = std::fabs(dot3(g, f.halfway_obj)) / mag;
         s.diffuse = static_cast<float>(p.ka + cue * p.kd * nl);
-        s.specular = static_cast<float>(cue * p.ks * std::pow(nh, p.shininess));
+        const double power = nh < floor ? 0.0 : std::pow(nh, p.shininess);
+        s.specular = static_cast<float>(cue * p.ks * power);
       }
   return out;
 }

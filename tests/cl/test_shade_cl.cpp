@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "simdvol/io.hpp"
 #include "simdvol/phantom.hpp"
@@ -118,7 +119,33 @@ TEST(ShadeKernel, SpecularExponents) {
       double lit = 0;
       for (const ShadeSample& x : run.flat) lit = std::max(lit, static_cast<double>(x.specular));
       EXPECT_GT(lit, 0.05);  // highlights to compare
+      // No denormal specular term (specular_floor: |N.H| below it counts as
+      // 0, so the power's multiplications stay normal), though most voxels'
+      // |N.H|^n would be one at the larger n.
+      std::size_t denormal = 0, below_floor = 0;
+      for (const ShadeSample& x : run.flat) denormal += std::fpclassify(x.specular) == FP_SUBNORMAL;
+      const std::vector<ShadeSample> ref = shade(vol, view, p);
+      for (const ShadeSample& x : ref) {
+        denormal += std::fpclassify(x.specular) == FP_SUBNORMAL;
+        below_floor += x.specular == 0.0f;
+      }
+      EXPECT_EQ(denormal, 0u);
+      if (n >= 24) {
+        EXPECT_GT(below_floor, ref.size() / 50) << "cases the floor takes";
+      }
     }
+}
+
+// The floor of |N.H| under which the specular power counts as 0: where the
+// power would fall below 2^-100, never below FLT_MIN, none for n = 0.
+TEST(ShadeKernel, SpecularFloor) {
+  EXPECT_EQ(specular_floor(0.0), 0.0f);
+  EXPECT_EQ(specular_floor(0.5), std::numeric_limits<float>::min());
+  EXPECT_EQ(specular_floor(1.0), static_cast<float>(std::exp2(-100.0)));
+  for (const double n : {1.0, 2.0, 7.5, 10.0, 24.0, 64.0, 100.0, 1000.0}) {
+    const double t = specular_floor(n);
+    EXPECT_NEAR(std::log2(std::pow(t, n)), -100.0, 1e-3 * n) << n;
+  }
 }
 
 TEST(ShadeKernel, OddAnisotropicVolume) {

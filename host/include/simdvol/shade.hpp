@@ -22,6 +22,16 @@ struct ShadeParams {
   double k2 = 0.6;
 };
 
+/// The specular term's floor: |N.H| below it makes |N.H|^n count as 0,
+/// where the power would be below 2^-100 (7.9e-31: no image holds it).
+/// The float arithmetic of the kernels would otherwise carry such powers
+/// down into denormal numbers, which the CPU handles by microcode at about
+/// a hundred times the cost of a normal multiplication (ch2's shade +
+/// classify spent about a quarter of its time there). 2^(-100 / n) for
+/// n > 0, at least FLT_MIN (an |N.H| below it counts as 0 at every n > 0);
+/// 0 for n = 0 (x^0 = 1). The reference and the kernels both take it.
+float specular_floor(double shininess);
+
 /// Per-voxel result of the shade stage.
 struct ShadeSample {
   float diffuse = 0;   ///< Id = ka + cue * kd * |N.L|
