@@ -37,7 +37,7 @@ SV_FN int sv_list_start(int4 o, int axis) {
 /* A round's pair (F, B) = (front, back) from its entry (the PE of the
  * lower cell along the round's axis, the PE of the cell above it): dir = the
  * sign of the depth step along the axis. The host lists each (axis,
- * parity)'s pairs once per split (DeviceMatching::pairs, match_cl.hpp): the
+ * parity)'s pairs once per matching (DeviceMatching::pairs, match_cl.hpp): the
  * pairs of cell indices (2 m + par, 2 m + 1 + par) along the axis. */
 SV_FN int2 sv_balance_fb(const int2 lu, int dir) {
   return dir > 0 ? lu : (int2)(lu.y, lu.x);

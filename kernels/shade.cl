@@ -251,6 +251,11 @@ SV_FN float16 sv_pow16(float16 x, float y) {
   return select(r, (float16)(y == 0.0f ? 1.0f : 0.0f), x < FLT_MIN);
 }
 
+/* sv_spec_pow on 16 lanes. */
+SV_FN_INLINE float16 sv_spec_pow16(__constant const sv_shade_params* sp, const float16 nh) {
+  return sv_pow16(select(nh, (float16)(0.0f), nh < sp->spec_floor), sp->shininess);
+}
+
 /* The squared length g2 of a gradient (0 where it is not finite: a NaN/inf
  * neighbour, no surface) and its length: one expression for the shading
  * and the kept gradient's reading (classify.cl), so the same bits. */
@@ -287,10 +292,7 @@ SV_FN void sv_light16(__constant const sv_shade_params* sp, float16 gx, float16 
   const float16 nh = fabs(gx * sp->halfway[0] + gy * sp->halfway[1] + gz * sp->halfway[2]) / m;
   const int16 surface = g2 >= 1e-12f; /* else N = 0: ambient only */
   const float16 lit_d = select((float16)(sp->ka), sp->ka + cue * sp->kd * nl, surface);
-  const float16 lit_s = select(
-      (float16)(0.0f),
-      cue * sp->ks * sv_pow16(select(nh, (float16)(0.0f), nh < sp->spec_floor), sp->shininess),
-      surface);
+  const float16 lit_s = select((float16)(0.0f), cue * sp->ks * sv_spec_pow16(sp, nh), surface);
   *id = sp->enabled ? lit_d : (float16)(1.0f);
   *is = sp->enabled ? lit_s : (float16)(0.0f);
 }

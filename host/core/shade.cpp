@@ -159,7 +159,7 @@ float specular_floor(double shininess) {
 
 std::vector<ShadeSample> shade(const Volume& vol, const ViewGeometry& view, const ShadeParams& p) {
   const ShadeFrame f = make_shade_frame(vol, view, p);
-  const double floor = specular_floor(p.shininess);
+  const double spec_floor = specular_floor(p.shininess);
   std::vector<ShadeSample> out(vol.voxel_count());
   for (int64_t z = 0; z < vol.nz(); ++z)
     for (int64_t y = 0; y < vol.ny(); ++y)
@@ -187,7 +187,7 @@ std::vector<ShadeSample> shade(const Volume& vol, const ViewGeometry& view, cons
         const double nl = std::fabs(dot3(g, f.light_obj)) / mag;
         const double nh = std::fabs(dot3(g, f.halfway_obj)) / mag;
         s.diffuse = static_cast<float>(p.ka + cue * p.kd * nl);
-        const double power = nh < floor ? 0.0 : std::pow(nh, p.shininess);
+        const double power = nh < spec_floor ? 0.0 : std::pow(nh, p.shininess);
         s.specular = static_cast<float>(cue * p.ks * power);
       }
   return out;

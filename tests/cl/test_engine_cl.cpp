@@ -59,6 +59,15 @@ EngineOptions turntable_options() {
   return eo;
 }
 
+// A turntable frame of those tests: 40 x 40 at view (20, phi, 10).
+RenderOptions turntable_frame(double phi, int order) {
+  RenderOptions opt;
+  opt.width = opt.height = 40;
+  opt.view = {20, phi, 10};
+  opt.order = order;
+  return opt;
+}
+
 // The per-sub-ray reference: the serial pipeline up to the samples, then
 // mc_sub_reference, composite_segments and the warp.
 Image subray_reference(const Volume& vol, const RenderOptions& opt, int64_t pes, bool allocate) {
@@ -247,10 +256,7 @@ TEST(RenderEngine, TransparentCellsStayUnshadedBetweenFrames) {
   int64_t most = 0;
   for (const Frame& f : frames) {
     SCOPED_TRACE("phi " + std::to_string(f.phi));
-    RenderOptions opt;
-    opt.width = opt.height = 40;
-    opt.view = {20, f.phi, 10};
-    opt.order = f.order;
+    RenderOptions opt = turntable_frame(f.phi, f.order);
     opt.classifier = f.hazy ? hazy : classifier_preset("ct");
     EngineStats st;
     const Image a = engine.render(vol, opt, nullptr, &st);
@@ -351,10 +357,7 @@ TEST(RenderEngine, KeptClassificationEqualsClassifyingAgain) {
   RenderEngine engine(dev, eo), every(dev, again);
   for (const Frame& f : frames) {
     SCOPED_TRACE("phi " + std::to_string(f.phi));
-    RenderOptions opt;
-    opt.width = opt.height = 40;
-    opt.view = {20, f.phi, 10};
-    opt.order = f.order;
+    RenderOptions opt = turntable_frame(f.phi, f.order);
     opt.sampling = f.sampling;
     opt.classifier = *f.c;
     EngineStats sa, sb;

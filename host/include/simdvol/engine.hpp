@@ -189,7 +189,7 @@ struct EngineOptions {
   /// scale light it instead of classifying again (enqueue_shade_classify's
   /// `kept`; the same image bit for bit; for cells whose rows take the
   /// shade's general path, an x extent other than 4, 8 or a multiple of 16,
-  /// the gradient too, twice the buffer). Off, or where the buffer would
+  /// the gradient too, 7 / 4 of the buffer). Off, or where the buffer would
   /// pass the device's largest allocation or, with the voxel cells of the
   /// same size, half its memory: every frame classifies.
   bool keep_classification = true;

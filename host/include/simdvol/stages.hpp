@@ -213,9 +213,8 @@ struct DeviceOccupancy;  // local_cl.hpp
 /// scale (under any lighting), and each PE flagged 0 has every voxel
 /// transparent (the engine passes the previous frame's PE mask of the same
 /// volume and classification: match.hpp's inactive PEs).
-/// With `kept` (vec16 only, else ArgumentError; a buffer of fewer than 4 *
-/// stride floats per PE of out's layout, 8 with its gradient:
-/// ArgumentError): the classification
+/// With `kept` (vec16 only, else ArgumentError; a buffer of fewer than
+/// KeptClassification::bytes for out's layout: ArgumentError): the classification
 /// before lighting, kept for the frames after. Where kept->filled is false
 /// the call classifies and writes it (per position: alpha where the voxel
 /// is lit, i.e. alpha >= FLT_MIN, value not NaN, inside the volume's cell,
