@@ -359,6 +359,32 @@ struct Device::Pool {
   std::vector<Entry> entries;
 };
 
+// Releases the pool's buffers that only the pool holds (reference count 1;
+// the implementation keeps a released buffer alive for the commands still
+// using it). Returns how many. The pool's mutex must be held.
+std::size_t Device::release_unheld(Pool& pool) {
+  const std::size_t before = pool.entries.size();
+  std::vector<Pool::Entry> kept;
+  for (Pool::Entry& e : pool.entries) {
+    cl_uint refs = 0;
+    if (e.buffer.getInfo(CL_MEM_REFERENCE_COUNT, &refs) == CL_SUCCESS && refs <= 1) continue;
+    kept.push_back(std::move(e));
+  }
+  pool.entries = std::move(kept);
+  return before - pool.entries.size();
+}
+
+bool is_allocation_failure(cl_int code) {
+  return code == CL_OUT_OF_HOST_MEMORY || code == CL_MEM_OBJECT_ALLOCATION_FAILURE ||
+         code == CL_OUT_OF_RESOURCES;
+}
+
+std::size_t Device::release_pooled() {
+  if (!pool_) return 0;
+  std::lock_guard<std::mutex> lock(pool_->mutex);
+  return release_unheld(*pool_);
+}
+
 Device::Device(std::optional<int> index)
     : cache_(std::make_unique<Cache>()), pool_(std::make_unique<Pool>()) {
   auto found = all_devices();
@@ -377,6 +403,7 @@ Device::Device(std::optional<int> index)
   cl_check(err, "clCreateCommandQueue");
   profiling_ = true;
   describe_self(chosen, found[chosen].platform_index, found[chosen].platform);
+  read_fail_allocation();
 }
 
 Device::Device(cl_context context, cl_command_queue queue)
@@ -398,6 +425,28 @@ Device::Device(cl_context context, cl_command_queue queue)
   std::string pname;
   cl::Platform(platform, false).getInfo(CL_PLATFORM_NAME, &pname);
   describe_self(-1, -1, trim(pname));
+  read_fail_allocation();
+}
+
+void Device::read_fail_allocation() {
+  fail_count_ = std::make_unique<std::atomic<int>>(0);
+  const char* env = std::getenv("SIMDVOL_FAIL_ALLOCATION");
+  if (!env || !*env) return;
+  std::string spec = env;
+  int at = 1;
+  if (const std::size_t colon = spec.rfind(':'); colon != std::string::npos) {
+    const std::string n = spec.substr(colon + 1);
+    if (n.empty() || n.size() > 6 || n.find_first_not_of("0123456789") != std::string::npos ||
+        std::stoi(n) < 1)
+      throw ArgumentError("SIMDVOL_FAIL_ALLOCATION",
+                          "'" + spec + "' is not WHAT or WHAT:N with N a positive integer");
+    at = std::stoi(n);
+    spec.resize(colon);
+  }
+  if (spec.empty())
+    throw ArgumentError("SIMDVOL_FAIL_ALLOCATION", "names no buffer ('" + std::string(env) + "')");
+  fail_what_ = spec;
+  fail_at_ = at;
 }
 
 Device::Device(Device&&) noexcept = default;
@@ -634,6 +683,19 @@ cl::Buffer Device::scratch_buffer(cl_mem_flags flags, std::size_t bytes, const s
 cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t fresh_bytes,
                             void* host_ptr, const std::string& what) {
   check_allocation(bytes, info_.max_alloc_bytes, what);
+  if (fail_at_ > 0 && what == fail_what_ && fail_count_ && ++*fail_count_ == fail_at_)
+    throw CLError("clCreateBuffer(" + what + ", " + std::to_string(bytes) + " bytes)",
+                  CL_MEM_OBJECT_ALLOCATION_FAILURE, "injected by SIMDVOL_FAIL_ALLOCATION");
+  // On a CPU device a buffer is host memory; PoCL (3.1) allocates it only
+  // when a command first uses it, and where the host has no memory left
+  // then it aborts the process inside the queue (an assertion in
+  // pocl_create_migration_commands) instead of reporting an error. Asked
+  // for host memory (CL_MEM_ALLOC_HOST_PTR), it allocates at once and
+  // clCreateBuffer reports the failure: a CLError naming `what`, which the
+  // caller can catch (the kept classification does) or report. The same
+  // host memory either way; a GPU keeps its device memory.
+  if (info_.is_cpu && host_ptr == nullptr && (flags & CL_MEM_USE_HOST_PTR) == 0)
+    flags |= CL_MEM_ALLOC_HOST_PTR;
   const bool pooled = pool_ && host_ptr == nullptr && bytes > 0;
   std::unique_lock<std::mutex> lock;
   if (pooled) {
@@ -664,7 +726,17 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
   cl::Buffer b(context_, flags, fresh_bytes, host_ptr, &err);
   if (err != CL_SUCCESS && fresh_bytes != bytes)  // no room for the headroom: exactly as asked
     b = cl::Buffer(context_, flags, fresh_bytes = bytes, host_ptr, &err);
-  if (err != CL_SUCCESS) throw CLError("clCreateBuffer(" + what + ")", err);
+  if (is_allocation_failure(err) && pool_) {
+    // The pool's buffers that nobody holds any more (kept for later
+    // frames) released, then once more.
+    if (!lock.owns_lock()) lock = std::unique_lock<std::mutex>(pool_->mutex);
+    if (release_unheld(*pool_) > 0) b = cl::Buffer(context_, flags, bytes, host_ptr, &err);
+  }
+  if (err != CL_SUCCESS)
+    throw CLError("clCreateBuffer(" + what + ", " + std::to_string(bytes) + " bytes)", err,
+                  is_allocation_failure(err) ? "the device (for a CPU device, the host) has no "
+                                               "memory left for it"
+                                             : "");
   if (pooled && pool_->depth > 0) pool_->entries.push_back({b, flags, fresh_bytes, true, 0, what});
   return b;
 }

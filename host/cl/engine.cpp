@@ -207,6 +207,31 @@ void summarise_kernels(EngineTimes& t) {
 
 Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTimes* times,
                            EngineStats* stats) {
+  try {
+    return render_frame(vol, opt, times, stats);
+  } catch (const CLError& e) {
+    // The kept classification holds as much memory as the RGBA voxel cells
+    // (7 / 4 of that with its gradient), and its rule (half the device's
+    // memory) cannot see what the host has left: where memory ran out in a
+    // frame while it was kept, it goes (and its buffer from the pool), and
+    // the frame runs again classifying, as where it never fit. A frame
+    // that fails part-way leaves the kept state consistent: each piece is
+    // used only where it was made for the same cells and classification.
+    State& S = *s_;
+    if (!is_allocation_failure(e.code()) || !S.kept_class) throw;
+    S.kept_class.reset();
+    S.kept_class_refused = true;
+    S.device->release_pooled();
+    if (times) *times = EngineTimes{};
+    if (stats) *stats = EngineStats{};
+    Image img = render_frame(vol, opt, times, stats);
+    if (stats) stats->classification_let_go = true;
+    return img;
+  }
+}
+
+Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, EngineTimes* times,
+                                 EngineStats* stats) {
   State& S = *s_;
   Device& device = *S.device;
   const EngineOptions& eo = S.eo;
@@ -322,6 +347,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
   // a transfer function, whose ramps cost less than the kept planes' reads
   // (docs/PERFORMANCE.md).
   KeptClassification* kept = nullptr;
+  bool let_go = false;  // its buffer's allocation failed in this frame
   if (eo.fused && eo.reuse_layout && eo.keep_classification && cp.kind == SV_CLASSIFY_MIXTURE) {
     if (!S.kept_class) {
       const VoxelLayout& V = S.rgba->layout();
@@ -350,6 +376,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
           // No room for it: the frames classify, as without it (not asked
           // again for these cells).
           S.kept_class_refused = true;
+          let_go = true;
         }
       }
     }
@@ -606,6 +633,7 @@ Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTi
     stats->segments = segs.count;
     stats->swapped = swapped;
     stats->classification_kept = kept_read;
+    stats->classification_let_go = let_go;
     if (swapped) stats->swap = swap_cost(S.swap_plan.plan, split, view, grid);
     if (live_used()) {
       std::vector<cl_uchar> live(static_cast<std::size_t>(dm.pes));

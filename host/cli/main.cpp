@@ -519,6 +519,7 @@ int main(int argc, char** argv) {
                << " PEs, utilisation " << st.utilisation();
             if (st.unshaded_pes > 0) os << ", shade left out " << st.unshaded_pes << " PEs";
             if (st.classification_kept) os << ", classification kept";
+            if (st.classification_let_go) os << ", classification let go (memory ran out)";
             os << "\n";
             std::cerr << os.str();
           }
@@ -582,6 +583,12 @@ int main(int argc, char** argv) {
   } catch (const fs::filesystem_error& e) {
     // A file-system call outside the checks (its message names the path).
     std::cerr << "simdvol: error: " << e.what() << "\n";
+    return 1;
+  } catch (const std::bad_alloc&) {
+    // A host allocation outside the OpenCL buffers (theirs are CLErrors
+    // naming the buffer) found no memory left.
+    std::cerr << "simdvol: error: out of memory: the host has no memory left for this render "
+                 "(a smaller volume, image or PE count needs less)\n";
     return 1;
   } catch (const std::exception& e) {
     std::cerr << "simdvol: unexpected error: " << e.what() << "\n";

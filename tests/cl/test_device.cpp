@@ -557,6 +557,87 @@ TEST(DeviceTest, ReuseScopeRecyclesOnlyReleasedBuffers) {
   EXPECT_EQ(d.pooled_bytes(), 0u);
 }
 
+// Device::release_pooled lets go of the pool's buffers that nobody else
+// holds (inside a scope too: the ones handed out and dropped again), and
+// keeps the held ones.
+TEST(DeviceTest, ReleasePooledLetsGoOfUnheldBuffers) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  const auto rw = CL_MEM_READ_WRITE;
+  cl::Buffer held;
+  {
+    Device::ReuseScope scope(d);
+    held = d.buffer(rw, 1 << 20, nullptr, "held");
+    cl::Buffer dropped = d.buffer(rw, 2 << 20, nullptr, "dropped");
+    EXPECT_EQ(d.pooled_bytes(), 3u << 20);
+    EXPECT_EQ(d.release_pooled(), 0u);  // both held
+    dropped = cl::Buffer();
+    EXPECT_EQ(d.release_pooled(), 1u);
+    EXPECT_EQ(d.pooled_bytes(), 1u << 20);
+  }
+  EXPECT_EQ(d.pooled_bytes(), 1u << 20);
+  held = cl::Buffer();
+  EXPECT_EQ(d.release_pooled(), 1u);
+  EXPECT_EQ(d.pooled_bytes(), 0u);
+}
+
+// On a CPU device the Device asks for host memory (CL_MEM_ALLOC_HOST_PTR),
+// so that PoCL allocates a buffer at clCreateBuffer, which reports a
+// failure, instead of at its first use, where PoCL 3.1 aborts the process
+// (Cli.OutOfMemoryIsAnErrorNamingTheBuffer); not with a host pointer of
+// the caller's, and not on other devices.
+TEST(DeviceTest, CpuBuffersAreHostMemoryFromTheStart) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  cl_mem_flags flags = 0;
+  ASSERT_EQ(d.buffer(CL_MEM_READ_WRITE, 4096, nullptr, "b").getInfo(CL_MEM_FLAGS, &flags),
+            CL_SUCCESS);
+  EXPECT_EQ((flags & CL_MEM_ALLOC_HOST_PTR) != 0, d.info().is_cpu) << flags;
+  EXPECT_NE(flags & CL_MEM_READ_WRITE, 0u);
+  std::vector<int> host(16);
+  ASSERT_EQ(d.buffer(CL_MEM_READ_WRITE | CL_MEM_USE_HOST_PTR, 64, host.data(), "own")
+                .getInfo(CL_MEM_FLAGS, &flags),
+            CL_SUCCESS);
+  EXPECT_EQ(flags & CL_MEM_ALLOC_HOST_PTR, 0u);
+}
+
+// SIMDVOL_FAIL_ALLOCATION=WHAT[:N] (a test hook): the N-th request for a
+// buffer named WHAT fails as out of memory, once; the others are served.
+// A malformed value is an error at construction.
+TEST(DeviceTest, FailAllocationFailsTheNamedRequest) {
+  SIMDVOL_REQUIRE_OPENCL();
+  EXPECT_TRUE(is_allocation_failure(CL_OUT_OF_HOST_MEMORY));
+  EXPECT_TRUE(is_allocation_failure(CL_MEM_OBJECT_ALLOCATION_FAILURE));
+  EXPECT_TRUE(is_allocation_failure(CL_OUT_OF_RESOURCES));
+  EXPECT_FALSE(is_allocation_failure(CL_INVALID_VALUE));
+  EXPECT_FALSE(is_allocation_failure(CL_SUCCESS));
+  struct Env {
+    explicit Env(const char* v) { setenv("SIMDVOL_FAIL_ALLOCATION", v, 1); }
+    ~Env() { unsetenv("SIMDVOL_FAIL_ALLOCATION"); }
+  };
+  {
+    Env env("the cells:2");
+    Device d;
+    const auto rw = CL_MEM_READ_WRITE;
+    EXPECT_NO_THROW(d.buffer(rw, 64, nullptr, "the cells"));
+    EXPECT_NO_THROW(d.buffer(rw, 64, nullptr, "other"));
+    try {
+      d.buffer(rw, 64, nullptr, "the cells");
+      ADD_FAILURE() << "the second request did not fail";
+    } catch (const CLError& e) {
+      EXPECT_EQ(e.code(), CL_MEM_OBJECT_ALLOCATION_FAILURE);
+      EXPECT_NE(std::string(e.what()).find("clCreateBuffer(the cells, 64 bytes)"),
+                std::string::npos)
+          << e.what();
+    }
+    EXPECT_NO_THROW(d.buffer(rw, 64, nullptr, "the cells"));
+  }
+  for (const char* bad : {"x:0", "x:", "x:y", ":2", "x:-1"}) {
+    Env env(bad);
+    EXPECT_THROW(Device{}, ArgumentError) << bad;
+  }
+}
+
 // Device::set_reuse_keep: a released buffer can be handed out in that many
 // scopes after the one it was used in, then it is released.
 TEST(DeviceTest, ReuseKeepSetsHowLongReleasedBuffersWait) {

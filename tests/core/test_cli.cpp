@@ -29,10 +29,13 @@ struct Result {
   std::string output;  // stdout and stderr together
 };
 
-// `env` ("NAME=value ..."), if any, is set for the program alone.
-Result run_once(const std::string& args, const std::string& env) {
-  const std::string cmd =
-      (env.empty() ? "" : "env " + env + " ") + std::string(SIMDVOL_CLI) + " " + args + " 2>&1";
+// `env` ("NAME=value ..."), if any, is set for the program alone; `shell`,
+// if any, is a shell command line the program's runs after ("ulimit -v N;
+// exec").
+Result run_once(const std::string& args, const std::string& env, const std::string& shell = "") {
+  const std::string cmd = (shell.empty() ? "" : shell + " ") +
+                          (env.empty() ? "" : "env " + env + " ") + std::string(SIMDVOL_CLI) + " " +
+                          args + " 2>&1";
   Result r;
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;
@@ -235,6 +238,131 @@ TEST_F(Cli, KeptClassificationLeftOutWhereItDoesNotFit) {
     EXPECT_EQ(differ, 0u) << frame;
     EXPECT_GT(sum, 1.0) << frame;
   }
+}
+
+namespace {
+
+// The frames of a --times run, one line each: whether the line says
+// "classification kept" and "classification let go".
+struct FrameNote {
+  bool kept = false, let_go = false;
+};
+std::vector<FrameNote> frame_notes(const std::string& out) {
+  std::vector<FrameNote> notes;
+  std::istringstream lines(out);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("frame ", 0) != 0) continue;
+    notes.push_back({line.find(", classification kept") != std::string::npos,
+                     line.find(", classification let go (memory ran out)") != std::string::npos});
+  }
+  return notes;
+}
+
+// How many pixels of two images differ in any channel (-1: other sizes);
+// `alpha` receives the first one's alpha sum.
+long differing_pixels(const std::string& a, const std::string& b, double* alpha) {
+  const simdvol::Image ia = simdvol::read_image(a);
+  const simdvol::Image ib = simdvol::read_image(b);
+  if (ia.pixels().size() != ib.pixels().size()) return -1;
+  long differ = 0;
+  *alpha = 0;
+  for (std::size_t k = 0; k < ia.pixels().size(); ++k) {
+    const simdvol::Rgba& x = ia.pixels()[k];
+    const simdvol::Rgba& y = ib.pixels()[k];
+    differ += x.r != y.r || x.g != y.g || x.b != y.b || x.a != y.a;
+    *alpha += x.a;
+  }
+  return differ;
+}
+
+}  // namespace
+
+// Where memory runs out for the kept classification, the frames classify
+// as where it never fit, with the same images bit for bit: its buffer's
+// allocation failing (the engine's catch), or a later allocation of a frame
+// that holds it (RenderEngine::render lets it go and renders the frame
+// again). SIMDVOL_FAIL_ALLOCATION=WHAT[:N] makes the N-th request for the
+// buffer named WHAT fail as a device out of memory would (a test hook of
+// Device): the kept planes in frame 0, the footprints in frame 1 (its
+// second request for them; the kept planes were made in frame 0).
+TEST_F(Cli, KeptClassificationLetGoWhereMemoryRunsOut) {
+  const std::string common =
+      "render --phantom-size 64 --size 48x48 --pe 512 --view 20,35,10 --frames 3 --step 0 "
+      "--times -o ";
+  const Result a = run(common + path("a.exr"));
+  ASSERT_EQ(a.code, 0) << a.output;
+  const std::vector<FrameNote> na = frame_notes(a.output);
+  ASSERT_EQ(na.size(), 3u) << a.output;
+  EXPECT_TRUE(!na[0].kept && na[1].kept && na[2].kept) << a.output;
+  for (const FrameNote& n : na) EXPECT_FALSE(n.let_go) << a.output;
+  struct Case {
+    const char* fail;
+    const char* out;
+    int let_go_frame;
+  };
+  for (const Case c : {Case{"kept classification", "b", 0}, Case{"footprints:2", "c", 1}}) {
+    const Result r = run(common + path(std::string(c.out) + ".exr"),
+                         std::string("SIMDVOL_FAIL_ALLOCATION='") + c.fail + "'");
+    ASSERT_EQ(r.code, 0) << c.fail << "\n" << r.output;
+    const std::vector<FrameNote> n = frame_notes(r.output);
+    ASSERT_EQ(n.size(), 3u) << r.output;
+    for (int f = 0; f < 3; ++f) {
+      EXPECT_EQ(n[f].let_go, f == c.let_go_frame) << c.fail << ", frame " << f << "\n" << r.output;
+      // kept before the frame that let it go (frame 0 never reads it), not after
+      EXPECT_EQ(n[f].kept, f > 0 && f < c.let_go_frame) << c.fail << ", frame " << f;
+    }
+    for (const char* frame : {"_0000.exr", "_0001.exr", "_0002.exr"}) {
+      double alpha = 0;
+      EXPECT_EQ(differing_pixels(path(std::string("a") + frame), path(c.out + std::string(frame)),
+                                 &alpha),
+                0)
+          << c.fail << frame;
+      EXPECT_GT(alpha, 1.0) << frame;
+    }
+  }
+}
+
+// Out of memory is an error naming the buffer, with exit code 1 and no
+// output file: injected for the footprints of a frame that keeps no
+// classification (a transfer function's), and for real under an address
+// space limit (ulimit -v) that leaves the 256^3 phantom's 268 MB of RGBA
+// voxel cells no room. PoCL 3.1 allocates a buffer only when a command
+// first uses it and aborts the process where that fails; the Device asks
+// for host memory (CL_MEM_ALLOC_HOST_PTR) on a CPU device, so that the
+// failure comes from clCreateBuffer instead.
+TEST_F(Cli, OutOfMemoryIsAnErrorNamingTheBuffer) {
+  const std::string tf = path("tf.txt");
+  std::ofstream(tf) << "density 0 0 24 1 255 1\ngradient 0 0 5 0 20 1 221 1\ncolor 0 1 1 1\n";
+  const Result inj =
+      run("render --phantom-size 32 --size 32x32 --classify " + tf + " -o " + path("i.png"),
+          "SIMDVOL_FAIL_ALLOCATION=footprints");
+  EXPECT_EQ(inj.code, 1) << inj.output;
+  EXPECT_NE(inj.output.find("clCreateBuffer(footprints, "), std::string::npos) << inj.output;
+  EXPECT_NE(inj.output.find("CL_MEM_OBJECT_ALLOCATION_FAILURE"), std::string::npos) << inj.output;
+  EXPECT_FALSE(fs::exists(path("i.png")));
+  const Result bad =
+      run("render --phantom-size 16 -o " + path("j.png"), "SIMDVOL_FAIL_ALLOCATION=footprints:0");
+  EXPECT_EQ(bad.code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("SIMDVOL_FAIL_ALLOCATION"), std::string::npos) << bad.output;
+
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "an address space limit and AddressSanitizer's shadow memory do not mix";
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+  GTEST_SKIP() << "an address space limit and AddressSanitizer's shadow memory do not mix";
+#endif
+#endif
+  const Result dev = run("devices");
+  if (dev.output.find("CPU") == std::string::npos)
+    GTEST_SKIP() << "the default device is not a CPU device: " << dev.output;
+  // The same render first without the limit (it builds the kernels into
+  // PoCL's cache: under the limit no compiler runs), then under it.
+  const std::string args = "render --size 64x64 -o ";
+  ASSERT_EQ(run(args + path("w.png")).code, 0);
+  const Result r = run_once(args + path("o.png"), "", "ulimit -v 700000; exec");
+  EXPECT_EQ(r.code, 1) << r.output;  // not an abort (134) inside PoCL
+  EXPECT_NE(r.output.find("memory"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("o.png")));
 }
 
 // --trace: every frame's kernels as a Chrome trace, one event per line;

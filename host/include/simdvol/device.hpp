@@ -44,6 +44,7 @@
 #include <CL/opencl.hpp>
 
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -77,6 +78,11 @@ class CLError : public Error {
   std::string call_;
   cl_int code_;
 };
+
+/// Whether an OpenCL error code says that memory ran out
+/// (CL_OUT_OF_HOST_MEMORY, CL_MEM_OBJECT_ALLOCATION_FAILURE,
+/// CL_OUT_OF_RESOURCES).
+bool is_allocation_failure(cl_int code);
 
 /// clBuildProgram failed. log() is the device's full build log (also in what()).
 class BuildError : public CLError {
@@ -289,6 +295,10 @@ class Device {
   void set_reuse_keep(int scopes);
   /// Bytes of buffers the pool holds (handed out or free), for tests.
   std::size_t pooled_bytes() const;
+  /// Releases the pool's buffers that nobody else holds any more (kept for
+  /// later scopes); returns how many. buffer() does so itself, and tries
+  /// once more, where the device has no memory left for a request.
+  std::size_t release_pooled();
 
   /// Enqueues a 1-D, 2-D or 3-D range; each global size is rounded up to a
   /// multiple of the local size. Returns the event (profiling info available
@@ -312,6 +322,7 @@ class Device {
 
  private:
   void describe_self(int index, int platform_index, const std::string& platform);
+  void read_fail_allocation();
   cl::Buffer allocate(cl_mem_flags flags, std::size_t bytes, std::size_t fresh_bytes,
                       void* host_ptr, const std::string& what);
 
@@ -330,7 +341,14 @@ class Device {
   bool log_ = false;
   std::vector<Launch> launches_;
   struct Pool;
+  static std::size_t release_unheld(Pool& pool);
   std::unique_ptr<Pool> pool_;
+  // SIMDVOL_FAIL_ALLOCATION=WHAT[:N] (a test hook, read at construction):
+  // the N-th request (default the first) for a buffer named WHAT fails as
+  // if the device had no memory left for it.
+  std::string fail_what_;
+  int fail_at_ = 0;
+  std::unique_ptr<std::atomic<int>> fail_count_;
 };
 
 /// Sets arguments `first`, `first` + 1, ... of `kernel`, throwing CLError

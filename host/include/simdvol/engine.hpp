@@ -121,6 +121,11 @@ struct EngineStats {
   /// The shade + classify lit the kept classification of the volume
   /// (EngineOptions::keep_classification) instead of classifying again.
   bool classification_kept = false;
+  /// Memory ran out for the kept classification in this frame: its
+  /// buffer's allocation failed, or a later one while it was held (the
+  /// frame then ran again without it; RenderEngine::render). The engine's
+  /// frames classify from then on, for these cells.
+  bool classification_let_go = false;
   /// SIMD utilisation after balancing: mean load / max load over all P PEs,
   /// the skipped ones included (1 when idle).
   double utilisation() const;
@@ -191,7 +196,8 @@ struct EngineOptions {
   /// shade's general path, an x extent other than 4, 8 or a multiple of 16,
   /// the gradient too, 7 / 4 of the buffer). Off, or where the buffer would
   /// pass the device's largest allocation or, with the voxel cells of the
-  /// same size, half its memory: every frame classifies.
+  /// same size, half its memory: every frame classifies; so too from the
+  /// frame where memory runs out while it is kept (RenderEngine::render).
   bool keep_classification = true;
 };
 
@@ -210,11 +216,16 @@ class RenderEngine {
 
   const EngineOptions& options() const;
   /// Renders one frame; same result as render_opencl with these options.
-  /// `stats`, when given, receives the frame's EngineStats.
+  /// `stats`, when given, receives the frame's EngineStats. Where memory
+  /// runs out (a CLError of is_allocation_failure) while the engine keeps a
+  /// classification, it lets that go and renders the frame once more
+  /// without it (as where it never fit).
   Image render(const Volume& vol, const RenderOptions& opt, EngineTimes* times = nullptr,
                EngineStats* stats = nullptr);
 
  private:
+  Image render_frame(const Volume& vol, const RenderOptions& opt, EngineTimes* times,
+                     EngineStats* stats);
   struct State;
   std::unique_ptr<State> s_;
 };
