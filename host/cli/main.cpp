@@ -410,6 +410,10 @@ int main(int argc, char** argv) {
       eo.pes = pes.count();
       eo.fused = true;
       eo.reuse_layout = true;  // the volume does not change between frames
+      // The kept classification pays from the second frame on; a single
+      // frame would only write it (and hold as much memory again as the
+      // RGBA voxel cells).
+      eo.keep_classification = frames > 1;
       eo.skip_empty = !no_skip_empty;
       eo.skip_pes = !no_skip_pes;
       eo.balance_sweeps = balance_sweeps;

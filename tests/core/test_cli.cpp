@@ -322,6 +322,18 @@ TEST_F(Cli, KeptClassificationLetGoWhereMemoryRunsOut) {
   }
 }
 
+// A single frame keeps no classification (it would only write it, and hold
+// as much memory as the RGBA voxel cells): it never asks for the kept
+// planes, so a failure injected there changes nothing.
+TEST_F(Cli, SingleFrameKeepsNoClassification) {
+  const Result r = run("render --phantom-size 64 --size 48x48 --pe 512 --times -o " + path("s.png"),
+                       "SIMDVOL_FAIL_ALLOCATION='kept classification'");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<FrameNote> n = frame_notes(r.output);
+  ASSERT_EQ(n.size(), 1u) << r.output;
+  EXPECT_FALSE(n[0].kept || n[0].let_go) << r.output;
+}
+
 // Out of memory is an error naming the buffer, with exit code 1 and no
 // output file: injected for the footprints of a frame that keeps no
 // classification (a transfer function's), and for real under an address
