@@ -108,15 +108,20 @@ SV_FN_INLINE void sv_resample_local8(
   int li[8], lj[8], lk[8], ln[8];
   long8 X[3];
   int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X, kb, use_kb);
-  /* The PE of position s0, searched once: the lanes' footprints start from
-   * it, and the prefetch steps on from it to the PE SV_VOX_PF positions
-   * ahead (sv_pe_after) instead of a second binary search of 13 dependent
-   * loads at 8,192 PEs. -DSV_PE_SEARCH2 searches twice, as before.
+  /* The PE of position s0: the lanes' footprints start from it, and the
+   * prefetch steps on from it to the PE SV_VOX_PF positions ahead
+   * (sv_pe_after) instead of a second binary search of 13 dependent loads
+   * at 8,192 PEs (-DSV_PE_SEARCH2 searches twice, as before). With
+   * ordered = 2 the segment order wrote it (order[nseg + s0 / 8]), so none
+   * is searched: scripts/bench-ab against ca7a949's build, resample +
+   * local (the order included), 2-core Xeon, 2026-12-05: the 256^3 phantom
+   * 0.988 / 0.995 (6 pairs each), ch2 0.971, brainsmall 0.949 (4 pairs);
+   * the same footprints. Before that:
    * simdvol-bench-options --frames 12, the 256^3 phantom at (20, 35, 10),
    * 2-core Xeon (family 6, model 167), four runs of both orders: resample +
    * local 35.09 / 35.39 / 35.00 / 35.30 -> 34.52 / 34.64 / 34.53 / 34.55 ms;
    * the same images. */
-  const int p0 = sv_pe_of_segment(seg_off, log2p, s0);
+  const int p0 = ordered == 2 ? order[nseg + (s0 >> 3)] : sv_pe_of_segment(seg_off, log2p, s0);
   sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, p0, view, table, vox, cs, origins, pe_cell, il);
   int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
@@ -272,7 +277,7 @@ SV_FN int sv_order_key(__global const sv_segment* segs, __global const short2* k
 __kernel void simdvol_segment_order(__global const sv_segment* segs, const int nseg,
                                     __global const int* seg_off, const int log2p,
                                     __global int* order, __global const short2* kb,
-                                    const int use_kb) {
+                                    const int use_kb, const int with_pe) {
   const int c0 = (int)get_global_id(0) * SV_ORDER_BLOCK;
   if (c0 >= nseg) return;
   const int c1 = min(c0 + SV_ORDER_BLOCK, nseg);
@@ -280,6 +285,11 @@ __kernel void simdvol_segment_order(__global const sv_segment* segs, const int n
   for (int b0 = c0; b0 < c1; ++p) {
     const int b1 = min(c1, seg_off[p + 1]);
     if (b1 <= b0) continue; /* a PE without segments */
+    /* with_pe: the PE of each float8 work-item's first position 8 w after
+     * the order, order[nseg + w] (the float8 kernels' ordered = 2), so that
+     * they need not search for it (SV_ORDER_BLOCK is a multiple of 8) */
+    if (with_pe)
+      for (int w = (b0 + 7) >> 3; 8 * w < b1; ++w) order[nseg + w] = p;
     int start[SV_ORDER_BUCKETS];
     for (int k = 0; k < SV_ORDER_BUCKETS; ++k) start[k] = 0;
     /* The keys kept from the count for the scatter (not loaded and

@@ -985,8 +985,8 @@ SV_FN_INLINE void sv_resample8(__global const sv_segment* segs, const int nseg,
   int li[8], lj[8], lk[8], ln[8], lo[8];
   long8 X[3];
   const int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X, 0, 0);
-  sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, sv_pe_of_segment(seg_off, log2p, s0), view, table,
-                       vox, cs, origins, pe_cell, il);
+  const int p0 = ordered == 2 ? order[nseg + (s0 >> 3)] : sv_pe_of_segment(seg_off, log2p, s0);
+  sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, p0, view, table, vox, cs, origins, pe_cell, il);
 #pragma unroll
   for (int l = 0; l < 8; ++l) {
     const int pos = min(s0 + l, nseg - 1);

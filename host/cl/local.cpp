@@ -17,6 +17,12 @@ static_assert(sizeof(sv_view) == 160, "sv_view must have the same layout in Open
 
 namespace {
 
+// The float8 kernels' `ordered`: 0 without an order, 1 with one, 2 with one
+// that carries each work-item's PE after it (SegmentOrder::with_pe).
+cl_int ordered_arg(const SegmentOrder* lanes) {
+  return lanes ? (lanes->with_pe ? 2 : 1) : 0;
+}
+
 constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
 
 int log2_exact(int64_t p) {
@@ -392,7 +398,7 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
   const PrefetchArgs pf = prefetch_args(tables, voxels.layout());
   const cl::Buffer pairs = pair_table(device, tables, voxels.layout(), v8);
   if (v8)
-    set_args_from(k, name, 8, lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
+    set_args_from(k, name, 8, lanes ? lanes->order : tables.table, ordered_arg(lanes),
                   skip ? skip->reach : tables.table, skip ? skip->bricks[0] : cl_int(0),
                   skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0), segs.seg_offset,
                   static_cast<cl_int>(log2_exact(segs.pes)), pf.origins, pf.pe_cell, pairs);
@@ -479,12 +485,15 @@ SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs) {
   SegmentOrder o;
   o.count = segs.count;
   const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(segs.count, 1));
-  o.order = device.scratch_buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int), "segment order");
+  // The order, then the PE of each float8 work-item's first position.
+  o.order =
+      device.scratch_buffer(CL_MEM_READ_WRITE, (n + (n + 7) / 8) * sizeof(cl_int), "segment order");
+  o.with_pe = true;
   const std::string name = "simdvol_segment_order";
   cl::Kernel k = stage_kernel(device, name, 1);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
            static_cast<cl_int>(log2_exact(segs.pes)), o.order, bounds_arg(segs),
-           cl_int(segs.bounds_pending));
+           cl_int(segs.bounds_pending), cl_int(o.with_pe ? 1 : 0));
   const int64_t blocks = (segs.count + SV_ORDER_BLOCK - 1) / SV_ORDER_BLOCK;
   o.event = device.run(k, name, segment_range(blocks), cl::NDRange(kSegmentWgs));
   return o;
@@ -517,7 +526,7 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   if (v8)
     set_args_from(k, name, 11, skip ? skip->reach : tables.table,
                   skip ? skip->bricks[0] : cl_int(0), skip ? skip->bricks[1] : cl_int(0),
-                  cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, cl_int(lanes ? 1 : 0),
+                  cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, ordered_arg(lanes),
                   pf.origins, pf.pe_cell, pairs, bounds_arg(segs), cl_int(segs.bounds_pending));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
                     cl::NDRange(kSegmentWgs));

@@ -848,6 +848,20 @@ TEST(LocalCl, SegmentOrderSortsWithinPeBlocks) {
           b0 = b1;
         }
       EXPECT_EQ(got, want) << "P " << pes << " view " << a.theta << "," << a.phi;
+      // After the order, the PE of each float8 work-item's first position
+      // 8 w (the largest p with seg_offset[p] <= 8 w), which the float8
+      // kernels take instead of searching.
+      ASSERT_TRUE(o.with_pe);
+      std::vector<cl_int> pe((got.size() + 7) / 8), pe_want(pe.size());
+      cl_check(dev.queue().enqueueReadBuffer(o.order, CL_TRUE, got.size() * sizeof(cl_int),
+                                             pe.size() * sizeof(cl_int), pe.data()),
+               "read the order's PEs");
+      for (std::size_t w = 0; w < pe.size(); ++w) {
+        const auto at =
+            std::upper_bound(m.seg_offset.begin(), m.seg_offset.end(), static_cast<int64_t>(8 * w));
+        pe_want[w] = static_cast<cl_int>(at - m.seg_offset.begin() - 1);
+      }
+      EXPECT_EQ(pe, pe_want) << "P " << pes << " view " << a.theta << "," << a.phi;
       std::vector<cl_int> identity(got.size());
       std::iota(identity.begin(), identity.end(), 0);
       sorted_cases += got != identity;

@@ -172,7 +172,11 @@ Footprints read_footprints(Device& device, const DeviceFootprints& fp);
 /// gives the same footprints, bit for bit.
 struct SegmentOrder {
   int64_t count = 0;  ///< the segments it orders (segs.count)
-  cl::Buffer order;   ///< cl_int[count]: position -> segment index
+  /// cl_int[count]: position -> segment index; with `with_pe`, then
+  /// cl_int[ceil(count / 8)]: the PE of position 8 w at count + w (the
+  /// float8 kernels' first lane, so that they need not search for it)
+  cl::Buffer order;
+  bool with_pe = false;
   cl::Event event;
 };
 /// Enqueues the sort of `segs` (their current k0, k1, from `bounds` where
