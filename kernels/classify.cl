@@ -368,9 +368,6 @@ SV_FN float16 sv_step_alpha16(float16 a, float s) {
   return select(big, small, a < 0.00390625f);
 }
 
-/* The lit premultiplied RGBA of 16 voxels from the classifier's alpha `a`
- * and premultiplied material colour (cr, cg, cb) (sv_classify16's second
- * half). */
 /* The lit premultiplied RGBA of 16 voxels from the alpha `a` before the
  * opacity step, where `ok` (else 0), and each colour over that alpha (q =
  * c * (1 / a)): the second half of sv_classify16_lit, and what the fused
@@ -391,6 +388,9 @@ SV_FN void sv_lit16(__constant const sv_classify_params* cp, float16 a, int16 ok
   *alpha = select(z, a1, ok);
 }
 
+/* The lit premultiplied RGBA of 16 voxels from the classifier's alpha `a`
+ * and premultiplied material colour (cr, cg, cb) (sv_classify16's second
+ * half). */
 SV_FN void sv_classify16_lit(__constant const sv_classify_params* cp, float16 a, float16 cr,
                              float16 cg, float16 cb, float16 id, float16 is, float16 v, float16* r,
                              float16* g, float16* b, float16* alpha) {

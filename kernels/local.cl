@@ -121,7 +121,7 @@ SV_FN_INLINE void sv_resample_local8(
    * 2-core Xeon (family 6, model 167), four runs of both orders: resample +
    * local 35.09 / 35.39 / 35.00 / 35.30 -> 34.52 / 34.64 / 34.53 / 34.55 ms;
    * the same images. */
-  const int p0 = ordered == 2 ? order[nseg + (s0 >> 3)] : sv_pe_of_segment(seg_off, log2p, s0);
+  const int p0 = sv_first_pe(order, ordered, seg_off, log2p, nseg, s0);
   sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, p0, view, table, vox, cs, origins, pe_cell, il);
   int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];

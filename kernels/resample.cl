@@ -723,6 +723,15 @@ SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, co
 #endif
 }
 
+/* The PE of a float8 work-item's first position s0: written by the
+ * segment order after it where `ordered` = 2 (simdvol_segment_order's
+ * with_pe), else searched in seg_off. */
+SV_FN_INLINE int sv_first_pe(__global const int* order, const int ordered,
+                             __global const int* seg_off, const int log2p, const int nseg,
+                             const int s0) {
+  return ordered == 2 ? order[nseg + (s0 >> 3)] : sv_pe_of_segment(seg_off, log2p, s0);
+}
+
 /* Lanes of the segments at positions s0 .. s0 + 7 (those past nseg repeat
  * the last with length 0): segment order[position] if `ordered`, else the
  * position itself. (i, j, k0) and length per lane, and X[a] = the
@@ -985,7 +994,7 @@ SV_FN_INLINE void sv_resample8(__global const sv_segment* segs, const int nseg,
   int li[8], lj[8], lk[8], ln[8], lo[8];
   long8 X[3];
   const int T = sv_lanes8(segs, order, ordered, nseg, s0, view, li, lj, lk, ln, X, 0, 0);
-  const int p0 = ordered == 2 ? order[nseg + (s0 >> 3)] : sv_pe_of_segment(seg_off, log2p, s0);
+  const int p0 = sv_first_pe(order, ordered, seg_off, log2p, nseg, s0);
   sv_prefetch_pe_ahead(seg_off, log2p, nseg, s0, p0, view, table, vox, cs, origins, pe_cell, il);
 #pragma unroll
   for (int l = 0; l < 8; ++l) {

@@ -436,11 +436,11 @@ void Device::read_fail_allocation() {
   int at = 1;
   if (const std::size_t colon = spec.rfind(':'); colon != std::string::npos) {
     const std::string n = spec.substr(colon + 1);
-    if (n.empty() || n.size() > 6 || n.find_first_not_of("0123456789") != std::string::npos ||
-        std::stoi(n) < 1)
+    const bool digits = !n.empty() && n.size() <= 6 && n.find_first_not_of("0123456789") == n.npos;
+    at = digits ? std::stoi(n) : 0;
+    if (at < 1)
       throw ArgumentError("SIMDVOL_FAIL_ALLOCATION",
                           "'" + spec + "' is not WHAT or WHAT:N with N a positive integer");
-    at = std::stoi(n);
     spec.resize(colon);
   }
   if (spec.empty())
