@@ -284,7 +284,9 @@ int main(int argc, char** argv) {
                                                        flat16_local)};
                           }});
     if (sweep) {
-      // The float16 kernels with non-temporal stores (SV_NT).
+      // The float16 kernels with every store non-temporal (SV_NT). By
+      // default only the fused kernel's into voxel cells stored before are
+      // (kc_mode & 8): its variants above after their first run.
       auto nt = [&](auto enqueue) {
         return [enqueue] {
           setenv("SIMDVOL_NT_STORES", "1", 1);

@@ -616,8 +616,10 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
 #if defined(SIMDVOL_SHADE_CL) && defined(SV_RW)
 /* Stores 16 lanes of (r, g, b, a) at positions e0 .. e0 + 15 of a PE's
  * interleaved block (channel c of position e at float 4 * e + c): the 4 x 16
- * transpose as two rounds of two-source shuffles, then 64 consecutive floats. */
-SV_FN void sv_store16_il(__global float* blk, int e0, float16 r, float16 g, float16 b, float16 a) {
+ * transpose as two rounds of two-source shuffles, then 64 consecutive floats
+ * (non-temporally where nt, SV_VSTORE16_NT). */
+SV_FN void sv_store16_il(__global float* blk, int e0, float16 r, float16 g, float16 b, float16 a,
+                         const int nt) {
   const uint16 lo = (uint16)(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
   const uint16 hi = lo + 8u;
   float16 rg0 = shuffle2(r, g, lo), rg1 = shuffle2(r, g, hi);
@@ -634,36 +636,37 @@ SV_FN void sv_store16_il(__global float* blk, int e0, float16 r, float16 g, floa
   const uint16 q0 = (uint16)(0, 1, 16, 17, 2, 3, 18, 19, 4, 5, 20, 21, 6, 7, 22, 23);
   const uint16 q1 = q0 + 8u;
   __global float* o = blk + 4 * e0;
-  SV_VSTORE16(shuffle2(rg0, ba0, q0), o);
-  SV_VSTORE16(shuffle2(rg0, ba0, q1), o + 16);
-  SV_VSTORE16(shuffle2(rg1, ba1, q0), o + 32);
-  SV_VSTORE16(shuffle2(rg1, ba1, q1), o + 48);
+  SV_VSTORE16_NT(shuffle2(rg0, ba0, q0), o, nt);
+  SV_VSTORE16_NT(shuffle2(rg0, ba0, q1), o + 16, nt);
+  SV_VSTORE16_NT(shuffle2(rg1, ba1, q0), o + 32, nt);
+  SV_VSTORE16_NT(shuffle2(rg1, ba1, q1), o + 48, nt);
 }
 
 /* Zeros at positions e0 .. e0 + 15 of a PE's planar (il = 0) or
  * interleaved (il = 1) block: the chunk of a transparent run, without the
  * transpose. */
-SV_FN_INLINE void sv_store16_zero(__global float* blk, int vstride, int e0, const int il) {
+SV_FN_INLINE void sv_store16_zero(__global float* blk, int vstride, int e0, const int il,
+                                  const int nt) {
   const float16 z = 0.0f;
   if (il) {
     __global float* o = blk + 4 * e0;
-    SV_VSTORE16(z, o);
-    SV_VSTORE16(z, o + 16);
-    SV_VSTORE16(z, o + 32);
-    SV_VSTORE16(z, o + 48);
+    SV_VSTORE16_NT(z, o, nt);
+    SV_VSTORE16_NT(z, o + 16, nt);
+    SV_VSTORE16_NT(z, o + 32, nt);
+    SV_VSTORE16_NT(z, o + 48, nt);
   } else {
-    sv_store16(blk, vstride, e0, z, z, z, z);
+    sv_store16(blk, vstride, e0, z, z, z, z, nt);
   }
 }
 
 /* The classified chunk into planar (il = 0) or interleaved (il = 1) cells
  * (always inlined: LLVM kept it a call, its four float16 through memory). */
 SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, float16 r, float16 g,
-                                  float16 b, float16 a, const int il) {
+                                  float16 b, float16 a, const int il, const int nt) {
   if (il)
-    sv_store16_il(blk, e0, r, g, b, a);
+    sv_store16_il(blk, e0, r, g, b, a, nt);
   else
-    sv_store16(blk, vstride, e0, r, g, b, a);
+    sv_store16(blk, vstride, e0, r, g, b, a, nt);
 }
 
 /* sv_shade_classify16's transparent chunks: with use_live, `out` holds
@@ -678,10 +681,10 @@ SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, floa
 #ifndef SV_STORE_KEPT_ZEROS
 #define SV_STORE_KEPT_ZEROS 0
 #endif
-#define SV_ZERO_CHUNK()                                                          \
-  {                                                                              \
-    if (kc_op == 1) SV_VSTORE16((float16)(0.0f), kq);                            \
-    if (!use_live || SV_STORE_KEPT_ZEROS) sv_store16_zero(dst, vstride, e0, il); \
+#define SV_ZERO_CHUNK()                                                              \
+  {                                                                                  \
+    if (kc_op == 1) SV_VSTORE16((float16)(0.0f), kq);                                \
+    if (!use_live || SV_STORE_KEPT_ZEROS) sv_store16_zero(dst, vstride, e0, il, nt); \
   }
 /* The kept classification of a chunk (kc_mode 1): a0 where lit, else 0,
  * and each colour times 1 / a0 (sv_classify16_lit's cr * inv). */
@@ -736,6 +739,9 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
   /* the kept classification (kc_mode & 3: 1 written, 2 read; kc_mode & 4:
    * with the gradient) and the chunk's planes of it */
   const int kc_op = kc_mode & 3, kc_grad = (kc_mode & 4) != 0;
+  /* kc_mode & 8: `out` stored non-temporally (the host: where it was
+   * stored before; chunk_ranges.hpp, nt_out) */
+  const int nt = (kc_mode & 8) != 0;
   __global float* kq = kc + (size_t)p * (kc_grad ? 7 : 4) * (size_t)vstride + e0;
   const int16 in = SV_ROWS16(ok) != 0.0f;
   /* (the cells' values are not read where the kept gradient is, so not
@@ -831,7 +837,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
     }
   }
   sv_store16_rgba(dst, vstride, e0, select(z, r, in), select(z, g, in), select(z, b, in),
-                  select(z, a, in), il);
+                  select(z, a, in), il, nt);
   /* The brick occupancy of resample.cl's simdvol_occupancy, marked here
    * from the values just stored (so no pass reads them again): each voxel
    * of the cell inside the volume with a channel that is not +-0 sets its

@@ -51,6 +51,22 @@ typedef float16 sv_float16u __attribute__((aligned(4)));
 #define SV_VSTORE16(v, p) (*(__global sv_float16u*)(p) = (v))
 #endif
 
+/* SV_VSTORE16, or where nt a non-temporal store (p 64-byte aligned): a
+ * run-time choice, so that both forms are one program (the fused shade +
+ * classify's kc_mode & 8, for voxel cells stored before; a define would
+ * build a second program in the frame that first takes it). */
+#if defined(__clang__)
+#define SV_VSTORE16_NT(v, p, nt)                                \
+  do {                                                          \
+    if (nt)                                                     \
+      __builtin_nontemporal_store((v), (__global float16*)(p)); \
+    else                                                        \
+      SV_VSTORE16((v), (p));                                    \
+  } while (0)
+#else
+#define SV_VSTORE16_NT(v, p, nt) SV_VSTORE16((v), (p))
+#endif
+
 /* A helper LLVM must inline: it kept some of the larger SV_FN helpers as
  * calls, with their array arguments passed through memory (perf: the call
  * to sv_ld16_rows took 8 % of ch2's shade + classify samples). */

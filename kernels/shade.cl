@@ -558,13 +558,14 @@ SV_FN int16 sv_shade_chunk(__constant const sv_shade_params* sp, __global const 
   return SV_ROWS16(ok) != 0.0f;
 }
 
-/* Stores 16 lanes of (a, b, c, d) at position e0 of a PE's planar block. */
+/* Stores 16 lanes of (a, b, c, d) at position e0 of a PE's planar block
+ * (non-temporally where nt, SV_VSTORE16_NT). */
 SV_FN void sv_store16(__global float* blk, int vstride, int e0, float16 a, float16 b, float16 c,
-                      float16 d) {
-  SV_VSTORE16(a, blk + e0);
-  SV_VSTORE16(b, blk + vstride + e0);
-  SV_VSTORE16(c, blk + 2 * vstride + e0);
-  SV_VSTORE16(d, blk + 3 * vstride + e0);
+                      float16 d, const int nt) {
+  SV_VSTORE16_NT(a, blk + e0, nt);
+  SV_VSTORE16_NT(b, blk + vstride + e0, nt);
+  SV_VSTORE16_NT(c, blk + 2 * vstride + e0, nt);
+  SV_VSTORE16_NT(d, blk + 3 * vstride + e0, nt);
 }
 
 /* simdvol_shade16: 2-D range (chunk, PE) = (vstride / 16 rounded up to the
@@ -580,6 +581,6 @@ __kernel void simdvol_shade16(__global const float* restrict cells, __global flo
   const int16 in = sv_shade_chunk(sp, cells, origins, cell, block, p, e0, &id, &is, &mag, &v);
   const float16 z = 0.0f;
   sv_store16(out + (size_t)p * 4 * (size_t)vstride, vstride, e0, select(z, id, in),
-             select(z, is, in), select(z, mag, in), select(z, v, in));
+             select(z, is, in), select(z, mag, in), select(z, v, in), 0);
 }
 #endif /* SV_RW */

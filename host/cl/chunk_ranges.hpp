@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <cstdlib>
+#include <initializer_list>
 #include <string>
 
 #include "simdvol/stages.hpp"
@@ -32,14 +34,51 @@ inline PlaneRange chunk_range(const VoxelLayout& L) {
   return {cl::NDRange(round_up(chunks, l0), round_up(pes, l1)), cl::NDRange(l0, l1)};
 }
 
-/// Whether the float16 kernels store their results with non-temporal
-/// stores (define SV_NT). Off: measured 15-30% slower than ordinary stores
-/// for shade, classify and the fused kernel (bench --sweep, 256^3, 8192
-/// PEs, PoCL 3.1 on a 2-core AMD EPYC). SIMDVOL_NT_STORES=1 turns them on
-/// (for benchmarking).
+/// Whether the float16 kernels' buffers `outs` can take non-temporal
+/// stores of float16 (which need their natural, 64-byte alignment; every
+/// chunk and plane starts on a multiple of 16 floats from the buffer's
+/// start): not a buffer over the caller's host memory (CL_MEM_USE_HOST_PTR)
+/// that is not 64-byte aligned. Null entries are skipped.
+inline bool nt_aligned(std::initializer_list<const cl::Buffer*> outs) {
+  for (const cl::Buffer* b : outs) {
+    if (!b || !(*b)()) continue;
+    cl_mem_flags flags = 0;
+    void* host = nullptr;
+    if (clGetMemObjectInfo((*b)(), CL_MEM_FLAGS, sizeof flags, &flags, nullptr) != CL_SUCCESS)
+      return false;
+    if ((flags & CL_MEM_USE_HOST_PTR) == 0) continue;
+    if (clGetMemObjectInfo((*b)(), CL_MEM_HOST_PTR, sizeof host, &host, nullptr) != CL_SUCCESS ||
+        reinterpret_cast<std::uintptr_t>(host) % 64 != 0)
+      return false;
+  }
+  return true;
+}
+
+/// Whether every store of the float16 kernels is non-temporal (define
+/// SV_NT): SIMDVOL_NT_STORES=1, for benchmarking. Off by default: the
+/// separate shade and classify measured the same either way (2-core Intel
+/// Xeon, 2026-12-05, simdvol-bench-shade --sweep: 16.2 / 20.8 ms with and
+/// without), in 2026-11 on a 2-core AMD EPYC with planar cells 15-30 %
+/// slower, and on fresh memory they cost (nt_out).
 inline bool nt_stores() {
-  if (const char* e = std::getenv("SIMDVOL_NT_STORES")) return std::string(e) != "0";
-  return false;
+  const char* e = std::getenv("SIMDVOL_NT_STORES");
+  return e && std::string(e) == "1";
+}
+
+/// Whether the fused shade + classify stores its voxel cells
+/// non-temporally (kc_mode & 8: no read-for-ownership of the lines it
+/// writes) where they were stored before (VoxelBuffer::stored) and are
+/// nt_aligned. On by default; SIMDVOL_NT_STORES=0 turns it off. On the
+/// 2-core Intel Xeon (2026-12-05, simdvol-bench-options, alternating in one
+/// process) a later frame's shade + classify of the 256^3 phantom took 9.1
+/// ms with it against 11.4 without, ch2's 10.4 against 12.0, and the
+/// resample that reads the cells the same. Into fresh memory (a first
+/// frame: the host zeroes each page into the cache as it is first touched,
+/// which ordinary stores then hit) it took the phantom's first frame 45 ms
+/// longer, so not there.
+inline bool nt_out() {
+  const char* e = std::getenv("SIMDVOL_NT_STORES");
+  return !(e && std::string(e) == "0");
 }
 
 /// The row width SV_RW of the float16 shade kernels for cells of x extent

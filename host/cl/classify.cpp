@@ -141,7 +141,7 @@ cl::Event run_classify(Device& device, const sv_classify_params& params, Classif
   const std::string name =
       std::string(vec ? "simdvol_classify16" : "simdvol_classify") + (shading ? "" : "_in_place");
   Defines defines = classify_defines(params);
-  if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+  if (vec && detail::nt_stores() && detail::nt_aligned({&out})) defines.emplace_back("SV_NT", "1");
   cl::Kernel k = device.kernel("classify", name, defines);
   const cl_int stride = static_cast<cl_int>(V.stride), pes = static_cast<cl_int>(V.pes());
   if (shading)
@@ -162,11 +162,13 @@ cl::Event enqueue_classify(Device& device, const VoxelBuffer& shading,
     throw ArgumentError("classify output",
                         "must not be the shading buffer (enqueue_classify_in_place classifies "
                         "in place)");
+  out.mark_stored();
   return run_classify(device, params, variant, out.layout(), &shading.buffer(), out.buffer());
 }
 
 cl::Event enqueue_classify_in_place(Device& device, VoxelBuffer& voxels,
                                     const sv_classify_params& params, ClassifyKernel variant) {
+  voxels.mark_stored();
   return run_classify(device, params, variant, voxels.layout(), nullptr, voxels.buffer());
 }
 
@@ -191,7 +193,15 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
       vec ? detail::voxel_kernel("simdvol_shade_classify16", V) : "simdvol_shade_classify";
   Defines defines = classify_defines(classify);
   if (vec) defines.emplace_back("SV_RW", std::to_string(rw));
-  if (vec && detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+  if (vec && detail::nt_stores() &&
+      detail::nt_aligned({&out.buffer(), kept ? &kept->planes : nullptr}))
+    defines.emplace_back("SV_NT", "1");
+  const bool kept_read = kept && kept->filled && kept->filled_gradient == kept->gradient;
+  // kc_mode & 8: `out` stored non-temporally (detail::nt_out), where it was
+  // stored before
+  const bool nt_out =
+      vec && out.stored() && detail::nt_out() && detail::nt_aligned({&out.buffer()});
+  out.mark_stored();
   if (mark && !vec) throw ArgumentError("occupancy", "only the float16 fused kernel marks it");
   if (mark && mark->dims != V.dims())
     throw ArgumentError("occupancy", "was made for a volume of other dimensions");
@@ -220,12 +230,11 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
     // Without marking the occupancy argument is never read, nor `live`
     // without a mask: any buffer will do.
     // (nor the kept classification without one: kc_mode 0)
-    set_args_from(k, name, 10, mark ? mark->occupied : cbuf, mark ? mark->bricks[0] : cl_int(0),
-                  mark ? mark->bricks[1] : cl_int(0), cl_int(mark ? 1 : 0), live ? *live : cbuf,
-                  cl_int(live ? 1 : 0), kept ? kept->planes : cbuf,
-                  cl_int(kept ? (kept->filled && kept->filled_gradient == kept->gradient ? 2 : 1) |
-                                    (kept->gradient ? 4 : 0)
-                              : 0));
+    set_args_from(
+        k, name, 10, mark ? mark->occupied : cbuf, mark ? mark->bricks[0] : cl_int(0),
+        mark ? mark->bricks[1] : cl_int(0), cl_int(mark ? 1 : 0), live ? *live : cbuf,
+        cl_int(live ? 1 : 0), kept ? kept->planes : cbuf,
+        cl_int((kept ? (kept_read ? 2 : 1) | (kept->gradient ? 4 : 0) : 0) | (nt_out ? 8 : 0)));
     const detail::PlaneRange r = detail::chunk_range(V);
     cl::Event e = device.run(k, name, r.global, r.local);
     if (kept) {

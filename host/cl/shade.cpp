@@ -82,6 +82,7 @@ void VoxelBuffer::read_raw(Device& device, void* out) const {
 }
 
 void VoxelBuffer::write_raw(Device& device, const void* in) {
+  stored_ = true;
   if (layout_.interleaved) {
     cl_check(device.queue().enqueueWriteBuffer(buffer_, CL_TRUE, 0,
                                                static_cast<std::size_t>(layout_.bytes()), in),
@@ -130,10 +131,12 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
   cl::Buffer pbuf = device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof params,
                                   const_cast<sv_shade_params*>(&params), "shade parameters");
   const int rw = detail::shade_row_width(V.cell()[0]);  // every cx has a float16 form
+  out.mark_stored();
   if (variant == ShadeKernel::vec16) {
     const std::string name = "simdvol_shade16";
     Defines defines{{"SV_RW", std::to_string(rw)}};
-    if (detail::nt_stores()) defines.emplace_back("SV_NT", "1");
+    if (detail::nt_stores() && detail::nt_aligned({&out.buffer()}))
+      defines.emplace_back("SV_NT", "1");
     cl::Kernel k = device.kernel("shade", name, defines);
     set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
              cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),

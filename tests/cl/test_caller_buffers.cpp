@@ -6,7 +6,9 @@
 // classify output must equal that path's bit for bit.
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <cstring>
+#include <vector>
 
 #include "simdvol/classify.hpp"
 #include "simdvol/layout.hpp"
@@ -62,6 +64,80 @@ TEST(CallerBuffers, WrappedContextAndBuffersGiveTheSameResults) {
   const std::vector<Rgba> a = rgba.read<Rgba>(dev), b = rgba2.read<Rgba>(dev);
   ASSERT_EQ(a.size(), b.size());
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(Rgba)), 0);
+}
+
+// The float16 kernels store their voxel cells non-temporally (SV_NT) into
+// a VoxelBuffer stored before, a store that needs each 16-float chunk
+// 64-byte aligned. A caller's buffer over host memory that is not (here 16
+// bytes past a 64-byte boundary) gets ordinary stores: the same bits as
+// simdvol's own buffers (the second call into each non-temporal), for the
+// shade, the classify, the fused kernel into planar and interleaved cells,
+// and the kept classification's planes.
+TEST(CallerBuffers, UnalignedHostMemoryGetsTheSameCells) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(24);
+  PeArray array(dev, pe_grid(8));
+  CellBuffer cells = array.layout(vol, 1);
+  const ViewGeometry view = make_view(vol, {30, 20, 10}, 32, 32, Sampling::voxel);
+  const ShadeParams sp{};
+  const sv_shade_params shp = shade_params(make_shade_frame(vol, view, sp), sp);
+  const sv_classify_params clp = classify_params(classifier_preset("ct"), vol.range(), 1.0);
+  // Host memory for a buffer of `bytes` at 16 bytes past a 64-byte boundary.
+  std::vector<std::vector<float>> hosts;
+  auto unaligned = [&](std::size_t bytes) {
+    hosts.emplace_back(bytes / sizeof(float) + 32);
+    float* p = hosts.back().data();
+    while (reinterpret_cast<std::uintptr_t>(p) % 64 != 16) ++p;
+    return cl::Buffer(dev.context(), CL_MEM_READ_WRITE | CL_MEM_USE_HOST_PTR, bytes, p);
+  };
+  auto same = [&](const VoxelBuffer& a, const VoxelBuffer& b, const char* what) {
+    const std::vector<Rgba> x = a.read<Rgba>(dev), y = b.read<Rgba>(dev);
+    ASSERT_EQ(x.size(), y.size());
+    EXPECT_EQ(std::memcmp(x.data(), y.data(), x.size() * sizeof(Rgba)), 0) << what;
+    int64_t nonzero = 0;
+    for (const Rgba& c : x) nonzero += c.r != 0 || c.g != 0 || c.b != 0 || c.a != 0;
+    EXPECT_GT(nonzero, 0) << what;
+  };
+  const VoxelLayout planar = make_voxel_layout(cells.layout(), false);
+  {
+    VoxelBuffer shading(planar, unaligned(planar.bytes())), rgba(planar, unaligned(planar.bytes()));
+    VoxelBuffer shading2(dev, planar), rgba2(dev, planar);
+    EXPECT_FALSE(shading2.stored());
+    for (int frame = 0; frame < 2; ++frame) {
+      enqueue_shade(dev, cells, shp, shading);
+      enqueue_classify(dev, shading, clp, rgba);
+      enqueue_shade(dev, cells, shp, shading2);
+      enqueue_classify(dev, shading2, clp, rgba2);
+      EXPECT_TRUE(shading2.stored() && rgba2.stored());
+      dev.finish();
+      same(shading, shading2, "shade");
+      same(rgba, rgba2, "shade, classify");
+    }
+  }
+  for (bool il : {false, true}) {
+    SCOPED_TRACE(il ? "interleaved" : "planar");
+    const VoxelLayout L = make_voxel_layout(cells.layout(), il);
+    const std::size_t kbytes = static_cast<std::size_t>(KeptClassification::bytes(L, true));
+    KeptClassification kept, kept2;
+    kept.planes = unaligned(kbytes);
+    kept2.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE, kbytes);
+    kept.gradient = kept2.gradient = true;
+    // (planes of chunks found transparent are not written: zeros in both)
+    cl_check(dev.queue().enqueueFillBuffer(kept2.planes, 0.0f, 0, kbytes), "fill");
+    VoxelBuffer out(L, unaligned(L.bytes())), out2(dev, L);
+    for (int frame = 0; frame < 2; ++frame) {  // the kept planes written, then read
+      enqueue_shade_classify(dev, cells, shp, clp, out, ShadeKernel::vec16, nullptr, nullptr,
+                             &kept);
+      enqueue_shade_classify(dev, cells, shp, clp, out2, ShadeKernel::vec16, nullptr, nullptr,
+                             &kept2);
+      dev.finish();
+      same(out, out2, frame ? "fused, the kept planes read" : "fused, the kept planes written");
+    }
+    std::vector<float> a(kbytes / sizeof(float)), b(a.size());
+    cl_check(dev.queue().enqueueReadBuffer(kept.planes, CL_TRUE, 0, kbytes, a.data()), "read");
+    cl_check(dev.queue().enqueueReadBuffer(kept2.planes, CL_TRUE, 0, kbytes, b.data()), "read");
+    EXPECT_EQ(std::memcmp(a.data(), b.data(), kbytes), 0) << "the kept planes";
+  }
 }
 
 TEST(CallerBuffers, TooSmallOrNullBuffersAreRejected) {

@@ -139,12 +139,21 @@ class VoxelBuffer {
       throw ArgumentError("cells", "size does not match the voxel layout");
     write_raw(device, cells.data());
   }
+  /// Whether the stages or write() have stored into the buffer through
+  /// this object (set by them). The float16 kernels store non-temporally
+  /// only into such a buffer: on fresh memory (a first frame) the host
+  /// zeroes each page into the cache as it is first touched, which ordinary
+  /// stores then hit; non-temporal ones took the phantom's first frame 45 ms
+  /// longer (docs/PERFORMANCE.md).
+  bool stored() const { return stored_; }
+  void mark_stored() { stored_ = true; }
 
  private:
   void read_raw(Device& device, void* out) const;
   void write_raw(Device& device, const void* in);
   VoxelLayout layout_;
   cl::Buffer buffer_;
+  bool stored_ = false;
 };
 
 // ------------------------------------------------------------------ shade
