@@ -65,20 +65,23 @@ inline bool nt_stores() {
   return e && std::string(e) == "1";
 }
 
-/// Whether the fused shade + classify stores its voxel cells
+/// Whether the fused shade + classify stores its voxel cells of `bytes`
 /// non-temporally (kc_mode & 8: no read-for-ownership of the lines it
-/// writes) where they were stored before (VoxelBuffer::stored) and are
-/// nt_aligned. On by default; SIMDVOL_NT_STORES=0 turns it off. On the
-/// 2-core Intel Xeon (2026-12-05, simdvol-bench-options, alternating in one
-/// process) a later frame's shade + classify of the 256^3 phantom took 9.1
-/// ms with it against 11.4 without, ch2's 10.4 against 12.0, and the
-/// resample that reads the cells the same. Into fresh memory (a first
-/// frame: the host zeroes each page into the cache as it is first touched,
-/// which ordinary stores then hit) it took the phantom's first frame 45 ms
-/// longer, so not there.
-inline bool nt_out() {
+/// writes), given that they were stored before (VoxelBuffer::stored) and
+/// are nt_aligned: where they are at least 64 MiB. SIMDVOL_NT_STORES=0
+/// turns it off. On the 2-core Intel Xeon (2026-12-05, scripts/bench-ab
+/// with SIMDVOL_NT_STORES=0 against it, 4 pairs) a later frame's shade +
+/// classify of the 256^3 phantom (268 MB of cells) took 0.78 of the time,
+/// ch2's (114 MB) 0.89, with the resample that reads the cells the same;
+/// brainsmall's (22 MB, which the last-level cache holds: about 64 MB
+/// measured, where the virtual machine reports 480 MiB) 1.08, its resample
+/// 1.03. Into fresh memory (a first frame: the host zeroes each page into
+/// the cache as it is first touched, which ordinary stores then hit) it
+/// took the phantom's first frame 45 ms longer, so not there.
+inline bool nt_out(std::uint64_t bytes) {
+  constexpr std::uint64_t kMinBytes = 64ull << 20;
   const char* e = std::getenv("SIMDVOL_NT_STORES");
-  return !(e && std::string(e) == "0");
+  return bytes >= kMinBytes && !(e && std::string(e) == "0");
 }
 
 /// The row width SV_RW of the float16 shade kernels for cells of x extent

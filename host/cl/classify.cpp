@@ -198,9 +198,9 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
     defines.emplace_back("SV_NT", "1");
   const bool kept_read = kept && kept->filled && kept->filled_gradient == kept->gradient;
   // kc_mode & 8: `out` stored non-temporally (detail::nt_out), where it was
-  // stored before
+  // stored before and is large
   const bool nt_out =
-      vec && out.stored() && detail::nt_out() && detail::nt_aligned({&out.buffer()});
+      vec && out.stored() && detail::nt_out(V.bytes()) && detail::nt_aligned({&out.buffer()});
   out.mark_stored();
   if (mark && !vec) throw ArgumentError("occupancy", "only the float16 fused kernel marks it");
   if (mark && mark->dims != V.dims())

@@ -7,7 +7,10 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "simdvol/classify.hpp"
@@ -66,22 +69,40 @@ TEST(CallerBuffers, WrappedContextAndBuffersGiveTheSameResults) {
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(Rgba)), 0);
 }
 
-// The float16 kernels store their voxel cells non-temporally (SV_NT) into
-// a VoxelBuffer stored before, a store that needs each 16-float chunk
-// 64-byte aligned. A caller's buffer over host memory that is not (here 16
-// bytes past a 64-byte boundary) gets ordinary stores: the same bits as
-// simdvol's own buffers (the second call into each non-temporal), for the
-// shade, the classify, the fused kernel into planar and interleaved cells,
-// and the kept classification's planes.
+// SIMDVOL_NT_STORES set to a value for a scope, then as it was.
+class ScopedNtStores {
+ public:
+  explicit ScopedNtStores(const char* value) {
+    if (const char* e = std::getenv(kName)) old_ = e;
+    if (value)
+      setenv(kName, value, 1);
+    else
+      unsetenv(kName);
+  }
+  ~ScopedNtStores() {
+    if (old_)
+      setenv(kName, old_->c_str(), 1);
+    else
+      unsetenv(kName);
+  }
+
+ private:
+  static constexpr const char* kName = "SIMDVOL_NT_STORES";
+  std::optional<std::string> old_;
+};
+
+// Non-temporal stores of float16 need each 16-float chunk 64-byte aligned.
+// The fused shade + classify stores its voxel cells that way by default
+// where they were stored before and hold at least 64 MiB (kc_mode & 8;
+// here a 168^3 volume's second call), and with SIMDVOL_NT_STORES=1 every
+// float16 kernel stores every chunk so (SV_NT; here a 24^3 volume). A
+// caller's buffer over host memory that is not 64-byte aligned (here 16
+// bytes past a boundary) gets ordinary stores: the same bits as simdvol's
+// own buffers, for the shade, the classify, the fused kernel into planar
+// and interleaved cells, and the kept classification's planes. Without the
+// check the stores fault.
 TEST(CallerBuffers, UnalignedHostMemoryGetsTheSameCells) {
   SIMDVOL_TEST_DEVICE(dev);
-  const Volume vol = shepp_logan(24);
-  PeArray array(dev, pe_grid(8));
-  CellBuffer cells = array.layout(vol, 1);
-  const ViewGeometry view = make_view(vol, {30, 20, 10}, 32, 32, Sampling::voxel);
-  const ShadeParams sp{};
-  const sv_shade_params shp = shade_params(make_shade_frame(vol, view, sp), sp);
-  const sv_classify_params clp = classify_params(classifier_preset("ct"), vol.range(), 1.0);
   // Host memory for a buffer of `bytes` at 16 bytes past a 64-byte boundary.
   std::vector<std::vector<float>> hosts;
   auto unaligned = [&](std::size_t bytes) {
@@ -98,12 +119,22 @@ TEST(CallerBuffers, UnalignedHostMemoryGetsTheSameCells) {
     for (const Rgba& c : x) nonzero += c.r != 0 || c.g != 0 || c.b != 0 || c.a != 0;
     EXPECT_GT(nonzero, 0) << what;
   };
-  const VoxelLayout planar = make_voxel_layout(cells.layout(), false);
-  {
-    VoxelBuffer shading(planar, unaligned(planar.bytes())), rgba(planar, unaligned(planar.bytes()));
-    VoxelBuffer shading2(dev, planar), rgba2(dev, planar);
-    EXPECT_FALSE(shading2.stored());
-    for (int frame = 0; frame < 2; ++frame) {
+  for (const bool every : {true, false}) {
+    SCOPED_TRACE(every ? "SIMDVOL_NT_STORES=1" : "the default");
+    ScopedNtStores env(every ? "1" : nullptr);
+    const Volume vol = shepp_logan(every ? 24 : 168);
+    PeArray array(dev, pe_grid(8));
+    CellBuffer cells = array.layout(vol, 1);
+    const ViewGeometry view = make_view(vol, {30, 20, 10}, 32, 32, Sampling::voxel);
+    const ShadeParams sp{};
+    const sv_shade_params shp = shade_params(make_shade_frame(vol, view, sp), sp);
+    const sv_classify_params clp = classify_params(classifier_preset("ct"), vol.range(), 1.0);
+    if (every) {
+      const VoxelLayout planar = make_voxel_layout(cells.layout(), false);
+      VoxelBuffer shading(planar, unaligned(planar.bytes()));
+      VoxelBuffer rgba(planar, unaligned(planar.bytes()));
+      VoxelBuffer shading2(dev, planar), rgba2(dev, planar);
+      EXPECT_FALSE(shading2.stored());
       enqueue_shade(dev, cells, shp, shading);
       enqueue_classify(dev, shading, clp, rgba);
       enqueue_shade(dev, cells, shp, shading2);
@@ -113,30 +144,33 @@ TEST(CallerBuffers, UnalignedHostMemoryGetsTheSameCells) {
       same(shading, shading2, "shade");
       same(rgba, rgba2, "shade, classify");
     }
-  }
-  for (bool il : {false, true}) {
-    SCOPED_TRACE(il ? "interleaved" : "planar");
-    const VoxelLayout L = make_voxel_layout(cells.layout(), il);
-    const std::size_t kbytes = static_cast<std::size_t>(KeptClassification::bytes(L, true));
-    KeptClassification kept, kept2;
-    kept.planes = unaligned(kbytes);
-    kept2.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE, kbytes);
-    kept.gradient = kept2.gradient = true;
-    // (planes of chunks found transparent are not written: zeros in both)
-    cl_check(dev.queue().enqueueFillBuffer(kept2.planes, 0.0f, 0, kbytes), "fill");
-    VoxelBuffer out(L, unaligned(L.bytes())), out2(dev, L);
-    for (int frame = 0; frame < 2; ++frame) {  // the kept planes written, then read
-      enqueue_shade_classify(dev, cells, shp, clp, out, ShadeKernel::vec16, nullptr, nullptr,
-                             &kept);
-      enqueue_shade_classify(dev, cells, shp, clp, out2, ShadeKernel::vec16, nullptr, nullptr,
-                             &kept2);
-      dev.finish();
-      same(out, out2, frame ? "fused, the kept planes read" : "fused, the kept planes written");
+    for (const bool il : {false, true}) {
+      SCOPED_TRACE(il ? "interleaved" : "planar");
+      const VoxelLayout L = make_voxel_layout(cells.layout(), il);
+      if (!every) {
+        ASSERT_GE(L.bytes(), 64u << 20) << "the fused kernel's stores stay ordinary";
+      }
+      const std::size_t kbytes = static_cast<std::size_t>(KeptClassification::bytes(L, true));
+      KeptClassification kept, kept2;
+      kept.planes = unaligned(kbytes);
+      kept2.planes = cl::Buffer(dev.context(), CL_MEM_READ_WRITE, kbytes);
+      kept.gradient = kept2.gradient = true;
+      // (planes of chunks found transparent are not written: zeros in both)
+      cl_check(dev.queue().enqueueFillBuffer(kept2.planes, 0.0f, 0, kbytes), "fill");
+      VoxelBuffer out(L, unaligned(L.bytes())), out2(dev, L);
+      for (int frame = 0; frame < 2; ++frame) {  // the kept planes written, then read
+        enqueue_shade_classify(dev, cells, shp, clp, out, ShadeKernel::vec16, nullptr, nullptr,
+                               &kept);
+        enqueue_shade_classify(dev, cells, shp, clp, out2, ShadeKernel::vec16, nullptr, nullptr,
+                               &kept2);
+        dev.finish();
+        same(out, out2, frame ? "fused, the kept planes read" : "fused, the kept planes written");
+      }
+      std::vector<float> a(kbytes / sizeof(float)), b(a.size());
+      cl_check(dev.queue().enqueueReadBuffer(kept.planes, CL_TRUE, 0, kbytes, a.data()), "read");
+      cl_check(dev.queue().enqueueReadBuffer(kept2.planes, CL_TRUE, 0, kbytes, b.data()), "read");
+      EXPECT_EQ(std::memcmp(a.data(), b.data(), kbytes), 0) << "the kept planes";
     }
-    std::vector<float> a(kbytes / sizeof(float)), b(a.size());
-    cl_check(dev.queue().enqueueReadBuffer(kept.planes, CL_TRUE, 0, kbytes, a.data()), "read");
-    cl_check(dev.queue().enqueueReadBuffer(kept2.planes, CL_TRUE, 0, kbytes, b.data()), "read");
-    EXPECT_EQ(std::memcmp(a.data(), b.data(), kbytes), 0) << "the kept planes";
   }
 }
 
