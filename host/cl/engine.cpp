@@ -529,7 +529,9 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
         walk_events = alloc->events;
       }
       fp.emplace(make_footprints(device, segs.host_rects));
-      e_zero = enqueue_zero_footprints(device, *fp);
+      // The kernel writes every segment's pixel (an empty segment's 0): only
+      // the others zeroed, as for the direct frames.
+      e_zero = enqueue_zero_uncovered(device, dm, *fp);
       walk_events.push_back(
           {"mc local", enqueue_mc_local(device, segs, soff, samples, W, opt.composite,
                                         alloc ? &*alloc : nullptr, *fp)});

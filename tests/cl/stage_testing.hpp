@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <random>
 #include <string>
@@ -17,6 +18,7 @@
 #include "simdvol/layout.hpp"
 #include "simdvol/local_cl.hpp"
 #include "simdvol/match.hpp"
+#include "simdvol/match_cl.hpp"
 #include "simdvol/render.hpp"
 #include "simdvol/shade.hpp"
 #include "simdvol/stages.hpp"
@@ -114,6 +116,27 @@ inline std::vector<uint8_t> reference_active(const Volume& vol, const RenderOpti
   std::vector<cl_uchar> reach;
   host_occupancy(voxels, vol.dims(), opt.order, occ, reach);
   return match_active_reference(split, std::vector<uint8_t>(reach.begin(), reach.end()));
+}
+
+// Three footprints for `rects` filled with NaN, so that a pixel a kernel
+// leaves unwritten shows: `all` zeroed (enqueue_zero_footprints), `some`
+// zeroed where no segment of `m` covers a pixel (enqueue_zero_uncovered),
+// `none` not at all. The zero-uncovered tests run the same kernel into each.
+struct NanFootprints {
+  DeviceFootprints all, some, none;
+};
+inline NanFootprints nan_footprints(Device& dev, const DeviceMatching& m,
+                                    const std::vector<sv_rect>& rects) {
+  NanFootprints f{make_footprints(dev, rects), make_footprints(dev, rects),
+                  make_footprints(dev, rects)};
+  const std::size_t bytes = static_cast<std::size_t>(std::max<int64_t>(f.all.size(), 1)) * 16;
+  for (DeviceFootprints* x : {&f.all, &f.some, &f.none})
+    cl_check(
+        dev.queue().enqueueFillBuffer(x->pixels, std::numeric_limits<float>::quiet_NaN(), 0, bytes),
+        "fill");
+  enqueue_zero_footprints(dev, f.all);
+  enqueue_zero_uncovered(dev, m, f.some);
+  return f;
 }
 
 }  // namespace simdvol::testing

@@ -1032,7 +1032,6 @@ TEST(LocalCl, ZeroUncoveredGivesTheSameFootprints) {
   Device& dev = *dp;
   const Dims3 dims{41, 35, 29};
   const Volume vol(dims, VoxelType::f32);
-  const float nan = std::numeric_limits<float>::quiet_NaN();
   int uncovered_cases = 0, hole_rows = 0, masked = 0;
   for (int64_t pes : {int64_t(1), int64_t(64), int64_t(8192)}) {
     const std::vector<Rgba> v = sparse_voxels(dims, static_cast<unsigned>(pes + 7));
@@ -1067,14 +1066,7 @@ TEST(LocalCl, ZeroUncoveredGivesTheSameFootprints) {
         }
         const ResampleTables t4 = make_resample_tables(dev, L4, view);
         const SegmentOrder lanes = enqueue_segment_order(dev, segs);
-        DeviceFootprints all = make_footprints(dev, segs.host_rects);
-        DeviceFootprints some = make_footprints(dev, segs.host_rects);
-        DeviceFootprints none = make_footprints(dev, segs.host_rects);
-        const std::size_t bytes = static_cast<std::size_t>(std::max<int64_t>(all.size(), 1)) * 16;
-        for (DeviceFootprints* f : {&all, &some, &none})
-          cl_check(dev.queue().enqueueFillBuffer(f->pixels, nan, 0, bytes), "fill");
-        enqueue_zero_footprints(dev, all);
-        enqueue_zero_uncovered(dev, dm, some);
+        auto [all, some, none] = simdvol::testing::nan_footprints(dev, dm, segs.host_rects);
         for (DeviceFootprints* f : {&all, &some, &none})
           enqueue_resample_local(dev, segs, t4, vb4, 1, *f, LocalKernel::vector8, &occ, &lanes);
         const Footprints want = read_footprints(dev, all);

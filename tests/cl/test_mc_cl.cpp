@@ -7,7 +7,11 @@
 // views, orders and P from 1 to 8192; balanced matchings.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cstdlib>
+#include <cstring>
+#include <limits>
 #include <random>
 #include <string>
 
@@ -164,6 +168,69 @@ TEST(McCl, DeviceEqualsReferenceAcrossViewsOrdersAndPes) {
     check_case(*dp, dims, voxels, view, v == 0 ? 1 : 64, 1, 5);
     check_case(*dp, dims, voxels, view, 8192, v == 2 ? 3 : 1, 19);
   }
+}
+
+// Per sub-ray Monte Carlo writes every segment's pixel, so zeroing only the
+// footprint pixels without a segment (enqueue_zero_uncovered, as the
+// engine does) gives the footprints that zeroing them all gives, bit for
+// bit; without either, the uncovered pixels keep what was there (NaN
+// here). Balanced device matchings, views with uncovered pixels.
+TEST(McCl, ZeroUncoveredGivesTheSameFootprints) {
+  Device* dp = test_device();
+  if (!dp) GTEST_SKIP() << "no OpenCL platform";
+  Device& dev = *dp;
+  const Dims3 dims{37, 29, 23};
+  const std::vector<Rgba> voxels = random_voxels(dims, 5);
+  const std::array<int64_t, 3> d{dims[0], dims[1], dims[2]};
+  int uncovered_cases = 0;
+  for (const int64_t pes : {int64_t(64), int64_t(8192)}) {
+    const KdSplit split = kd_split(dims, pes);
+    const VoxelLayout L = make_voxel_layout(make_cell_layout(dims, pes, 1));
+    VoxelBuffer vb(dev, L);
+    vb.write(dev, voxels_to_cells(voxels, L));
+    for (const ViewAngles& a : {ViewAngles{20, 35, 10}, ViewAngles{-63, 118, 27}}) {
+      SCOPED_TRACE("P " + std::to_string(pes) + " view " + std::to_string(a.theta));
+      const ViewGeometry view = make_view(d, {1.0, 1.0, 1.0}, a, 40, 40, Sampling::voxel);
+      DeviceMatching dm = enqueue_match(dev, view, split);
+      enqueue_balance(dev, dm, view, split, kBalanceSweeps, BalanceBounds::automatic,
+                      BalanceUnpack::now);
+      const LocalSegments segs = device_segments(dev, dm);
+      const Matching m = dm.read(dev);
+      int64_t area = 0;
+      for (const sv_rect& r : m.rects) area += int64_t(r.w) * r.h;
+      const bool uncovered = area > static_cast<int64_t>(m.segments.size());
+      uncovered_cases += uncovered;
+      const ResampleTables tables = make_resample_tables(dev, L, view);
+      const cl::Buffer soff = upload_sample_offsets(dev, m);
+      const int64_t nsamples = sample_offsets(m).back();
+      cl::Buffer samples = dev.buffer(CL_MEM_READ_WRITE,
+                                      static_cast<std::size_t>(std::max<int64_t>(nsamples, 1)) * 16,
+                                      nullptr, "samples");
+      enqueue_resample(dev, segs, soff, tables, vb, 1, samples);
+      CompositeParams p;
+      p.mode = CompositeMode::mc;
+      p.samples = 5;
+      p.seed = 0x2468ull;
+      p.exact_opacity = true;
+      p.stratified = true;
+      auto [all, some, none] = simdvol::testing::nan_footprints(dev, dm, segs.host_rects);
+      for (DeviceFootprints* f : {&all, &some, &none})
+        enqueue_mc_local(dev, segs, soff, samples, view.width(), p, nullptr, *f);
+      const Footprints want = read_footprints(dev, all);
+      const Footprints got = read_footprints(dev, some);
+      ASSERT_EQ(got.pixels.size(), want.pixels.size());
+      EXPECT_EQ(std::memcmp(got.pixels.data(), want.pixels.data(), got.pixels.size() * 16), 0);
+      int64_t lit = 0;
+      for (const Rgba& c : want.pixels) lit += c.a > 0;
+      EXPECT_GT(lit, 0);
+      if (uncovered) {
+        const Footprints stale = read_footprints(dev, none);
+        EXPECT_NE(std::memcmp(stale.pixels.data(), want.pixels.data(), stale.pixels.size() * 16),
+                  0);
+      }
+    }
+  }
+  EXPECT_GE(uncovered_cases, 2);
 }
 
 // The walk-by-walk loop the kernels keep for timing comparisons

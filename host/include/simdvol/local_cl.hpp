@@ -157,8 +157,9 @@ DeviceFootprints make_footprints(Device& device, const std::vector<sv_rect>& rec
 cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp);
 /// Zero-fills only the footprint pixels that no segment of `m` covers
 /// (match.cl: simdvol_zero_uncovered), which is enough before the direct
-/// local kernels (enqueue_resample_local, enqueue_local): they write every
-/// segment's pixel, an empty segment's too. `fp` must be made from m's
+/// local kernels (enqueue_resample_local, enqueue_local) and the per
+/// sub-ray Monte Carlo (enqueue_mc_local): they write every segment's
+/// pixel, an empty segment's too. `fp` must be made from m's
 /// rectangles (device_segments(device, m).host_rects); balancing moves no
 /// segment's pixel. ArgumentError if fp holds another PE count.
 cl::Event enqueue_zero_uncovered(Device& device, const DeviceMatching& m, DeviceFootprints& fp);

@@ -83,9 +83,10 @@ DeviceAllocation enqueue_mc_allocation(Device& device, const LocalSegments& segs
                                        const cl::Buffer& sample_off, const cl::Buffer& samples,
                                        const DeviceRayLists& rays, int budget);
 
-/// Per sub-ray Monte Carlo into the footprints (every footprint pixel
-/// written: segments' estimates, 0 elsewhere only if zeroed first with
-/// enqueue_zero_footprints). `alloc` (if given) supplies the walks per
+/// Per sub-ray Monte Carlo into the footprints: every segment's pixel
+/// written (its estimate; 0 for an empty segment), the others only if
+/// zeroed first (enqueue_zero_footprints, or enqueue_zero_uncovered for
+/// the pixels without a segment). `alloc` (if given) supplies the walks per
 /// segment, else p.samples each. `width` is the viewing grid's width (ray ids).
 cl::Event enqueue_mc_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                            const cl::Buffer& samples, int width, const CompositeParams& p,
