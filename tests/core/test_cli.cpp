@@ -267,6 +267,30 @@ TEST_F(Cli, KeptClassificationLeftOutWhereItDoesNotFit) {
   }
 }
 
+// The fused shade + classify stores voxel cells of 64 MiB or more
+// non-temporally where they were stored before (a turntable's later frames;
+// chunk_ranges.hpp, nt_out): a 168^3 phantom's cells (76 MB at 8,192 PEs),
+// the kept classification lit from other views in frames 1 and 2. The same
+// frames bit for bit as with ordinary stores (SIMDVOL_NT_STORES=0).
+TEST_F(Cli, NonTemporalStoresGiveTheSameFrames) {
+  const std::string common =
+      "render --phantom-size 168 --size 64x64 --view 20,35,10 --frames 3 --step 10 --times -o ";
+  const Result a = run(common + path("a.exr"));
+  const Result b = run(common + path("b.exr"), "SIMDVOL_NT_STORES=0");
+  ASSERT_EQ(a.code, 0) << a.output;
+  ASSERT_EQ(b.code, 0) << b.output;
+  int kept = 0;
+  for (const FrameNote& f : frame_notes(a.output)) kept += f.kept;
+  EXPECT_EQ(kept, 2) << a.output;  // frames 1 and 2 light the kept classification
+  for (const char* frame : {"_0001.exr", "_0002.exr"}) {
+    double alpha = 0;
+    EXPECT_EQ(
+        differing_pixels(path(std::string("a") + frame), path(std::string("b") + frame), &alpha), 0)
+        << frame;
+    EXPECT_GT(alpha, 1.0) << frame;
+  }
+}
+
 // Where memory runs out for the kept classification, the frames classify
 // as where it never fit, with the same images bit for bit: its buffer's
 // allocation failing (the engine's catch), or a later allocation of a frame
