@@ -140,11 +140,11 @@ class VoxelBuffer {
     write_raw(device, cells.data());
   }
   /// Whether the stages or write() have stored into the buffer through
-  /// this object (set by them). The float16 kernels store non-temporally
-  /// only into such a buffer: on fresh memory (a first frame) the host
-  /// zeroes each page into the cache as it is first touched, which ordinary
-  /// stores then hit; non-temporal ones took the phantom's first frame 45 ms
-  /// longer (docs/PERFORMANCE.md).
+  /// this object (set by them). The fused shade + classify stores
+  /// non-temporally only into such a buffer (of 64 MiB or more): on fresh
+  /// memory (a first frame) the host zeroes each page into the cache as it
+  /// is first touched, which ordinary stores then hit; non-temporal ones
+  /// took the phantom's first frame 45 ms longer (docs/PERFORMANCE.md).
   bool stored() const { return stored_; }
   void mark_stored() { stored_ = true; }
 
