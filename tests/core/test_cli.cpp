@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <random>
 #include <regex>
 #include <set>
@@ -232,6 +233,25 @@ long differing_pixels(const std::string& a, const std::string& b, double* alpha)
   return differ;
 }
 
+// How many frames of a --times run say "classification kept".
+int kept_frames(const std::string& out) {
+  int n = 0;
+  for (const FrameNote& f : frame_notes(out)) n += f.kept;
+  return n;
+}
+
+// Frames `frames` (suffixes such as "_0001.exr") of the runs written as
+// a + suffix and b + suffix are the same bit for bit and not empty (alpha
+// sum above 1).
+void expect_same_frames(const std::string& a, const std::string& b,
+                        std::initializer_list<const char*> frames, const std::string& what = "") {
+  for (const char* frame : frames) {
+    double alpha = 0;
+    EXPECT_EQ(differing_pixels(a + frame, b + frame, &alpha), 0) << what << frame;
+    EXPECT_GT(alpha, 1.0) << what << frame;
+  }
+}
+
 }  // namespace
 
 // The kept classification is kept only where it fits one allocation
@@ -251,20 +271,9 @@ TEST_F(Cli, KeptClassificationLeftOutWhereItDoesNotFit) {
   const Result b = run(common + path("b.exr"), limit);
   ASSERT_EQ(a.code, 0) << a.output;
   ASSERT_EQ(b.code, 0) << b.output;
-  auto kept_frames = [](const std::string& out) {
-    int n = 0;
-    for (const FrameNote& f : frame_notes(out)) n += f.kept;
-    return n;
-  };
   EXPECT_EQ(kept_frames(a.output), 2) << a.output;  // frames 1 and 2
   EXPECT_EQ(kept_frames(b.output), 0) << b.output;
-  for (const char* frame : {"_0000.exr", "_0002.exr"}) {
-    double alpha = 0;
-    EXPECT_EQ(
-        differing_pixels(path(std::string("a") + frame), path(std::string("b") + frame), &alpha), 0)
-        << frame;
-    EXPECT_GT(alpha, 1.0) << frame;
-  }
+  expect_same_frames(path("a"), path("b"), {"_0000.exr", "_0002.exr"});
 }
 
 // The fused shade + classify stores voxel cells of 64 MiB or more
@@ -279,16 +288,8 @@ TEST_F(Cli, NonTemporalStoresGiveTheSameFrames) {
   const Result b = run(common + path("b.exr"), "SIMDVOL_NT_STORES=0");
   ASSERT_EQ(a.code, 0) << a.output;
   ASSERT_EQ(b.code, 0) << b.output;
-  int kept = 0;
-  for (const FrameNote& f : frame_notes(a.output)) kept += f.kept;
-  EXPECT_EQ(kept, 2) << a.output;  // frames 1 and 2 light the kept classification
-  for (const char* frame : {"_0001.exr", "_0002.exr"}) {
-    double alpha = 0;
-    EXPECT_EQ(
-        differing_pixels(path(std::string("a") + frame), path(std::string("b") + frame), &alpha), 0)
-        << frame;
-    EXPECT_GT(alpha, 1.0) << frame;
-  }
+  EXPECT_EQ(kept_frames(a.output), 2) << a.output;  // frames 1 and 2 light the kept classification
+  expect_same_frames(path("a"), path("b"), {"_0001.exr", "_0002.exr"});
 }
 
 // Where memory runs out for the kept classification, the frames classify
@@ -325,14 +326,7 @@ TEST_F(Cli, KeptClassificationLetGoWhereMemoryRunsOut) {
       // kept before the frame that let it go (frame 0 never reads it), not after
       EXPECT_EQ(n[f].kept, f > 0 && f < c.let_go_frame) << c.fail << ", frame " << f;
     }
-    for (const char* frame : {"_0000.exr", "_0001.exr", "_0002.exr"}) {
-      double alpha = 0;
-      EXPECT_EQ(differing_pixels(path(std::string("a") + frame), path(c.out + std::string(frame)),
-                                 &alpha),
-                0)
-          << c.fail << frame;
-      EXPECT_GT(alpha, 1.0) << frame;
-    }
+    expect_same_frames(path("a"), path(c.out), {"_0000.exr", "_0001.exr", "_0002.exr"}, c.fail);
   }
 }
 
