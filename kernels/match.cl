@@ -13,7 +13,10 @@
  *   simdvol_match_pe     per PE: exclusive prefix of its rows (rowoff),
  *                        totals, load, footprint rect
  *   simdvol_match_scan   one work-item: seg_offset[P + 1], link-list offsets
- *   simdvol_match_fill   per (PE, row): the segments again, written at
+ *                        (and, where `save`, each column's k0, k1 and
+ *                        link axis for the fill: sv_kpack8)
+ *   simdvol_match_fill   per (PE, row): the segments again (from the rows'
+ *                        saved columns, or stepped again), written at
  *                        seg_offset[p] + rowoff, with the per-(PE, axis)
  *                        lists of their balance links (balance_links) and,
  *                        where fill_bounds, their (k0, k1) as the balance's
@@ -408,6 +411,31 @@ SV_FN void sv_link_targets(__constant sv_view* view, int4 ci, int4 splits, globa
   }
 }
 
+/* The columns' results saved by simdvol_match_rows for simdvol_match_fill
+ * (save / saved, where the grid's depth D <= 32767): per (work-item, column
+ * i, lane l) one uint at koff[p] + row0 w + 8 (i - i0) + l, w and i0 the
+ * PE's candidate width and first column (koff[p]: the sum of ceil8(h) w
+ * over the PEs before p), bits 0-14 k0, 15-29 k1 (0, 0 where the lane has
+ * no segment), 30-31 the link's exit axis (3: no link). So the fill reads
+ * them instead of stepping the columns again, and a row at a time (its
+ * segments, bounds and links consecutive stores). 2-core Intel Xeon,
+ * 2026-12-05, the 256^3 phantom at (20, 35, 10), `simdvol render --frames 8
+ * --step 0 --trace`, frames 2-7, alternated twice with SIMDVOL_MATCH_SAVED=0
+ * (stepped): match_fill 5.56 / 5.64 -> 2.90 / 3.14 ms, match_rows 2.87 /
+ * 3.02 -> 2.93 / 3.12; without links 2.87 / 3.00 -> 1.73 / 1.78 ms. */
+SV_FN uint8 sv_kpack8(int8 k0, int8 k1, int8 act, int8 lnk, int8 ea, const int make_links) {
+  const uint8 e = make_links ? as_uint8(select((int8)(3), ea, lnk)) : (uint8)(3);
+  return select((uint8)(3u << 30), as_uint8(k0) | (as_uint8(k1) << 15) | (e << 30), as_uint8(act));
+}
+
+SV_FN void sv_kunpack8(uint8 v, int8* k0, int8* k1, int8* act, int8* lnk, int8* ea) {
+  *k0 = as_int8(v & 0x7fffu);
+  *k1 = as_int8((v >> 15) & 0x7fffu);
+  *ea = as_int8(v >> 30);
+  *act = *k0 < *k1;
+  *lnk = *ea != (int8)(3);
+}
+
 /* The kernels' bodies take make_links as a constant (always inlined), so
  * that the _nolinks kernels leave the link test of sv_row8_eval out
  * altogether. */
@@ -433,7 +461,8 @@ SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
                                __constant long* stepc, global const sv_rect* cand,
                                global const int4* cidx, int4 cell, int4 splits,
                                global const int* pe_of, global const uchar* active, int pes, int H,
-                               global int4* rowsum, global int4* rowlk, const int make_links) {
+                               global int4* rowsum, global int4* rowlk, global uint* kscr,
+                               global const int* koff, const int save, const int make_links) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
@@ -476,9 +505,11 @@ SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
     sv_row8 st;
     sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
     const int8 IA = vload8(0, ia), IB = vload8(0, ib);
+    const int kb = save ? koff[p] + row0 * r.w : 0;
     for (int i = i0; i <= i1; ++i) {
       int8 k0, k1, act, lnk, ea;
       sv_row8_eval(&st, view, lo, hi, cell, i, IA, IB, &k0, &k1, &act, &lnk, &ea);
+      if (save) vstore8(sv_kpack8(k0, k1, act, lnk, ea, make_links), 0, kscr + kb + 8 * (i - r.i0));
       first = select(first, (int8)(i), act & (cnt == (int8)(0)));
       cnt -= act;
       load += select((int8)(0), k1 - k0, act);
@@ -511,7 +542,8 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
                                global const int* seg_offset, global const int4* lofs,
                                global sv_segment* segments, global short2* bounds,
                                const int fill_bounds, global int2* llist, const int narrow,
-                               global int4* lbase, const int make_links) {
+                               global int4* lbase, global const uint* kscr, global const int* koff,
+                               const int saved, const int make_links) {
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
@@ -578,76 +610,98 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
       SV_PREFETCH(seg_offset + q);
     }
 #endif
-  sv_row8 st;
-  sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
-  const int8 IA = vload8(0, ia), IB = vload8(0, ib);
-  for (int i = i0; i <= i1; ++i) {
-    int8 k0, k1, act, lnk, ea;
-    sv_row8_eval(&st, view, lo, hi, cell, i, IA, IB, &k0, &k1, &act, &lnk, &ea);
-    if (any(act)) {
-      int K0[8], K1[8], A[8], LK[8], E[8];
-      vstore8(k0, 0, K0);
-      vstore8(k1, 0, K1);
-      vstore8(act, 0, A);
-      vstore8(lnk, 0, LK);
-      vstore8(ea, 0, E);
-      for (int l = 0; l < 8; ++l) {
-        if (!A[l]) continue;
-        sv_segment sg;
-        sg.i = i;
-        sg.j = jj[l];
-        sg.k0 = K0[l];
-        sg.k1 = K1[l];
-        segments[at[l]] = sg;
-#if SV_FILL_WPF > 0
-        SV_PREFETCH(segments + at[l] + SV_FILL_WPF);
-        if (make_links && fill_bounds) SV_PREFETCH(bounds + at[l] + 4 * SV_FILL_WPF);
-#endif
-        /* The balance's 16-bit bounds (balance.cl), where the host asks for
-         * them: its pack would otherwise read the segments back. */
-        if (make_links && fill_bounds) bounds[at[l]] = (short2)((short)sg.k0, (short)sg.k1);
-        if (make_links && LK[l] && nq[E[l]] >= 0) {
-          const int e = E[l], q = nq[e];
-          if (t0[e][l] == SV_UNSET) {
-            const int gq = q * H + (jj[l] - cand[q].j0);
-            const int4 s = rowsum[gq];
-            const int b = seg_offset[q] + rowoff[gq].x;
-            t0[e][l] = s.x == s.w - s.z + 1 ? b - s.z : SV_HOLES;
-            hb[e][l] = b;
-            hc[e][l] = s.z;
-            hn[e][l] = 0;
-          }
-          int t;
-          if (t0[e][l] != SV_HOLES) {
-            t = t0[e][l] + i;
-          } else {
-            long qlo[3], qhi[3];
-            sv_pe_box(view, cidx[q], cell, qlo, qhi);
-            int c = hc[e][l], n = hn[e][l];
-            for (; c < i; ++c) {
-              const int2 k = sv_box_ray(view, qlo, qhi, c, jj[l]);
-              n += k.x < k.y;
-            }
-            hc[e][l] = c;
-            hn[e][l] = n;
-            t = hb[e][l] + n;
-          }
-#if SV_FILL_WPF > 0
-          if (narrow)
-            SV_PREFETCH((global uint*)llist + la[e][l] + 4 * SV_FILL_WPF);
-          else
-            SV_PREFETCH(llist + la[e][l] + 2 * SV_FILL_WPF);
-#endif
-          if (narrow)
-            ((global uint*)llist)[la[e][l]++] = (uint)(at[l] - base) | ((uint)(t - qb[e]) << 16);
-          else
-            llist[la[e][l]++] = (int2)(at[l], t);
-        }
-        ++at[l];
+  const int kb = saved ? koff[p] + row0 * r.w : 0;
+  /* One segment of lane l: column I, bounds KA, KB; LKV, EV its link and
+   * exit axis. */
+#define SV_FILL_SEGMENT(l, I, KA, KB, LKV, EV)                                                \
+  {                                                                                           \
+    sv_segment sg;                                                                            \
+    sg.i = (I);                                                                               \
+    sg.j = jj[l];                                                                             \
+    sg.k0 = (KA);                                                                             \
+    sg.k1 = (KB);                                                                             \
+    segments[at[l]] = sg;                                                                     \
+    if (SV_FILL_WPF > 0) {                                                                    \
+      SV_PREFETCH(segments + at[l] + SV_FILL_WPF);                                            \
+      if (make_links && fill_bounds) SV_PREFETCH(bounds + at[l] + 4 * SV_FILL_WPF);           \
+    }                                                                                         \
+    /* The balance's 16-bit bounds (balance.cl), where the host asks for                      \
+     * them: its pack would otherwise read the segments back. */                              \
+    if (make_links && fill_bounds) bounds[at[l]] = (short2)((short)sg.k0, (short)sg.k1);      \
+    if (make_links && (LKV) && nq[(EV)] >= 0) {                                               \
+      const int e = (EV), q = nq[e];                                                          \
+      if (t0[e][l] == SV_UNSET) {                                                             \
+        const int gq = q * H + (jj[l] - cand[q].j0);                                          \
+        const int4 s = rowsum[gq];                                                            \
+        const int b = seg_offset[q] + rowoff[gq].x;                                           \
+        t0[e][l] = s.x == s.w - s.z + 1 ? b - s.z : SV_HOLES;                                 \
+        hb[e][l] = b;                                                                         \
+        hc[e][l] = s.z;                                                                       \
+        hn[e][l] = 0;                                                                         \
+      }                                                                                       \
+      int t;                                                                                  \
+      if (t0[e][l] != SV_HOLES) {                                                             \
+        t = t0[e][l] + (I);                                                                   \
+      } else {                                                                                \
+        long qlo[3], qhi[3];                                                                  \
+        sv_pe_box(view, cidx[q], cell, qlo, qhi);                                             \
+        int c = hc[e][l], n = hn[e][l];                                                       \
+        for (; c < (I); ++c) {                                                                \
+          const int2 k = sv_box_ray(view, qlo, qhi, c, jj[l]);                                \
+          n += k.x < k.y;                                                                     \
+        }                                                                                     \
+        hc[e][l] = c;                                                                         \
+        hn[e][l] = n;                                                                         \
+        t = hb[e][l] + n;                                                                     \
+      }                                                                                       \
+      if (SV_FILL_WPF > 0) {                                                                  \
+        if (narrow)                                                                           \
+          SV_PREFETCH((global uint*)llist + la[e][l] + 4 * SV_FILL_WPF);                      \
+        else                                                                                  \
+          SV_PREFETCH(llist + la[e][l] + 2 * SV_FILL_WPF);                                    \
+      }                                                                                       \
+      if (narrow)                                                                             \
+        ((global uint*)llist)[la[e][l]++] = (uint)(at[l] - base) | ((uint)(t - qb[e]) << 16); \
+      else                                                                                    \
+        llist[la[e][l]++] = (int2)(at[l], t);                                                 \
+    }                                                                                         \
+    ++at[l];                                                                                  \
+  }
+  if (saved) {
+    /* From the rows' saved columns, a lane (row) at a time: its segments,
+     * bounds and links are consecutive stores (5 streams, not 8 rows' 40). */
+    for (int l = 0; l < 8; ++l) {
+      global const uint* kc = kscr + kb + l + 8 * (ia[l] - r.i0);
+      for (int i = ia[l]; i <= ib[l]; ++i, kc += 8) {
+        const uint v = *kc;
+        const int ka = (int)(v & 0x7fffu), kz = (int)((v >> 15) & 0x7fffu), ev = (int)(v >> 30);
+        if (ka >= kz) continue;
+        SV_FILL_SEGMENT(l, i, ka, kz, ev != 3, ev)
       }
     }
-    sv_row8_step(&st, view, stepc);
+  } else {
+    sv_row8 st;
+    sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
+    const int8 IA = vload8(0, ia), IB = vload8(0, ib);
+    for (int i = i0; i <= i1; ++i) {
+      int8 k0, k1, act, lnk, ea;
+      sv_row8_eval(&st, view, lo, hi, cell, i, IA, IB, &k0, &k1, &act, &lnk, &ea);
+      if (any(act)) {
+        int K0[8], K1[8], A[8], LK[8], E[8];
+        vstore8(k0, 0, K0);
+        vstore8(k1, 0, K1);
+        vstore8(act, 0, A);
+        vstore8(lnk, 0, LK);
+        vstore8(ea, 0, E);
+        for (int l = 0; l < 8; ++l) {
+          if (!A[l]) continue;
+          SV_FILL_SEGMENT(l, i, K0[l], K1[l], LK[l], E[l])
+        }
+      }
+      sv_row8_step(&st, view, stepc);
+    }
   }
+#undef SV_FILL_SEGMENT
 #undef SV_UNSET
 #undef SV_HOLES
 }
@@ -657,9 +711,9 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
       __constant sv_view* view, __constant float* geo, __constant long* stepc,                  \
       global const sv_rect* cand, global const int4* cidx, int4 cell, int4 splits,              \
       global const int* pe_of, global const uchar* active, int pes, int H, global int4* rowsum, \
-      global int4* rowlk) {                                                                     \
+      global int4* rowlk, global uint* kscr, global const int* koff, int save) {                \
     sv_match_rows(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum,    \
-                  rowlk, LINKS);                                                                \
+                  rowlk, kscr, koff, save, LINKS);                                              \
   }
 SV_MATCH_ROWS_KERNEL(simdvol_match_rows, 1)
 SV_MATCH_ROWS_KERNEL(simdvol_match_rows_nolinks, 0)
@@ -671,10 +725,11 @@ SV_MATCH_ROWS_KERNEL(simdvol_match_rows_nolinks, 0)
       global const int* pe_of, global const uchar* active, int pes, int H,                       \
       global const int4* rowsum, global const int4* rowoff, global const int* seg_offset,        \
       global const int4* lofs, global sv_segment* segments, global short2* bounds,               \
-      int fill_bounds, global int2* llist, int narrow, global int4* lbase) {                     \
+      int fill_bounds, global int2* llist, int narrow, global int4* lbase,                       \
+      global const uint* kscr, global const int* koff, int saved) {                              \
     sv_match_fill(view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum,     \
                   rowoff, seg_offset, lofs, segments, bounds, fill_bounds, llist, narrow, lbase, \
-                  LINKS);                                                                        \
+                  kscr, koff, saved, LINKS);                                                     \
   }
 SV_MATCH_FILL_KERNEL(simdvol_match_fill, 1)
 SV_MATCH_FILL_KERNEL(simdvol_match_fill_nolinks, 0)

@@ -7,6 +7,7 @@
 #include <array>
 #include <climits>
 #include <cmath>
+#include <cstdlib>
 #include <string>
 
 namespace simdvol {
@@ -260,6 +261,24 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
                                       "link lists");
   m.link_base =
       device.buffer(rw, (m.links_narrow ? P : 1) * sizeof(cl_int4), nullptr, "link bases");
+  // The rows' column results saved for the fill (match.cl: sv_kpack8), where
+  // 15-bit bounds hold every k and the scratch has 32-bit indices: per PE
+  // ceil8(h) * w of them, koff[p] the sum over the PEs before p.
+  std::vector<cl_int> koff(P, 0);
+  int64_t kwords = 0;
+  for (std::size_t p = 0; p < P; ++p) {
+    koff[p] = static_cast<cl_int>(std::min<int64_t>(kwords, INT_MAX));
+    kwords += int64_t(cand[p].w) * ((int64_t(cand[p].h) + 7) / 8 * 8);
+  }
+  const char* ke = std::getenv("SIMDVOL_MATCH_SAVED");
+  m.columns_saved = view.grid.grid[2] <= 32767 && kwords <= INT_MAX - 8 &&
+                    !(ke != nullptr && std::string(ke) == "0");
+  m.column_scratch = device.scratch_buffer(
+      rw,
+      static_cast<std::size_t>(m.columns_saved ? std::max<int64_t>(kwords, 1) : 1) *
+          sizeof(cl_uint),
+      "saved columns");
+  m.column_offsets = device.buffer(ro, P * sizeof(cl_int), koff.data(), "saved column offsets");
   const std::string rows_name = m.linked ? "simdvol_match_rows" : "simdvol_match_rows_nolinks";
   const std::string fill_name = m.linked ? "simdvol_match_fill" : "simdvol_match_fill_nolinks";
 
@@ -269,7 +288,8 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
 
   cl::Kernel k_rows = device.kernel("match", rows_name, match_defines());
   set_args(k_rows, rows_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
-           m.pe_of, m.active, npes, H, m.rowsum, m.rowlinks);
+           m.pe_of, m.active, npes, H, m.rowsum, m.rowlinks, m.column_scratch, m.column_offsets,
+           cl_int(m.columns_saved));
   m.match_events.push_back(
       {"match_rows", device.run(k_rows, rows_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
   cl::Kernel k_pe = device.kernel("match", "simdvol_match_pe", match_defines());
@@ -284,7 +304,8 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   cl::Kernel k_fill = device.kernel("match", fill_name, match_defines());
   set_args(k_fill, fill_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
            m.pe_of, m.active, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset, m.segments,
-           m.bounds, cl_int(m.bounds_filled), m.link_list, cl_int(m.links_narrow), m.link_base);
+           m.bounds, cl_int(m.bounds_filled), m.link_list, cl_int(m.links_narrow), m.link_base,
+           m.column_scratch, m.column_offsets, cl_int(m.columns_saved));
   m.match_events.push_back(
       {"match_fill", device.run(k_fill, fill_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
   return m;

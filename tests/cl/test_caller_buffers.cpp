@@ -9,7 +9,6 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -69,28 +68,6 @@ TEST(CallerBuffers, WrappedContextAndBuffersGiveTheSameResults) {
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(Rgba)), 0);
 }
 
-// SIMDVOL_NT_STORES set to a value for a scope, then as it was.
-class ScopedNtStores {
- public:
-  explicit ScopedNtStores(const char* value) {
-    if (const char* e = std::getenv(kName)) old_ = e;
-    if (value)
-      setenv(kName, value, 1);
-    else
-      unsetenv(kName);
-  }
-  ~ScopedNtStores() {
-    if (old_)
-      setenv(kName, old_->c_str(), 1);
-    else
-      unsetenv(kName);
-  }
-
- private:
-  static constexpr const char* kName = "SIMDVOL_NT_STORES";
-  std::optional<std::string> old_;
-};
-
 // Non-temporal stores of float16 need each 16-float chunk 64-byte aligned.
 // The fused shade + classify stores its voxel cells that way by default
 // where they were stored before and hold at least 64 MiB (kc_mode & 8;
@@ -121,7 +98,7 @@ TEST(CallerBuffers, UnalignedHostMemoryGetsTheSameCells) {
   };
   for (const bool every : {true, false}) {
     SCOPED_TRACE(every ? "SIMDVOL_NT_STORES=1" : "the default");
-    ScopedNtStores env(every ? "1" : nullptr);
+    testing::ScopedEnv env("SIMDVOL_NT_STORES", every ? "1" : nullptr);
     const Volume vol = shepp_logan(every ? 24 : 168);
     PeArray array(dev, pe_grid(8));
     CellBuffer cells = array.layout(vol, 1);

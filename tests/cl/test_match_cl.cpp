@@ -348,6 +348,42 @@ std::vector<uint8_t> random_mask(int64_t pes, double p_on, std::mt19937& rng) {
 // no balancing follows): the same segments, rects and loads as the
 // reference, with and without a mask; balancing and reading the links are
 // refused, sweeps 0 is not.
+// The fill reads the columns simdvol_match_rows saved (15-bit bounds and
+// the link's axis per candidate ray) where every k fits 15 bits, and steps
+// the columns again otherwise or with SIMDVOL_MATCH_SAVED=0: each gives the
+// reference's matching, links and balance. A grid over 16,384 samples deep
+// sets the bounds' top bit.
+TEST(MatchCl, SavedColumnsAndSteppedFill) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 dims{93, 57, 31};
+  for (const char* env : {"0", "1"}) {
+    ScopedEnv saved("SIMDVOL_MATCH_SAVED", env);
+    for (ViewAngles va : {kViews[0], kViews[2], kViews[3]})
+      for (int64_t pes : {8, 512, 8192}) {
+        const ViewGeometry v = geometry(dims, va, 96, 96);
+        const std::string what = name(va, pes) + " SIMDVOL_MATCH_SAVED=" + env;
+        EXPECT_EQ(enqueue_match(dev, v, kd_split(dims, pes)).columns_saved, env[0] == '1') << what;
+        check_device(dev, v, kd_split(dims, pes), 8, what);
+        DeviceMatching dm = enqueue_match(dev, v, kd_split(dims, pes), MatchLinks::skip);
+        expect_same(dm.read(dev), match_reference(v, kd_split(dims, pes)), what + " without links");
+      }
+  }
+  // A slab seen nearly edge-on: about 17,000 samples deep (make_view's
+  // limits keep every grid under 32,768: sqrt(3) x 16,384 at most).
+  const Dims3 deep{12000, 2, 12000};
+  for (ViewAngles va : {ViewAngles{0, 45, 0}, ViewAngles{0, 44.5, 0.01}}) {
+    const ViewGeometry v = geometry(deep, va, 64, 64);
+    ASSERT_GT(v.grid.grid[2], 16384) << "the case this test needs";
+    const KdSplit split = kd_split(deep, 16);
+    const Matching ref = match_reference(v, split);
+    int64_t top = 0;  // segments whose k1 sets bit 14
+    for (const sv_segment& g : ref.segments) top += g.k1 >= 16384;
+    ASSERT_GT(top, 0) << "the case this test needs";
+    EXPECT_TRUE(enqueue_match(dev, v, split).columns_saved);
+    check_device(dev, v, split, 2, name(va, 16) + " depth " + std::to_string(v.grid.grid[2]));
+  }
+}
+
 TEST(MatchCl, WithoutLinksSameMatching) {
   SIMDVOL_TEST_DEVICE(dev);
   std::mt19937 rng(23);

@@ -7,12 +7,15 @@
 // H = the largest candidate height rounded up to a multiple of 8, except
 // where noted):
 //   1. simdvol_match_rows  the exact segments of each row, counted (count,
-//                          load, first and last i; links per axis)
+//                          load, first and last i; links per axis), and
+//                          each column's bounds and link axis saved for
+//                          the fill (DeviceMatching::columns_saved)
 //   2. simdvol_match_pe    one work-item per PE: row offsets, totals, load,
 //                          footprint rect
 //   3. simdvol_match_scan  one work-item: seg_offset[P + 1] and the link-list
 //                          offsets (a serial scan of P entries: microseconds)
-//   4. simdvol_match_fill  the segments again, written in place, with the
+//   4. simdvol_match_fill  the segments again (from the saved columns, not
+//                          stepped again), written in place, with the
 //                          per-(PE, axis) lists of their balance links and,
 //                          where 16-bit balance bounds will do, the bounds
 //                          the balance rounds move (so no pack reads the
@@ -108,28 +111,34 @@ struct DeviceMatching {
   /// entries pair_first[2 a + par] .. pair_first[2 a + par + 1] - 1.
   cl::Buffer pairs;
   std::array<cl_int, 7> pair_first{};
-  cl::Buffer view;         ///< sv_view
-  cl::Buffer geometry;     ///< float[20] row geometry (zonogon strips)
-  cl::Buffer steps;        ///< cl_long[9] exact stepping constants per axis
-  cl::Buffer rowsum;       ///< cl_int4[P * H] (count, load, first i, last i) per row
-  cl::Buffer rowlinks;     ///< cl_int4[P * H] links along x, y, z per row
-  cl::Buffer rowoff;       ///< cl_int4[P * H] exclusive prefix within the PE of (count, links)
-  cl::Buffer petot;        ///< cl_int4[P] (segments, links x, y, z) per PE
-  cl::Buffer counts;       ///< cl_int[P] segment counts
-  cl::Buffer seg_offset;   ///< cl_int[P + 1]
-  cl::Buffer segments;     ///< sv_segment[capacity]
-  cl::Buffer rects;        ///< sv_rect[P]
-  cl::Buffer loads;        ///< cl_int[P]
-  cl::Buffer bounds;       ///< cl_short2[capacity]: (k0, k1) per segment, see bounds_filled
-  cl::Buffer link_offset;  ///< cl_int4[P + 1]: y, z, w = start of PE p's list along x, y, z
-  cl::Buffer link_list;    ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE);
-                           ///< cl_uint[capacity] where links_narrow
+  cl::Buffer view;      ///< sv_view
+  cl::Buffer geometry;  ///< float[20] row geometry (zonogon strips)
+  cl::Buffer steps;     ///< cl_long[9] exact stepping constants per axis
+  cl::Buffer rowsum;    ///< cl_int4[P * H] (count, load, first i, last i) per row
+  cl::Buffer rowlinks;  ///< cl_int4[P * H] links along x, y, z per row
+  cl::Buffer rowoff;    ///< cl_int4[P * H] exclusive prefix within the PE of (count, links)
+  /// cl_uint per (row, candidate column) where columns_saved: the rows'
+  /// (k0, k1, link axis) per column for the fill (match.cl: sv_kpack8)
+  cl::Buffer column_scratch;
+  cl::Buffer column_offsets;  ///< cl_int[P]: PE p's first entry in column_scratch
+  cl::Buffer petot;           ///< cl_int4[P] (segments, links x, y, z) per PE
+  cl::Buffer counts;          ///< cl_int[P] segment counts
+  cl::Buffer seg_offset;      ///< cl_int[P + 1]
+  cl::Buffer segments;        ///< sv_segment[capacity]
+  cl::Buffer rects;           ///< sv_rect[P]
+  cl::Buffer loads;           ///< cl_int[P]
+  cl::Buffer bounds;          ///< cl_short2[capacity]: (k0, k1) per segment, see bounds_filled
+  cl::Buffer link_offset;     ///< cl_int4[P + 1]: y, z, w = start of PE p's list along x, y, z
+  cl::Buffer link_list;       ///< cl_int2[capacity]: (segment, linked segment), per (axis, PE);
+                              ///< cl_uint[capacity] where links_narrow
   /// cl_int4[P] where links_narrow: the first segment of PE p's link target
   /// along x, y, z (-1: none) and p's own (w).
   cl::Buffer link_base;
   cl::Buffer active;    ///< cl_uchar[P]: the PE mask (all 1 without one)
   bool masked = false;  ///< made with a mask (read() then returns it in Matching::active)
   bool linked = true;   ///< made with MatchLinks::make (link lists written)
+  /// The fill read the rows' saved columns instead of stepping them again.
+  bool columns_saved = false;
   /// The link entries are 16-bit pairs of indices within the PEs' segments
   /// (every PE has at most 65536 candidate rays; the rounds named ...n).
   bool links_narrow = false;
