@@ -303,9 +303,9 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
                                                      cl::NDRange(kWgs), cl::NDRange(kWgs))});
   cl::Kernel k_fill = device.kernel("match", fill_name, match_defines());
   set_args(k_fill, fill_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
-           m.pe_of, m.active, npes, H, m.rowsum, m.rowoff, m.seg_offset, m.link_offset, m.segments,
-           m.bounds, cl_int(m.bounds_filled), m.link_list, cl_int(m.links_narrow), m.link_base,
-           m.column_scratch, m.column_offsets, cl_int(m.columns_saved));
+           m.pe_of, m.active, npes, H, m.rowsum, m.rowlinks, m.rowoff, m.seg_offset, m.link_offset,
+           m.segments, m.bounds, cl_int(m.bounds_filled), m.link_list, cl_int(m.links_narrow),
+           m.link_base, m.column_scratch, m.column_offsets, cl_int(m.columns_saved));
   m.match_events.push_back(
       {"match_fill", device.run(k_fill, fill_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
   return m;
