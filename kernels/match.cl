@@ -886,18 +886,44 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_zero_unco
   const int j0 = cand[p].j0 + row0;
   if (j0 + 7 < r.j0 || j0 >= r.j0 + r.h) return;
   global float4* base = foot + rect_off[p];
+  int A[8], B[8];
   for (int l = 0; l < 8; ++l) {
     const int j = j0 + l;
+    A[l] = 0;
+    B[l] = r.w;
     if (j < r.j0 || j >= r.j0 + r.h) continue;
     const int4 s = rowsum[g0 + l];
-    global float4* row = base + (size_t)(j - r.j0) * r.w;
 #ifndef SV_ZERO_ALL
     const int whole = s.x <= 0 || s.x != s.w - s.z + 1;
 #else
     const int whole = 1; /* every pixel, for comparison */
 #endif
-    const int a = whole ? r.w : s.z - r.i0, b = whole ? r.w : s.w + 1 - r.i0;
-    for (int x = 0; x < a; ++x) row[x] = (float4)(0.0f);
-    for (int x = b; x < r.w; ++x) row[x] = (float4)(0.0f);
+    A[l] = whole ? r.w : s.z - r.i0;
+    B[l] = whole ? r.w : s.w + 1 - r.i0;
+#ifndef SV_ZERO_NO_PF
+    /* The lines to zero asked for first (for writing), the 8 rows' at
+     * once: the footprints come from memory (the frame's voxel cells went
+     * through the cache since the last swap read them), and the stores
+     * then wait for one line after another. 2026-12-05, 2-core Intel Xeon,
+     * `simdvol render --view 20,35,10 --frames 10 --step 0 --trace`,
+     * frames 2-9, two alternations with -DSV_ZERO_NO_PF (not asked):
+     * 0.98 / 1.12 -> 0.84 / 0.84 ms on the 256^3 phantom. */
+    global float4* row = base + (size_t)(j - r.j0) * r.w;
+    if (A[l] > 0) {
+      SV_PREFETCHW(row);
+      SV_PREFETCHW(row + A[l] - 1);
+    }
+    if (B[l] < r.w) {
+      SV_PREFETCHW(row + B[l]);
+      SV_PREFETCHW(row + r.w - 1);
+    }
+#endif
+  }
+  for (int l = 0; l < 8; ++l) {
+    const int j = j0 + l;
+    if (j < r.j0 || j >= r.j0 + r.h) continue;
+    global float4* row = base + (size_t)(j - r.j0) * r.w;
+    for (int x = 0; x < A[l]; ++x) row[x] = (float4)(0.0f);
+    for (int x = B[l]; x < r.w; ++x) row[x] = (float4)(0.0f);
   }
 }
