@@ -344,13 +344,10 @@ std::vector<uint8_t> random_mask(int64_t pes, double p_on, std::mt19937& rng) {
 
 }  // namespace
 
-// Without the balance links (MatchLinks::skip, the engine's matching when
-// no balancing follows): the same segments, rects and loads as the
-// reference, with and without a mask; balancing and reading the links are
-// refused, sweeps 0 is not.
 // The fill reads the columns simdvol_match_rows saved (15-bit bounds and
 // the link's axis per candidate ray) where every k fits 15 bits, and steps
-// the columns again otherwise or with SIMDVOL_MATCH_SAVED=0: each gives the
+// the columns again otherwise (a grid over 32,767 samples deep, which
+// make_view never makes) or with SIMDVOL_MATCH_SAVED=0: each gives the
 // reference's matching, links and balance. A grid over 16,384 samples deep
 // sets the bounds' top bit.
 TEST(MatchCl, SavedColumnsAndSteppedFill) {
@@ -384,6 +381,10 @@ TEST(MatchCl, SavedColumnsAndSteppedFill) {
   }
 }
 
+// Without the balance links (MatchLinks::skip, the engine's matching when
+// no balancing follows): the same segments, rects and loads as the
+// reference, with and without a mask; balancing and reading the links are
+// refused, sweeps 0 is not.
 TEST(MatchCl, WithoutLinksSameMatching) {
   SIMDVOL_TEST_DEVICE(dev);
   std::mt19937 rng(23);
