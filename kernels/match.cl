@@ -236,12 +236,17 @@ SV_FN void sv_row_init(__constant sv_view* view, __constant long* stepc, const l
 }
 
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_pe(
-    global const sv_rect* cand, int pes, int H, global const int4* rowsum, global const int4* rowlk,
-    global int4* rowoff, global int4* petot, global int* counts, global sv_rect* rects,
-    global int* loads) {
+    global const sv_rect* cand, global const uchar* active, int pes, int H,
+    global const int4* rowsum, global const int4* rowlk, global int4* rowoff, global int4* petot,
+    global int* counts, global sv_rect* rects, global int* loads) {
   const int p = (int)get_global_id(0);
   if (p >= pes) return;
-  const int h = cand[p].h;
+  /* An inactive PE's rows are not written (simdvol_match_rows): it has no
+   * segments, and no fill or zero fill reads its row offsets. Its rows
+   * written as zeros and walked here, as before: scripts/bench-ab, match
+   * 5.78 -> 5.36 ms (0.926, 6 pairs) on the 256^3 phantom, brainsmall 2.25
+   * -> 2.05 (0.902, 4 pairs) (2-core Intel Xeon, 2026-12-05). */
+  const int h = active[p] ? cand[p].h : 0;
   int4 acc = (int4)(0, 0, 0, 0);
   int load = 0, i0 = INT_MAX, i1 = -1, j0 = -1, j1 = -1;
   for (int row = 0; row < h; ++row) {
@@ -498,19 +503,16 @@ SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
   const int g0 = (int)get_global_id(0) * 8;
   const int p = g0 / H, row0 = g0 - p * H;
   if (p >= pes) return;
-  /* An inactive PE's rows (more than half the PEs at 8,192 with empty
-   * space left out): what the loop below gives them, without its set-up
-   * (the cell's box, the link targets). simdvol-bench-options --frames 12,
-   * two alternations with this as a define: match 9.23 / 9.32 -> 8.99 /
-   * 9.15 ms on the 256^3 phantom, 3.43 / 3.39 -> 3.25 / 3.26 on brainsmall
-   * (a 2-core Intel Xeon, 2026-12-05). */
-  if (!active[p]) {
-    for (int l = 0; l < 8; ++l) {
-      rowsum[g0 + l] = (int4)(0, 0, 0, -1);
-      rowlk[g0 + l] = (int4)(0);
-    }
-    return;
-  }
+  /* An inactive PE (more than half the PEs at 8,192 with empty space left
+   * out) has no segments: its rows are left as they are, unwritten, and
+   * simdvol_match_pe and the fill take the mask for them (no row of such a
+   * PE is read: no link goes into it, and its footprint is empty).
+   * Skipping its loop's set-up, simdvol-bench-options --frames 12, two
+   * alternations with this as a define: match 9.23 / 9.32 -> 8.99 / 9.15
+   * ms on the 256^3 phantom, 3.43 / 3.39 -> 3.25 / 3.26 on brainsmall (a
+   * 2-core Intel Xeon, 2026-12-05); leaving its rows unwritten too: see
+   * simdvol_match_pe. */
+  if (!active[p]) return;
   const sv_rect r = cand[p];
   const int4 ci = cidx[p];
   long lo[3], hi[3];
@@ -592,9 +594,10 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
   const int base = seg_offset[p];
   int ia[8], ib[8], jj[8], on[8], at[8], la[3][8];
   int i0 = INT_MAX, i1 = INT_MIN;
+  const int live = active[p]; /* (an inactive PE's rows are not written) */
   for (int l = 0; l < 8; ++l) {
-    const int4 sum = rowsum[g0 + l];
-    const int4 ro = rowoff[g0 + l];
+    const int4 sum = live ? rowsum[g0 + l] : (int4)(0, 0, 0, -1);
+    const int4 ro = live ? rowoff[g0 + l] : (int4)(0);
     jj[l] = r.j0 + row0 + l;
     on[l] = sum.x > 0;
     ia[l] = on[l] ? sum.z : 1;

@@ -293,8 +293,8 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   m.match_events.push_back(
       {"match_rows", device.run(k_rows, rows_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
   cl::Kernel k_pe = device.kernel("match", "simdvol_match_pe", match_defines());
-  set_args(k_pe, "simdvol_match_pe", m.candidates, npes, H, m.rowsum, m.rowlinks, m.rowoff, m.petot,
-           m.counts, m.rects, m.loads);
+  set_args(k_pe, "simdvol_match_pe", m.candidates, m.active, npes, H, m.rowsum, m.rowlinks,
+           m.rowoff, m.petot, m.counts, m.rects, m.loads);
   m.match_events.push_back(
       {"match_pe", device.run(k_pe, "simdvol_match_pe", cl::NDRange(P), cl::NDRange(kWgs))});
   cl::Kernel k_scan = device.kernel("match", "simdvol_match_scan", match_defines());
