@@ -108,8 +108,16 @@ SV_FN float sv_uniform(sv_u64 seed, sv_u32 ray, sv_u32 sample, sv_u32 step) {
 
 /* The fused resample + local kernel's lane order (local.cl:
  * simdvol_segment_order): segments sorted by length within blocks of
- * SV_ORDER_BLOCK consecutive segments. */
-#define SV_ORDER_BLOCK 256
+ * SV_ORDER_BLOCK consecutive segments (cut at the PEs' boundaries). The
+ * lanes' efficiency (samples over 8 x the longest lane's, summed over the
+ * work-items; the 256^3 phantom at (20, 35, 10), 8,192 PEs, every PE, on
+ * the host): unsorted 0.595, blocks of 256 0.917, 1024 0.929, 4096 0.932
+ * after 8 sweeps (0.631 / 0.931 / 0.943 / 0.945 without balancing).
+ * scripts/bench-ab, 256 -> 1024, resample + local (the order in it):
+ * the phantom 28.75 -> 28.43 ms (0.983, 6 pairs), ch2 23.82 -> 23.39
+ * (0.984), brainsmall 3.94 -> 3.83 (0.970) (2-core Intel Xeon,
+ * 2026-12-05). */
+#define SV_ORDER_BLOCK 1024
 /* The balance's per-sweep "moved samples" flags (balance.cl: moves): one
  * int per SV_BAL_MOVES_STRIDE, a cache line each, so that the flag a round
  * reads (the sweep before) shares no line with the one it writes. */
