@@ -686,6 +686,12 @@ SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, floa
     if (kc_op == 1) SV_VSTORE16((float16)(0.0f), kq);                                \
     if (!use_live || SV_STORE_KEPT_ZEROS) sv_store16_zero(dst, vstride, e0, il, nt); \
   }
+/* The kept planes of the PE this many PEs after a chunk's, prefetched by
+ * the fused kernel's kept reading (0: none; classify.cl below). */
+#ifndef SV_KEPT_PF_PE
+#define SV_KEPT_PF_PE 1
+#endif
+
 /* The kept classification of a chunk (kc_mode 1): a0 where lit, else 0,
  * and each colour times 1 / a0 (sv_classify16_lit's cr * inv). */
 #define SV_KEEP_CLASS(a0, cr, cg, cb)                          \
@@ -763,6 +769,23 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
      * transfer function's ramps cost less than those reads (brainsmall's
      * volpack preset: 1.88 -> 2.10 ms), so the engine keeps only a
      * mixture's. */
+#if SV_KEPT_PF_PE > 0
+    {
+      /* The same chunk's kept planes of the PE SV_KEPT_PF_PE after p
+       * prefetched: the next PE's chunks come right after this PE's in the
+       * range, and the hardware prefetch does not follow the jump between
+       * the PEs' blocks of planes. simdvol-bench-options --frames 12, two
+       * alternations with -DSV_KEPT_PF_PE=0 (none) and =2: ch2 (7 planes)
+       * 10.23 / 10.24 -> 8.72 / 8.80 ms (8.97 / 8.94 two PEs ahead), the
+       * 256^3 phantom (4 planes) 8.56 / 8.50 -> 8.37 / 8.38 (8.45 / 8.43);
+       * scripts/bench-ab against 6f98148: ch2 0.861, the phantom 0.990
+       * (2-core Intel Xeon, 2026-12-05). A fixed 4096 floats ahead in each
+       * plane (a first probe): the phantom 8.35 / 8.29 against 8.63 / 8.67. */
+      const int planes = kc_grad ? 7 : 4;
+      __global const float* kn = kq + (size_t)planes * (size_t)vstride * SV_KEPT_PF_PE;
+      for (int k = 0; k < planes; ++k) SV_PREFETCH(kn + k * vstride);
+    }
+#endif
     const float16 k0 = SV_VLOAD16(kq);
     if (!any(k0 > 0.0f)) {
       SV_ZERO_CHUNK();
