@@ -465,14 +465,6 @@ SV_FN uint8 sv_kpack8(int8 k0, int8 k1, int8 act, int8 lnk, int8 ea, const int m
   return select((uint8)(3u << 30), as_uint8(k0) | (as_uint8(k1) << 15) | (e << 30), as_uint8(act));
 }
 
-SV_FN void sv_kunpack8(uint8 v, int8* k0, int8* k1, int8* act, int8* lnk, int8* ea) {
-  *k0 = as_int8(v & 0x7fffu);
-  *k1 = as_int8((v >> 15) & 0x7fffu);
-  *ea = as_int8(v >> 30);
-  *act = *k0 < *k1;
-  *lnk = *ea != (int8)(3);
-}
-
 /* The kernels' bodies take make_links as a constant (always inlined), so
  * that the _nolinks kernels leave the link test of sv_row8_eval out
  * altogether. */
