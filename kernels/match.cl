@@ -141,42 +141,13 @@ SV_FN long sv_ceil_div(long n, long m, long* r) {
   return q;
 }
 
-/* The columns [*ia, *ib] of row j that can meet the cell of PE p (a superset;
- * empty when *ia > *ib). */
-SV_FN void sv_row_range(__constant float* geo, int4 ci, sv_rect r, int j, int* ia, int* ib) {
-  const float cx = geo[0] + ci.x * geo[2] + ci.y * geo[3] + ci.z * geo[4];
-  const float cy = geo[1] + ci.x * geo[5] + ci.y * geo[6] + ci.z * geo[7];
-  float lo = (float)r.i0, hi = (float)(r.i0 + r.w - 1);
-  const float dj = (float)j - cy;
-  for (int a = 0; a < 3; ++a) {
-    const float ni = geo[8 + a], nj = geo[11 + a], h = geo[14 + a];
-    if (ni == 0.0f) continue;
-    const float t = nj * dj;
-    float x0 = (-h - t) / ni, x1 = (h - t) / ni;
-    if (ni < 0.0f) {
-      const float x = x0;
-      x0 = x1;
-      x1 = x;
-    }
-    lo = max(lo, cx + x0);
-    hi = min(hi, cx + x1);
-  }
-  if (!(lo <= hi)) {
-    *ia = 1;
-    *ib = 0;
-    return;
-  }
-  *ia = (int)ceil(lo);
-  *ib = (int)floor(hi);
-}
-
-/* sv_row_range of the rows j0 ... j0 + 7 in float8 lanes, the same
- * arithmetic lane by lane (so the same columns); lanes l >= n empty. Its
- * 48 scalar divisions per work-item were much of simdvol_match_rows'
- * set-up: simdvol-bench-options --frames 12, the 256^3 phantom at (20, 35,
- * 10), two alternations with -DSV_ROW_RANGE_LANES (a call of sv_row_range
- * per lane, as before): match 6.80 / 6.79 -> 6.12 / 6.13 ms (2-core Intel
- * Xeon, 2026-12-05); the same images. */
+/* The columns [ia[l], ib[l]] of the rows j0 + l, l = 0 .. 7, that can meet
+ * the cell of PE p (a superset; empty when ia[l] > ib[l], and for l >= n),
+ * in float8 lanes. It replaced a scalar function of the same arithmetic
+ * called per row: its 48 divisions per work-item were much of
+ * simdvol_match_rows' set-up (simdvol-bench-options --frames 12, the
+ * 256^3 phantom at (20, 35, 10), two alternations: match 6.80 / 6.79 ->
+ * 6.12 / 6.13 ms, 2-core Intel Xeon, 2026-12-05; the same images). */
 SV_FN void sv_row_range8(__constant float* geo, int4 ci, sv_rect r, int j0, int n, int* ia,
                          int* ib) {
   const float cx = geo[0] + ci.x * geo[2] + ci.y * geo[3] + ci.z * geo[4];
@@ -514,16 +485,9 @@ SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
   if (!make_links) qa[0] = qa[1] = qa[2] = -1;
   int ia[8], ib[8], jj[8], on[8];
   int i0 = INT_MAX, i1 = INT_MIN;
-#ifndef SV_ROW_RANGE_LANES
   sv_row_range8(geo, ci, r, r.j0 + row0, box ? r.h - row0 : 0, ia, ib);
-#endif
   for (int l = 0; l < 8; ++l) {
     jj[l] = r.j0 + row0 + l;
-#ifdef SV_ROW_RANGE_LANES
-    ia[l] = 1;
-    ib[l] = 0;
-    if (box && row0 + l < r.h) sv_row_range(geo, ci, r, jj[l], &ia[l], &ib[l]);
-#endif
     on[l] = ia[l] <= ib[l];
     if (on[l]) {
       i0 = min(i0, ia[l]);
@@ -625,9 +589,6 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
      * before. */
 #define SV_UNSET INT_MAX
 #define SV_HOLES INT_MIN
-  int t0[3][8], hb[3][8], hc[3][8], hn[3][8];
-  for (int e = 0; e < 3; ++e)
-    for (int l = 0; l < 8; ++l) t0[e][l] = SV_UNSET;
 #if SV_FILL_PF
   /* A lane's first link along e reads the neighbour's row sums and offsets
    * (rows j of PE nq[e], 16 bytes each, far from this PE's): prefetched
@@ -771,6 +732,10 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
       }
     }
   } else {
+    /* (the per-(axis, lane) link state, the stepping fill's only) */
+    int t0[3][8], hb[3][8], hc[3][8], hn[3][8];
+    for (int e = 0; e < 3; ++e)
+      for (int l = 0; l < 8; ++l) t0[e][l] = SV_UNSET;
     sv_row8 st;
     sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
     const int8 IA = vload8(0, ia), IB = vload8(0, ib);
