@@ -134,7 +134,7 @@ __kernel void simdvol_swap_stage(__global const float4* in, __global const int8*
                  n, p, k, front);
 }
 
-/* simdvol_swap_stages: stages k0 .. k0 + m - 1 (1 <= m <= 6) in one launch.
+/* simdvol_swap_stages: stages k0 .. k0 + m - 1 (1 <= m <= 7) in one launch.
  * Work-group g (local size 2^m) takes the 2^m PEs that differ only in bits
  * k0 .. k0 + m - 1, p = base | (lid << k0) with base = (g's low k0 bits) |
  * (the rest of g << (k0 + m)), one work-item per PE: every partner of those
@@ -147,34 +147,56 @@ __kernel void simdvol_swap_stage(__global const float4* in, __global const int8*
  * go out to memory; only level k0 + m is written to `out`. la and lb must
  * hold the largest group's pixels of their levels (the host sizes them).
  * fronts bit s = stage k0 + s's `front`. Levels k0 .. k0 + m: rectangles
- * r0 .. r6, offsets o0 .. o6 (the ones past m are not read). Each pixel is
- * the same over() as simdvol_swap_stage's. */
-#define SV_SWAP_GROUP 64 /* 2^6: kSwapFusedStages in swap_cl.hpp */
+ * r0 .. r7, offsets o0 .. o7 (the ones past m are not read). Each pixel is
+ * the same over() as simdvol_swap_stage's. The engine's launch takes 7
+ * stages (6 before 2026-12-05: stage 6, 64 PEs apart, went alone):
+ * scripts/bench-ab against that build (with the prefix sums below),
+ * column swap, 4 pairs, 2-core Intel Xeon (family 6, model 167): the
+ * 256^3 phantom 6.31 -> 6.21 ms (0.977), at 512^2 0.979, ch2 0.956,
+ * brainsmall 0.931; 8 stages in one launch against 7: 1.024 / 1.000. */
+#define SV_SWAP_GROUP 128 /* 2^7: kSwapFusedStages in swap_cl.hpp */
 __kernel void simdvol_swap_stages(
     __global const float4* in, __global float4* out, __local float4* la, __local float4* lb,
     __global const int8* r0, __global const int8* r1, __global const int8* r2,
     __global const int8* r3, __global const int8* r4, __global const int8* r5,
-    __global const int8* r6, __global const int* o0, __global const int* o1, __global const int* o2,
-    __global const int* o3, __global const int* o4, __global const int* o5, __global const int* o6,
-    const int k0, const int m, const int fronts) {
-  __global const int8* R[7] = {r0, r1, r2, r3, r4, r5, r6};
-  __global const int* O[7] = {o0, o1, o2, o3, o4, o5, o6};
+    __global const int8* r6, __global const int8* r7, __global const int* o0,
+    __global const int* o1, __global const int* o2, __global const int* o3, __global const int* o4,
+    __global const int* o5, __global const int* o6, __global const int* o7, const int k0,
+    const int m, const int fronts) {
+  __global const int8* R[8] = {r0, r1, r2, r3, r4, r5, r6, r7};
+  __global const int* O[8] = {o0, o1, o2, o3, o4, o5, o6, o7};
   /* Level k0 + s's pixel count and local offset of each PE of the group
    * (index s - 1, lid). */
-  __local int size[5][SV_SWAP_GROUP];
-  __local int start[5][SV_SWAP_GROUP];
+  __local int size[6][SV_SWAP_GROUP];
+  __local int start[6][SV_SWAP_GROUP];
   const int lid = (int)get_local_id(0), g = (int)get_group_id(0);
   const int low = g & ((1 << k0) - 1);
   const int p = low | ((g >> k0) << (k0 + m)) | (lid << k0);
   for (int s = 1; s < m; ++s) size[s - 1][lid] = O[s][p + 1] - O[s][p];
   barrier(CLK_LOCAL_MEM_FENCE);
+  /* The group's offsets in local memory: prefix sums of the sizes, one
+   * work-item summing each level's 2^m sizes in turn (-DSV_SWAP_SCAN_ALL:
+   * each work-item its own sum over the sizes before it, 2^m (2^m - 1) / 2
+   * additions a level instead of 2^m; simdvol-bench-options --frames 12,
+   * two alternations: swap 6.31 / 6.24 -> 6.23 / 6.15 ms). */
+#ifdef SV_SWAP_SCAN_ALL
   for (int s = 1; s < m; ++s) {
     int a = 0;
     for (int j = 0; j < lid; ++j) a += size[s - 1][j];
     start[s - 1][lid] = a;
   }
+#else
+  if (lid == 0)
+    for (int s = 1; s < m; ++s) {
+      int a = 0;
+      for (int j = 0; j < (1 << m); ++j) {
+        start[s - 1][j] = a;
+        a += size[s - 1][j];
+      }
+    }
+#endif
   barrier(CLK_LOCAL_MEM_FENCE);
-  /* The six stage slots unrolled, each barrier outside any loop or branch
+  /* The seven stage slots unrolled, each barrier outside any loop or branch
    * (PoCL ran the loop with a barrier inside at several times the cost
    * per work-item); slots past m do nothing. Slot S reads level k0 + S
    * (global for S = 0, else local) and writes level k0 + S + 1 (global for
@@ -193,7 +215,7 @@ __kernel void simdvol_swap_stages(
         sv_swap_pixels_lg(lin, rp, start[S > 0 ? S - 1 : 0][lid], rq,                          \
                           start[S > 0 ? S - 1 : 0][lq], out, ro, O[S + 1][p], 0, n, p, k, fr); \
     } else {                                                                                   \
-      const int base = start[S < 5 ? S : 0][lid];                                              \
+      const int base = start[S < 6 ? S : 0][lid];                                              \
       if (S == 0)                                                                              \
         sv_swap_pixels_gl(in, rp, O[0][p], rq, O[0][q], lout, ro, base, 0, n, p, k, fr);       \
       else                                                                                     \
@@ -208,6 +230,7 @@ __kernel void simdvol_swap_stages(
   SV_SWAP_SLOT(3)
   SV_SWAP_SLOT(4)
   SV_SWAP_SLOT(5)
+  SV_SWAP_SLOT(6)
 #undef SV_SWAP_SLOT
 }
 

@@ -19,7 +19,7 @@ constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
 constexpr int64_t kBlock = 64;  // local size
 // simdvol_swap_stages' own local arrays (size and start: 2 x 5 x 64 ints),
 // and 1 KiB for the padding that aligns its four local blocks.
-constexpr int64_t kSwapStagesFixedLocal = 2 * 5 * 64 * int64_t(sizeof(cl_int)) + 1024;
+constexpr int64_t kSwapStagesFixedLocal = 2 * 6 * 128 * int64_t(sizeof(cl_int)) + 1024;
 
 template <class T>
 cl::Buffer upload(Device& device, const std::vector<T>& v, const std::string& what) {
@@ -271,8 +271,8 @@ cl::Event enqueue_swap_stages_sized(Device& device, const DeviceSwapPlan& d, int
   const std::string name = "simdvol_swap_stages";
   cl::Kernel kern = swap_kernel(device, name);
   // Levels k0 .. k0 + m; the slots past them repeat the last (not read).
-  std::array<const cl::Buffer*, 7> r{}, o{};
-  for (int s = 0; s < 7; ++s) {
+  std::array<const cl::Buffer*, 8> r{}, o{};
+  for (int s = 0; s < 8; ++s) {
     const auto L = static_cast<std::size_t>(k0 + std::min(s, m));
     r[static_cast<std::size_t>(s)] = &d.rects[L];
     o[static_cast<std::size_t>(s)] = &d.offsets[L];
@@ -283,8 +283,8 @@ cl::Event enqueue_swap_stages_sized(Device& device, const DeviceSwapPlan& d, int
   set_args(kern, name, in, out,
            cl::Local(static_cast<std::size_t>(std::max<int64_t>(lbytes[0], 16))),
            cl::Local(static_cast<std::size_t>(std::max<int64_t>(lbytes[1], 16))), *r[0], *r[1],
-           *r[2], *r[3], *r[4], *r[5], *r[6], *o[0], *o[1], *o[2], *o[3], *o[4], *o[5], *o[6],
-           static_cast<cl_int>(k0), static_cast<cl_int>(m), fronts);
+           *r[2], *r[3], *r[4], *r[5], *r[6], *r[7], *o[0], *o[1], *o[2], *o[3], *o[4], *o[5],
+           *o[6], *o[7], static_cast<cl_int>(k0), static_cast<cl_int>(m), fronts);
   const std::size_t pes = std::size_t(1) << N;
   return device.run(kern, name, cl::NDRange(pes), cl::NDRange(std::size_t(1) << m));
 }

@@ -193,7 +193,7 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
                                       levels[static_cast<std::size_t>(k0 + fm)]))
                 << "stages " << k0 << " .. " << k0 + fm - 1 << " in one launch";
           }
-        // Local memory too small for six stages in one launch: as many as
+        // Local memory too small for seven stages in one launch: as many as
         // fit (at least kSwapFusedMin), or none; the same bits.
         if (N >= kSwapFusedMin) {
           const int64_t need4 = swap_stages_local_need(plan.plan, 0, kSwapFusedMin);
@@ -547,7 +547,7 @@ TEST(RenderOpenClSwap, LargerFrame) {
     const Image img = render_opencl(dev, vol, opt, &t, 8192, true, L);
     EXPECT_GE(psnr(ref, img), 80.0);
     EXPECT_LE(max_abs_diff(ref, img), 1e-4f);
-    EXPECT_EQ(t.swap_stage_ms.size(), 8u);  // 13 stages: the first 6 in one launch
+    EXPECT_EQ(t.swap_stage_ms.size(), 7u);  // 13 stages: the first 7 in one launch
   }
 }
 

@@ -1,7 +1,7 @@
 // The OpenCL render engine: the pipeline of thesis figure 1.2 on the PE
 // array. Direct compositing, every stage on the device: layout -> shade ->
 // classify -> match -> balance -> resample + local (fused) -> binary swap
-// (the first six stages in one launch, the rest one launch each; swap_cl.hpp)
+// (the first seven stages in one launch, the rest one launch each; swap_cl.hpp)
 // -> display (the final cut-and-stack or
 // hierarchical layout -> intermediate image) -> warp (voxel sampling), then
 // one read of the output image. The host reads only the footprint

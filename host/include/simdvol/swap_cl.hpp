@@ -3,9 +3,9 @@
 //
 // The plan is computed on the host from the footprint rectangles (which the
 // host already reads to size the footprints) and uploaded once per frame:
-// per level the strided rectangles and offsets. The first six stages run in
-// one launch (a work-group per 64 consecutive PEs, whose partners in those
-// stages are all inside it; barriers between the stages; the five levels
+// per level the strided rectangles and offsets. The first seven stages run in
+// one launch (a work-group per 128 consecutive PEs, whose partners in those
+// stages are all inside it; barriers between the stages; the six levels
 // between in the work-group's local memory, fewer stages where they would
 // not fit), the later ones one launch per stage (a work-item per PE; the
 // partner's rectangle is read directly: the whole level is one buffer), no
@@ -93,7 +93,7 @@ bool swap_plan_held_in_map(Device& device, DeviceSwapPlan& d, int stages, int wi
 /// The level buffers of a swap run.
 /// The most swap stages one launch runs (simdvol_swap_stages: a work-group
 /// of 2^m work-items per group of 2^m PEs, barriers between the stages).
-inline constexpr int kSwapFusedStages = 6;
+inline constexpr int kSwapFusedStages = 7;
 /// Fewer stages than this go one launch per stage (simdvol_swap_stage: with
 /// a work-group of 2 or 4 work-items per group, PoCL's cost per work-group
 /// would outweigh what the launches save).
