@@ -137,6 +137,9 @@ struct RenderEngine::State {
   // tables, the cells' origins): made with the cells, only their view is
   // uploaded again per frame (set_resample_view).
   std::optional<ResampleTables> tables;
+  // The matching's PE tables of the split of `cells` (upload_pe_tables):
+  // made with the cells, not per frame.
+  std::optional<DevicePeTables> pe_tables;
   KeptVolume laid_out;  // reuse_layout: the volume in `cells`
   // The value range of a relative classification (the MRI preset), kept
   // for the volume it was computed from while reuse_layout promises that
@@ -271,6 +274,7 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     S.cells.reset();
     S.rgba.reset();
     S.tables.reset();
+    S.pe_tables.reset();
     S.laid_out.clear();
     S.live.reset();
     S.kept_class.reset();
@@ -413,10 +417,12 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   const KdSplit& split = S.cells->layout().split;
   // The balance links only where balancing follows (a third of the matching).
   const MatchLinks links = eo.balance_sweeps > 0 ? MatchLinks::make : MatchLinks::skip;
-  DeviceMatching dm = mask_pes
-                          ? enqueue_match(device, view, split,
-                                          BrickReach{&occupancy->reach, occupancy->bricks}, links)
-                          : enqueue_match(device, view, split, links);
+  if (mask_pes && (!S.pe_tables || !(S.pe_tables->split == split)))
+    S.pe_tables = upload_pe_tables(device, split);
+  DeviceMatching dm = mask_pes ? enqueue_match(device, view, split,
+                                               BrickReach{&occupancy->reach, occupancy->bricks},
+                                               *S.pe_tables, links)
+                               : enqueue_match(device, view, split, links);
   if (mask_pes && eo.fused && eo.reuse_layout) {
     S.live.emplace();
     S.live->mask = dm.active;

@@ -116,8 +116,25 @@ namespace {
 DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, const KdSplit& split,
                                     DeviceMatching m, MatchLinks links);
 
-// m.cidx (cell index of each PE) and m.pe_of (PE of each cell).
-void upload_pe_tables(Device& device, const KdSplit& split, DeviceMatching& m) {
+void set_pe_tables(DeviceMatching& m, const DevicePeTables& t) {
+  m.cidx = t.cidx;
+  m.pe_of = t.pe_of;
+  m.pairs = t.pairs;
+  m.pair_first = t.pair_first;
+}
+
+// The matching with the brick reach's PE mask (simdvol_match_active) and
+// the split's tables `t`.
+DeviceMatching enqueue_match_reach(Device& device, const ViewGeometry& view, const KdSplit& split,
+                                   const BrickReach& reach, const DevicePeTables& t,
+                                   MatchLinks links);
+
+}  // namespace
+
+// cidx (cell index of each PE), pe_of (PE of each cell), the balance pairs.
+DevicePeTables upload_pe_tables(Device& device, const KdSplit& split) {
+  DevicePeTables m;
+  m.split = split;
   const int64_t pes = split.pes();
   std::vector<cl_int4> cidx(static_cast<std::size_t>(pes));
   std::vector<cl_int> pe_of(static_cast<std::size_t>(pes));
@@ -149,9 +166,8 @@ void upload_pe_tables(Device& device, const KdSplit& split, DeviceMatching& m) {
   m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
   m.pe_of = device.buffer(ro, pe_of.size() * sizeof(cl_int), pe_of.data(), "PE of cell");
   m.pairs = device.buffer(ro, pairs.size() * sizeof(cl_int2), pairs.data(), "balance pairs");
+  return m;
 }
-
-}  // namespace
 
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
                              MatchLinks links) {
@@ -170,12 +186,28 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   for (std::size_t p = 0; p < active.size(); ++p) flags[p] = active[p] ? 1 : 0;
   m.active =
       device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, flags.size(), flags.data(), "PE mask");
-  upload_pe_tables(device, split, m);
+  set_pe_tables(m, upload_pe_tables(device, split));
   return enqueue_match_masked(device, view, split, std::move(m), links);
 }
 
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
                              const BrickReach& reach, MatchLinks links) {
+  if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
+  return enqueue_match_reach(device, view, split, reach, upload_pe_tables(device, split), links);
+}
+
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             const BrickReach& reach, const DevicePeTables& tables,
+                             MatchLinks links) {
+  if (!(tables.split == split)) throw ArgumentError("tables", "PE tables made for another split");
+  return enqueue_match_reach(device, view, split, reach, tables, links);
+}
+
+namespace {
+
+DeviceMatching enqueue_match_reach(Device& device, const ViewGeometry& view, const KdSplit& split,
+                                   const BrickReach& reach, const DevicePeTables& t,
+                                   MatchLinks links) {
   if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
   for (int a = 0; a < 3; ++a)
     if (reach.bricks[a] != (split.dims[a] + (1 << SV_BRICK_LOG2) - 1) >> SV_BRICK_LOG2)
@@ -185,7 +217,7 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   m.masked = true;
   m.active = device.buffer(CL_MEM_READ_WRITE, static_cast<std::size_t>(std::max<int64_t>(pes, 1)),
                            nullptr, "PE mask");
-  upload_pe_tables(device, split, m);
+  set_pe_tables(m, t);
   const cl_int4 cell = int4(split.cell[0], split.cell[1], split.cell[2], 0);
   const cl_int4 dims = int4(split.dims[0], split.dims[1], split.dims[2], 0);
   const cl_int4 nb = int4(reach.bricks[0], reach.bricks[1], reach.bricks[2], 0);
@@ -197,8 +229,6 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
                                   cl::NDRange(static_cast<std::size_t>(pes)), cl::NDRange(kWgs))});
   return enqueue_match_masked(device, view, split, std::move(m), links);
 }
-
-namespace {
 
 DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, const KdSplit& split,
                                     DeviceMatching m, MatchLinks links) {

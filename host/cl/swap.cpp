@@ -235,6 +235,11 @@ int64_t swap_group_pixels(const SwapPlan& plan, int k0, int m, int L) {
                                       ", level " + std::to_string(L) + " outside the plan");
   const std::vector<int64_t>& off = plan.offset[static_cast<std::size_t>(L)];
   const std::size_t pes = std::size_t(1) << N, groups = pes >> m;
+  if (k0 == 0) {  // (the engine's) groups of consecutive PEs: differences of the prefix
+    int64_t most = 0;
+    for (std::size_t g = 0; g < groups; ++g) most = std::max(most, off[(g + 1) << m] - off[g << m]);
+    return most;
+  }
   const std::size_t lowmask = (std::size_t(1) << k0) - 1;
   std::vector<int64_t> sum(groups, 0);
   for (std::size_t p = 0; p < pes; ++p)

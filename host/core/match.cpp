@@ -106,22 +106,45 @@ std::vector<sv_rect> match_candidates(const ViewGeometry& view, const KdSplit& s
   const Mat3 inv = inverse_viewing_map(view, o);
   const int64_t w = view.width(), h = view.height();
   std::vector<sv_rect> rects(static_cast<std::size_t>(split.pes()), sv_rect{0, 0, 0, 0});
+  // The cells' boxes (cell_box) from two tables of cell indices: each bit of
+  // the PE index adds its power of two to one axis' index, so the index of
+  // p is that of its low bits plus that of its high bits.
+  const int low = split.bits / 2;
+  std::vector<Dims3> lo_idx(std::size_t(1) << low), hi_idx(std::size_t(1) << (split.bits - low));
+  for (std::size_t q = 0; q < lo_idx.size(); ++q) lo_idx[q] = split.cell_index(int64_t(q));
+  for (std::size_t q = 0; q < hi_idx.size(); ++q) hi_idx[q] = split.cell_index(int64_t(q) << low);
   for (int64_t p = 0; p < split.pes(); ++p) {
-    const CellBox box = cell_box(split, p);
+    const Dims3& il = lo_idx[static_cast<std::size_t>(p & ((int64_t(1) << low) - 1))];
+    const Dims3& ih = hi_idx[static_cast<std::size_t>(p >> low)];
+    CellBox box;
+    for (int a = 0; a < 3; ++a) {
+      box.lo[a] = (il[a] + ih[a]) * split.cell[a];
+      box.hi[a] = std::min(box.lo[a] + split.cell[a], split.dims[a]);
+    }
     if (box.empty()) continue;
     double lo[2] = {std::numeric_limits<double>::infinity(),
                     std::numeric_limits<double>::infinity()};
     double hi[2] = {-lo[0], -lo[1]};
-    for (int v = 0; v < 8; ++v) {
-      Vec3 x{};
-      for (int a = 0; a < 3; ++a)
-        x[a] = static_cast<double>(((v >> a) & 1) ? box.hi[a] : box.lo[a]) - o[a];
-      const Vec3 ijk = multiply(inv, x);
+    // The vertices' i and j, as multiply(inv, x) sums them ((0 + t0) + t1)
+    // + t2, from the 12 products inv[c][a] x[a] of the two values of each
+    // x[a] (the same doubles, without 8 full matrix products per PE). With
+    // the cell boxes from the tables above: 0.39 -> 0.17 ms for 8,192 PEs
+    // (a host loop; the same rectangles over 960 views, P and volumes).
+    double t[2][3][2];
+    for (int a = 0; a < 3; ++a) {
+      const double xl = static_cast<double>(box.lo[a]) - o[a];
+      const double xh = static_cast<double>(box.hi[a]) - o[a];
       for (int c = 0; c < 2; ++c) {
-        lo[c] = std::min(lo[c], ijk[c]);
-        hi[c] = std::max(hi[c], ijk[c]);
+        t[c][a][0] = inv[c][a] * xl;
+        t[c][a][1] = inv[c][a] * xh;
       }
     }
+    for (int v = 0; v < 8; ++v)
+      for (int c = 0; c < 2; ++c) {
+        const double ijk = ((0.0 + t[c][0][v & 1]) + t[c][1][(v >> 1) & 1]) + t[c][2][(v >> 2) & 1];
+        lo[c] = std::min(lo[c], ijk);
+        hi[c] = std::max(hi[c], ijk);
+      }
     const int64_t i0 = std::max<int64_t>(0, static_cast<int64_t>(std::floor(lo[0])) - 1);
     const int64_t i1 = std::min<int64_t>(w - 1, static_cast<int64_t>(std::ceil(hi[0])) + 1);
     const int64_t j0 = std::max<int64_t>(0, static_cast<int64_t>(std::floor(lo[1])) - 1);

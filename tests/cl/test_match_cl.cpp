@@ -469,6 +469,12 @@ TEST(MatchCl, ActiveFromReachEqualsReference) {
     const Matching got = dm.read(dev);
     ASSERT_EQ(got.active, want) << "P=" << pes;
     expect_same(got, match_reference(v, split, want), "reach P=" + std::to_string(pes));
+    // The same with the split's PE tables made before (the engine's), and
+    // their links too.
+    const DevicePeTables tables = upload_pe_tables(dev, split);
+    DeviceMatching dt = enqueue_match(dev, v, split, BrickReach{&rb, nb}, tables);
+    expect_same(dt.read(dev), got, "tables P=" + std::to_string(pes));
+    EXPECT_EQ(dt.read_links(dev), dm.read_links(dev)) << "P=" << pes;
     on += std::count(want.begin(), want.end(), 1);
     off += std::count(want.begin(), want.end(), 0);
   }
@@ -477,5 +483,12 @@ TEST(MatchCl, ActiveFromReachEqualsReference) {
   // Bricks that do not tile the split's volume are refused.
   const cl::Buffer rb = dev.buffer(CL_MEM_READ_WRITE, nbricks, nullptr, "reach");
   EXPECT_THROW(enqueue_match(dev, v, kd_split(dims, 8), BrickReach{&rb, {nb[0] + 1, nb[1], nb[2]}}),
+               ArgumentError);
+  // PE tables of another split are refused.
+  EXPECT_THROW(enqueue_match(dev, v, kd_split(dims, 8), BrickReach{&rb, nb},
+                             upload_pe_tables(dev, kd_split(dims, 16))),
+               ArgumentError);
+  EXPECT_THROW(enqueue_match(dev, v, kd_split(dims, 8), BrickReach{&rb, nb},
+                             upload_pe_tables(dev, kd_split({93, 57, 32}, 8))),
                ArgumentError);
 }

@@ -92,6 +92,7 @@ struct KdSplit {
   Dims3 cell_origin(int64_t pe) const;
   /// The PE whose cell holds voxel v (0 <= v < dims).
   int64_t owner(const Dims3& voxel) const;
+  bool operator==(const KdSplit&) const = default;
 };
 
 /// Splits `dims` over `pes` PEs. Throws ArgumentError for a non-positive
