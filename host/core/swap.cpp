@@ -174,10 +174,14 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
   plan.held.resize(static_cast<std::size_t>(N + 1));
   plan.offset.resize(static_cast<std::size_t>(N + 1));
   // Constraints of the stages before level L, per axis: j[a] constrained
-  // levels, and PE p's values of them v[a][p] (grown by one stage per level).
+  // levels, and PE p's values of them, which depend only on its bits
+  // 0 .. L - 1: v[a][r] for r = p mod 2^L (grown by one stage per level:
+  // entries 2^(L-1) .. 2^L - 1 are those below with bit L - 1 added). And
+  // the pixel counts of a block's rectangles, for the offsets.
   int j[2] = {0, 0};
-  std::vector<int64_t> v[2] = {std::vector<int64_t>(static_cast<std::size_t>(P), 0),
-                               std::vector<int64_t>(static_cast<std::size_t>(P), 0)};
+  std::vector<int32_t> v[2] = {std::vector<int32_t>(static_cast<std::size_t>(P), 0),
+                               std::vector<int32_t>(static_cast<std::size_t>(P), 0)};
+  std::vector<int64_t> counts(static_cast<std::size_t>(P));
   int B[2];  // hierarchical: the pixel bits per axis
   for (int a = 0; a < 2; ++a)
     B[a] =
@@ -190,9 +194,10 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
   // F_{L-1}(p ^ 2^k)), k = L - 1). The engine plans while the device
   // resamples, on the cores PoCL's threads use: a frame with two more plans
   // took 1.034 of the time (scripts/bench-ab, 6 pairs, 2-core Intel Xeon,
-  // 2026-12-05). G and the branchless ranges below: 0.56 -> 0.41 ms a plan
-  // of the 256^3 phantom at 256^2, 8,192 PEs (a host loop, warm caches),
-  // the same plans as before over 1,008 cases (views, P, both layouts).
+  // 2026-12-05). G, the residues per r and the branchless ranges below:
+  // 0.56 -> 0.36 ms a plan of the 256^3 phantom at 256^2, 8,192 PEs (a host
+  // loop, warm caches), the same plans as before over 1,008 cases (views,
+  // P, both layouts).
   std::vector<Box2>& G = F;
   for (int L = 0; L <= N; ++L) {
     if (L > 0) {
@@ -202,8 +207,12 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
         G[static_cast<std::size_t>(g)] =
             bbox(G[static_cast<std::size_t>(2 * g)], G[static_cast<std::size_t>(2 * g + 1)]);
       const PixelBit& pb = plan.bits[static_cast<std::size_t>(k)];
-      int64_t* va = v[pb.axis].data();
-      for (int64_t p = 0; p < P; ++p) va[p] |= ((p >> k) & 1) << pb.level;
+      const int64_t half = int64_t(1) << k;
+      for (int a = 0; a < 2; ++a) {
+        int32_t* va = v[a].data();
+        const int32_t add = a == pb.axis ? int32_t(1) << pb.level : 0;
+        for (int64_t r = half; r < 2 * half; ++r) va[r] = va[r - half] | add;
+      }
       ++j[pb.axis];
     }
     auto& held = plan.held[static_cast<std::size_t>(L)];
@@ -222,38 +231,50 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
     const int64_t mx = (int64_t(1) << lx) - 1, my = (int64_t(1) << ly) - 1;
     const int64_t bx = cut ? 0 : int64_t(1) << (B[0] - j[0]);
     const int64_t by = cut ? 0 : int64_t(1) << (B[1] - j[1]);
-    const int64_t* vx = v[0].data();
-    const int64_t* vy = v[1].data();
+    const int32_t* vx = v[0].data();
+    const int32_t* vy = v[1].data();
     SwapRect* h = held_out ? held_out[L] : held.data();
     int64_t* o = off.data();
     int64_t total = 0;
     const int32_t sx = int32_t(1) << lx, sy = int32_t(1) << ly;
-    for (int64_t p = 0; p < P; ++p) {
-      const Box2 f = G[static_cast<std::size_t>(p >> L)];
-      int64_t fx, fy, cx, cy;
-      if (cut) {
-        fx = f.x0 + ((vx[p] - f.x0) & mx);
-        fy = f.y0 + ((vy[p] - f.y0) & my);
-        cx = ((f.x1 - 1 - fx) >> lx) + 1;
-        cy = ((f.y1 - 1 - fy) >> ly) + 1;
-      } else {
-        fx = std::max(f.x0, vx[p]);
-        fy = std::max(f.y0, vy[p]);
-        cx = std::min(f.x1, vx[p] + bx) - fx;
-        cy = std::min(f.y1, vy[p] + by) - fy;
+    // Block by block (one box each), in 32 bits (every coordinate is inside
+    // the image); the counts' prefix after.
+    const int64_t span = int64_t(1) << L;
+    for (int64_t g = 0; g < (P >> L); ++g) {
+      const Box2 f = G[static_cast<std::size_t>(g)];
+      const int32_t x0 = static_cast<int32_t>(f.x0), x1 = static_cast<int32_t>(f.x1);
+      const int32_t y0 = static_cast<int32_t>(f.y0), y1 = static_cast<int32_t>(f.y1);
+      SwapRect* hg = h + (g << L);
+      int64_t* cg = counts.data() + (g << L);
+      for (int64_t r = 0; r < span; ++r) {
+        const int32_t ux = vx[r], uy = vy[r];
+        int32_t fx, fy, cx, cy;
+        if (cut) {
+          fx = x0 + ((ux - x0) & static_cast<int32_t>(mx));
+          fy = y0 + ((uy - y0) & static_cast<int32_t>(my));
+          cx = ((x1 - 1 - fx) >> lx) + 1;
+          cy = ((y1 - 1 - fy) >> ly) + 1;
+        } else {
+          fx = std::max(x0, ux);
+          fy = std::max(y0, uy);
+          cx = static_cast<int32_t>(std::min<int64_t>(x1, ux + bx) - fx);
+          cy = static_cast<int32_t>(std::min<int64_t>(y1, uy + by) - fy);
+        }
+        const bool some = cx > 0 && cy > 0;
+        SwapRect& q = hg[r];
+        q.x0 = some ? fx : 0;
+        q.y0 = some ? fy : 0;
+        q.nx = some ? cx : 0;
+        q.ny = some ? cy : 0;
+        q.sx = sx;
+        q.sy = sy;
+        q.lx = lx;
+        q.ly = ly;
+        cg[r] = some ? int64_t(cx) * cy : 0;
       }
-      const bool some = cx > 0 && cy > 0;
-      SwapRect r;
-      r.x0 = some ? static_cast<int32_t>(fx) : 0;
-      r.y0 = some ? static_cast<int32_t>(fy) : 0;
-      r.nx = some ? static_cast<int32_t>(cx) : 0;
-      r.ny = some ? static_cast<int32_t>(cy) : 0;
-      r.sx = sx;
-      r.sy = sy;
-      r.lx = lx;
-      r.ly = ly;
-      h[p] = r;
-      total += int64_t(r.nx) * r.ny;
+    }
+    for (int64_t p = 0; p < P; ++p) {
+      total += counts[static_cast<std::size_t>(p)];
       o[p + 1] = total;
     }
   }
