@@ -262,6 +262,19 @@ Image::Image(int width, int height) {
   px_.assign(static_cast<std::size_t>(width) * static_cast<std::size_t>(height), Rgba{});
 }
 
+Image::Image(int width, int height, std::vector<Rgba> pixels) {
+  if (width <= 0 || height <= 0)
+    throw ArgumentError("image size", "width and height must be positive, got " +
+                                          std::to_string(width) + "x" + std::to_string(height));
+  if (pixels.size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
+    throw ArgumentError("image pixels", std::to_string(pixels.size()) + " pixels for a " +
+                                            std::to_string(width) + "x" + std::to_string(height) +
+                                            " image");
+  w_ = width;
+  h_ = height;
+  px_ = std::move(pixels);
+}
+
 void check_image_extension(const fs::path& path) {
   (void)format_of(path);
 }

@@ -83,6 +83,19 @@ TEST(Image, ConstructsZeroedAndRejectsBadSizes) {
   EXPECT_THROW(Image(-1, 5), ArgumentError);
 }
 
+TEST(Image, TakesOverPixelsOfItsSize) {
+  std::vector<Rgba> px(6);
+  for (std::size_t i = 0; i < px.size(); ++i) px[i].r = float(i);
+  const Image img(3, 2, px);
+  EXPECT_EQ(img.width(), 3);
+  EXPECT_EQ(img.height(), 2);
+  EXPECT_EQ(img.at(0, 1).r, 3.0f);
+  EXPECT_EQ(img.at(2, 1).r, 5.0f);
+  EXPECT_THROW(Image(3, 2, std::vector<Rgba>(5)), ArgumentError);
+  EXPECT_THROW(Image(2, 3, std::vector<Rgba>(7)), ArgumentError);
+  EXPECT_THROW(Image(0, 2, std::vector<Rgba>()), ArgumentError);
+}
+
 TEST(Psnr, KnownValues) {
   // Offset 0.125 (exact in float): MSE = 1/64, PSNR = 10 log10(64).
   const Image a = constant(8, 5, {0.25f, 0.5f, 0.75f, 1.0f});

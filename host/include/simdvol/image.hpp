@@ -19,6 +19,9 @@ class Image {
  public:
   Image() = default;
   Image(int width, int height);  // throws ArgumentError if not positive
+  /// An image of these pixels (row-major, width * height of them; else
+  /// ArgumentError), taken over without zeroing the storage first.
+  Image(int width, int height, std::vector<Rgba> pixels);
   int width() const { return w_; }
   int height() const { return h_; }
   Rgba& at(int x, int y) { return px_[static_cast<std::size_t>(y) * w_ + x]; }
