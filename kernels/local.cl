@@ -308,6 +308,14 @@ __kernel void simdvol_segment_order(__global const sv_segment* segs, const int n
   const int c0 = (int)get_global_id(0) * SV_ORDER_BLOCK;
   if (c0 >= nseg) return;
   const int c1 = min(c0 + SV_ORDER_BLOCK, nseg);
+#ifndef SV_ORDER_NO_PFW
+  /* The block's lines of the order asked for first, for writing (the
+   * pieces' scatters hit them in no order the hardware follows): `simdvol
+   * render --view 20,35,10 --frames 10 --step 0 --trace`, frames 2-9, two
+   * alternations, 2-core Intel Xeon, 2026-12-05: 1.17 / 1.23 -> 1.04 /
+   * 1.00 ms on the 256^3 phantom (-DSV_ORDER_NO_PFW leaves it out). */
+  for (int s = c0; s < c1; s += 16) SV_PREFETCHW(order + s);
+#endif
   int p = sv_pe_of_segment(seg_off, log2p, c0);
   for (int b0 = c0; b0 < c1; ++p) {
     const int b1 = min(c1, seg_off[p + 1]);
