@@ -529,6 +529,16 @@ SV_MATCH_FN void sv_match_rows(__constant sv_view* view, __constant float* geo,
   }
 }
 
+/* Row j of the face neighbour q, as the fill's links take it: (its first
+ * segment's index b, that segment's column, whether the row has holes). */
+SV_FN_INLINE int4 sv_fill_row(global const sv_rect* cand, global const int4* rowsum,
+                              global const int4* rowoff, global const int* seg_offset, const int H,
+                              const int q, const int j) {
+  const int gq = q * H + (j - cand[q].j0);
+  const int4 s = rowsum[gq];
+  return (int4)(seg_offset[q] + rowoff[gq].x, s.z, s.x != s.w - s.z + 1, 0);
+}
+
 SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
                                __constant long* stepc, global const sv_rect* cand,
                                global const int4* cidx, int4 cell, int4 splits,
@@ -579,16 +589,6 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
   for (int e = 0; e < 3; ++e) qb[e] = narrow && nq[e] >= 0 ? seg_offset[nq[e]] : -1;
   if (writes_base) lbase[p] = (int4)(qb[0], qb[1], qb[2], base);
   if (i0 > i1) return;
-    /* A link along axis e goes to the face neighbour nq[e] (one per axis for
-     * the whole work-item), into the same row j. Per (axis, lane), set at its
-     * first link: t0 = the index its row's segment at column 0 would have, or
-     * SV_HOLES if the row has holes; then hb = the index of the row's first
-     * segment, and a cursor (hc, hn): hn segments in columns before hc,
-     * advanced with sv_box_ray as the lane's columns grow, so a row's holes
-     * are counted once, not from the row's start at every link. SV_UNSET
-     * before. */
-#define SV_UNSET INT_MAX
-#define SV_HOLES INT_MIN
 #if SV_FILL_PF
   /* A lane's first link along e reads the neighbour's row sums and offsets
    * (rows j of PE nq[e], 16 bytes each, far from this PE's): prefetched
@@ -604,61 +604,50 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
     }
 #endif
   const int kb = saved ? koff[p] + row0 * r.w : 0;
-  /* One segment of lane l: column I, bounds KA, KB; LKV, EV its link and
-   * exit axis. */
-#define SV_FILL_SEGMENT(l, I, KA, KB, LKV, EV)                                                \
-  {                                                                                           \
-    sv_segment sg;                                                                            \
-    sg.i = (I);                                                                               \
-    sg.j = jj[l];                                                                             \
-    sg.k0 = (KA);                                                                             \
-    sg.k1 = (KB);                                                                             \
-    segments[at[l]] = sg;                                                                     \
-    if (SV_FILL_WPF > 0) {                                                                    \
-      SV_PREFETCH(segments + at[l] + SV_FILL_WPF);                                            \
-      if (make_links && fill_bounds) SV_PREFETCH(bounds + at[l] + 4 * SV_FILL_WPF);           \
-    }                                                                                         \
-    /* The balance's 16-bit bounds (balance.cl), where the host asks for                      \
-     * them: its pack would otherwise read the segments back. */                              \
-    if (make_links && fill_bounds) bounds[at[l]] = (short2)((short)sg.k0, (short)sg.k1);      \
-    if (make_links && (LKV) && nq[(EV)] >= 0) {                                               \
-      const int e = (EV), q = nq[e];                                                          \
-      if (t0[e][l] == SV_UNSET) {                                                             \
-        const int gq = q * H + (jj[l] - cand[q].j0);                                          \
-        const int4 s = rowsum[gq];                                                            \
-        const int b = seg_offset[q] + rowoff[gq].x;                                           \
-        t0[e][l] = s.x == s.w - s.z + 1 ? b - s.z : SV_HOLES;                                 \
-        hb[e][l] = b;                                                                         \
-        hc[e][l] = s.z;                                                                       \
-        hn[e][l] = 0;                                                                         \
-      }                                                                                       \
-      int t;                                                                                  \
-      if (t0[e][l] != SV_HOLES) {                                                             \
-        t = t0[e][l] + (I);                                                                   \
-      } else {                                                                                \
-        long qlo[3], qhi[3];                                                                  \
-        sv_pe_box(view, cidx[q], cell, qlo, qhi);                                             \
-        int c = hc[e][l], n = hn[e][l];                                                       \
-        for (; c < (I); ++c) {                                                                \
-          const int2 k = sv_box_ray(view, qlo, qhi, c, jj[l]);                                \
-          n += k.x < k.y;                                                                     \
-        }                                                                                     \
-        hc[e][l] = c;                                                                         \
-        hn[e][l] = n;                                                                         \
-        t = hb[e][l] + n;                                                                     \
-      }                                                                                       \
-      if (SV_FILL_WPF > 0) {                                                                  \
-        if (narrow)                                                                           \
-          SV_PREFETCH((global uint*)llist + la[e][l] + 4 * SV_FILL_WPF);                      \
-        else                                                                                  \
-          SV_PREFETCH(llist + la[e][l] + 2 * SV_FILL_WPF);                                    \
-      }                                                                                       \
-      if (narrow)                                                                             \
-        ((global uint*)llist)[la[e][l]++] = (uint)(at[l] - base) | ((uint)(t - qb[e]) << 16); \
-      else                                                                                    \
-        llist[la[e][l]++] = (int2)(at[l], t);                                                 \
-    }                                                                                         \
-    ++at[l];                                                                                  \
+  /* The stores and the holes' count, the same in both fills below (macros:
+   * as functions they cost the saved fill 3-4 %, scripts/bench-ab).
+   * SV_FILL_STORE: segment (I, J, KA, KZ) at position A, with its 16-bit
+   * bounds beside it where the balance asks for them (fill_bounds: its pack
+   * would otherwise read the segments back). SV_FILL_LINK: a link entry at
+   * LP of its list, (A, T) or, narrow, the two indices within the PEs'
+   * segments (A - base, T - QB). Each store with the line SV_FILL_WPF
+   * entries ahead prefetched.
+   * A link along axis e goes to the face neighbour nq[e] (one per axis for
+   * the whole work-item), into the same row j (sv_fill_row: its first
+   * segment b, at column `first`). Where that row's segments are
+   * contiguous (no holes) column i's is b - first + i; else b + n, n its
+   * segments in the columns before i, which SV_FILL_HOLES counts with
+   * sv_box_ray (qlo, qhi: the neighbour's cell) from a cursor (HC, HN: HN
+   * segments in the columns before HC) that grows with the columns, so that
+   * a row's holes are counted once, not from its start at every link. */
+#define SV_FILL_STORE(A, I, J, KA, KZ)                                             \
+  {                                                                                \
+    sv_segment sg;                                                                 \
+    sg.i = (I);                                                                    \
+    sg.j = (J);                                                                    \
+    sg.k0 = (KA);                                                                  \
+    sg.k1 = (KZ);                                                                  \
+    segments[A] = sg;                                                              \
+    if (SV_FILL_WPF > 0) {                                                         \
+      SV_PREFETCH(segments + (A) + SV_FILL_WPF);                                   \
+      if (make_links && fill_bounds) SV_PREFETCH(bounds + (A) + 4 * SV_FILL_WPF);  \
+    }                                                                              \
+    if (make_links && fill_bounds) bounds[A] = (short2)((short)(KA), (short)(KZ)); \
+  }
+#define SV_FILL_LINK(LP, A, T, QB)                                                    \
+  {                                                                                   \
+    if (narrow) {                                                                     \
+      if (SV_FILL_WPF > 0) SV_PREFETCH((global uint*)llist + (LP) + 4 * SV_FILL_WPF); \
+      ((global uint*)llist)[LP] = (uint)((A)-base) | ((uint)((T) - (QB)) << 16);      \
+    } else {                                                                          \
+      if (SV_FILL_WPF > 0) SV_PREFETCH(llist + (LP) + 2 * SV_FILL_WPF);               \
+      llist[LP] = (int2)((A), (T));                                                   \
+    }                                                                                 \
+  }
+#define SV_FILL_HOLES(HC, HN, I, J)                        \
+  for (; (HC) < (I); ++(HC)) {                             \
+    const int2 k_ = sv_box_ray(view, qlo, qhi, (HC), (J)); \
+    (HN) += k_.x < k_.y;                                   \
   }
   if (saved) {
     /* From the rows' saved columns, a row at a time: its segments and
@@ -678,17 +667,7 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
         const uint v = kc[8 * c];
         const int ka = (int)(v & 0x7fffu), kz = (int)((v >> 15) & 0x7fffu);
         if (ka >= kz) continue;
-        sv_segment sg;
-        sg.i = c0 + c;
-        sg.j = j;
-        sg.k0 = ka;
-        sg.k1 = kz;
-        segments[a] = sg;
-        if (SV_FILL_WPF > 0) {
-          SV_PREFETCH(segments + a + SV_FILL_WPF);
-          if (make_links && fill_bounds) SV_PREFETCH(bounds + a + 4 * SV_FILL_WPF);
-        }
-        if (make_links && fill_bounds) bounds[a] = (short2)((short)ka, (short)kz);
+        SV_FILL_STORE(a, c0 + c, j, ka, kz)
         ++a;
       }
       if (!make_links) continue;
@@ -696,46 +675,35 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
       for (int e = 0; e < 3; ++e) {
         const int q = nq[e];
         if (q < 0 || (e == 0 ? lk.x : e == 1 ? lk.y : lk.z) == 0) continue;
-        /* the same row of the neighbour: its first segment b; where its
-         * segments are contiguous, column i's is b - first + i, else
-         * counted with sv_box_ray as the columns grow */
-        const int gq = q * H + (j - cand[q].j0);
-        const int4 sq = rowsum[gq];
-        const int b = seg_offset[q] + rowoff[gq].x;
-        const int holes = sq.x != sq.w - sq.z + 1;
+        const int4 nr = sv_fill_row(cand, rowsum, rowoff, seg_offset, H, q, j);
         long qlo[3], qhi[3];
-        if (holes) sv_pe_box(view, cidx[q], cell, qlo, qhi);
-        int hc = sq.z, hn = 0, at2 = at[l], lp = la[e][l];
+        if (nr.z) sv_pe_box(view, cidx[q], cell, qlo, qhi);
+        int hc = nr.y, hn = 0, at2 = at[l], lp = la[e][l];
         for (int c = 0; c < n; ++c) {
           const uint v = kc[8 * c];
           if ((int)(v & 0x7fffu) >= (int)((v >> 15) & 0x7fffu)) continue;
           if ((int)(v >> 30) == e) {
             const int i = c0 + c;
-            int t = b - sq.z + i;
-            if (holes) {
-              for (; hc < i; ++hc) {
-                const int2 k = sv_box_ray(view, qlo, qhi, hc, j);
-                hn += k.x < k.y;
-              }
-              t = b + hn;
+            int t = nr.x - nr.y + i;
+            if (nr.z) {
+              SV_FILL_HOLES(hc, hn, i, j)
+              t = nr.x + hn;
             }
-            if (narrow) {
-              if (SV_FILL_WPF > 0) SV_PREFETCH((global uint*)llist + lp + 4 * SV_FILL_WPF);
-              ((global uint*)llist)[lp++] = (uint)(at2 - base) | ((uint)(t - qb[e]) << 16);
-            } else {
-              if (SV_FILL_WPF > 0) SV_PREFETCH(llist + lp + 2 * SV_FILL_WPF);
-              llist[lp++] = (int2)(at2, t);
-            }
+            SV_FILL_LINK(lp, at2, t, qb[e])
+            ++lp;
           }
           ++at2;
         }
       }
     }
   } else {
-    /* (the per-(axis, lane) link state, the stepping fill's only) */
-    int t0[3][8], hb[3][8], hc[3][8], hn[3][8];
+    /* The per-(axis, lane) link state, set at the lane's first link along
+     * the axis (hb = SV_UNSET before): the neighbour row's first segment hb
+     * at column hf, whether it has holes, and SV_FILL_HOLES' cursor. */
+#define SV_UNSET INT_MAX
+    int hb[3][8], hf[3][8], hh[3][8], hc[3][8], hn[3][8];
     for (int e = 0; e < 3; ++e)
-      for (int l = 0; l < 8; ++l) t0[e][l] = SV_UNSET;
+      for (int l = 0; l < 8; ++l) hb[e][l] = SV_UNSET;
     sv_row8 st;
     sv_row8_init(view, stepc, lo, hi, i0, jj, on, &st);
     const int8 IA = vload8(0, ia), IB = vload8(0, ib);
@@ -751,15 +719,37 @@ SV_MATCH_FN void sv_match_fill(__constant sv_view* view, __constant float* geo,
         vstore8(ea, 0, E);
         for (int l = 0; l < 8; ++l) {
           if (!A[l]) continue;
-          SV_FILL_SEGMENT(l, i, K0[l], K1[l], LK[l], E[l])
+          SV_FILL_STORE(at[l], i, jj[l], K0[l], K1[l])
+          if (make_links && LK[l] && nq[E[l]] >= 0) {
+            const int e = E[l], q = nq[e];
+            if (hb[e][l] == SV_UNSET) {
+              const int4 nr = sv_fill_row(cand, rowsum, rowoff, seg_offset, H, q, jj[l]);
+              hb[e][l] = nr.x;
+              hf[e][l] = nr.y;
+              hh[e][l] = nr.z;
+              hc[e][l] = nr.y;
+              hn[e][l] = 0;
+            }
+            long qlo[3], qhi[3];
+            if (hh[e][l]) sv_pe_box(view, cidx[q], cell, qlo, qhi);
+            int t = hb[e][l] - hf[e][l] + i;
+            if (hh[e][l]) {
+              SV_FILL_HOLES(hc[e][l], hn[e][l], i, jj[l])
+              t = hb[e][l] + hn[e][l];
+            }
+            SV_FILL_LINK(la[e][l], at[l], t, qb[e])
+            ++la[e][l];
+          }
+          ++at[l];
         }
       }
       sv_row8_step(&st, view, stepc);
     }
   }
-#undef SV_FILL_SEGMENT
 #undef SV_UNSET
-#undef SV_HOLES
+#undef SV_FILL_STORE
+#undef SV_FILL_LINK
+#undef SV_FILL_HOLES
 }
 
 #define SV_MATCH_ROWS_KERNEL(NAME, LINKS)                                                       \

@@ -431,7 +431,7 @@ cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffe
 }
 
 Image read_device_image(Device& device, const cl::Buffer& image, int width, int height) {
-  if (width <= 0 || height <= 0) return Image(width, height);  // (its ArgumentError)
+  if (width <= 0 || height <= 0) return Image(width, height);  // (throws ArgumentError)
   // Mapped (on a CPU device the buffer's own memory) and copied once into
   // the image's storage: a read into an Image zeroed it first, 1 MB a frame
   // at 256^2 (about 0.15 ms of host work beside the kernels).

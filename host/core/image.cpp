@@ -253,25 +253,23 @@ Format format_of(const fs::path& path) {
 
 }  // namespace
 
-Image::Image(int width, int height) {
+namespace {
+// Pixels of a width x height image; ArgumentError unless both are positive.
+std::size_t image_pixels(int width, int height) {
   if (width <= 0 || height <= 0)
     throw ArgumentError("image size", "width and height must be positive, got " +
                                           std::to_string(width) + "x" + std::to_string(height));
-  w_ = width;
-  h_ = height;
-  px_.assign(static_cast<std::size_t>(width) * static_cast<std::size_t>(height), Rgba{});
+  return static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
 }
+}  // namespace
 
-Image::Image(int width, int height, std::vector<Rgba> pixels) {
-  if (width <= 0 || height <= 0)
-    throw ArgumentError("image size", "width and height must be positive, got " +
-                                          std::to_string(width) + "x" + std::to_string(height));
-  if (pixels.size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
+Image::Image(int width, int height) : w_(width), h_(height), px_(image_pixels(width, height)) {}
+
+Image::Image(int width, int height, std::vector<Rgba> pixels) : w_(width), h_(height) {
+  if (pixels.size() != image_pixels(width, height))
     throw ArgumentError("image pixels", std::to_string(pixels.size()) + " pixels for a " +
                                             std::to_string(width) + "x" + std::to_string(height) +
                                             " image");
-  w_ = width;
-  h_ = height;
   px_ = std::move(pixels);
 }
 
