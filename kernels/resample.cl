@@ -663,10 +663,18 @@ SV_FN void sv_lanes_of8(const float8 r, const float8 g, const float8 b, const fl
 #ifndef SV_VOX_PF
 #define SV_VOX_PF 256
 #endif
-SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, const int nseg,
-                                const int s0, const int p0, __global const sv_view* view,
-                                __global const int* table, __global const float* vox, const int cs,
-                                __global const int4* origins, const int4 pe_cell, const int il) {
+/* The prefetch's rows as a cursor (sv_pf_begin sets it, sv_pf_row asks
+ * for one row and steps on), so that the fused resample + local can spread
+ * them over its steps (local.cl); sv_prefetch_pe_ahead asks for them all at
+ * once. */
+typedef struct {
+  int r, r1, ly, ry, y0, z, x0, x1, run, tx0, lo, hi, nx, ny, nz;
+} sv_pf;
+SV_FN_INLINE void sv_pf_begin(__global const int* seg_off, const int log2p, const int nseg,
+                              const int s0, const int p0, __global const sv_view* view,
+                              __global const int* table, __global const int4* origins,
+                              const int4 pe_cell, const int il, sv_pf* c) {
+  c->r = c->r1 = 0;
 #if SV_VOX_PF > 0
   const int sa = s0 + SV_VOX_PF;
   if (sa >= nseg || pe_cell.w <= 0) return;
@@ -686,41 +694,57 @@ SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, co
    * work-item takes its share of them: the cell's part of each row (one
    * run in q's block) and its halo voxels in the neighbours' blocks. */
   const int4 o = origins[q];
-  const int nx = view->dims[0], ny = view->dims[1], nz = view->dims[2];
-  __global const int* tx = table;
-  __global const int* ty = table + nx;
-  __global const int* tz = table + nx + ny;
-  const int vm = il ? 4 : 1;
-  const int lo = ORDER >= 2 ? 1 : 0, hi = ORDER >= 2 ? 2 : 1;
-  const int ry = pe_cell.y + lo + hi, rows = ry * (pe_cell.z + lo + hi);
-  const int r0 = SV_SHARE(rows, 0), r1 = SV_SHARE(rows, 8);
-  if (r0 >= r1) return;
+  c->nx = view->dims[0];
+  c->ny = view->dims[1];
+  c->nz = view->dims[2];
+  c->lo = ORDER >= 2 ? 1 : 0;
+  c->hi = ORDER >= 2 ? 2 : 1;
+  c->ry = pe_cell.y + c->lo + c->hi;
+  const int rows = c->ry * (pe_cell.z + c->lo + c->hi);
+  c->r = SV_SHARE(rows, 0);
+  c->r1 = SV_SHARE(rows, 8);
+#undef SV_SHARE
   /* (clamped: origins of another split would make a wrong hint, never a
    * read outside the table) */
-  const int x0 = clamp(o.x, 0, nx - 1), x1 = min(x0 + pe_cell.x, nx); /* the cell's x run */
-  const int run = (x1 - 1 - x0) * vm; /* floats after the run's first */
-  const int tx0 = tx[x0];
-  int ly = r0 % ry, z = o.z - lo + r0 / ry;
-  for (int r = r0; r < r1; ++r) {
-    const int y = o.y - lo + ly;
-    if (y >= 0 && y < ny && z >= 0 && z < nz) {
-      const int row = ty[y] + tz[z];
-      for (int ch = 0; ch < (il ? 1 : 4); ++ch) {
-        __global const float* p = vox + row + ch * cs;
-        for (int e = 0; e < run; e += 16) SV_PREFETCH(p + tx0 + e);
-        SV_PREFETCH(p + tx0 + run);
-        for (int x = x0 - lo; x < x0; ++x)
-          if (x >= 0) SV_PREFETCH(p + tx[x]);
-        for (int x = x1; x < min(x1 + hi, nx); ++x) SV_PREFETCH(p + tx[x]);
-      }
-    }
-    if (++ly == ry) {
-      ly = 0;
-      ++z;
+  c->x0 = clamp(o.x, 0, c->nx - 1);
+  c->x1 = min(c->x0 + pe_cell.x, c->nx);       /* the cell's x run */
+  c->run = (c->x1 - 1 - c->x0) * (il ? 4 : 1); /* floats after the run's first */
+  c->tx0 = table[c->x0];
+  c->ly = c->r % c->ry;
+  c->y0 = o.y - c->lo;
+  c->z = o.z - c->lo + c->r / c->ry;
+#endif
+}
+SV_FN_INLINE void sv_pf_row(sv_pf* c, __global const int* table, __global const float* vox,
+                            const int cs, const int il) {
+  __global const int* tx = table;
+  __global const int* ty = table + c->nx;
+  __global const int* tz = table + c->nx + c->ny;
+  const int y = c->y0 + c->ly, z = c->z;
+  if (y >= 0 && y < c->ny && z >= 0 && z < c->nz) {
+    const int row = ty[y] + tz[z];
+    for (int ch = 0; ch < (il ? 1 : 4); ++ch) {
+      __global const float* p = vox + row + ch * cs;
+      for (int e = 0; e < c->run; e += 16) SV_PREFETCH(p + c->tx0 + e);
+      SV_PREFETCH(p + c->tx0 + c->run);
+      for (int x = c->x0 - c->lo; x < c->x0; ++x)
+        if (x >= 0) SV_PREFETCH(p + tx[x]);
+      for (int x = c->x1; x < min(c->x1 + c->hi, c->nx); ++x) SV_PREFETCH(p + tx[x]);
     }
   }
-#undef SV_SHARE
-#endif
+  ++c->r;
+  if (++c->ly == c->ry) {
+    c->ly = 0;
+    ++c->z;
+  }
+}
+SV_FN void sv_prefetch_pe_ahead(__global const int* seg_off, const int log2p, const int nseg,
+                                const int s0, const int p0, __global const sv_view* view,
+                                __global const int* table, __global const float* vox, const int cs,
+                                __global const int4* origins, const int4 pe_cell, const int il) {
+  sv_pf c;
+  sv_pf_begin(seg_off, log2p, nseg, s0, p0, view, table, origins, pe_cell, il, &c);
+  while (c.r < c.r1) sv_pf_row(&c, table, vox, cs, il);
 }
 
 /* The PE of a float8 work-item's first position s0: written by the
