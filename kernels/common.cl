@@ -83,9 +83,12 @@ typedef float16 sv_float16u __attribute__((aligned(4)));
 #if defined(__clang__) && (defined(__x86_64__) || defined(__aarch64__))
 #define SV_PREFETCH(p) __builtin_prefetch(p)
 #define SV_PREFETCHW(p) __builtin_prefetch((p), 1)
+/* ... into the second-level cache (x86-64: prefetcht1) */
+#define SV_PREFETCH_L2(p) __builtin_prefetch((p), 0, 2)
 #else
 #define SV_PREFETCH(p) ((void)0)
 #define SV_PREFETCHW(p) ((void)0)
+#define SV_PREFETCH_L2(p) ((void)0)
 #endif
 
 /* Marks brick word *p of an occupancy buffer (zero before the kernel,

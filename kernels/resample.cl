@@ -715,6 +715,20 @@ SV_FN_INLINE void sv_pf_begin(__global const int* seg_off, const int log2p, cons
   c->z = o.z - c->lo + c->r / c->ry;
 #endif
 }
+/* The rows' lines asked for into the second-level cache (prefetcht1; the
+ * PE's steps come 256 positions later, about 32 work-items): with the rows
+ * spread over the steps (local.cl) simdvol-bench-options --frames 12, in
+ * turn, locality 3 (the first level, -DSV_VOX_PF_L1) -> 2, resample +
+ * local, two runs each: the 256^3 phantom 25.45 / 25.40 -> 25.10 / 25.10
+ * ms, at 512^2 25.64 / 25.68 -> 25.48 / 25.49, ch2 23.56 / 23.37 -> 23.31 /
+ * 22.85 (2-core Intel Xeon, 2026-12-05; locality 1, prefetcht2, in between;
+ * with the rows all at once before the steps the localities had measured
+ * the same). */
+#ifdef SV_VOX_PF_L1
+#define SV_PFR(p) SV_PREFETCH(p)
+#else
+#define SV_PFR(p) SV_PREFETCH_L2(p)
+#endif
 SV_FN_INLINE void sv_pf_row(sv_pf* c, __global const int* table, __global const float* vox,
                             const int cs, const int il) {
   __global const int* tx = table;
@@ -725,11 +739,11 @@ SV_FN_INLINE void sv_pf_row(sv_pf* c, __global const int* table, __global const 
     const int row = ty[y] + tz[z];
     for (int ch = 0; ch < (il ? 1 : 4); ++ch) {
       __global const float* p = vox + row + ch * cs;
-      for (int e = 0; e < c->run; e += 16) SV_PREFETCH(p + c->tx0 + e);
-      SV_PREFETCH(p + c->tx0 + c->run);
+      for (int e = 0; e < c->run; e += 16) SV_PFR(p + c->tx0 + e);
+      SV_PFR(p + c->tx0 + c->run);
       for (int x = c->x0 - c->lo; x < c->x0; ++x)
-        if (x >= 0) SV_PREFETCH(p + tx[x]);
-      for (int x = c->x1; x < min(c->x1 + c->hi, c->nx); ++x) SV_PREFETCH(p + tx[x]);
+        if (x >= 0) SV_PFR(p + tx[x]);
+      for (int x = c->x1; x < min(c->x1 + c->hi, c->nx); ++x) SV_PFR(p + tx[x]);
     }
   }
   ++c->r;
