@@ -783,7 +783,15 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
        * plane (a first probe): the phantom 8.35 / 8.29 against 8.63 / 8.67. */
       const int planes = kc_grad ? 7 : 4;
       __global const float* kn = kq + (size_t)planes * (size_t)vstride * SV_KEPT_PF_PE;
+      /* Into the second-level cache (-DSV_KEPT_PF_L1: the first, as
+       * before the ninth session of 2026-12-05; in turn, two runs each:
+       * the phantom 8.41 / 8.43 -> 8.35 / 8.32 ms, ch2 8.49 / 8.44 -> 8.35
+       * / 8.33). */
+#ifdef SV_KEPT_PF_L1
       for (int k = 0; k < planes; ++k) SV_PREFETCH(kn + k * vstride);
+#else
+      for (int k = 0; k < planes; ++k) SV_PREFETCH_L2(kn + k * vstride);
+#endif
     }
 #endif
     const float16 k0 = SV_VLOAD16(kq);
