@@ -2,6 +2,9 @@
 #include "simdvol/device.hpp"
 
 #include <unistd.h>
+#ifdef __linux__
+#include <sys/mman.h>
+#endif
 
 #include <algorithm>
 #include <array>
@@ -680,6 +683,71 @@ cl::Buffer Device::scratch_buffer(cl_mem_flags flags, std::size_t bytes, const s
   return allocate(flags, bytes, room, nullptr, what);
 }
 
+namespace {
+
+// Large host buffers on transparent huge pages (Linux, where the kernel's
+// setting is "madvise", Debian's default, or "always"): the frame's kernels
+// walk hundreds of MB (the 256^3 phantom's RGBA cells are 268 MB, the kept
+// classification and the value cells 100 MB or more), and with 4 KiB pages
+// most of their cache misses also miss the TLB. The buffer is then made over
+// memory of our own (CL_MEM_USE_HOST_PTR: PoCL's CPU devices take it as the
+// buffer's storage, no copy), 2 MiB-aligned and advised MADV_HUGEPAGE before
+// any page is touched, and freed by the buffer's destructor callback. Not
+// for a GPU (info.is_cpu false), not below kHugeMin, and never where
+// SIMDVOL_HUGE_PAGES=0. scripts/bench-ab with SIMDVOL_HUGE_PAGES=0 as A
+// (2-core Intel Xeon, family 6, model 167, 2026-12-05, ninth session), the
+// frame's wall: the 256^3 phantom 48.29 -> 46.08 ms (0.976, 6 pairs), at
+// 512^2 0.955, ch2 0.924, brainsmall 0.966 (4 pairs); in one process, two
+// runs each: shade + classify 8.22 / 8.82 -> 7.76 / 7.81 ms, resample +
+// local 26.08 / 27.09 -> 25.30 / 25.45.
+constexpr std::size_t kHugePage = std::size_t(2) << 20;
+constexpr std::size_t kHugeMin = std::size_t(4) << 20;
+
+bool huge_pages_wanted() {  // (read at each fresh large buffer: a few a render)
+  const char* e = std::getenv("SIMDVOL_HUGE_PAGES");
+  return !(e && std::string(e) == "0");
+}
+
+// Device::own_host_bytes: the memory huge_alloc handed out, not yet freed.
+std::atomic<std::size_t> g_own_host_bytes{0};
+
+// The block huge_alloc hands out: its size before the memory it gives.
+struct OwnBlock {
+  void* base;
+  std::size_t bytes;
+};
+
+// Memory for a buffer of `bytes` on huge pages, or nullptr (not Linux, or
+// no memory: the caller takes the device's own allocation). Freed by
+// free_host_memory with the pointer it returns.
+void* huge_alloc(std::size_t bytes) {
+#ifdef __linux__
+  const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+  void* p = nullptr;
+  if (posix_memalign(&p, kHugePage, rounded) != 0) return nullptr;
+  madvise(p, rounded, MADV_HUGEPAGE);  // a hint: pages of 4 KiB where refused
+  g_own_host_bytes += rounded;
+  return p;
+#else
+  (void)bytes;
+  return nullptr;
+#endif
+}
+
+// The destructor callback's data: the block and its size.
+void CL_CALLBACK free_host_memory(cl_mem, void* block) {
+  auto* b = static_cast<OwnBlock*>(block);
+  std::free(b->base);
+  g_own_host_bytes -= b->bytes;
+  delete b;
+}
+
+}  // namespace
+
+std::size_t Device::own_host_bytes() {
+  return g_own_host_bytes.load();
+}
+
 cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t fresh_bytes,
                             void* host_ptr, const std::string& what) {
   check_allocation(bytes, info_.max_alloc_bytes, what);
@@ -723,9 +791,28 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
     }
   }
   cl_int err = CL_SUCCESS;
-  cl::Buffer b(context_, flags, fresh_bytes, host_ptr, &err);
-  if (err != CL_SUCCESS && fresh_bytes != bytes)  // no room for the headroom: exactly as asked
-    b = cl::Buffer(context_, flags, fresh_bytes = bytes, host_ptr, &err);
+  cl::Buffer b;
+  if (info_.is_cpu && host_ptr == nullptr && fresh_bytes >= kHugeMin && huge_pages_wanted()) {
+    // (flags keeps CL_MEM_ALLOC_HOST_PTR for the pool's matching)
+    if (void* own = huge_alloc(fresh_bytes)) {
+      auto* block = new OwnBlock{own, (fresh_bytes + kHugePage - 1) / kHugePage * kHugePage};
+      const cl_mem_flags uf = (flags & ~cl_mem_flags(CL_MEM_ALLOC_HOST_PTR)) | CL_MEM_USE_HOST_PTR;
+      b = cl::Buffer(context_, uf, fresh_bytes, own, &err);
+      if (err == CL_SUCCESS &&
+          clSetMemObjectDestructorCallback(b(), free_host_memory, block) != CL_SUCCESS)
+        err = CL_OUT_OF_RESOURCES;
+      if (err != CL_SUCCESS) {
+        b = cl::Buffer();  // released (nothing uses it yet): the block is free to go
+        free_host_memory(nullptr, block);
+      }
+    }
+  }
+  if (!b()) {
+    err = CL_SUCCESS;
+    b = cl::Buffer(context_, flags, fresh_bytes, host_ptr, &err);
+    if (err != CL_SUCCESS && fresh_bytes != bytes)  // no room for the headroom: exactly as asked
+      b = cl::Buffer(context_, flags, fresh_bytes = bytes, host_ptr, &err);
+  }
   if (is_allocation_failure(err) && pool_) {
     // The pool's buffers that nobody holds any more (kept for later
     // frames) released, then once more.

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "simdvol/device.hpp"
+#include "stage_testing.hpp"
 #include "testing.hpp"
 
 namespace simdvol {
@@ -599,6 +600,92 @@ TEST(DeviceTest, CpuBuffersAreHostMemoryFromTheStart) {
                 .getInfo(CL_MEM_FLAGS, &flags),
             CL_SUCCESS);
   EXPECT_EQ(flags & CL_MEM_ALLOC_HOST_PTR, 0u);
+}
+
+// The VmFlags of the mapping that holds `p` (/proc/self/smaps), or "".
+std::string vm_flags_at(const void* p) {
+  std::ifstream in("/proc/self/smaps");
+  const auto a = reinterpret_cast<std::uintptr_t>(p);
+  std::string line;
+  bool inside = false;
+  while (std::getline(in, line)) {
+    std::uintptr_t lo = 0, hi = 0;
+    char dash = 0;
+    std::istringstream head(line);
+    if (head >> std::hex >> lo >> dash >> hi && dash == '-') {
+      inside = lo <= a && a < hi;
+      continue;
+    }
+    if (inside && line.rfind("VmFlags:", 0) == 0) return line;
+  }
+  return "";
+}
+
+// On a Linux CPU device a buffer of 4 MiB or more without a host pointer is
+// made over memory of the Device's own, 2 MiB-aligned and advised for
+// transparent huge pages (VmFlags "hg"), freed with the buffer; it works as
+// any buffer (a kernel's writes read back), goes back to the pool and comes
+// out again for its request; smaller ones, and all with
+// SIMDVOL_HUGE_PAGES=0, are the implementation's host memory as before.
+TEST(DeviceTest, LargeCpuBuffersOnHugePages) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+#ifndef __linux__
+  GTEST_SKIP() << "huge pages are asked for on Linux only";
+#endif
+  if (!d.info().is_cpu) GTEST_SKIP() << "not a CPU device";
+  simdvol::testing::ScopedEnv on("SIMDVOL_HUGE_PAGES", nullptr);
+  const std::size_t big = std::size_t(5) << 20, n = big / sizeof(cl_int);
+  auto flags_of = [](const cl::Buffer& b) {
+    cl_mem_flags f = 0;
+    EXPECT_EQ(b.getInfo(CL_MEM_FLAGS, &f), CL_SUCCESS);
+    return f;
+  };
+  cl_mem first = nullptr;
+  {
+    Device::ReuseScope scope(d);
+    cl::Buffer b = d.scratch_buffer(CL_MEM_READ_WRITE, big, "large");
+    first = b();
+    EXPECT_NE(flags_of(b) & CL_MEM_USE_HOST_PTR, 0u);
+    EXPECT_EQ(flags_of(b) & CL_MEM_ALLOC_HOST_PTR, 0u);
+    void* host = nullptr;
+    ASSERT_EQ(b.getInfo(CL_MEM_HOST_PTR, &host), CL_SUCCESS);
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(host) % (std::size_t(2) << 20), 0u);
+    const std::string vm = vm_flags_at(host);
+    EXPECT_NE(vm.find(" hg"), std::string::npos) << vm;
+    std::vector<cl_int> v(n);
+    for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<cl_int>(i * 7);
+    ASSERT_EQ(d.queue().enqueueWriteBuffer(b, CL_TRUE, 0, big, v.data()), CL_SUCCESS);
+    cl::Program prog = d.build("kernel void add3(global int* a) { a[get_global_id(0)] += 3; }");
+    cl::Kernel k(prog, "add3");
+    k.setArg(0, b);
+    d.run(k, "add3", cl::NDRange(n), cl::NDRange(64));
+    std::vector<cl_int> back(n);
+    ASSERT_EQ(d.queue().enqueueReadBuffer(b, CL_TRUE, 0, big, back.data()), CL_SUCCESS);
+    for (std::size_t i = 0; i < n; i += 4099) EXPECT_EQ(back[i], static_cast<cl_int>(i * 7 + 3));
+    EXPECT_EQ(back[n - 1], static_cast<cl_int>((n - 1) * 7 + 3));
+  }
+  {
+    Device::ReuseScope scope(d);
+    EXPECT_EQ(d.scratch_buffer(CL_MEM_READ_WRITE, big, "large")(), first);  // from the pool
+    EXPECT_EQ(flags_of(d.buffer(CL_MEM_READ_WRITE, (std::size_t(4) << 20) - 4096, nullptr,
+                                "below the bound")) &
+                  CL_MEM_USE_HOST_PTR,
+              0u);
+  }
+  // Freed with its buffer (PoCL runs the destructor callback at the release,
+  // its commands done).
+  const std::size_t own = Device::own_host_bytes();
+  {
+    cl::Buffer once = d.buffer(CL_MEM_READ_WRITE, big, nullptr, "outside a scope");
+    EXPECT_EQ(Device::own_host_bytes(), own + (std::size_t(6) << 20));
+  }
+  d.finish();
+  EXPECT_EQ(Device::own_host_bytes(), own);
+  simdvol::testing::ScopedEnv off("SIMDVOL_HUGE_PAGES", "0");
+  const cl_mem_flags f = flags_of(d.buffer(CL_MEM_READ_WRITE, big, nullptr, "large, off"));
+  EXPECT_EQ(f & CL_MEM_USE_HOST_PTR, 0u);
+  EXPECT_NE(f & CL_MEM_ALLOC_HOST_PTR, 0u);
 }
 
 // SIMDVOL_FAIL_ALLOCATION=WHAT[:N] (a test hook): the N-th request for a
