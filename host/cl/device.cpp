@@ -685,27 +685,35 @@ cl::Buffer Device::scratch_buffer(cl_mem_flags flags, std::size_t bytes, const s
 
 namespace {
 
-// Large host buffers on transparent huge pages (Linux, where the kernel's
-// setting is "madvise", Debian's default, or "always"): the frame's kernels
-// walk hundreds of MB (the 256^3 phantom's RGBA cells are 268 MB, the kept
-// classification and the value cells 100 MB or more), and with 4 KiB pages
-// most of their cache misses also miss the TLB. The buffer is then made over
-// memory of our own (CL_MEM_USE_HOST_PTR: PoCL's CPU devices take it as the
-// buffer's storage, no copy), 2 MiB-aligned and advised MADV_HUGEPAGE before
-// any page is touched, and freed by the buffer's destructor callback. Not
-// for a GPU (info.is_cpu false), not below kHugeMin, and never where
-// SIMDVOL_HUGE_PAGES=0. scripts/bench-ab with SIMDVOL_HUGE_PAGES=0 as A
-// (2-core Intel Xeon, family 6, model 167, 2026-12-05, ninth session), the
-// frame's wall: the 256^3 phantom 48.29 -> 46.08 ms (0.976, 6 pairs), at
-// 512^2 0.955, ch2 0.924, brainsmall 0.966 (4 pairs); in one process, two
-// runs each: shade + classify 8.22 / 8.82 -> 7.76 / 7.81 ms, resample +
-// local 26.08 / 27.09 -> 25.30 / 25.45.
+// Large host buffers on transparent huge pages, with SIMDVOL_HUGE_PAGES=1
+// (Linux, where the kernel's setting is "madvise", Debian's default, or
+// "always"): the frame's kernels walk hundreds of MB (the 256^3 phantom's
+// RGBA cells are 268 MB, the kept classification and the value cells 100 MB
+// or more), and with 4 KiB pages most of their cache misses also miss the
+// TLB. The buffer is then made over memory of our own (CL_MEM_USE_HOST_PTR:
+// PoCL's CPU devices take it as the buffer's storage, no copy), 2
+// MiB-aligned and advised MADV_HUGEPAGE before any page is touched, and
+// freed by the buffer's destructor callback. Not for a GPU (info.is_cpu
+// false), not below kHugeMin.
+// Off by default: on the 2-core Intel Xeon (family 6, model 167; a
+// Firecracker VM with virtio-balloon, 2026-12-05, ninth session) each fresh
+// 2 MiB page took about 1.4 ms to fault in (the host's faults, invisible to
+// the guest's counters: no compaction stall), so the frames that touch new
+// buffers lost more than the later ones gained. The phantom's first frame
+// (`simdvol render --view 20,35,10 --times`, 3 s apart) 221-227 ms against
+// 561-752 with huge pages; a 36-frame turntable (`--frames 36 --step 5`,
+// whose scratch buffers grow with the views) 2.21 / 2.24 s against 3.09 /
+// 3.13 s. The frames after: scripts/bench-ab with it as B, the frame's
+// wall, the 256^3 phantom 48.29 -> 46.08 ms (0.976, 6 pairs), at 512^2
+// 0.955, ch2 0.924, brainsmall 0.966 (4 pairs); in one process, two runs
+// each: shade + classify 8.22 / 8.82 -> 7.76 / 7.81 ms, resample + local
+// 26.08 / 27.09 -> 25.30 / 25.45.
 constexpr std::size_t kHugePage = std::size_t(2) << 20;
 constexpr std::size_t kHugeMin = std::size_t(4) << 20;
 
 bool huge_pages_wanted() {  // (read at each fresh large buffer: a few a render)
   const char* e = std::getenv("SIMDVOL_HUGE_PAGES");
-  return !(e && std::string(e) == "0");
+  return e && std::string(e) == "1";
 }
 
 // Device::own_host_bytes: the memory huge_alloc handed out, not yet freed.

@@ -621,12 +621,13 @@ std::string vm_flags_at(const void* p) {
   return "";
 }
 
-// On a Linux CPU device a buffer of 4 MiB or more without a host pointer is
-// made over memory of the Device's own, 2 MiB-aligned and advised for
-// transparent huge pages (VmFlags "hg"), freed with the buffer; it works as
-// any buffer (a kernel's writes read back), goes back to the pool and comes
-// out again for its request; smaller ones, and all with
-// SIMDVOL_HUGE_PAGES=0, are the implementation's host memory as before.
+// With SIMDVOL_HUGE_PAGES=1 on a Linux CPU device a buffer of 4 MiB or more
+// without a host pointer is made over memory of the Device's own, 2
+// MiB-aligned and advised for transparent huge pages (VmFlags "hg"), freed
+// with the buffer; it works as any buffer (a kernel's writes read back), goes
+// back to the pool and comes out again for its request; smaller ones, and all
+// without the variable (the default) or with it 0, are the implementation's
+// host memory as before.
 TEST(DeviceTest, LargeCpuBuffersOnHugePages) {
   SIMDVOL_REQUIRE_OPENCL();
   Device d;
@@ -634,7 +635,7 @@ TEST(DeviceTest, LargeCpuBuffersOnHugePages) {
   GTEST_SKIP() << "huge pages are asked for on Linux only";
 #endif
   if (!d.info().is_cpu) GTEST_SKIP() << "not a CPU device";
-  simdvol::testing::ScopedEnv on("SIMDVOL_HUGE_PAGES", nullptr);
+  simdvol::testing::ScopedEnv on("SIMDVOL_HUGE_PAGES", "1");
   const std::size_t big = std::size_t(5) << 20, n = big / sizeof(cl_int);
   auto flags_of = [](const cl::Buffer& b) {
     cl_mem_flags f = 0;
@@ -682,10 +683,12 @@ TEST(DeviceTest, LargeCpuBuffersOnHugePages) {
   }
   d.finish();
   EXPECT_EQ(Device::own_host_bytes(), own);
-  simdvol::testing::ScopedEnv off("SIMDVOL_HUGE_PAGES", "0");
-  const cl_mem_flags f = flags_of(d.buffer(CL_MEM_READ_WRITE, big, nullptr, "large, off"));
-  EXPECT_EQ(f & CL_MEM_USE_HOST_PTR, 0u);
-  EXPECT_NE(f & CL_MEM_ALLOC_HOST_PTR, 0u);
+  for (const char* v : {"0", static_cast<const char*>(nullptr)}) {
+    simdvol::testing::ScopedEnv off("SIMDVOL_HUGE_PAGES", v);
+    const cl_mem_flags f = flags_of(d.buffer(CL_MEM_READ_WRITE, big, nullptr, "large, off"));
+    EXPECT_EQ(f & CL_MEM_USE_HOST_PTR, 0u);
+    EXPECT_NE(f & CL_MEM_ALLOC_HOST_PTR, 0u);
+  }
 }
 
 // SIMDVOL_FAIL_ALLOCATION=WHAT[:N] (a test hook): the N-th request for a

@@ -256,12 +256,11 @@ class Device {
   /// open, a request without a host pointer may get a buffer released in an
   /// earlier scope (of the same flags, bytes <= size <= 2 * bytes + 64 KiB,
   /// the smallest, preferring one last handed out for the same `what`;
-  /// contents unspecified, as for a fresh buffer). On a Linux CPU device a
-  /// fresh buffer of 4 MiB or more without a host pointer is made over host
-  /// memory of the Device's own, 2 MiB-aligned and advised for transparent
-  /// huge pages (its CL_MEM_FLAGS then show CL_MEM_USE_HOST_PTR; device.cpp;
-  /// SIMDVOL_HUGE_PAGES=0: the implementation's host memory, as for smaller
-  /// ones).
+  /// contents unspecified, as for a fresh buffer). With SIMDVOL_HUGE_PAGES=1
+  /// on a Linux CPU device a fresh buffer of 4 MiB or more without a host
+  /// pointer is made over host memory of the Device's own, 2 MiB-aligned and
+  /// advised for transparent huge pages (its CL_MEM_FLAGS then show
+  /// CL_MEM_USE_HOST_PTR; device.cpp has the trade-off).
   cl::Buffer buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr, const std::string& what);
   /// buffer() for scratch whose size changes from frame to frame (the
   /// matching's segments, footprints, swap levels, ...): when no pooled
@@ -301,10 +300,9 @@ class Device {
   /// Bytes of buffers the pool holds (handed out or free), for tests.
   std::size_t pooled_bytes() const;
   /// Bytes of host memory that Devices allocated themselves for their
-  /// buffers and that are not freed yet (on Linux CPU devices, buffers of 4
-  /// MiB or more: over memory advised for transparent huge pages, freed with
-  /// the buffer; SIMDVOL_HUGE_PAGES=0 leaves them to the implementation), for
-  /// tests.
+  /// buffers and that are not freed yet (with SIMDVOL_HUGE_PAGES=1, on Linux
+  /// CPU devices, buffers of 4 MiB or more: over memory advised for
+  /// transparent huge pages, freed with the buffer), for tests.
   static std::size_t own_host_bytes();
   /// Releases the pool's buffers that nobody else holds any more (kept for
   /// later scopes); returns how many. buffer() does so itself, and tries
