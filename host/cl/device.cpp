@@ -719,7 +719,7 @@ bool huge_pages_wanted() {  // (read at each fresh large buffer: a few a render)
 // Device::own_host_bytes: the memory huge_alloc handed out, not yet freed.
 std::atomic<std::size_t> g_own_host_bytes{0};
 
-// The block huge_alloc hands out: its size before the memory it gives.
+// A block huge_alloc hands out: the memory and its size.
 struct OwnBlock {
   void* base;
   std::size_t bytes;
@@ -727,22 +727,21 @@ struct OwnBlock {
 
 // Memory for a buffer of `bytes` on huge pages, or nullptr (not Linux, or
 // no memory: the caller takes the device's own allocation). Freed by
-// free_host_memory with the pointer it returns.
-void* huge_alloc(std::size_t bytes) {
+// free_host_memory, the buffer's destructor callback.
+OwnBlock* huge_alloc(std::size_t bytes) {
 #ifdef __linux__
   const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
   void* p = nullptr;
   if (posix_memalign(&p, kHugePage, rounded) != 0) return nullptr;
   madvise(p, rounded, MADV_HUGEPAGE);  // a hint: pages of 4 KiB where refused
   g_own_host_bytes += rounded;
-  return p;
+  return new OwnBlock{p, rounded};
 #else
   (void)bytes;
   return nullptr;
 #endif
 }
 
-// The destructor callback's data: the block and its size.
 void CL_CALLBACK free_host_memory(cl_mem, void* block) {
   auto* b = static_cast<OwnBlock*>(block);
   std::free(b->base);
@@ -802,10 +801,9 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
   cl::Buffer b;
   if (info_.is_cpu && host_ptr == nullptr && fresh_bytes >= kHugeMin && huge_pages_wanted()) {
     // (flags keeps CL_MEM_ALLOC_HOST_PTR for the pool's matching)
-    if (void* own = huge_alloc(fresh_bytes)) {
-      auto* block = new OwnBlock{own, (fresh_bytes + kHugePage - 1) / kHugePage * kHugePage};
+    if (OwnBlock* block = huge_alloc(fresh_bytes)) {
       const cl_mem_flags uf = (flags & ~cl_mem_flags(CL_MEM_ALLOC_HOST_PTR)) | CL_MEM_USE_HOST_PTR;
-      b = cl::Buffer(context_, uf, fresh_bytes, own, &err);
+      b = cl::Buffer(context_, uf, fresh_bytes, block->base, &err);
       if (err == CL_SUCCESS &&
           clSetMemObjectDestructorCallback(b(), free_host_memory, block) != CL_SUCCESS)
         err = CL_OUT_OF_RESOURCES;

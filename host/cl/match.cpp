@@ -190,9 +190,21 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   return enqueue_match_masked(device, view, split, std::move(m), links);
 }
 
+namespace {
+
+// ArgumentError unless `reach` is a brick reach of the split's volume.
+void check_reach(const BrickReach& reach, const KdSplit& split) {
+  if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
+  for (int a = 0; a < 3; ++a)
+    if (reach.bricks[a] != (split.dims[a] + (1 << SV_BRICK_LOG2) - 1) >> SV_BRICK_LOG2)
+      throw ArgumentError("reach", "bricks do not tile the volume of the split");
+}
+
+}  // namespace
+
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
                              const BrickReach& reach, MatchLinks links) {
-  if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
+  check_reach(reach, split);  // (before the tables' upload)
   return enqueue_match_reach(device, view, split, reach, upload_pe_tables(device, split), links);
 }
 
@@ -200,18 +212,16 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
                              const BrickReach& reach, const DevicePeTables& tables,
                              MatchLinks links) {
   if (!(tables.split == split)) throw ArgumentError("tables", "PE tables made for another split");
+  check_reach(reach, split);
   return enqueue_match_reach(device, view, split, reach, tables, links);
 }
 
 namespace {
 
+// (reach checked by the caller: check_reach)
 DeviceMatching enqueue_match_reach(Device& device, const ViewGeometry& view, const KdSplit& split,
                                    const BrickReach& reach, const DevicePeTables& t,
                                    MatchLinks links) {
-  if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
-  for (int a = 0; a < 3; ++a)
-    if (reach.bricks[a] != (split.dims[a] + (1 << SV_BRICK_LOG2) - 1) >> SV_BRICK_LOG2)
-      throw ArgumentError("reach", "bricks do not tile the volume of the split");
   const int64_t pes = split.pes();
   DeviceMatching m;
   m.masked = true;

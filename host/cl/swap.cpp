@@ -17,9 +17,11 @@ namespace {
 
 constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
 constexpr int64_t kBlock = 64;  // local size
-// simdvol_swap_stages' own local arrays (size and start: 2 x 5 x 64 ints),
-// and 1 KiB for the padding that aligns its four local blocks.
-constexpr int64_t kSwapStagesFixedLocal = 2 * 6 * 128 * int64_t(sizeof(cl_int)) + 1024;
+// simdvol_swap_stages' own local arrays (size and start: 2 x (stages - 1)
+// levels x 2^stages ints, SV_SWAP_GROUP = 2^kSwapFusedStages), and 1 KiB
+// for the padding that aligns its four local blocks.
+constexpr int64_t kSwapStagesFixedLocal =
+    2 * (kSwapFusedStages - 1) * (int64_t(1) << kSwapFusedStages) * int64_t(sizeof(cl_int)) + 1024;
 
 template <class T>
 cl::Buffer upload(Device& device, const std::vector<T>& v, const std::string& what) {

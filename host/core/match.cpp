@@ -29,14 +29,22 @@ int64_t Matching::total_load() const {
   return t;
 }
 
-CellBox cell_box(const KdSplit& split, int64_t pe) {
-  const Dims3 idx = split.cell_index(pe);
+namespace {
+
+// The box of the cell with index `idx`, clipped to the volume.
+CellBox cell_box_at(const KdSplit& split, const Dims3& idx) {
   CellBox b;
   for (int a = 0; a < 3; ++a) {
     b.lo[a] = idx[a] * split.cell[a];
     b.hi[a] = std::min(b.lo[a] + split.cell[a], split.dims[a]);
   }
   return b;
+}
+
+}  // namespace
+
+CellBox cell_box(const KdSplit& split, int64_t pe) {
+  return cell_box_at(split, split.cell_index(pe));
 }
 
 namespace {
@@ -116,11 +124,7 @@ std::vector<sv_rect> match_candidates(const ViewGeometry& view, const KdSplit& s
   for (int64_t p = 0; p < split.pes(); ++p) {
     const Dims3& il = lo_idx[static_cast<std::size_t>(p & ((int64_t(1) << low) - 1))];
     const Dims3& ih = hi_idx[static_cast<std::size_t>(p >> low)];
-    CellBox box;
-    for (int a = 0; a < 3; ++a) {
-      box.lo[a] = (il[a] + ih[a]) * split.cell[a];
-      box.hi[a] = std::min(box.lo[a] + split.cell[a], split.dims[a]);
-    }
+    const CellBox box = cell_box_at(split, Dims3{il[0] + ih[0], il[1] + ih[1], il[2] + ih[2]});
     if (box.empty()) continue;
     double lo[2] = {std::numeric_limits<double>::infinity(),
                     std::numeric_limits<double>::infinity()};
