@@ -7,6 +7,10 @@
 #include <fstream>
 #include <thread>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 namespace simdvol::bench {
 
 Summary summarize(std::vector<double> v) {
@@ -68,5 +72,20 @@ HostInfo host_info(const Device& device) {
   }
   return h;
 }
+
+#if defined(__GLIBC__)
+KeepHeap::KeepHeap() {
+  mallopt(M_MMAP_MAX, 0);
+  mallopt(M_TRIM_THRESHOLD, INT32_MAX);
+}
+KeepHeap::~KeepHeap() {
+  mallopt(M_MMAP_MAX, 65536);                   // glibc's default
+  mallopt(M_MMAP_THRESHOLD, 32 * 1024 * 1024);  // its dynamic threshold's ceiling
+  mallopt(M_TRIM_THRESHOLD, 64 * 1024 * 1024);  // twice that, as glibc sets it
+}
+#else
+KeepHeap::KeepHeap() = default;
+KeepHeap::~KeepHeap() = default;
+#endif
 
 }  // namespace simdvol::bench

@@ -1,7 +1,8 @@
 // Pieces the benchmark tools share: wall-clock timing, median / min / max
 // over repeats, the host's triad bandwidth, what the machine is (CPU model,
 // OpenCL platform version, POCL_MAX_PTHREAD_COUNT) and, from bench_args.hpp,
-// strict parsing of option values (ArgumentError naming the option).
+// strict parsing of option values (ArgumentError naming the option), and
+// the serial reference timed warm (KeepHeap, time_warm).
 #pragma once
 
 #include <chrono>
@@ -42,5 +43,46 @@ struct HostInfo {
   std::string platform_version;        ///< CL_PLATFORM_VERSION of the device's platform
 };
 HostInfo host_info(const Device& device);
+
+/// While one lives, memory the process frees stays in its heap (glibc): no
+/// block is mapped apart (glibc maps each block of 32 MiB or more on its own
+/// and unmaps it on free, so the next call faults every page in again) and
+/// the heap is not trimmed. The serial reference allocates its shaded and
+/// classified volumes (hundreds of MiB for the 256^3 phantom) afresh each
+/// call; on the Firecracker VMs of these machines faulting them in took from
+/// 0.1 s to 1.3 s of a phantom frame, depending on the host's state and not
+/// on the code. At destruction glibc's settled values come back (blocks of
+/// 32 MiB or more mapped apart, the heap trimmed above 64 MiB: where its
+/// dynamic threshold ends up), and the kept memory is handed back at the next
+/// free above the trim threshold. No effect without glibc.
+class KeepHeap {
+ public:
+  KeepHeap();
+  ~KeepHeap();
+  KeepHeap(const KeepHeap&) = delete;
+  KeepHeap& operator=(const KeepHeap&) = delete;
+};
+
+/// One call's time measured as the engines' frames are: an untimed warm-up
+/// call (its time in `first_ms`), then `runs` (>= 1) timed calls, their
+/// median in `ms`, all under one KeepHeap, so that a serial reference's
+/// figure counts its arithmetic and not the VM's page faults (the engines
+/// keep their buffers in the device's pool between frames). Returns the
+/// last call's result.
+template <class F>
+auto time_warm(int runs, F&& f, double& ms, double& first_ms) {
+  KeepHeap keep;
+  auto t0 = Clock::now();
+  auto result = f();
+  first_ms = ms_since(t0);
+  std::vector<double> t;
+  for (int r = 0; r < runs || t.empty(); ++r) {
+    t0 = Clock::now();
+    result = f();
+    t.push_back(ms_since(t0));
+  }
+  ms = median(std::move(t));
+  return result;
+}
 
 }  // namespace simdvol::bench

@@ -22,7 +22,8 @@
 //
 // Whole frames (issue 5): the 256^3 phantom (preset ct) to 256^2 and 512^2
 // and brainsmall.den (preset volpack) to 256^2, direct compositing, voxel
-// sampling, view (0, 30, 0): the serial reference (one frame), one-shot
+// sampling, view (0, 30, 0): the serial reference (one frame after a
+// warm-up, its freed memory kept: bench_common.hpp's time_warm), one-shot
 // render_opencl (fresh buffers each frame) and a warm RenderEngine (buffers
 // and the layout reused, as a turntable), interleaved, R frames each
 // (median), with the engine's per-stage times of the median warm frame.
@@ -37,6 +38,7 @@
 #include <vector>
 
 #include "bench_args.hpp"
+#include "bench_common.hpp"
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/engine.hpp"
@@ -179,9 +181,10 @@ int whole_frames(int64_t pes, int order, int runs, const std::string& brain) {
     eo.pes = pes;
     eo.fused = true;
     eo.reuse_layout = true;
+    double ref_ms = 0, ref_first = 0;  // warm, as the engine's frames (bench_common.hpp)
+    const Image ref = simdvol::bench::time_warm(
+        1, [&] { return render_reference(*c.vol, opt); }, ref_ms, ref_first);
     auto t0 = Clock::now();
-    const Image ref = render_reference(*c.vol, opt);
-    const double ref_ms = ms_since(t0);
     RenderEngine engine(device, eo);
     EngineOptions oneshot_eo = eo;
     oneshot_eo.reuse_layout = false;

@@ -40,6 +40,7 @@
 #include <vector>
 
 #include "bench_args.hpp"
+#include "bench_common.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/engine.hpp"
 #include "simdvol/error.hpp"
@@ -267,7 +268,11 @@ int main(int argc, char** argv) try {
       imgs["volpack_raw"] = timed(raw, runs, [&] { return example.render(vp::Mode::raw); });
       imgs["volpack_classified"] =
           timed(cls, runs, [&] { return example.render(vp::Mode::classified); });
-      imgs["simdvol_reference"] = timed(ref, ref_runs, [&] { return render_reference(vol, opt); });
+      {
+        simdvol::bench::KeepHeap keep;  // its freed volumes stay in the heap (bench_common.hpp)
+        imgs["simdvol_reference"] =
+            timed(ref, ref_runs, [&] { return render_reference(vol, opt); });
+      }
       if (opencl)
         imgs["simdvol_opencl"] = timed(ocl, runs, [&] {
           EngineTimes t;

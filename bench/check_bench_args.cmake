@@ -82,6 +82,7 @@ expect_bad(OPTIONS --order --order 4 --variant -DSV_VOX_PF=0)
 
 expect_bad(BENCH --repeat --repeat 3,4)
 expect_bad(BENCH --turntable --turntable 721)
+expect_bad(BENCH --reference-runs --reference-runs 0)
 expect_bad(BENCH --sizes --sizes 256,0)
 
 if(checked LESS 20)

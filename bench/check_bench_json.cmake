@@ -3,7 +3,8 @@
 # compositing mode, balance sweep count (8 and 0) and --skip-pes (on, off)
 # with its stage times, the frame's samples, utilisation and X-Net bytes,
 # and direct compositing equal to the reference (PSNR >= 80 dB, or
-# identical) either way, no balance time without sweeps, the same samples
+# identical) either way, the reference timed warm (a warm-up and
+# --reference-runs timed renders), no balance time without sweeps, the same samples
 # (fewer with skip-pes, which leaves out the PEs with nothing in reach);
 # the layout once (the default): the warm-up frame's layout timed, none in
 # the timed frames; the kernels' sum within their span within the wall;
@@ -13,7 +14,7 @@ file(REMOVE ${OUT})
 execute_process(
   COMMAND ${BENCH} --volumes phantom32 --sizes 64 --orders 1 --pes 64
           --compositing direct,adaptive,mc4s --balance-sweeps 8,0 --skip-pes on,off --repeat 2
-          --turntable 4
+          --turntable 4 --reference-runs 3
           --json ${OUT}
   RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(NOT rc EQUAL 0)
@@ -97,6 +98,13 @@ foreach(i RANGE ${last})
   endif()
   get(psnr cases ${i} reference psnr_db)
   get(identical cases ${i} reference identical)
+  get(ref_ms cases ${i} reference ms)
+  get(ref_first cases ${i} reference first_ms)
+  get(ref_runs cases ${i} reference runs)
+  if(NOT ref_ms GREATER 0 OR NOT ref_first GREATER 0 OR NOT ref_runs EQUAL 3)
+    message(FATAL_ERROR "${id}: reference ${ref_ms} ms (warm-up ${ref_first} ms, "
+                        "${ref_runs} runs; 3 asked for)")
+  endif()
   if(NOT halo GREATER 0)
     message(FATAL_ERROR "${id}: halo bytes ${halo} (64 PEs have neighbours)")
   endif()
