@@ -275,12 +275,12 @@ int main(int argc, char** argv) try {
       gather_rgba(device, rgba, flat.data());
     }
     const KdSplit split = kd_split(vol.dims(), pes);
-    auto t0 = Clock::now();
-    const Matching m0 = match_reference(view, split);
-    const double ref_match = ms_since(t0);
-    t0 = Clock::now();
-    const Matching m = balance_reference(m0, view, split);
-    const double ref_balance = ms_since(t0);
+    // The serial references timed warm (bench_common.hpp's time_warm).
+    double ref_match = 0, ref_balance = 0, ref_first = 0;
+    const Matching m0 = simdvol::bench::time_warm(
+        1, [&] { return match_reference(view, split); }, ref_match, ref_first);
+    const Matching m = simdvol::bench::time_warm(
+        1, [&] { return balance_reference(m0, view, split); }, ref_balance, ref_first);
 
     // Device match + balance (warm-up, then timed with the other stages).
     // Each run's buffers come back from the previous run's (Device::
@@ -446,9 +446,9 @@ int main(int argc, char** argv) try {
     }
     double ref_rl = 0;
     if (reference) {
-      t0 = Clock::now();
-      const std::vector<Rgba> comp = local_reference(m, flat, vol.dims(), view, order);
-      ref_rl = ms_since(t0);
+      double first = 0;
+      simdvol::bench::time_warm(
+          1, [&] { return local_reference(m, flat, vol.dims(), view, order); }, ref_rl, first);
     }
     const XnetReads x = xnet_reads(m, split, view, order);
     const double M = order + 1;
