@@ -739,8 +739,28 @@ SV_FN_INLINE void sv_pf_row(sv_pf* c, __global const int* table, __global const 
     const int row = ty[y] + tz[z];
     for (int ch = 0; ch < (il ? 1 : 4); ++ch) {
       __global const float* p = vox + row + ch * cs;
+#ifndef SV_PF_STRIDE16
+      {
+        /* Each 64-byte line of the run once, from the line of its first
+         * float to that of its last (the last voxel's 4 channels when
+         * interleaved). -DSV_PF_STRIDE16 asks as before: every 16th float
+         * of the run and its last, which asked for a line twice where the
+         * run's end shares the line of the last 16th float (the phantom's
+         * 128-byte rows: three prefetches for two lines) and missed none.
+         * simdvol-bench-options, variants in turn in one process, twice
+         * each, resample + local (2-core Intel Xeon, the tenth session of
+         * 2026-12-05): ch2 (rows of 12 voxels, 192 bytes) 23.43 / 23.61 ->
+         * 22.97 / 22.90 ms, brainsmall 3.49 / 3.49 -> 3.46 / 3.47, the
+         * 256^3 phantom 25.73 / 25.66 -> 25.72 / 25.52 (at 512^2 25.68 /
+         * 25.72 -> 25.81 / 25.75); the same images. */
+        const ulong l0 = (ulong)(p + c->tx0) & ~(ulong)63;
+        const ulong l1 = (ulong)(p + c->tx0 + c->run + (il ? 3 : 0));
+        for (ulong q = l0; q <= l1; q += 64) SV_PFR((__global const float*)q);
+      }
+#else
       for (int e = 0; e < c->run; e += 16) SV_PFR(p + c->tx0 + e);
       SV_PFR(p + c->tx0 + c->run);
+#endif
       for (int x = c->x0 - c->lo; x < c->x0; ++x)
         if (x >= 0) SV_PFR(p + tx[x]);
       for (int x = c->x1; x < min(c->x1 + c->hi, c->nx); ++x) SV_PFR(p + tx[x]);
