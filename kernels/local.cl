@@ -93,6 +93,25 @@ SV_FN_INLINE void sv_over_lanes16(float16* acc, const float16* u, const int8 on,
   }
 }
 
+/* The footprint pixel of each of the 8 lanes' segments (positions s0 ..
+ * s0 + 7), -1 past nseg: the lanes' PEs from p (the PE of s0) forward (the
+ * positions are consecutive, so their PEs ascend; `order` keeps each
+ * segment in its PE's range of positions). */
+SV_FN_INLINE void sv_lane_feet8(__global const int* seg_off, const int nseg,
+                                __global const sv_rect* rects, __global const int* rect_off,
+                                const int s0, int p, const int* li, const int* lj, const int* lk,
+                                const int* ln, int* fi) {
+#pragma unroll
+  for (int l = 0; l < 8; ++l) {
+    fi[l] = -1;
+    if (s0 + l < nseg) {
+      while (seg_off[p + 1] <= s0 + l) ++p;
+      const sv_segment g = {li[l], lj[l], lk[l], lk[l] + ln[l]};
+      fi[l] = sv_footprint_index(rects, rect_off, p, g);
+    }
+  }
+}
+
 /* simdvol_resample_local_v8 (planar cells, il = 0) and _v8_il (interleaved
  * cells, il = 1; cs is 1 there): one body, the layout a constant. */
 SV_FN_INLINE void sv_resample_local8(
@@ -146,23 +165,12 @@ SV_FN_INLINE void sv_resample_local8(
    * for them (-DSV_FOOT_LATE finds them at the end and asks for nothing, as
    * before: scripts/bench-ab with it as A, resample + local, 2-core Intel
    * Xeon, 2026-12-05: the 256^3 phantom 0.978 (6 pairs), at 512^2 0.960,
-   * brainsmall 0.985, ch2 1.002; the same footprints). The lanes' PEs: p0,
-   * then forward (the 8 positions are consecutive, so their PEs ascend;
-   * `order` keeps each segment in its PE's range of positions). */
+   * brainsmall 0.985, ch2 1.002; the same footprints). */
   int fi[8];
-  {
-    int p = p0;
+  sv_lane_feet8(seg_off, nseg, rects, rect_off, s0, p0, li, lj, lk, ln, fi);
 #pragma unroll
-    for (int l = 0; l < 8; ++l) {
-      fi[l] = -1;
-      if (s0 + l < nseg) {
-        while (seg_off[p + 1] <= s0 + l) ++p;
-        const sv_segment g = {li[l], lj[l], lk[l], lk[l] + ln[l]};
-        fi[l] = sv_footprint_index(rects, rect_off, p, g);
-        SV_PREFETCHW(foot + fi[l]);
-      }
-    }
-  }
+  for (int l = 0; l < 8; ++l)
+    if (fi[l] >= 0) SV_PREFETCHW(foot + fi[l]);
 #endif
   int8 N = (int8)(ln[0], ln[1], ln[2], ln[3], ln[4], ln[5], ln[6], ln[7]);
   const long s_0 = view->step[0][2], s_1 = view->step[1][2], s_2 = view->step[2][2];
@@ -261,25 +269,18 @@ SV_FN_INLINE void sv_resample_local8(
     sv_lanes_of16(acc, res);
   else
     sv_lanes_of8(ar, ag, ab, aa, res);
-#ifndef SV_FOOT_LATE
+#ifdef SV_FOOT_LATE
+  int fi[8];
+#ifdef SV_PE_SEARCH2
+  const int pl = sv_pe_of_segment(seg_off, log2p, s0); /* (a second search, for comparison) */
+#else
+  const int pl = p0;
+#endif
+  sv_lane_feet8(seg_off, nseg, rects, rect_off, s0, pl, li, lj, lk, ln, fi);
+#endif
 #pragma unroll
   for (int l = 0; l < 8; ++l)
     if (fi[l] >= 0) foot[fi[l]] = res[l];
-#else
-#ifdef SV_PE_SEARCH2
-  int p = sv_pe_of_segment(seg_off, log2p, s0); /* (a second search, for comparison) */
-#else
-  int p = p0;
-#endif
-#pragma unroll
-  for (int l = 0; l < 8; ++l) {
-    if (s0 + l < nseg) {
-      while (seg_off[p + 1] <= s0 + l) ++p;
-      const sv_segment g = {li[l], lj[l], lk[l], lk[l] + ln[l]};
-      foot[sv_footprint_index(rects, rect_off, p, g)] = res[l];
-    }
-  }
-#endif
 }
 
 /* The kernels: planar cells (il = 0), interleaved cells (il = 1), and
