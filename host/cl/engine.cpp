@@ -417,12 +417,11 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   const KdSplit& split = S.cells->layout().split;
   // The balance links only where balancing follows (a third of the matching).
   const MatchLinks links = eo.balance_sweeps > 0 ? MatchLinks::make : MatchLinks::skip;
-  if (mask_pes && (!S.pe_tables || !(S.pe_tables->split == split)))
-    S.pe_tables = upload_pe_tables(device, split);
+  if (!S.pe_tables || !(S.pe_tables->split == split)) S.pe_tables = upload_pe_tables(device, split);
   DeviceMatching dm = mask_pes ? enqueue_match(device, view, split,
                                                BrickReach{&occupancy->reach, occupancy->bricks},
                                                *S.pe_tables, links)
-                               : enqueue_match(device, view, split, links);
+                               : enqueue_match(device, view, split, *S.pe_tables, links);
   if (mask_pes && eo.fused && eo.reuse_layout) {
     S.live.emplace();
     S.live->mask = dm.active;

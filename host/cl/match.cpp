@@ -174,20 +174,44 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   return enqueue_match(device, view, split, std::vector<uint8_t>{}, links);
 }
 
-DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
-                             const std::vector<uint8_t>& active, MatchLinks links) {
+namespace {
+
+// The matching of the PEs flagged in `active` (every PE where empty) with
+// the split's tables `t`.
+DeviceMatching enqueue_match_flags(Device& device, const ViewGeometry& view, const KdSplit& split,
+                                   const std::vector<uint8_t>& active, const DevicePeTables& t,
+                                   MatchLinks links) {
   const int64_t pes = split.pes();
-  if (!active.empty() && static_cast<int64_t>(active.size()) != pes)
-    throw ArgumentError(
-        "active", std::to_string(active.size()) + " flags for " + std::to_string(pes) + " PEs");
   DeviceMatching m;
   m.masked = !active.empty();
   std::vector<cl_uchar> flags(static_cast<std::size_t>(std::max<int64_t>(pes, 1)), 1);
   for (std::size_t p = 0; p < active.size(); ++p) flags[p] = active[p] ? 1 : 0;
   m.active =
       device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, flags.size(), flags.data(), "PE mask");
-  set_pe_tables(m, upload_pe_tables(device, split));
+  set_pe_tables(m, t);
   return enqueue_match_masked(device, view, split, std::move(m), links);
+}
+
+// ArgumentError unless `tables` were made for `split`.
+void check_tables(const DevicePeTables& tables, const KdSplit& split) {
+  if (!(tables.split == split)) throw ArgumentError("tables", "PE tables made for another split");
+}
+
+}  // namespace
+
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             const std::vector<uint8_t>& active, MatchLinks links) {
+  const int64_t pes = split.pes();
+  if (!active.empty() && static_cast<int64_t>(active.size()) != pes)
+    throw ArgumentError(
+        "active", std::to_string(active.size()) + " flags for " + std::to_string(pes) + " PEs");
+  return enqueue_match_flags(device, view, split, active, upload_pe_tables(device, split), links);
+}
+
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             const DevicePeTables& tables, MatchLinks links) {
+  check_tables(tables, split);
+  return enqueue_match_flags(device, view, split, {}, tables, links);
 }
 
 namespace {
@@ -211,7 +235,7 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
                              const BrickReach& reach, const DevicePeTables& tables,
                              MatchLinks links) {
-  if (!(tables.split == split)) throw ArgumentError("tables", "PE tables made for another split");
+  check_tables(tables, split);
   check_reach(reach, split);
   return enqueue_match_reach(device, view, split, reach, tables, links);
 }

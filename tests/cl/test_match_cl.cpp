@@ -475,6 +475,11 @@ TEST(MatchCl, ActiveFromReachEqualsReference) {
     DeviceMatching dt = enqueue_match(dev, v, split, BrickReach{&rb, nb}, tables);
     expect_same(dt.read(dev), got, "tables P=" + std::to_string(pes));
     EXPECT_EQ(dt.read_links(dev), dm.read_links(dev)) << "P=" << pes;
+    // Every PE, with the tables and without.
+    DeviceMatching da = enqueue_match(dev, v, split, tables);
+    DeviceMatching d0 = enqueue_match(dev, v, split);
+    expect_same(da.read(dev), d0.read(dev), "all PEs, tables P=" + std::to_string(pes));
+    EXPECT_EQ(da.read_links(dev), d0.read_links(dev)) << "P=" << pes;
     on += std::count(want.begin(), want.end(), 1);
     off += std::count(want.begin(), want.end(), 0);
   }
@@ -490,5 +495,7 @@ TEST(MatchCl, ActiveFromReachEqualsReference) {
                ArgumentError);
   EXPECT_THROW(enqueue_match(dev, v, kd_split(dims, 8), BrickReach{&rb, nb},
                              upload_pe_tables(dev, kd_split({93, 57, 32}, 8))),
+               ArgumentError);
+  EXPECT_THROW(enqueue_match(dev, v, kd_split(dims, 8), upload_pe_tables(dev, kd_split(dims, 16))),
                ArgumentError);
 }

@@ -203,6 +203,10 @@ DevicePeTables upload_pe_tables(Device& device, const KdSplit& split);
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
                              const BrickReach& reach, const DevicePeTables& tables,
                              MatchLinks links = MatchLinks::make);
+/// enqueue_match(device, view, split, links) (every PE) with the split's
+/// tables made before; ArgumentError if they were made for another split.
+DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
+                             const DevicePeTables& tables, MatchLinks links = MatchLinks::make);
 
 /// The width of the bounds the balance rounds move: 16-bit where every k of
 /// the grid fits (automatic: balance_bounds16), or as asked.
