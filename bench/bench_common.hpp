@@ -64,17 +64,17 @@ class KeepHeap {
 };
 
 /// One call's time measured as the engines' frames are: an untimed warm-up
-/// call (its time in `first_ms`), then `runs` (>= 1) timed calls, their
+/// call (its time in *first_ms where given), then `runs` (>= 1) timed calls, their
 /// median in `ms`, all under one KeepHeap, so that a serial reference's
 /// figure counts its arithmetic and not the VM's page faults (the engines
 /// keep their buffers in the device's pool between frames). Returns the
 /// last call's result.
 template <class F>
-auto time_warm(int runs, F&& f, double& ms, double& first_ms) {
+auto time_warm(int runs, F&& f, double& ms, double* first_ms = nullptr) {
   KeepHeap keep;
   auto t0 = Clock::now();
   auto result = f();
-  first_ms = ms_since(t0);
+  if (first_ms) *first_ms = ms_since(t0);
   std::vector<double> t;
   for (int r = 0; r < runs || t.empty(); ++r) {
     t0 = Clock::now();

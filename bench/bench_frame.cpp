@@ -58,16 +58,17 @@
 using namespace simdvol;
 using simdvol::bench::Args;
 using simdvol::bench::argument_error;
-using Clock = std::chrono::steady_clock;
+using simdvol::bench::Clock;
+using simdvol::bench::ms_since;
+using simdvol::bench::time_warm;
 
 namespace {
 
+// (the upper of the middle two for an even count, as this tool has always
+// reported; bench_common's median takes their mean)
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.empty() ? 0.0 : v[v.size() / 2];
-}
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 // The value named `name` in a list kept in first-seen order (added if new).
 template <class V>
@@ -181,9 +182,9 @@ int whole_frames(int64_t pes, int order, int runs, const std::string& brain) {
     eo.pes = pes;
     eo.fused = true;
     eo.reuse_layout = true;
-    double ref_ms = 0, ref_first = 0;  // warm, as the engine's frames (bench_common.hpp)
-    const Image ref = simdvol::bench::time_warm(
-        1, [&] { return render_reference(*c.vol, opt); }, ref_ms, ref_first);
+    double ref_ms = 0;  // warm, as the engine's frames (bench_common.hpp)
+    const Image ref = time_warm(
+        1, [&] { return render_reference(*c.vol, opt); }, ref_ms);
     auto t0 = Clock::now();
     RenderEngine engine(device, eo);
     EngineOptions oneshot_eo = eo;
@@ -276,11 +277,11 @@ int main(int argc, char** argv) try {
     }
     const KdSplit split = kd_split(vol.dims(), pes);
     // The serial references timed warm (bench_common.hpp's time_warm).
-    double ref_match = 0, ref_balance = 0, ref_first = 0;
-    const Matching m0 = simdvol::bench::time_warm(
-        1, [&] { return match_reference(view, split); }, ref_match, ref_first);
-    const Matching m = simdvol::bench::time_warm(
-        1, [&] { return balance_reference(m0, view, split); }, ref_balance, ref_first);
+    double ref_match = 0, ref_balance = 0;
+    const Matching m0 = time_warm(
+        1, [&] { return match_reference(view, split); }, ref_match);
+    const Matching m = time_warm(
+        1, [&] { return balance_reference(m0, view, split); }, ref_balance);
 
     // Device match + balance (warm-up, then timed with the other stages).
     // Each run's buffers come back from the previous run's (Device::
@@ -446,9 +447,8 @@ int main(int argc, char** argv) try {
     }
     double ref_rl = 0;
     if (reference) {
-      double first = 0;
-      simdvol::bench::time_warm(
-          1, [&] { return local_reference(m, flat, vol.dims(), view, order); }, ref_rl, first);
+      time_warm(
+          1, [&] { return local_reference(m, flat, vol.dims(), view, order); }, ref_rl);
     }
     const XnetReads x = xnet_reads(m, split, view, order);
     const double M = order + 1;

@@ -383,11 +383,11 @@ int main(int argc, char** argv) {
     double ref_ms = 0;
     if (reference) {
       // Warm, as the device's runs (bench_common.hpp's time_warm).
-      double shade_ref = 0, cls_ref = 0, first = 0;
+      double shade_ref = 0, cls_ref = 0;
       const auto s = time_warm(
-          1, [&] { return shade(vol, view, shp); }, shade_ref, first);
+          1, [&] { return shade(vol, view, shp); }, shade_ref);
       time_warm(
-          1, [&] { return classify(vol, s, cls, view.step); }, cls_ref, first);
+          1, [&] { return classify(vol, s, cls, view.step); }, cls_ref);
       ref_ms = shade_ref + cls_ref;
       std::printf(
           "serial reference: shade %.0f ms, classify %.0f ms, total %.0f ms "

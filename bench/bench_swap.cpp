@@ -280,9 +280,9 @@ int main(int argc, char** argv) {
       }
       double ref_ms = 0, q = 0, diff = 0;
       if (reference) {
-        double first = 0;  // warm, as the engine's frames (bench_common.hpp)
+        // warm, as the engine's frames (bench_common.hpp)
         const Image ref = time_warm(
-            1, [&] { return render_reference(*f.vol, opt); }, ref_ms, first);
+            1, [&] { return render_reference(*f.vol, opt); }, ref_ms);
         q = psnr(ref, img);
         diff = max_abs_diff(ref, img);
       }

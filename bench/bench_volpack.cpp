@@ -54,13 +54,10 @@ using simdvol::bench::Args;
 using simdvol::bench::argument_error;
 using simdvol::bench::check_output_file;
 namespace vp = simdvol::volpack;
-using Clock = std::chrono::steady_clock;
+using simdvol::bench::Clock;
+using simdvol::bench::ms_since;
 
 namespace {
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 struct Stats {
   std::vector<double> ms;

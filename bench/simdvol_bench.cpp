@@ -376,7 +376,7 @@ class RefCache {
     RefResult& r = cache_[key];
     if (use == Use::timed && std::isnan(r.ms))
       r.image = time_warm(
-          runs_, [&] { return render_reference(vol, opt); }, r.ms, r.first_ms);
+          runs_, [&] { return render_reference(vol, opt); }, r.ms, &r.first_ms);
     else if (r.image.width() == 0)
       r.image = render_reference(vol, opt);
     return r;
