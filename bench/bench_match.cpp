@@ -12,19 +12,21 @@
 //
 //   simdvol-bench-match [--pes N] [--repeat R] [--sweeps S] [--random V] [--no-table]
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "bench_args.hpp"
+#include "bench_common.hpp"
 #include "simdvol/engine.hpp"
 #include "simdvol/match_cl.hpp"
 
 using namespace simdvol;
 using simdvol::bench::Args;
 using simdvol::bench::argument_error;
+using simdvol::bench::median;
+using simdvol::bench::time_warm;
 
 namespace {
 
@@ -32,15 +34,6 @@ struct NamedView {
   const char* name;
   ViewAngles angles;
 };
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 constexpr const char* kUsage =
     "usage: simdvol-bench-match [--pes N] [--repeat R] [--sweeps S] [--random V] [--no-table]\n"
@@ -90,7 +83,7 @@ int main(int argc, char** argv) {
     const KdSplit split = kd_split(dims, pes);
     for (const NamedView& nv : timed) {
       const ViewGeometry v = make_view(dims, spacing, nv.angles, 256, 256, Sampling::voxel);
-      std::vector<double> st[4], mt, bt, rm, rb;
+      std::vector<double> st[4], mt, bt;
       int64_t segs = 0;
       for (int r = 0; r < repeat + 1; ++r) {  // the first run builds the kernels
         // Buffers from the previous run's, as a frame's (no page faults).
@@ -104,22 +97,23 @@ int main(int argc, char** argv) {
         bt.push_back(events_ns(dm.balance_events) * 1e-6);
         if (r == 1) segs = static_cast<int64_t>(dm.read(dev).segments.size());
       }
-      for (int r = 0; r < std::max(1, repeat / 2); ++r) {
-        auto t0 = std::chrono::steady_clock::now();
-        const Matching m = match_reference(v, split);
-        rm.push_back(ms_since(t0));
-        t0 = std::chrono::steady_clock::now();
-        const Matching b = balance_reference(m, v, split, sweeps);
-        rb.push_back(ms_since(t0));
-      }
+      // The serial references timed warm, as simdvol-bench-frame's
+      // (bench_common.hpp's time_warm: a warm-up call, then the median of
+      // max(1, R / 2) with the freed memory kept in the heap).
+      const int ref_runs = std::max(1, repeat / 2);
+      double ref_m = 0, ref_b = 0;
+      const Matching m = time_warm(
+          ref_runs, [&] { return match_reference(v, split); }, ref_m);
+      time_warm(
+          ref_runs, [&] { return balance_reference(m, v, split, sweeps); }, ref_b);
       std::printf("%-5s %9lld %8.2f %8.3f %8.3f %8.2f %9.2f %9.2f %9.2f %8.1f %8.1f\n", nv.name,
                   static_cast<long long>(segs), median(st[0]), median(st[1]), median(st[2]),
-                  median(st[3]), median(mt), median(bt), median(mt) + median(bt), median(rm),
-                  median(rb));
+                  median(st[3]), median(mt), median(bt), median(mt) + median(bt), ref_m, ref_b);
     }
     std::printf(
         "(ms from profiling events; ref m / ref b: serial match_reference / "
-        "balance_reference, one thread)\n");
+        "balance_reference, one thread, timed warm: the median of max(1, R / 2) after a "
+        "warm-up call)\n");
     if (!table) return 0;
 
     const NamedView views[] = {{"0", {0, 0, 0}},           {"90", {0, 90, 0}},
