@@ -9,13 +9,15 @@
 // each local size compiles), R runs (default 7) of each variant, interleaved,
 // reporting the median device time (profiling events) and the median wall
 // time (enqueue + clFinish). Also: the serial reference's shade + classify on
-// the same volume (each timed once after a warm-up: time_warm), bytes moved per stage against the
-// machine's triad bandwidth measured here (two threads, 256 MiB per array), and flat (x-fastest,
-// non-PE-major) variants for the PE-major/flat ratio. The in-place classify (the engine's
-// two-launch path) writes over a copy of the shading made before each run (untimed). --sweep also
-// times the work-group sizes 64/256/1024 (16/64/256 chunks of 16 voxels for the float16 kernels),
-// the float16 kernels with non-temporal stores, and the scalar kernels (shade decompositions,
-// classify, fused, flat fused) that the float16 defaults replaced.
+// the same volume (each timed once after a warm-up: time_warm), bytes moved
+// per stage against the machine's triad bandwidth measured here (two threads,
+// 256 MiB per array), and flat (x-fastest, non-PE-major) variants for the
+// PE-major/flat ratio. The in-place classify (the engine's two-launch path)
+// writes over a copy of the shading made before each run (untimed). --sweep
+// also times the work-group sizes 64/256/1024 (16/64/256 chunks of 16 voxels
+// for the float16 kernels), the float16 kernels with non-temporal stores, and
+// the scalar kernels (shade decompositions, classify, fused, flat fused) that
+// the float16 defaults replaced.
 //
 // PoCL compiles kernels into its cache (POCL_CACHE_DIR, default
 // ~/.cache/pocl); the environment is left to the user. Timings on these

@@ -12,8 +12,9 @@
 // sampling), and brainsmall.den (preset volpack) to 256^2, view (0, 30, 0)
 // and (20, 35, 10). Per frame: a warm-up call, then R calls (default 5):
 // median wall time of the whole call and median device time of each stage
-// (profiling events); the serial reference (render_reference) once after
-// a warm-up (bench_common.hpp's time_warm), its time, and PSNR / max abs difference of the frames.
+// (profiling events); the serial reference (render_reference) once after a
+// warm-up (bench_common.hpp's time_warm), its time, and PSNR / max abs
+// difference of the frames.
 // Communication (per frame): per swap stage the pixels and bytes moved
 // (float4, 16 bytes per pixel), the most one PE sends, holds before the
 // stage and composites (keeps), the X-Net distance of the partners; totals

@@ -142,18 +142,19 @@ SV_FN_INLINE void sv_resample_local8(
    * the same images. */
   const int p0 = sv_first_pe(order, ordered, seg_off, log2p, nseg, s0);
   /* The voxel prefetch (resample.cl: sv_pf_begin) spread over the steps:
-   * each step asks for max(1, ceil(rows / T)) of this work-item's rows of
-   * the PE ahead, the rest after the steps. All at once before the steps
-   * (-DSV_PF_BURST, as before the ninth session of 2026-12-05) its
-   * prefetches waited for free line-fill buffers, one after another (perf
-   * annotate: about 12 % of the kernel's samples on the instructions after
-   * them), with no step to run meanwhile; between the steps' instructions
-   * the lines come in while the steps run. simdvol-bench-options --frames 12, in turn,
-   * -DSV_PF_BURST -> this, resample + local (2-core Intel Xeon, family 6, model 167): the 256^3
-   * phantom at (20, 35, 10) 26.32 / 26.23 -> 24.56 / 24.61 ms, at 512^2 27.14 / 27.10 -> 24.83
-   * / 24.91, ch2 22.27 / 22.19 -> 21.86 / 21.87, brainsmall 3.49 / 3.52 -> 3.32 / 3.35; the same
-   * images. (One row a step, or two: the same within 1-2 %; two rows before the steps: 1-3 %
-   * slower.) A hint only: no result changes. */
+   * each step asks for max(1, ceil(rows / T)) of this work-item's rows of the
+   * PE ahead, the rest after the steps. All at once before the steps
+   * (-DSV_PF_BURST, as before the ninth session of 2026-12-05) its prefetches
+   * waited for free line-fill buffers, one after another (perf annotate:
+   * about 12 % of the kernel's samples on the instructions after them), with
+   * no step to run meanwhile; between the steps' instructions the lines come
+   * in while the steps run. simdvol-bench-options --frames 12, in turn,
+   * -DSV_PF_BURST -> this, resample + local (2-core Intel Xeon, family 6,
+   * model 167): the 256^3 phantom at (20, 35, 10) 26.32 / 26.23 -> 24.56 /
+   * 24.61 ms, at 512^2 27.14 / 27.10 -> 24.83 / 24.91, ch2 22.27 / 22.19 ->
+   * 21.86 / 21.87, brainsmall 3.49 / 3.52 -> 3.32 / 3.35; the same images.
+   * (One row a step, or two: the same within 1-2 %; two rows before the
+   * steps: 1-3 % slower.) A hint only: no result changes. */
   sv_pf pf;
   sv_pf_begin(seg_off, log2p, nseg, s0, p0, view, table, origins, pe_cell, il, &pf);
 #ifdef SV_PF_BURST
