@@ -56,25 +56,14 @@ using simdvol::bench::check_output_file;
 namespace vp = simdvol::volpack;
 using simdvol::bench::Clock;
 using simdvol::bench::ms_since;
+using simdvol::bench::summarize;
+using simdvol::bench::Summary;
 
 namespace {
 
-struct Stats {
-  std::vector<double> ms;
-  double median() const {
-    if (ms.empty()) return 0.0;
-    std::vector<double> v = ms;
-    std::sort(v.begin(), v.end());
-    const std::size_t n = v.size();
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-  }
-  double min() const { return ms.empty() ? 0.0 : *std::min_element(ms.begin(), ms.end()); }
-  double max() const { return ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()); }
-};
-
 struct Row {
   std::string name;
-  Stats time;
+  std::vector<double> ms;  // per timed call (median, min, max: bench_common's summarize)
   std::vector<double> psnr, psnr_matched;  // per frame
   double first_ms = 0.0;                   // first (cold) call
 };
@@ -122,9 +111,9 @@ Image timed(Row& row, int runs, const std::function<Image()>& render) {
   for (int r = 0; r < runs; ++r) {
     t0 = Clock::now();
     Image again = render();
-    row.time.ms.push_back(ms_since(t0));
+    row.ms.push_back(ms_since(t0));
   }
-  if (runs == 0) row.time.ms.push_back(first);
+  if (runs == 0) row.ms.push_back(first);
   return img;
 }
 
@@ -325,7 +314,7 @@ int main(int argc, char** argv) try {
         cue_fit[0], cue_fit[1], 100.0 * cue_fit[2]);
     std::printf("%-26s %10s %10s %10s %10s %11s %10s %12s\n", "renderer", "ms/frame", "min", "max",
                 "first", "x VP clsfd", "PSNR dB", "matched dB");
-    const double base = cls.time.median();
+    const double base = summarize(cls.ms).median;
     std::vector<const Row*> rows;
     if (brute) rows.push_back(&bf);
     rows.push_back(&raw);
@@ -338,18 +327,16 @@ int main(int argc, char** argv) try {
       if (!is_ref) std::snprintf(p, sizeof p, "%.2f", frames > 1 ? mean(row->psnr) : row->psnr[0]);
       if (!is_ref && !row->psnr_matched.empty())
         std::snprintf(pm, sizeof pm, "%.2f", row->psnr_matched[0]);
+      const Summary t = summarize(row->ms);
       std::printf("%-26s %10.2f %10.2f %10.2f %10.2f %11.2f %10s %12s\n", row->name.c_str(),
-                  row->time.median(), row->time.min(), row->time.max(), row->first_ms,
-                  row->time.median() / base, p, pm);
+                  t.median, t.min, t.max, row->first_ms, t.median / base, p, pm);
       json_cases +=
           std::string(json_cases.empty() ? "" : ",\n") + "    {\"size\": " + std::to_string(size) +
           ", \"frames\": " + std::to_string(frames) + ", \"renderer\": " + json_str(row->name) +
-          ", \"ms_median\": " + json_num(row->time.median()) +
-          ", \"ms_min\": " + json_num(row->time.min()) +
-          ", \"ms_max\": " + json_num(row->time.max()) +
-          ", \"ms_first\": " + json_num(row->first_ms) +
-          ", \"timed_renders\": " + std::to_string(row->time.ms.size()) +
-          ", \"ratio_to_volpack_classified\": " + json_num(row->time.median() / base) +
+          ", \"ms_median\": " + json_num(t.median) + ", \"ms_min\": " + json_num(t.min) +
+          ", \"ms_max\": " + json_num(t.max) + ", \"ms_first\": " + json_num(row->first_ms) +
+          ", \"timed_renders\": " + std::to_string(row->ms.size()) +
+          ", \"ratio_to_volpack_classified\": " + json_num(t.median / base) +
           ", \"psnr_db\": " + (is_ref ? "null" : json_num(mean(row->psnr))) +
           ", \"psnr_min_db\": " + (is_ref ? "null" : json_num(min_of(row->psnr))) +
           ", \"psnr_matched_db\": " +
