@@ -166,6 +166,8 @@ DevicePeTables upload_pe_tables(Device& device, const KdSplit& split) {
   m.cidx = device.buffer(ro, cidx.size() * sizeof(cl_int4), cidx.data(), "PE cell indices");
   m.pe_of = device.buffer(ro, pe_of.size() * sizeof(cl_int), pe_of.data(), "PE of cell");
   m.pairs = device.buffer(ro, pairs.size() * sizeof(cl_int2), pairs.data(), "balance pairs");
+  std::vector<cl_uchar> every(static_cast<std::size_t>(std::max<int64_t>(pes, 1)), 1);
+  m.every_pe = device.buffer(ro, every.size(), every.data(), "PE mask");
   return m;
 }
 
@@ -176,18 +178,21 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
 
 namespace {
 
-// The matching of the PEs flagged in `active` (every PE where empty) with
-// the split's tables `t`.
+// The matching of the PEs flagged in `active` (every PE where empty: the
+// tables' all-ones mask, no upload) with the split's tables `t`.
 DeviceMatching enqueue_match_flags(Device& device, const ViewGeometry& view, const KdSplit& split,
                                    const std::vector<uint8_t>& active, const DevicePeTables& t,
                                    MatchLinks links) {
-  const int64_t pes = split.pes();
   DeviceMatching m;
   m.masked = !active.empty();
-  std::vector<cl_uchar> flags(static_cast<std::size_t>(std::max<int64_t>(pes, 1)), 1);
-  for (std::size_t p = 0; p < active.size(); ++p) flags[p] = active[p] ? 1 : 0;
-  m.active =
-      device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, flags.size(), flags.data(), "PE mask");
+  if (m.masked) {
+    std::vector<cl_uchar> flags(active.size());
+    for (std::size_t p = 0; p < active.size(); ++p) flags[p] = active[p] ? 1 : 0;
+    m.active = device.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, flags.size(), flags.data(),
+                             "PE mask");
+  } else {
+    m.active = t.every_pe;
+  }
   set_pe_tables(m, t);
   return enqueue_match_masked(device, view, split, std::move(m), links);
 }
@@ -195,6 +200,14 @@ DeviceMatching enqueue_match_flags(Device& device, const ViewGeometry& view, con
 // ArgumentError unless `tables` were made for `split`.
 void check_tables(const DevicePeTables& tables, const KdSplit& split) {
   if (!(tables.split == split)) throw ArgumentError("tables", "PE tables made for another split");
+}
+
+// ArgumentError unless `reach` is a brick reach of the split's volume.
+void check_reach(const BrickReach& reach, const KdSplit& split) {
+  if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
+  for (int a = 0; a < 3; ++a)
+    if (reach.bricks[a] != (split.dims[a] + (1 << SV_BRICK_LOG2) - 1) >> SV_BRICK_LOG2)
+      throw ArgumentError("reach", "bricks do not tile the volume of the split");
 }
 
 }  // namespace
@@ -213,18 +226,6 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
   check_tables(tables, split);
   return enqueue_match_flags(device, view, split, {}, tables, links);
 }
-
-namespace {
-
-// ArgumentError unless `reach` is a brick reach of the split's volume.
-void check_reach(const BrickReach& reach, const KdSplit& split) {
-  if (reach.reach == nullptr) throw ArgumentError("reach", "no brick reach buffer");
-  for (int a = 0; a < 3; ++a)
-    if (reach.bricks[a] != (split.dims[a] + (1 << SV_BRICK_LOG2) - 1) >> SV_BRICK_LOG2)
-      throw ArgumentError("reach", "bricks do not tile the volume of the split");
-}
-
-}  // namespace
 
 DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdSplit& split,
                              const BrickReach& reach, MatchLinks links) {

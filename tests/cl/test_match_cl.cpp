@@ -475,11 +475,22 @@ TEST(MatchCl, ActiveFromReachEqualsReference) {
     DeviceMatching dt = enqueue_match(dev, v, split, BrickReach{&rb, nb}, tables);
     expect_same(dt.read(dev), got, "tables P=" + std::to_string(pes));
     EXPECT_EQ(dt.read_links(dev), dm.read_links(dev)) << "P=" << pes;
-    // Every PE, with the tables and without.
+    // Every PE, with the tables and without, and the reference's.
     DeviceMatching da = enqueue_match(dev, v, split, tables);
     DeviceMatching d0 = enqueue_match(dev, v, split);
-    expect_same(da.read(dev), d0.read(dev), "all PEs, tables P=" + std::to_string(pes));
+    const Matching all = da.read(dev);
+    expect_same(all, d0.read(dev), "all PEs, tables P=" + std::to_string(pes));
+    expect_same(all, match_reference(v, split), "all PEs P=" + std::to_string(pes));
     EXPECT_EQ(da.read_links(dev), d0.read_links(dev)) << "P=" << pes;
+    // The tables' every-PE mask (the one those matchings read, not uploaded
+    // each time) is P ones, and a second matching with them, after the
+    // masked one above, matches the same.
+    std::vector<uint8_t> every(static_cast<std::size_t>(pes), 0);
+    cl_check(dev.queue().enqueueReadBuffer(tables.every_pe, CL_TRUE, 0, every.size(), every.data()),
+             "read every_pe");
+    EXPECT_EQ(std::count(every.begin(), every.end(), 1), pes) << "P=" << pes;
+    expect_same(enqueue_match(dev, v, split, tables).read(dev), all,
+                "all PEs again P=" + std::to_string(pes));
     on += std::count(want.begin(), want.end(), 1);
     off += std::count(want.begin(), want.end(), 0);
   }

@@ -362,6 +362,30 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
   }
 }
 
+// read_device_image refuses a size that is not positive and a buffer too
+// small for the image with an ArgumentError naming it (not a mapping error
+// or a read past the buffer), and reads one that fits bit for bit.
+TEST(SwapKernels, ReadDeviceImageChecksItsSize) {
+  SIMDVOL_TEST_DEVICE(dev);
+  std::vector<Rgba> px(6 * 4);
+  for (std::size_t i = 0; i < px.size(); ++i)
+    px[i] = Rgba{float(i), 0.5f * float(i), -1.0f, 1.0f / float(i + 1)};
+  cl::Buffer b = dev.buffer(CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, px.size() * sizeof(Rgba),
+                            px.data(), "image");
+  EXPECT_TRUE(bitwise_equal(read_device_image(dev, b, 6, 4).pixels(), px));
+  EXPECT_TRUE(bitwise_equal(read_device_image(dev, b, 4, 5).pixels(),
+                            std::vector<Rgba>(px.begin(), px.begin() + 20)));
+  for (const auto& [w, h] : {std::pair{0, 4}, {6, -1}, {5, 5}, {25, 1}}) {
+    try {
+      (void)read_device_image(dev, b, w, h);
+      ADD_FAILURE() << w << "x" << h << " read";
+    } catch (const ArgumentError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(std::to_string(w) + "x" + std::to_string(h)), std::string::npos) << what;
+    }
+  }
+}
+
 // A plan whose output x stride is finer than an input's (plan_swap never
 // makes one: its strides only grow) takes the stage kernel's per-pixel
 // path; it too equals the reference bit for bit. Level k + 1 of a real plan

@@ -190,11 +190,14 @@ DeviceMatching enqueue_match(Device& device, const ViewGeometry& view, const KdS
 /// that matches frame after frame under one split makes them once and
 /// passes them to enqueue_match (the engine's way: at 8,192 PEs about a
 /// quarter of a millisecond of host work a frame otherwise, beside the
-/// kernels that share the CPU).
+/// kernels that share the CPU). They also hold the every-PE mask (P bytes
+/// of 1) that the matching without a mask reads, so that it too is made
+/// once rather than uploaded every frame.
 struct DevicePeTables {
   KdSplit split;  ///< the split they were made for
   cl::Buffer cidx, pe_of, pairs;
   std::array<cl_int, 7> pair_first{};
+  cl::Buffer every_pe;  ///< cl_uchar[max(P, 1)], all 1: the mask of the every-PE matching
 };
 /// Makes and uploads the PE tables of `split`.
 DevicePeTables upload_pe_tables(Device& device, const KdSplit& split);

@@ -151,7 +151,8 @@ cl::Event enqueue_display(Device& device, const DeviceSwapPlan& plan, const cl::
 cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
                        cl::Buffer& out);
 
-/// Reads a width x height float4 image back (blocking).
+/// Reads a width x height float4 image back (blocking). ArgumentError if the
+/// size is not positive or `image` holds fewer than width x height pixels.
 Image read_device_image(Device& device, const cl::Buffer& image, int width, int height);
 
 }  // namespace simdvol
