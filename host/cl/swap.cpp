@@ -433,13 +433,10 @@ cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffe
 }
 
 Image read_device_image(Device& device, const cl::Buffer& image, int width, int height) {
-  if (width <= 0 || height <= 0)
-    throw ArgumentError("image size", "width and height must be positive, got " +
-                                          std::to_string(width) + "x" + std::to_string(height));
   // Mapped (on a CPU device the buffer's own memory) and copied once into
   // the image's storage: a read into an Image zeroed it first, 1 MB a frame
   // at 256^2 (about 0.15 ms of host work beside the kernels).
-  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  const std::size_t n = image_pixels(width, height);  // (checks the size)
   const std::size_t have = image.getInfo<CL_MEM_SIZE>();
   if (have / sizeof(Rgba) < n)
     throw ArgumentError("image", "a buffer of " + std::to_string(have) +

@@ -253,15 +253,12 @@ Format format_of(const fs::path& path) {
 
 }  // namespace
 
-namespace {
-// Pixels of a width x height image; ArgumentError unless both are positive.
 std::size_t image_pixels(int width, int height) {
   if (width <= 0 || height <= 0)
     throw ArgumentError("image size", "width and height must be positive, got " +
                                           std::to_string(width) + "x" + std::to_string(height));
   return static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
 }
-}  // namespace
 
 Image::Image(int width, int height) : w_(width), h_(height), px_(image_pixels(width, height)) {}
 

@@ -15,6 +15,10 @@ struct Rgba {
   float r = 0, g = 0, b = 0, a = 0;
 };
 
+/// Pixels of a width x height image; ArgumentError naming the size unless
+/// both are positive.
+std::size_t image_pixels(int width, int height);
+
 class Image {
  public:
   Image() = default;
