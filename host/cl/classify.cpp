@@ -104,9 +104,8 @@ sv_classify_params classify_params(const Classifier& c, const ValueRange& range,
   if (c.mixture.relative) {
     if (!std::isfinite(range.min) || !std::isfinite(range.max))
       throw ArgumentError("range", "the value range must be finite for a relative mixture");
-    const double span = static_cast<double>(range.max) - static_cast<double>(range.min);
     p.range_min = range.min;
-    p.range_scale = span > 0.0 ? static_cast<float>(1.0 / span) : 0.0f;
+    p.range_scale = mixture_range_scale(range);  // (the reference's mixture_index)
   }
   return p;
 }

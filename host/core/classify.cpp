@@ -15,8 +15,10 @@
 //  load_classifier sort them; a Classifier built by hand that is not sorted
 //  is rejected with ArgumentError rather than silently re-sorted per voxel).
 //      I = v                                   (absolute)
-//      I = (v - range.min) / (range.max - range.min), 0 if max == min
-//                                              (relative)
+//      I = (v - range.min) * s, s = 1 / (range.max - range.min), 0 if
+//          max == min, in float as the kernel computes it (relative;
+//          mixture_index: the pair below jumps at each mean, so both sides
+//          take it on the same I)
 //      I <= mean_0     : p_0 = 1                (pure first material)
 //      I >= mean_last  : p_last = 1             (pure last material)
 //      otherwise, i = last material with mean_i <= I, j = i + 1:
@@ -120,11 +122,7 @@ double log_likelihood(const Material& m, double I) {
 
 float classify_mixture(const MaterialMixture& mix, const ValueRange& range, float value,
                        float colour[3]) {
-  double I = value;
-  if (mix.relative) {
-    const double span = static_cast<double>(range.max) - static_cast<double>(range.min);
-    I = span > 0.0 ? (static_cast<double>(value) - static_cast<double>(range.min)) / span : 0.0;
-  }
+  const double I = mixture_index(mix, range, value);
   const auto& m = mix.materials;
   std::size_t i = 0, j = 0;   // the bracketing pair
   double pi = 1.0, pj = 0.0;  // fractions of materials i and j (pi + pj = 1)
@@ -212,6 +210,19 @@ float Ramp::operator()(float v) const {
       static_cast<std::size_t>(std::upper_bound(x.begin(), x.end(), v) - x.begin()) - 1;
   const float t = (v - x[k]) / (x[k + 1] - x[k]);
   return y[k] + t * (y[k + 1] - y[k]);
+}
+
+float mixture_range_scale(const ValueRange& range) {
+  const double span = static_cast<double>(range.max) - static_cast<double>(range.min);
+  return span > 0.0 ? static_cast<float>(1.0 / span) : 0.0f;
+}
+
+float mixture_index(const MaterialMixture& mix, const ValueRange& range, float value) {
+  if (!mix.relative) return value;
+  const float scale = mixture_range_scale(range);
+  // Two float operations, each rounded, as sv_mixture / sv_mixture_index16.
+  const float d = value - range.min;
+  return scale > 0.0f ? d * scale : 0.0f;
 }
 
 float classify_voxel(const Classifier& c, const ValueRange& range, float value, float grad_mag,

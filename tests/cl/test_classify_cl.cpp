@@ -273,6 +273,36 @@ TEST(ClassifyKernel, OddVolumeAndOpacitySteps) {
   check_case({&vol, "ct", kViews[0], 8, 1.0, unlit});
 }
 
+// Integer volumes holding every value of their range once (in a shuffled
+// order), with the "mri" preset's relative means (0.15, 0.45, 0.6, 0.85):
+// for the ranges 0 .. 255 (value 153 = 0.6), 0 .. 100 (45 = 0.45),
+// 0 .. 1000, -1000 .. 1000 and 0 .. 4095 some value lands exactly on a mean,
+// where the mixture jumps (the bracketing pair changes); a reference that
+// took I = (v - min) / (max - min) in double put those values on the other
+// side of the mean from the kernel's float I (alpha 0.0192 against 0.0234
+// at 153 of 0 .. 255, 3 of -1000 .. 1000's values with one side empty).
+TEST(ClassifyKernel, RelativeMixtureAtTheMaterialMeans) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const int ranges[][2] = {{0, 255}, {0, 100}, {0, 1000}, {-1000, 1000}, {0, 4095}};
+  for (const auto& r : ranges) {
+    const int64_t n = r[1] - r[0] + 1;
+    const int64_t nx = 16, ny = 16, nz = (n + nx * ny - 1) / (nx * ny);
+    Volume vol({nx, ny, nz}, r[0] < 0 ? VoxelType::i16 : VoxelType::u16);
+    auto& v = vol.data();
+    // every value once, the rest of the grid the range's minimum
+    std::fill(v.begin(), v.end(), static_cast<float>(r[0]));
+    for (int64_t k = 0; k < n; ++k)
+      v[static_cast<std::size_t>((k * 7919) % (nx * ny * nz))] = static_cast<float>(r[0] + k);
+    SCOPED_TRACE("range " + std::to_string(r[0]) + " .. " + std::to_string(r[1]));
+    ASSERT_EQ(vol.range().min, static_cast<float>(r[0]));
+    ASSERT_EQ(vol.range().max, static_cast<float>(r[1]));
+    ShadeParams unlit;
+    unlit.enabled = false;
+    for (int64_t pes : {1, 512}) check_case({&vol, "mri", kViews[1], pes, 1.0, unlit});
+    check_case({&vol, "mri", kViews[2], 8});
+  }
+}
+
 TEST(ClassifyKernel, BrainSmall) {
   const auto path = testing::data_dir() / "brainsmall.den";
   SIMDVOL_REQUIRE_FILE(path);

@@ -72,6 +72,20 @@ Classifier load_classifier(const std::filesystem::path& path);
 /// Looks `spec` up as a preset, else loads it as a file.
 Classifier classifier_from_spec(const std::string& spec);
 
+/// A relative mixture's scale 1 / (max - min) of `range` in float, 0 when
+/// max == min: what the kernels multiply by (sv_classify_params::range_scale).
+float mixture_range_scale(const ValueRange& range);
+
+/// The mixture's index I of `value`: the value itself (absolute), or, for a
+/// relative mixture, (value - range.min) * mixture_range_scale(range) in
+/// float, as the kernels compute it (0 when max == min). The mixture jumps
+/// at each material's mean (it mixes only the two materials whose means
+/// bracket I), so the reference decides the bracketing pair on the same
+/// float I as the device: a double (value - min) / (max - min) can fall on
+/// the other side of a mean (value 153 of 0 .. 255 at the "mri" preset's
+/// 0.6: alpha 0.0192 against 0.0234).
+float mixture_index(const MaterialMixture& mix, const ValueRange& range, float value);
+
 /// Opacity of one voxel before lighting (mixture or transfer function).
 /// Also returns premultiplied material colour in colour[0..2].
 float classify_voxel(const Classifier& c, const ValueRange& range, float value, float grad_mag,
