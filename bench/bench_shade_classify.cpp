@@ -190,7 +190,8 @@ int main(int argc, char** argv) {
     // The frame's fused kernel also marks the brick occupancy for
     // empty-space skipping (zeroed before each run, untimed).
     DeviceOccupancy occ = make_occupancy(dev, L, 1);
-    const Defines defs = classify_defines(cp);
+    Defines defs = classify_defines(cp);
+    for (auto& d : shade_defines(sp)) defs.push_back(std::move(d));
     cl::Buffer cbuf = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof cp,
                                  const_cast<sv_classify_params*>(&cp), "classify parameters");
     cl::Buffer sbuf = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof sp,

@@ -590,9 +590,8 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
                    sp->grad_scale[1];
   const float gz = 0.5f * (volume[i + (z + 1 < dims.z ? sz : 0)] - volume[i - (z > 0 ? sz : 0)]) *
                    sp->grad_scale[2];
-  float g2 = gx * gx + gy * gy + gz * gz;
-  g2 = isfinite(g2) ? g2 : 0.0f;
-  const float m = sqrt(g2);
+  float g2, m;
+  sv_grad_len(gx, gy, gz, &g2, &m);
   const float d =
       sp->depth_dir[0] * x + sp->depth_dir[1] * y + sp->depth_dir[2] * z + sp->depth_offset;
   const float cue = 1.0f / (sp->k1 + sp->k2 * d);

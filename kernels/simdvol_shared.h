@@ -140,6 +140,8 @@ typedef struct sv_shade_params {
   float k1, k2;     /* depth cue 1 / (k1 + k2 d) */
   sv_i32 enabled;   /* 0: Id = 1, Is = 0 */
   float spec_floor; /* |N.H| below it: |N.H|^n counts as 0 (specular_floor, shade.hpp) */
+  sv_i32 grad_over; /* 1: the volume's range allows gradients whose squares overflow float
+                       (ShadeFrame::grad_over); the host then builds with SV_GRAD_OVER */
 } sv_shade_params;
 
 /* The materials of a mixture, one array per quantity (not an array of

@@ -191,6 +191,7 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
   const std::string name =
       vec ? detail::voxel_kernel("simdvol_shade_classify16", V) : "simdvol_shade_classify";
   Defines defines = classify_defines(classify);
+  for (auto& d : shade_defines(shade)) defines.push_back(std::move(d));
   if (vec) defines.emplace_back("SV_RW", std::to_string(rw));
   if (vec && detail::nt_stores() &&
       detail::nt_aligned({&out.buffer(), kept ? &kept->planes : nullptr}))

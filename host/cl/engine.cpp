@@ -244,23 +244,26 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   const ViewGeometry view =
       make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
   // Parameters first: every argument error is thrown before anything runs.
-  const sv_shade_params sp = shade_params(make_shade_frame(vol, view, opt.shade), opt.shade);
+  // The value range (a pass over the voxels, kept with the layout): a
+  // relative mixture's scale, and the shading's switch for gradients whose
+  // squares overflow float (ShadeFrame::grad_over).
+  validate(opt.shade);
+  ValueRange values{};
+  if (!(eo.reuse_layout && S.range && S.range_of.is(vol))) {
+    S.range.reset();
+    values = vol.range();
+    if (eo.reuse_layout) {
+      S.range = values;
+      S.range_of.keep(vol);
+    }
+  }
+  if (S.range) values = *S.range;
+  const sv_shade_params sp =
+      shade_params(make_shade_frame(vol, view, opt.shade, values), opt.shade);
   const bool need_range =
       opt.classifier.kind == Classifier::Kind::mixture && opt.classifier.mixture.relative;
-  ValueRange values{};
-  if (need_range) {
-    const bool kept = eo.reuse_layout && S.range && S.range_of.is(vol);
-    if (!kept) {
-      S.range.reset();
-      values = vol.range();
-      if (eo.reuse_layout) {
-        S.range = values;
-        S.range_of.keep(vol);
-      }
-    }
-    if (S.range) values = *S.range;
-  }
-  const sv_classify_params cp = classify_params(opt.classifier, values, view.step);
+  const sv_classify_params cp =
+      classify_params(opt.classifier, need_range ? values : ValueRange{}, view.step);
   const CompositeMode mode = opt.composite.mode;
 
   // Every launch logged for the frame's timeline (EngineTimes::kernels).

@@ -11,7 +11,7 @@
 
 namespace simdvol {
 
-static_assert(sizeof(sv_shade_params) == 25 * 4, "sv_shade_params must be plain floats/ints");
+static_assert(sizeof(sv_shade_params) == 26 * 4, "sv_shade_params must be plain floats/ints");
 
 namespace {
 
@@ -117,7 +117,13 @@ sv_shade_params shade_params(const ShadeFrame& f, const ShadeParams& p) {
   s.k2 = finite_float(p.k2, "k2");
   s.enabled = p.enabled ? 1 : 0;
   s.spec_floor = specular_floor(p.shininess);
+  s.grad_over = f.grad_over ? 1 : 0;
   return s;
+}
+
+Defines shade_defines(const sv_shade_params& params) {
+  if (params.grad_over) return {{"SV_GRAD_OVER", "1"}};
+  return {};
 }
 
 cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_params& params,
@@ -134,7 +140,8 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
   out.mark_stored();
   if (variant == ShadeKernel::vec16) {
     const std::string name = "simdvol_shade16";
-    Defines defines{{"SV_RW", std::to_string(rw)}};
+    Defines defines = shade_defines(params);
+    defines.emplace_back("SV_RW", std::to_string(rw));
     if (detail::nt_stores() && detail::nt_aligned({&out.buffer()}))
       defines.emplace_back("SV_NT", "1");
     cl::Kernel k = device.kernel("shade", name, defines);
@@ -147,7 +154,7 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
   const char* name = variant == ShadeKernel::range3d ? "simdvol_shade"
                      : variant == ShadeKernel::voxel ? "simdvol_shade_voxel"
                                                      : "simdvol_shade_rows";
-  cl::Kernel k = device.kernel("shade", name);
+  cl::Kernel k = device.kernel("shade", name, shade_defines(params));
   set_args(k, name, cells.cells(), out.buffer(), cells.origins(), cells.dims_arg(),
            cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
            static_cast<cl_int>(V.stride), pbuf);

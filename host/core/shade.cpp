@@ -46,8 +46,11 @@
 //  Lighting is two-sided: |N.L| and |N.H|, so the sign of N (which way the
 //  gradient points across a surface) does not matter. With shading
 //  disabled, Id = 1 and Is = 0 (|g| is still computed; classify needs it).
-//  A non-finite g.g (a NaN or infinite neighbour) counts as g = 0: |g| = 0,
-//  N = 0.
+//  A non-finite g.g (a NaN or infinite neighbour, or two neighbours further
+//  apart than the largest float, whose float difference overflows) counts
+//  as g = 0: |g| = 0, N = 0. A finite g whose g.g overflows float (|g|
+//  above about 1.8e19) is lit as any other: the kernels take its length
+//  rescaled (shade.cl, sv_grad_len).
 #include "simdvol/shade.hpp"
 
 #include <algorithm>
@@ -106,14 +109,24 @@ Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& gr
     std::array<int64_t, 3> lo = i, hi = i;
     lo[a] = std::max<int64_t>(i[a] - 1, 0);
     hi[a] = std::min<int64_t>(i[a] + 1, vol.dims()[a] - 1);
-    const double diff = static_cast<double>(vol.at(hi[0], hi[1], hi[2])) -
-                        static_cast<double>(vol.at(lo[0], lo[1], lo[2]));
+    const float fh = vol.at(hi[0], hi[1], hi[2]), fl = vol.at(lo[0], lo[1], lo[2]);
+    // Neighbours further apart than the largest float: the kernels' float
+    // difference is infinite there, so this one is too (no surface).
+    const float fd = fh - fl;
+    const double diff = std::isfinite(fd) ? static_cast<double>(fh) - static_cast<double>(fl)
+                                          : static_cast<double>(fd);
     g[a] = 0.5 * diff * grad_scale[a];
   }
   return g;
 }
 
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p) {
+  validate(p);
+  return make_shade_frame(vol, view, p, vol.range());
+}
+
+ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p,
+                            const ValueRange& range) {
   validate(p);
   if (!(view.radius > 0) || !std::isfinite(view.radius))
     throw ArgumentError("view.radius",
@@ -123,6 +136,9 @@ ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const S
       throw ArgumentError("view.rot", "must be finite");
 
   ShadeFrame f;
+  // |g_a| <= (max - min) / 2, so |g|^2 <= 0.75 (max - min)^2: below
+  // FLT_MAX = 3.4e38 for spans under 2.1e19 (1e19 leaves a margin).
+  f.grad_over = static_cast<double>(range.max) - static_cast<double>(range.min) >= 1e19;
   const double min_sp = std::min({vol.spacing()[0], vol.spacing()[1], vol.spacing()[2]});
   Vec3 s{};  // spacing in units of the smallest spacing
   for (int a = 0; a < 3; ++a) {

@@ -381,6 +381,42 @@ TEST(RenderEngine, KeptClassificationEqualsClassifyingAgain) {
 // volume is the first scaled by 3 and shifted by 50, so that its range
 // differs while its classification (by fractions of its own range) does
 // not: an image made with the first volume's range would differ.
+// A volume whose gradients' squares overflow float (a random volume times
+// 1e25, as simulation output in cgs units can be): the frames through one
+// engine (the kept classification after the first) against the reference,
+// for a mixture and a transfer function that reads |g|. Before the kernels
+// rescaled such lengths (SV_GRAD_OVER) every voxel was unlit with |g| = 0,
+// and the transfer function's image empty.
+TEST(RenderEngine, HugeValuesAreLitAsTheReferenceLightsThem) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Volume vol = simdvol::testing::random_volume({24, 20, 18}, 0.0f, 100.0f, {1, 1, 1}, 5);
+  for (float& x : vol.data()) x *= 1e25f;
+  Classifier tf;
+  tf.kind = Classifier::Kind::transfer;
+  tf.transfer.density.x = {0.0f, 1e27f};
+  tf.transfer.density.y = {0.02f, 0.3f};
+  tf.transfer.gradient.x = {0.0f, 1e25f, 1e26f};
+  tf.transfer.gradient.y = {0.0f, 0.2f, 1.0f};
+  for (const Classifier& cls : {classifier_preset("mri"), tf}) {
+    SCOPED_TRACE(cls.kind == Classifier::Kind::transfer ? "transfer function" : "mri");
+    RenderOptions opt;
+    opt.width = opt.height = 40;
+    opt.classifier = cls;
+    EngineOptions eo;
+    eo.pes = 64;
+    RenderEngine engine(dev, eo);
+    for (const ViewAngles& a : {ViewAngles{20, 35, 10}, ViewAngles{-40, 100, 0}}) {
+      opt.view = a;
+      const Image want = render_reference(vol, opt);
+      float alpha = 0;
+      for (const Rgba& p : want.pixels()) alpha += p.a;
+      EXPECT_GT(alpha, 10.0f);  // not an empty frame
+      for (int frame = 0; frame < 2; ++frame)
+        EXPECT_LE(max_diff(engine.render(vol, opt), want), 1e-5f) << "frame " << frame;
+    }
+  }
+}
+
 TEST(RenderEngine, RelativeClassificationTakesEachVolumesRange) {
   SIMDVOL_TEST_DEVICE(dev);
   const Volume vol = shepp_logan(32, 2);

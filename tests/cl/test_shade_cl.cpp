@@ -188,6 +188,37 @@ TEST(ShadeKernel, NonFiniteNeighboursMeanNoSurface) {
   EXPECT_FLOAT_EQ(run.flat[vol.index(5, 4, 4)].diffuse, 0.25f);  // ka
 }
 
+// Values far beyond float's square root: a random volume times 1e25 (the
+// gradients' squares overflow float; before, the kernels took every such
+// voxel as no surface, |g| = 0, where the reference lit it), times 1e-25
+// (the squares underflow: no surface on both sides, |g| to 1e-6 relative),
+// and neighbours 3e38 and -3e38 apart (their float difference overflows:
+// no surface on both sides).
+TEST(ShadeKernel, HugeAndTinyValues) {
+  SIMDVOL_TEST_DEVICE(dev);
+  for (const float k : {1e25f, 1e-25f, 1e35f}) {
+    Volume vol = testing::random_volume({21, 13, 10}, -100.0f, 100.0f, {1, 1, 1}, 17);
+    for (float& v : vol.data()) v *= k;
+    for (const ViewAngles& v : kViews)
+      for (int64_t pes : {1, 8, 512})
+        check_case(vol, v, ShadeParams{}, pes, "random x " + std::to_string(k));
+  }
+  Volume vol = testing::random_volume({12, 10, 9}, 0.0f, 100.0f, {1, 1, 1}, 11);
+  vol.at(4, 4, 4) = 3e38f;
+  vol.at(6, 4, 4) = -3e38f;
+  check_case(vol, kViews[1], ShadeParams{}, 8, "neighbours 3e38 and -3e38");
+  const ViewGeometry view = make_view(vol, kViews[1], 32, 32, Sampling::voxel);
+  const auto ref = shade(vol, view, ShadeParams{});
+  EXPECT_EQ(ref[vol.index(5, 4, 4)].gradient, 0.0f);        // between them
+  EXPECT_FLOAT_EQ(ref[vol.index(5, 4, 4)].diffuse, 0.25f);  // ka
+  // A huge gradient is a surface with its length.
+  Volume big({3, 1, 1}, VoxelType::f32);
+  big.data() = {0.0f, 0.0f, 1e30f};
+  const auto rb = shade(big, make_view(big, kViews[0], 8, 8, Sampling::voxel), ShadeParams{});
+  EXPECT_FLOAT_EQ(rb[1].gradient, 5e29f);
+  EXPECT_GT(rb[1].diffuse, 0.25f);
+}
+
 TEST(ShadeKernel, BrainSmall) {
   const auto path = testing::data_dir() / "brainsmall.den";
   SIMDVOL_REQUIRE_FILE(path);

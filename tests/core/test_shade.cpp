@@ -166,6 +166,23 @@ TEST(ShadeFrame, DepthOfEveryVoxelLiesInZeroOneForRealViews) {
   }
 }
 
+// grad_over: set where the value range lets a gradient's squared length
+// overflow float (max - min >= 1e19), from the range given or the volume's.
+TEST(ShadeFrame, GradOverFromTheValueRange) {
+  Volume vol({5, 4, 3}, VoxelType::f32);
+  for (std::size_t i = 0; i < vol.voxel_count(); ++i) vol.data()[i] = static_cast<float>(i % 256);
+  const ViewGeometry v = make_view(vol, {0, 0, 0}, 8, 8, Sampling::voxel);
+  EXPECT_FALSE(make_shade_frame(vol, v, ShadeParams{}).grad_over);
+  EXPECT_FALSE(make_shade_frame(vol, v, ShadeParams{}, {-4e18f, 5e18f}).grad_over);
+  EXPECT_TRUE(make_shade_frame(vol, v, ShadeParams{}, {-6e18f, 6e18f}).grad_over);
+  vol.at(1, 1, 1) = 2e19f;
+  EXPECT_TRUE(make_shade_frame(vol, v, ShadeParams{}).grad_over);
+  vol.at(1, 1, 1) = -2e19f;
+  EXPECT_TRUE(make_shade_frame(vol, v, ShadeParams{}).grad_over);
+  vol.at(1, 1, 1) = INFINITY;  // not finite: not in the range
+  EXPECT_FALSE(make_shade_frame(vol, v, ShadeParams{}).grad_over);
+}
+
 TEST(Shade, GradientAlongLightGivesFullDiffuse) {
   // f = 6 y - 8 z: g = (0, 6, -8) inside, |g| = 10, N = (0, 0.6, -0.8) = L.
   const Volume vol = linear_volume({3, 5, 6}, 0.0f, 6.0f, -8.0f);

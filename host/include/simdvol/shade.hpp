@@ -46,6 +46,11 @@ struct ShadeFrame {
   Vec3 depth_dir{};  ///< viewing z in object index units: d = dot(depth_dir, x) + depth_offset
   double depth_offset = 0;
   Vec3 grad_scale{};  ///< multiply index-space differences by this (min spacing / spacing)
+  /// The volume's range (max - min >= 1e19) allows a gradient whose squared
+  /// length overflows float (|g| above about 1.8e19): the kernels then take
+  /// such lengths rescaled (shade.cl, sv_grad_len), as the reference's
+  /// double does.
+  bool grad_over = false;
 };
 
 /// Checks the parameters (finite; a non-zero light; ka, kd, ks, n >= 0; k1 > 0
@@ -53,11 +58,17 @@ struct ShadeFrame {
 /// --phong KA,KD,KS,N or --depth-cue K1,K2).
 void validate(const ShadeParams& p);
 
-/// Throws as validate(p) first.
+/// Throws as validate(p) first. Takes the volume's value range (for
+/// grad_over) from `range`, or, without it, from vol.range() (a pass over
+/// the voxels: callers that render many frames keep the range).
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p);
+ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p,
+                            const ValueRange& range);
 
 /// Central-difference gradient at voxel (x, y, z), neighbours clamped at the
-/// volume's edges, in value units per smallest voxel spacing.
+/// volume's edges, in value units per smallest voxel spacing; a component is
+/// infinite where the two neighbours' float difference overflows (as in the
+/// kernels), NaN next to a NaN.
 Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& grad_scale);
 
 /// The shade stage over the whole volume (reference, serial).

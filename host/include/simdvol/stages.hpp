@@ -163,6 +163,14 @@ class VoxelBuffer {
 /// non-finite values.
 sv_shade_params shade_params(const ShadeFrame& frame, const ShadeParams& p);
 
+/// The shade code's build defines for `params`: SV_GRAD_OVER where
+/// params.grad_over is set (the gradients' lengths rescaled where their
+/// squares overflow float; compiled in only then, since the test alone cost
+/// the fused shade + classify 4-6 %), else none. enqueue_shade and
+/// enqueue_shade_classify add them; a program built from shade.cl by hand
+/// for such a volume needs them too.
+Defines shade_defines(const sv_shade_params& params);
+
 /// Decomposition of the shade kernel (kernels/shade.cl, which records the
 /// measurements): vec16 (the default, fastest measured: explicit float16 on
 /// chunks of 16 voxels; needs cells whose x extent is 4, 8 or a multiple of
