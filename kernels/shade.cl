@@ -101,9 +101,6 @@ SV_FN float sv_spec_pow(__constant const sv_shade_params* sp, const float nh) {
   return sv_pow(nh < sp->spec_floor ? 0.0f : nh, sp->shininess);
 }
 
-/* Shading of one voxel whose value is at c (in a padded block with row pitch
- * bx and slice pitch bxy), at global voxel index (ix, iy, iz). Scalar code
- * only: PoCL's loop vectoriser does not take vector types (float3/float4). */
 /* The squared length g2 of a gradient and its length |g|: 0 and 0 where a
  * component is not finite (a NaN/inf neighbour, or neighbours further apart
  * than the largest float: no surface). With SV_GRAD_OVER (the host defines
@@ -130,6 +127,9 @@ SV_FN void sv_grad_len(const float gx, const float gy, const float gz, float* g2
 #endif
 }
 
+/* Shading of one voxel whose value is at c (in a padded block with row pitch
+ * bx and slice pitch bxy), at global voxel index (ix, iy, iz). Scalar code
+ * only: PoCL's loop vectoriser does not take vector types (float3/float4). */
 SV_FN void sv_shade_voxel(__constant const sv_shade_params* sp, __global const float* c, int bx,
                           int bxy, float ix, float iy, float iz, float* id, float* is, float* mag) {
   const float gx = 0.5f * (c[1] - c[-1]) * sp->grad_scale[0];

@@ -247,7 +247,6 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   // The value range (a pass over the voxels, kept with the layout): a
   // relative mixture's scale, and the shading's switch for gradients whose
   // squares overflow float (ShadeFrame::grad_over).
-  validate(opt.shade);
   ValueRange values{};
   if (!(eo.reuse_layout && S.range && S.range_of.is(vol))) {
     S.range.reset();
