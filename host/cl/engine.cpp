@@ -259,10 +259,8 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   if (S.range) values = *S.range;
   const sv_shade_params sp =
       shade_params(make_shade_frame(vol, view, opt.shade, values), opt.shade);
-  const bool need_range =
-      opt.classifier.kind == Classifier::Kind::mixture && opt.classifier.mixture.relative;
-  const sv_classify_params cp =
-      classify_params(opt.classifier, need_range ? values : ValueRange{}, view.step);
+  // (classify_params reads the range only for a relative mixture)
+  const sv_classify_params cp = classify_params(opt.classifier, values, view.step);
   const CompositeMode mode = opt.composite.mode;
 
   // Every launch logged for the frame's timeline (EngineTimes::kernels).

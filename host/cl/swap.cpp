@@ -437,7 +437,7 @@ Image read_device_image(Device& device, const cl::Buffer& image, int width, int 
   // the image's storage: a read into an Image zeroed it first, 1 MB a frame
   // at 256^2 (about 0.15 ms of host work beside the kernels).
   const std::size_t n = image_pixels(width, height);  // (checks the size)
-  const std::size_t have = image.getInfo<CL_MEM_SIZE>();
+  const std::size_t have = buffer_size(image, "clGetMemObjectInfo(image)");
   if (have / sizeof(Rgba) < n)
     throw ArgumentError("image", "a buffer of " + std::to_string(have) +
                                      " bytes holds fewer than " + std::to_string(width) + "x" +
