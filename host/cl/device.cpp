@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include "kernel_files.hpp"
 
@@ -347,6 +348,13 @@ void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const 
                                   (hint.empty() ? std::string() : ": " + hint));
 }
 
+// The launch logs of the threads that have one on (log_launches).
+struct Device::LaunchLogs {
+  std::mutex mutex;
+  std::atomic<bool> any{false};  // some thread logs (run() takes the mutex only then)
+  std::vector<std::pair<std::thread::id, std::vector<Launch>>> threads;
+};
+
 struct Device::Pool {
   struct Entry {
     cl::Buffer buffer;
@@ -357,9 +365,19 @@ struct Device::Pool {
     std::string what;   // the request it was last handed out for
   };
   std::mutex mutex;
-  int depth = 0;  // open scopes
-  int keep = 2;   // closed scopes a released buffer waits to be handed out again
+  // Open scopes per thread (one entry per thread with a scope open): each
+  // thread's frames open and close their own, and a thread's outermost close
+  // frees what has been released while other threads' frames go on.
+  std::vector<std::pair<std::thread::id, int>> depths;
+  int keep = 2;  // closed scopes a released buffer waits to be handed out again
   std::vector<Entry> entries;
+
+  // The open scopes of thread `id` (0 when none).
+  int depth(std::thread::id id) const {
+    for (const auto& d : depths)
+      if (d.first == id) return d.second;
+    return 0;
+  }
 };
 
 // Releases the pool's buffers that only the pool holds (reference count 1;
@@ -389,7 +407,9 @@ std::size_t Device::release_pooled() {
 }
 
 Device::Device(std::optional<int> index)
-    : cache_(std::make_unique<Cache>()), pool_(std::make_unique<Pool>()) {
+    : cache_(std::make_unique<Cache>()),
+      logs_(std::make_unique<LaunchLogs>()),
+      pool_(std::make_unique<Pool>()) {
   auto found = all_devices();
   std::vector<DeviceInfo> infos;
   for (std::size_t i = 0; i < found.size(); ++i) {
@@ -410,7 +430,9 @@ Device::Device(std::optional<int> index)
 }
 
 Device::Device(cl_context context, cl_command_queue queue)
-    : cache_(std::make_unique<Cache>()), pool_(std::make_unique<Pool>()) {
+    : cache_(std::make_unique<Cache>()),
+      logs_(std::make_unique<LaunchLogs>()),
+      pool_(std::make_unique<Pool>()) {
   if (!context || !queue) throw ArgumentError("Device", "null cl_context or cl_command_queue");
   context_ = cl::Context(context, /*retainObject=*/true);
   queue_ = cl::CommandQueue(queue, /*retainObject=*/true);
@@ -775,7 +797,7 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
   std::unique_lock<std::mutex> lock;
   if (pooled) {
     lock = std::unique_lock<std::mutex>(pool_->mutex);
-    if (pool_->depth > 0) {
+    if (pool_->depth(std::this_thread::get_id()) > 0) {
       // The smallest that fits, preferring one last handed out for the same
       // `what`: a frame's requests keep their buffers from frame to frame
       // as their sizes drift, instead of taking each other's.
@@ -830,33 +852,67 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
                   is_allocation_failure(err) ? "the device (for a CPU device, the host) has no "
                                                "memory left for it"
                                              : "");
-  if (pooled && pool_->depth > 0) pool_->entries.push_back({b, flags, fresh_bytes, true, 0, what});
+  if (pooled && pool_->depth(std::this_thread::get_id()) > 0)
+    pool_->entries.push_back({b, flags, fresh_bytes, true, 0, what});
   return b;
 }
 
-Device::ReuseScope::ReuseScope(Device& device) : device_(&device) {
+Device::ReuseScope::ReuseScope(Device& device)
+    : device_(&device), thread_(std::this_thread::get_id()) {
   if (!device_->pool_) throw ArgumentError("device", "was moved from");
   std::lock_guard<std::mutex> lock(device_->pool_->mutex);
-  ++device_->pool_->depth;
+  auto& depths = device_->pool_->depths;
+  auto it =
+      std::find_if(depths.begin(), depths.end(), [&](const auto& d) { return d.first == thread_; });
+  if (it == depths.end())
+    depths.emplace_back(thread_, 1);
+  else
+    ++it->second;
 }
 
 Device::ReuseScope::~ReuseScope() {
   Pool& pool = *device_->pool_;
   std::lock_guard<std::mutex> lock(pool.mutex);
-  if (--pool.depth > 0) return;
-  // Every command that used the scope's buffers must have completed before
-  // one is handed out again (a conforming implementation keeps a buffer
-  // alive for its pending commands, but need not show that in the count).
+  auto it = std::find_if(pool.depths.begin(), pool.depths.end(),
+                         [&](const auto& d) { return d.first == thread_; });
+  if (it == pool.depths.end() || --it->second > 0) return;
+  pool.depths.erase(it);
+  // This thread's outermost scope. Whatever nobody but the pool holds any
+  // more (its reference count is 1) can take no new commands, so once the
+  // queue has finished the commands enqueued so far, it is free to be handed
+  // out again. Where no other thread has a scope open, the counts are read
+  // after the wait, as ever (a conforming implementation keeps a buffer
+  // alive for its pending commands, but need not show that in the count;
+  // PoCL's may). Where another thread's frame goes on, they are read before
+  // it: a buffer that frame releases during the wait may have had a command
+  // enqueued after the wait began, and it waits for the next close. So each
+  // thread's frames free buffers while the others' go on, instead of the
+  // pool growing until no scope is open anywhere.
+  std::vector<char> unheld;  // per entry: 0 held, 1 only the pool's, 2 unknown (drop it)
+  auto read_counts = [&] {
+    unheld.assign(pool.entries.size(), 0);
+    for (std::size_t i = 0; i < pool.entries.size(); ++i) {
+      cl_uint refs = 0;
+      unheld[i] = pool.entries[i].buffer.getInfo(CL_MEM_REFERENCE_COUNT, &refs) != CL_SUCCESS
+                      ? 2
+                      : refs <= 1;
+    }
+  };
+  const bool alone = pool.depths.empty();
+  if (!alone) read_counts();
   if (device_->queue_.finish() != CL_SUCCESS) {
     pool.entries.clear();  // unknown state: keep nothing
     return;
   }
+  if (alone) read_counts();
   std::vector<Pool::Entry> kept;
-  for (Pool::Entry& e : pool.entries) {
-    cl_uint refs = 0;
-    if (e.buffer.getInfo(CL_MEM_REFERENCE_COUNT, &refs) != CL_SUCCESS) continue;  // drop it
-    e.busy = refs > 1;
-    if (!e.busy && ++e.idle > pool.keep) continue;  // not used lately: release it
+  for (std::size_t i = 0; i < pool.entries.size(); ++i) {
+    Pool::Entry& e = pool.entries[i];
+    if (unheld[i] == 2) continue;
+    if (unheld[i]) {
+      e.busy = false;
+      if (++e.idle > pool.keep) continue;  // not used lately: release it
+    }
     kept.push_back(std::move(e));
   }
   pool.entries = std::move(kept);
@@ -893,18 +949,39 @@ cl::Event Device::run(const cl::Kernel& kernel, const std::string& what, const c
   cl::Event event;
   cl_int err = queue_.enqueueNDRangeKernel(kernel, cl::NullRange, rounded, local, nullptr, &event);
   if (err != CL_SUCCESS) throw CLError("clEnqueueNDRangeKernel(" + what + ")", err);
-  if (log_) launches_.push_back({what, event});
+  if (logs_ && logs_->any.load(std::memory_order_relaxed)) {
+    std::lock_guard<std::mutex> lock(logs_->mutex);
+    const auto id = std::this_thread::get_id();
+    for (auto& t : logs_->threads)
+      if (t.first == id) t.second.push_back({what, event});
+  }
   return event;
 }
 
 void Device::log_launches(bool on) {
-  log_ = on;
-  launches_.clear();
+  if (!logs_) throw ArgumentError("device", "was moved from");
+  std::lock_guard<std::mutex> lock(logs_->mutex);
+  auto& threads = logs_->threads;
+  const auto id = std::this_thread::get_id();
+  auto it =
+      std::find_if(threads.begin(), threads.end(), [&](const auto& t) { return t.first == id; });
+  if (!on) {
+    if (it != threads.end()) threads.erase(it);
+  } else if (it == threads.end()) {
+    threads.emplace_back(id, std::vector<Launch>());
+  } else {
+    it->second.clear();
+  }
+  logs_->any = !threads.empty();
 }
 
 std::vector<Device::Launch> Device::take_launches() {
   std::vector<Launch> v;
-  v.swap(launches_);
+  if (!logs_) return v;
+  std::lock_guard<std::mutex> lock(logs_->mutex);
+  const auto id = std::this_thread::get_id();
+  for (auto& t : logs_->threads)
+    if (t.first == id) v.swap(t.second);
   return v;
 }
 

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <iostream>
 #include <sstream>
+#include <thread>
 
 #include "simdvol/device.hpp"
 #include "stage_testing.hpp"
@@ -556,6 +557,43 @@ TEST(DeviceTest, ReuseScopeRecyclesOnlyReleasedBuffers) {
   { Device::ReuseScope s5(d); }
   { Device::ReuseScope s6(d); }
   EXPECT_EQ(d.pooled_bytes(), 0u);
+}
+
+// Scopes are per thread: while one thread holds a scope open (another
+// engine's frame, say), a second thread's frames still get back at each
+// frame's end what they released, so the pool does not grow frame by
+// frame; and a buffer that the first thread has dropped is freed by the
+// second thread's close too. What the first thread still holds is never
+// handed to the second.
+TEST(DeviceTest, ReuseScopeFreesReleasedBuffersWhileAnotherThreadsScopeIsOpen) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  const auto rw = CL_MEM_READ_WRITE;
+  Device::ReuseScope open(d);  // this thread's: stays open throughout
+  cl::Buffer held = d.buffer(rw, 1 << 20, nullptr, "held");
+  cl::Buffer dropped = d.buffer(rw, 1 << 20, nullptr, "dropped");
+  const cl_mem dropped_id = dropped();
+  dropped = cl::Buffer();
+  EXPECT_EQ(d.pooled_bytes(), 2u << 20);
+  std::vector<cl_mem> got;
+  std::thread frames([&] {
+    for (int f = 0; f < 6; ++f) {
+      Device::ReuseScope scope(d);
+      got.push_back(d.buffer(rw, 1 << 20, nullptr, "frame")());
+    }
+  });
+  frames.join();
+  ASSERT_EQ(got.size(), 6u);
+  // Frame 0 finds nothing free (the dropped one is freed at its end), so a
+  // fresh buffer; every later frame is handed frame 0's again (the same
+  // request's), released at the frame before's end.
+  EXPECT_NE(got[0], dropped_id);
+  EXPECT_NE(got[0], held());
+  for (int f = 1; f < 6; ++f) EXPECT_EQ(got[f], got[0]) << "frame " << f;
+  // The held one and the frames' one: not one buffer more per frame, and
+  // the dropped one, freed at frame 0's end and not handed out in the two
+  // scopes after (set_reuse_keep), released.
+  EXPECT_EQ(d.pooled_bytes(), 2u << 20);
 }
 
 // Device::release_pooled lets go of the pool's buffers that nobody else

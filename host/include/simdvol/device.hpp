@@ -56,6 +56,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -204,7 +205,8 @@ inline std::size_t round_up(std::size_t n, std::size_t m) {
 }
 
 /// A device with its context, in-order queue and program cache.
-/// Movable, not copyable; thread-safe for build()/program()/kernel().
+/// Movable, not copyable; thread-safe for build()/program()/kernel(),
+/// buffer() and run() (ReuseScope and the launch log are per thread).
 class Device {
  public:
   /// Opens device `index` as listed by list_devices(), or the one
@@ -273,14 +275,18 @@ class Device {
   /// Reuse of scratch buffers from frame to frame. A frame allocates tens of
   /// MB of buffers that live only for that frame; on PoCL each is fresh host
   /// memory, and touching it costs a page fault per 4 KiB inside the
-  /// kernels (about 33,000 per 256^3 frame). While a scope is open, buffer()
-  /// records what it hands out; when the outermost scope closes it waits for
-  /// the queue and keeps the buffers that nobody else holds any more (their
-  /// reference count is 1: only the pool's), for the next scope. A kept
-  /// buffer not handed out again in the next two scopes (set_reuse_keep) is released. Buffers
-  /// still held by the caller (a RenderEngine's persistent cells, say) are
-  /// never handed out twice. For one thread's frames (RenderEngine::render
-  /// opens one per frame).
+  /// kernels (about 33,000 per 256^3 frame). While a thread has a scope
+  /// open, buffer() called from that thread records what it hands out; when
+  /// the thread's outermost scope closes it waits for the queue and keeps the
+  /// buffers that nobody else holds any more (their reference count is 1:
+  /// only the pool's), for the next scope. A kept buffer not handed out again
+  /// in the next two scopes (set_reuse_keep) is released. Buffers still held
+  /// by the caller (a RenderEngine's persistent cells, say) are never handed
+  /// out twice. Scopes are per thread (RenderEngine::render opens one per
+  /// frame): engines rendering on one Device from several threads free each
+  /// other's released buffers at each of their frames' ends, so the pool
+  /// stays bounded while their frames overlap. Close a scope on the thread
+  /// that opened it.
   class ReuseScope {
    public:
     explicit ReuseScope(Device& device);
@@ -290,6 +296,7 @@ class Device {
 
    private:
     Device* device_;
+    std::thread::id thread_;  ///< the thread that opened it
   };
   /// A buffer released in one scope can be handed out in the next `scopes`
   /// scopes (default 2); not handed out in those, it is released. A program
@@ -322,11 +329,13 @@ class Device {
     std::string kernel;  ///< run()'s `what`
     cl::Event event;
   };
-  /// Starts (clearing it) or stops the log of run()'s launches, for a
-  /// timeline of the device's work (RenderEngine::render with `times`).
+  /// Starts (clearing it) or stops the calling thread's log of its run()
+  /// launches, for a timeline of the device's work (RenderEngine::render
+  /// with `times`). Each thread has its own log: engines on several threads
+  /// each see their own launches.
   void log_launches(bool on);
-  /// The launches logged since log_launches(true), in launch order; the log
-  /// is left empty (and on, if it was).
+  /// The calling thread's launches logged since its log_launches(true), in
+  /// launch order; the log is left empty (and on, if it was).
   std::vector<Launch> take_launches();
 
  private:
@@ -347,8 +356,8 @@ class Device {
     std::size_t from_disk = 0;
   };
   std::unique_ptr<Cache> cache_;
-  bool log_ = false;
-  std::vector<Launch> launches_;
+  struct LaunchLogs;
+  std::unique_ptr<LaunchLogs> logs_;
   struct Pool;
   static std::size_t release_unheld(Pool& pool);
   std::unique_ptr<Pool> pool_;

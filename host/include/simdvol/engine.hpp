@@ -206,7 +206,10 @@ struct EngineOptions {
 void validate(const EngineOptions& eo, const RenderOptions& opt);
 
 /// The engine with its buffers kept between frames (see the file comment).
-/// Not thread-safe; `device` must outlive it.
+/// Not thread-safe: one thread at a time renders with it. Engines on
+/// several threads may share one `device` (its buffer pool's scopes and its
+/// launch logs are per thread; RenderEngine.EnginesOnSeveralThreadsShareOneDevice).
+/// `device` must outlive it.
 class RenderEngine {
  public:
   explicit RenderEngine(Device& device, EngineOptions options = {});
