@@ -348,6 +348,16 @@ void check_allocation(std::uint64_t bytes, std::uint64_t max_alloc_bytes, const 
                                   (hint.empty() ? std::string() : ": " + hint));
 }
 
+namespace {
+
+// The entry of thread `id` in a vector of (thread, value) pairs, or end().
+template <typename Pairs>
+auto find_thread(Pairs& pairs, std::thread::id id) {
+  return std::find_if(pairs.begin(), pairs.end(), [&](const auto& p) { return p.first == id; });
+}
+
+}  // namespace
+
 // The launch logs of the threads that have one on (log_launches).
 struct Device::LaunchLogs {
   std::mutex mutex;
@@ -374,9 +384,8 @@ struct Device::Pool {
 
   // The open scopes of thread `id` (0 when none).
   int depth(std::thread::id id) const {
-    for (const auto& d : depths)
-      if (d.first == id) return d.second;
-    return 0;
+    const auto it = find_thread(depths, id);
+    return it == depths.end() ? 0 : it->second;
   }
 };
 
@@ -862,8 +871,7 @@ Device::ReuseScope::ReuseScope(Device& device)
   if (!device_->pool_) throw ArgumentError("device", "was moved from");
   std::lock_guard<std::mutex> lock(device_->pool_->mutex);
   auto& depths = device_->pool_->depths;
-  auto it =
-      std::find_if(depths.begin(), depths.end(), [&](const auto& d) { return d.first == thread_; });
+  const auto it = find_thread(depths, thread_);
   if (it == depths.end())
     depths.emplace_back(thread_, 1);
   else
@@ -873,8 +881,7 @@ Device::ReuseScope::ReuseScope(Device& device)
 Device::ReuseScope::~ReuseScope() {
   Pool& pool = *device_->pool_;
   std::lock_guard<std::mutex> lock(pool.mutex);
-  auto it = std::find_if(pool.depths.begin(), pool.depths.end(),
-                         [&](const auto& d) { return d.first == thread_; });
+  const auto it = find_thread(pool.depths, thread_);
   if (it == pool.depths.end() || --it->second > 0) return;
   pool.depths.erase(it);
   // This thread's outermost scope. Whatever nobody but the pool holds any
@@ -951,9 +958,8 @@ cl::Event Device::run(const cl::Kernel& kernel, const std::string& what, const c
   if (err != CL_SUCCESS) throw CLError("clEnqueueNDRangeKernel(" + what + ")", err);
   if (logs_ && logs_->any.load(std::memory_order_relaxed)) {
     std::lock_guard<std::mutex> lock(logs_->mutex);
-    const auto id = std::this_thread::get_id();
-    for (auto& t : logs_->threads)
-      if (t.first == id) t.second.push_back({what, event});
+    const auto it = find_thread(logs_->threads, std::this_thread::get_id());
+    if (it != logs_->threads.end()) it->second.push_back({what, event});
   }
   return event;
 }
@@ -963,8 +969,7 @@ void Device::log_launches(bool on) {
   std::lock_guard<std::mutex> lock(logs_->mutex);
   auto& threads = logs_->threads;
   const auto id = std::this_thread::get_id();
-  auto it =
-      std::find_if(threads.begin(), threads.end(), [&](const auto& t) { return t.first == id; });
+  const auto it = find_thread(threads, id);
   if (!on) {
     if (it != threads.end()) threads.erase(it);
   } else if (it == threads.end()) {
@@ -979,9 +984,8 @@ std::vector<Device::Launch> Device::take_launches() {
   std::vector<Launch> v;
   if (!logs_) return v;
   std::lock_guard<std::mutex> lock(logs_->mutex);
-  const auto id = std::this_thread::get_id();
-  for (auto& t : logs_->threads)
-    if (t.first == id) v.swap(t.second);
+  const auto it = find_thread(logs_->threads, std::this_thread::get_id());
+  if (it != logs_->threads.end()) v.swap(it->second);
   return v;
 }
 
