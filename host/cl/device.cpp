@@ -449,9 +449,25 @@ Device::Device(cl_context context, cl_command_queue queue)
   cl_check(clGetCommandQueueInfo(queue, CL_QUEUE_DEVICE, sizeof(id), &id, nullptr),
            "clGetCommandQueueInfo(CL_QUEUE_DEVICE)");
   device_ = cl::Device(id, /*retainObject=*/true);
+  cl_context queue_context = nullptr;
+  cl_check(clGetCommandQueueInfo(queue, CL_QUEUE_CONTEXT, sizeof(queue_context), &queue_context,
+                                 nullptr),
+           "clGetCommandQueueInfo(CL_QUEUE_CONTEXT)");
+  if (queue_context != context)
+    throw ArgumentError("Device",
+                        "the cl_command_queue belongs to another cl_context than the one "
+                        "given (buffers and programs are made in the given context)");
   cl_command_queue_properties props = 0;
   cl_check(clGetCommandQueueInfo(queue, CL_QUEUE_PROPERTIES, sizeof(props), &props, nullptr),
            "clGetCommandQueueInfo(CL_QUEUE_PROPERTIES)");
+  // The stages enqueued one after another depend on each other through the
+  // queue's order, not through events: out of order, they read what the
+  // stage before has not written yet (on PoCL the matching then faulted).
+  if ((props & CL_QUEUE_OUT_OF_ORDER_EXEC_MODE_ENABLE) != 0)
+    throw ArgumentError("Device",
+                        "the cl_command_queue executes out of order "
+                        "(CL_QUEUE_OUT_OF_ORDER_EXEC_MODE_ENABLE); simdvol's stages "
+                        "depend on the queue's order: give an in-order queue");
   profiling_ = (props & CL_QUEUE_PROFILING_ENABLE) != 0;
   cl_platform_id platform = nullptr;
   cl_check(clGetDeviceInfo(id, CL_DEVICE_PLATFORM, sizeof(platform), &platform, nullptr),

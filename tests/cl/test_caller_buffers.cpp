@@ -68,6 +68,50 @@ TEST(CallerBuffers, WrappedContextAndBuffersGiveTheSameResults) {
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(Rgba)), 0);
 }
 
+// A Device wraps only a queue it can run the stages on: an out-of-order
+// queue (the stages depend on the queue's order, not on events) and a
+// queue of another context than the one given (buffers and programs are
+// made in the given context) are ArgumentErrors that say so, before
+// anything is enqueued; an in-order queue of the same device and context,
+// made by the caller without profiling, is taken.
+TEST(CallerBuffers, OutOfOrderOrForeignQueuesAreRejected) {
+  SIMDVOL_TEST_DEVICE(base);
+  const cl_context ctx = base.context()();
+  const cl_device_id id = base.device()();
+  auto message = [](cl_context c, cl_command_queue q) -> std::string {
+    try {
+      Device d(c, q);
+    } catch (const ArgumentError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  cl_int err = CL_SUCCESS;
+  cl_command_queue plain = clCreateCommandQueue(ctx, id, 0, &err);
+  ASSERT_EQ(err, CL_SUCCESS);
+  EXPECT_EQ(message(ctx, plain), "");
+  {
+    Device d(ctx, plain);
+    EXPECT_FALSE(d.profiling());
+  }
+
+  cl_context other = clCreateContext(nullptr, 1, &id, nullptr, nullptr, &err);
+  ASSERT_EQ(err, CL_SUCCESS);
+  const std::string foreign = message(other, plain);
+  EXPECT_NE(foreign.find("another cl_context"), std::string::npos) << foreign;
+  clReleaseContext(other);
+  clReleaseCommandQueue(plain);
+
+  cl_command_queue ooo =
+      clCreateCommandQueue(ctx, id, CL_QUEUE_OUT_OF_ORDER_EXEC_MODE_ENABLE, &err);
+  if (err == CL_INVALID_QUEUE_PROPERTIES) GTEST_SKIP() << "the device has no out-of-order queues";
+  ASSERT_EQ(err, CL_SUCCESS);
+  const std::string out_of_order = message(ctx, ooo);
+  clReleaseCommandQueue(ooo);
+  EXPECT_NE(out_of_order.find("out of order"), std::string::npos) << out_of_order;
+  EXPECT_NE(out_of_order.find("in-order queue"), std::string::npos) << out_of_order;
+}
+
 // Non-temporal stores of float16 need each 16-float chunk 64-byte aligned.
 // The fused shade + classify stores its voxel cells that way by default
 // where they were stored before and hold at least 64 MiB (kc_mode & 8;

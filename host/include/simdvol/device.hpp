@@ -214,6 +214,8 @@ class Device {
   explicit Device(std::optional<int> index = std::nullopt);
   /// Wraps an existing context and queue (both retained, not taken over), for
   /// programs that embed simdvol's kernels. The device is the queue's device.
+  /// ArgumentError for a null handle, a queue of another context, or an
+  /// out-of-order queue (the stages depend on the queue's order).
   Device(cl_context context, cl_command_queue queue);
   Device(Device&&) noexcept;
   Device& operator=(Device&&) noexcept;
