@@ -350,15 +350,23 @@ void nrrd_prescan_header(const fs::path& path) {
     throw FileError(path,
                     "not a NRRD file (the header does not begin with the magic line NRRD000x)");
   bool have_dimension = false;
+  int line_number = 1;
   while (true) {
     const std::size_t start = pos;
     if (!next_line(line)) break;
+    ++line_number;
     // teem 1.11 over-reads its line buffer (a heap overflow found by the
     // fuzzer, in a biff message about a LIST of data files) when the file
     // ends inside a header line: a header must end with a newline.
     if (text.find('\n', start) == std::string::npos && text.size() < (std::size_t{1} << 20))
       throw FileError(path, "truncated header: the last header line has no newline");
     if (line.empty()) break;  // the end of the header
+    // teem 1.11 over-reads its line buffer (a heap overflow in a biff
+    // message, found by the fuzzer) on a header line with a NUL byte, after
+    // "data file: LIST". A header is text: no line of it holds a NUL.
+    if (line.find('\0') != std::string::npos)
+      throw FileError(path, "malformed header: line " + std::to_string(line_number) +
+                                " holds a NUL byte (a NRRD header is text)");
     if (line[0] == '#') continue;
     const std::size_t colon = line.find(':');
     if (colon == std::string::npos) continue;

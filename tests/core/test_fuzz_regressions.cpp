@@ -188,6 +188,34 @@ TEST_F(FuzzRegressions, NrrdHeaderEndingWithoutNewline) {
   EXPECT_THROW(load_nrrd(write("input2.nhdr", concat(header + "\n", {}))), FileError);
 }
 
+// Fuzzer finding (nrrd, crash-11eb82…, heap-buffer-overflow READ of 206
+// bytes in teem's biffAddf called from nrrdLoad, the fifteenth session's
+// 600 s run): a detached header whose LIST of data files has a line of NUL
+// bytes around a name. A header line with a NUL byte is now rejected,
+// naming the line; in an attached NRRD the binary data after the header's
+// blank line may hold any bytes.
+TEST_F(FuzzRegressions, NrrdHeaderLineWithANulByte) {
+  const std::string head =
+      "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 2\nencoding: raw\ndata file: LIST\n";
+  const std::string names = std::string(3, '\0') + "i.raw" + std::string(150, '\0') + "at:\n";
+  expect_file_error(write("input.nhdr", concat(head + names + "# nanp:\n\n", {})),
+                    "line 7 holds a NUL byte");
+  // A NUL in an ordinary field is rejected the same way.
+  expect_file_error(write("field.nrrd", concat(std::string("NRRD0004\ntype: uint8\ndimension: 3\n"
+                                                           "sizes: 2 2 2\nencoding: raw\n") +
+                                                   std::string("content: a\0b\n\n", 14),
+                                               std::vector<uint8_t>(8, 0))),
+                    "line 6 holds a NUL byte");
+  // NUL bytes in the data after the header are voxels.
+  const Volume v = load_nrrd(write("data.nrrd", concat("NRRD0004\ntype: uint8\ndimension: 3\n"
+                                                       "sizes: 2 2 2\nencoding: raw\n\n",
+                                                       {0, 0, 7, 0, 0, 0, 0, 9})));
+  ASSERT_EQ(v.voxel_count(), 8);
+  EXPECT_EQ(v.data()[2], 7.0f);
+  EXPECT_EQ(v.data()[7], 9.0f);
+  EXPECT_EQ(v.data()[0], 0.0f);
+}
+
 // Fuzzer finding (nrrd, leak-28a84a…): a formatted data file line in a
 // header whose dimension line was mangled; teem rejected it but leaked its
 // file-name array (4184 bytes). A data file line before the dimension is
