@@ -322,10 +322,11 @@ void nrrd_check_data_file_line(const fs::path& path, const std::string& value) {
                               " do not give 1 to 100000 files");
 }
 
-/// Reads the NRRD header lines (up to the first blank line, at most 1 MiB)
-/// and checks what teem cannot be trusted with: the magic, so that teem never
-/// tries its other formats (its text reader leaks on malformed input), a last
-/// header line without a newline, and the data file line
+/// Reads the NRRD header lines (up to the first blank line, or after
+/// "data file: LIST" to the end of the file; at most 1 MiB) and checks what
+/// teem cannot be trusted with: the magic, so that teem never tries its
+/// other formats (its text reader leaks on malformed input), a last header
+/// line without a newline, a line with a NUL byte, and the data file line
 /// (nrrd_check_data_file_line).
 void nrrd_prescan_header(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
@@ -333,6 +334,7 @@ void nrrd_prescan_header(const fs::path& path) {
   std::string text(std::size_t{1} << 20, '\0');
   in.read(text.data(), static_cast<std::streamsize>(text.size()));
   text.resize(static_cast<std::size_t>(in.gcount()));
+  const bool more = in && in.peek() != std::char_traits<char>::eof();  // past the 1 MiB read
   std::size_t pos = 0;
   auto next_line = [&](std::string& line) {
     if (pos >= text.size()) return false;
@@ -350,6 +352,9 @@ void nrrd_prescan_header(const fs::path& path) {
     throw FileError(path,
                     "not a NRRD file (the header does not begin with the magic line NRRD000x)");
   bool have_dimension = false;
+  // After "data file: LIST" teem takes every later line of the file as a
+  // data file name, past blank lines too: those lines are checked as well.
+  bool list = false;
   int line_number = 1;
   while (true) {
     const std::size_t start = pos;
@@ -360,14 +365,17 @@ void nrrd_prescan_header(const fs::path& path) {
     // ends inside a header line: a header must end with a newline.
     if (text.find('\n', start) == std::string::npos && text.size() < (std::size_t{1} << 20))
       throw FileError(path, "truncated header: the last header line has no newline");
-    if (line.empty()) break;  // the end of the header
+    if (line.empty()) {
+      if (list) continue;
+      break;  // the end of the header
+    }
     // teem 1.11 over-reads its line buffer (a heap overflow in a biff
     // message, found by the fuzzer) on a header line with a NUL byte, after
     // "data file: LIST". A header is text: no line of it holds a NUL.
     if (line.find('\0') != std::string::npos)
       throw FileError(path, "malformed header: line " + std::to_string(line_number) +
                                 " holds a NUL byte (a NRRD header is text)");
-    if (line[0] == '#') continue;
+    if (list || line[0] == '#') continue;  // a data file name, or a comment
     const std::size_t colon = line.find(':');
     if (colon == std::string::npos) continue;
     if (colon + 1 < line.size() && line[colon + 1] == '=') continue;  // key/value pair
@@ -383,8 +391,13 @@ void nrrd_prescan_header(const fs::path& path) {
       if (!have_dimension)
         throw FileError(path, "malformed header: 'data file' before 'dimension'");
       nrrd_check_data_file_line(path, line.substr(colon + 1));
+      std::istringstream words(line.substr(colon + 1));
+      std::string first;
+      words >> first;
+      list = first == "LIST";
     }
   }
+  if (list && more) throw FileError(path, "a header whose LIST of data files runs past 1 MiB");
 }
 
 /// Names of the data files of a detached-header nrrd (after a header-only

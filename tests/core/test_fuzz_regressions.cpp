@@ -200,6 +200,24 @@ TEST_F(FuzzRegressions, NrrdHeaderLineWithANulByte) {
   const std::string names = std::string(3, '\0') + "i.raw" + std::string(150, '\0') + "at:\n";
   expect_file_error(write("input.nhdr", concat(head + names + "# nanp:\n\n", {})),
                     "line 7 holds a NUL byte");
+  // After "data file: LIST" teem reads every later line as a name, past a
+  // blank line too (the same over-read, found by hand after the fix above
+  // first stopped at the blank line): checked to the end of the file, for
+  // the NUL and for the last line's newline.
+  expect_file_error(write("after_blank.nhdr", concat(head + "a.raw\n\n" + names, {})),
+                    "line 9 holds a NUL byte");
+  expect_file_error(
+      write("tabs_after_blank.nhdr", concat(head + "\ndata." + std::string(29, '\t'), {})),
+      "no newline");
+  // A well-formed LIST still loads: each file one slice of the slowest axis.
+  write("a.raw", {1, 2, 3, 4});
+  write("b.raw", {5, 6, 7, 8});
+  const Volume listed =
+      load_nrrd(write("list.nhdr", concat("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\n"
+                                          "encoding: raw\ndata file: LIST\na.raw\nb.raw\n",
+                                          {})));
+  ASSERT_EQ(listed.voxel_count(), 8);
+  for (std::size_t i = 0; i < 8; ++i) EXPECT_EQ(listed.data()[i], float(i + 1)) << i;
   // A NUL in an ordinary field is rejected the same way.
   expect_file_error(write("field.nrrd", concat(std::string("NRRD0004\ntype: uint8\ndimension: 3\n"
                                                            "sizes: 2 2 2\nencoding: raw\n") +
