@@ -286,8 +286,9 @@ void nrrd_copy(const Nrrd* n, const NrrdShape& s, float* out) {
 /// that its first conversion is %d (so "%d%s" reads a missing argument), and
 /// counts the files with an int loop that never ends when max + step
 /// overflows. Only %d (with at most two width digits) and %% are accepted, and
-/// min, max and step must give 1 to 100000 files within +-2^30.
-void nrrd_check_data_file_line(const fs::path& path, const std::string& value) {
+/// min, max and step must give 1 to 100000 files within +-2^30. Returns
+/// whether the line is "LIST [<subdim>]" (the names on the lines after it).
+bool nrrd_check_data_file_line(const fs::path& path, const std::string& value) {
   std::istringstream words(value);
   std::string format;
   words >> format;
@@ -306,7 +307,7 @@ void nrrd_check_data_file_line(const fs::path& path, const std::string& value) {
     ++conversions;
     i = j;
   }
-  if (conversions == 0) return;  // one file name (or LIST)
+  if (conversions == 0) return format == "LIST";  // one file name, or LIST
   if (conversions > 1)
     throw FileError(path, "data file format '" + format + "' has more than one %d");
   long long mn = 0, mx = 0, step = 0;
@@ -320,6 +321,7 @@ void nrrd_check_data_file_line(const fs::path& path, const std::string& value) {
     throw FileError(path, "data file format '" + format + "': min " + std::to_string(mn) +
                               ", max " + std::to_string(mx) + ", step " + std::to_string(step) +
                               " do not give 1 to 100000 files");
+  return false;
 }
 
 /// Reads the NRRD header lines (up to the first blank line, or after
@@ -390,11 +392,7 @@ void nrrd_prescan_header(const fs::path& path) {
       // dimension first anyway.
       if (!have_dimension)
         throw FileError(path, "malformed header: 'data file' before 'dimension'");
-      nrrd_check_data_file_line(path, line.substr(colon + 1));
-      std::istringstream words(line.substr(colon + 1));
-      std::string first;
-      words >> first;
-      list = first == "LIST";
+      list = nrrd_check_data_file_line(path, line.substr(colon + 1));
     }
   }
   if (list && more) throw FileError(path, "a header whose LIST of data files runs past 1 MiB");

@@ -121,7 +121,7 @@ Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& gr
 }
 
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p) {
-  validate(p);
+  validate(p);  // before the range's pass over the voxels
   return make_shade_frame(vol, view, p, vol.range());
 }
 
