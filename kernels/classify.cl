@@ -597,7 +597,7 @@ __kernel void simdvol_shade_classify_flat(__global const float* restrict volume,
   const float cue = 1.0f / (sp->k1 + sp->k2 * d);
   const float nl = fabs(gx * sp->light[0] + gy * sp->light[1] + gz * sp->light[2]) / m;
   const float nh = fabs(gx * sp->halfway[0] + gy * sp->halfway[1] + gz * sp->halfway[2]) / m;
-  const int surface = g2 >= 1e-12f;
+  const int surface = g2 >= sv_surface_g2(sp);
   float id = surface ? sp->ka + cue * sp->kd * nl : sp->ka;
   float is = surface ? cue * sp->ks * sv_spec_pow(sp, nh) : 0.0f;
   id = sp->enabled ? id : 1.0f;

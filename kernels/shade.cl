@@ -127,6 +127,14 @@ SV_FN void sv_grad_len(const float gx, const float gy, const float gz, float* g2
 #endif
 }
 
+/* The squared gradient length below which a voxel is no surface (N = 0,
+ * ambient light only): sp->surface_g2, the host's surface_threshold of the
+ * volume's span (1e-12 for a span of 1 or more); 1e-12 where a caller's
+ * parameters leave it 0. */
+SV_FN_INLINE float sv_surface_g2(__constant const sv_shade_params* sp) {
+  return sp->surface_g2 > 0.0f ? sp->surface_g2 : 1e-12f;
+}
+
 /* Shading of one voxel whose value is at c (in a padded block with row pitch
  * bx and slice pitch bxy), at global voxel index (ix, iy, iz). Scalar code
  * only: PoCL's loop vectoriser does not take vector types (float3/float4). */
@@ -143,7 +151,7 @@ SV_FN void sv_shade_voxel(__constant const sv_shade_params* sp, __global const f
   const float cue = 1.0f / (sp->k1 + sp->k2 * d);
   const float nl = fabs(gx * sp->light[0] + gy * sp->light[1] + gz * sp->light[2]) / m;
   const float nh = fabs(gx * sp->halfway[0] + gy * sp->halfway[1] + gz * sp->halfway[2]) / m;
-  const int surface = g2 >= 1e-12f; /* else N = 0: ambient only */
+  const int surface = g2 >= sv_surface_g2(sp); /* else N = 0: ambient only */
   const float lit_d = surface ? sp->ka + cue * sp->kd * nl : sp->ka;
   const float lit_s = surface ? cue * sp->ks * sv_spec_pow(sp, nh) : 0.0f;
   *id = sp->enabled ? lit_d : 1.0f;
@@ -324,7 +332,7 @@ SV_FN void sv_light16(__constant const sv_shade_params* sp, float16 gx, float16 
   const float16 cue = 1.0f / (sp->k1 + sp->k2 * d);
   const float16 nl = fabs(gx * sp->light[0] + gy * sp->light[1] + gz * sp->light[2]) / m;
   const float16 nh = fabs(gx * sp->halfway[0] + gy * sp->halfway[1] + gz * sp->halfway[2]) / m;
-  const int16 surface = g2 >= 1e-12f; /* else N = 0: ambient only */
+  const int16 surface = g2 >= sv_surface_g2(sp); /* else N = 0: ambient only */
   const float16 lit_d = select((float16)(sp->ka), sp->ka + cue * sp->kd * nl, surface);
   const float16 lit_s = select((float16)(0.0f), cue * sp->ks * sv_spec_pow16(sp, nh), surface);
   *id = sp->enabled ? lit_d : (float16)(1.0f);

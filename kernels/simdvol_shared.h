@@ -142,6 +142,8 @@ typedef struct sv_shade_params {
   float spec_floor; /* |N.H| below it: |N.H|^n counts as 0 (specular_floor, shade.hpp) */
   sv_i32 grad_over; /* 1: the volume's range allows gradients whose squares overflow float
                        (ShadeFrame::grad_over); the host then builds with SV_GRAD_OVER */
+  float surface_g2; /* |g|^2 below it: no surface, ambient light only (ShadeFrame::surface_g2,
+                       surface_threshold in shade.hpp); 0 or less: 1e-12 */
 } sv_shade_params;
 
 /* The materials of a mixture, one array per quantity (not an array of

@@ -11,7 +11,7 @@
 
 namespace simdvol {
 
-static_assert(sizeof(sv_shade_params) == 26 * 4, "sv_shade_params must be plain floats/ints");
+static_assert(sizeof(sv_shade_params) == 27 * 4, "sv_shade_params must be plain floats/ints");
 
 namespace {
 
@@ -118,6 +118,7 @@ sv_shade_params shade_params(const ShadeFrame& f, const ShadeParams& p) {
   s.enabled = p.enabled ? 1 : 0;
   s.spec_floor = specular_floor(p.shininess);
   s.grad_over = f.grad_over ? 1 : 0;
+  s.surface_g2 = static_cast<float>(f.surface_g2);
   return s;
 }
 

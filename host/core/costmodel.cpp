@@ -189,7 +189,7 @@ OpCounts shade_ops_per_voxel() {
   o.mul += 1;  // cue = 1 / (k1 + k2 d)
   o.add += 1;
   o.div += 1;
-  o.cmp += 1;  // g.g < 1e-12
+  o.cmp += 1;  // g.g < surface_g2
   o.mul += 3;  // |N.L| = |g . L| / |g|
   o.add += 2;
   o.cmp += 1;

@@ -39,7 +39,9 @@
 //  Lighting (eq 4.1 with f = 1, V_lambda = 1, one colour channel: the
 //  material colour multiplies later, in classify). Per voxel:
 //      |g| = sqrt(g.g)
-//      N   = g / |g|, or N = 0 when g.g < 1e-12 (only ambient light)
+//      N   = g / |g|, or N = 0 when g.g < t (only ambient light), t =
+//            surface_threshold(the value range's span): 1e-12 for a span
+//            of 1 or more, (1e-6 span)^2 below (at least 1e-32)
 //      cue = 1 / (k1 + k2 * d)
 //      Id  = ka + cue * kd * |N.L|
 //      Is  = cue * ks * |N.H|^n        (Is = 0 when N = 0, whatever n)
@@ -138,7 +140,9 @@ ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const S
   ShadeFrame f;
   // |g_a| <= (max - min) / 2, so |g|^2 <= 0.75 (max - min)^2: below
   // FLT_MAX = 3.4e38 for spans under 2.1e19 (1e19 leaves a margin).
-  f.grad_over = static_cast<double>(range.max) - static_cast<double>(range.min) >= 1e19;
+  const double span = static_cast<double>(range.max) - static_cast<double>(range.min);
+  f.grad_over = span >= 1e19;
+  f.surface_g2 = surface_threshold(span);
   const double min_sp = std::min({vol.spacing()[0], vol.spacing()[1], vol.spacing()[2]});
   Vec3 s{};  // spacing in units of the smallest spacing
   for (int a = 0; a < 3; ++a) {
@@ -165,6 +169,11 @@ ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const S
     f.depth_offset += w * (0.5 - 0.5 * static_cast<double>(vol.dims()[a]));
   }
   return f;
+}
+
+double surface_threshold(double span) {
+  const double s = !(span < 1.0) ? 1.0 : std::max(span, 1e-10);  // NaN: 1
+  return 1e-12 * s * s;
 }
 
 float specular_floor(double shininess) {
@@ -195,7 +204,7 @@ std::vector<ShadeSample> shade(const Volume& vol, const ViewGeometry& view, cons
                          f.depth_dir[1] * static_cast<double>(y) +
                          f.depth_dir[2] * static_cast<double>(z) + f.depth_offset;
         const double cue = 1.0 / (p.k1 + p.k2 * d);
-        if (g2 < 1e-12) {  // no surface: N = 0, ambient only
+        if (g2 < f.surface_g2) {  // no surface: N = 0, ambient only
           s.diffuse = static_cast<float>(p.ka);
           s.specular = 0.0f;
           continue;

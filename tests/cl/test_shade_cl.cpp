@@ -219,6 +219,42 @@ TEST(ShadeKernel, HugeAndTinyValues) {
   EXPECT_GT(rb[1].diffuse, 0.25f);
 }
 
+// Values in small units (a random volume times 1e-9, as a diffusion map in
+// m^2/s, and times 2^-40): lit as the reference lights them, which is as the
+// same volume in larger units (surface_threshold); before, the kernels and
+// the reference alike took |g|^2 < 1e-12 as no surface and left every voxel
+// ambient only. Each kernel variant, with a flat run of voxels (no surface)
+// among them.
+TEST(ShadeKernel, TinyValuesAreLit) {
+  SIMDVOL_TEST_DEVICE(dev);
+  for (const float k : {1e-9f, std::ldexp(1.0f, -40)}) {
+    Volume vol = testing::random_volume({37, 29, 23}, 0.0f, 100.0f, {1, 0.8, 2.5}, 23);
+    for (int64_t x = 0; x < 37; ++x)
+      for (int64_t y = 0; y < 29; ++y) vol.at(x, y, 4) = vol.at(x, y, 5) = vol.at(x, y, 6) = 50.0f;
+    for (float& v : vol.data()) v *= k;
+    for (const ViewAngles& v : kViews)
+      for (int64_t pes : {1, 8, 512})
+        check_case(vol, v, ShadeParams{}, pes, "random x " + std::to_string(k));
+    const ViewGeometry view = make_view(vol, kViews[1], 32, 32, Sampling::voxel);
+    const auto sp = shade_params(make_shade_frame(vol, view, ShadeParams{}), ShadeParams{});
+    EXPECT_GT(sp.surface_g2, 0.0f);
+    EXPECT_LT(sp.surface_g2, 1e-24f);
+    const auto ref = shade(vol, view, ShadeParams{});
+    for (ShadeKernel kv :
+         {ShadeKernel::range3d, ShadeKernel::voxel, ShadeKernel::rows, ShadeKernel::vec16}) {
+      const auto run = run_shade(dev, vol, sp, 64, kv);
+      std::size_t lit = 0, ambient = 0;
+      for (std::size_t i = 0; i < ref.size(); ++i) {
+        ASSERT_NEAR(ref[i].diffuse, run.flat[i].diffuse, kTolLight) << i;
+        lit += run.flat[i].diffuse > 0.25f;
+        ambient += run.flat[i].diffuse == 0.25f;
+      }
+      EXPECT_GT(lit, ref.size() / 2) << "k " << k;
+      EXPECT_GE(ambient, 37u * 29u) << "k " << k;  // the flat run's middle slice
+    }
+  }
+}
+
 TEST(ShadeKernel, BrainSmall) {
   const auto path = testing::data_dir() / "brainsmall.den";
   SIMDVOL_REQUIRE_FILE(path);

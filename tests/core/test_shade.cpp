@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 
 #include "simdvol/error.hpp"
 #include "simdvol/shade.hpp"
@@ -181,6 +182,65 @@ TEST(ShadeFrame, GradOverFromTheValueRange) {
   EXPECT_TRUE(make_shade_frame(vol, v, ShadeParams{}).grad_over);
   vol.at(1, 1, 1) = INFINITY;  // not finite: not in the range
   EXPECT_FALSE(make_shade_frame(vol, v, ShadeParams{}).grad_over);
+}
+
+// The no-surface threshold on |g|^2: 1e-12 for a span of 1 or more, (1e-6
+// span)^2 below, at least 1e-32; a span that is not finite counts as 1.
+TEST(ShadeFrame, SurfaceThresholdFollowsTheSpanBelowOne) {
+  EXPECT_EQ(surface_threshold(1.0), 1e-12);
+  EXPECT_EQ(surface_threshold(2000.0), 1e-12);
+  EXPECT_EQ(surface_threshold(3e30), 1e-12);
+  EXPECT_EQ(surface_threshold(INFINITY), 1e-12);
+  EXPECT_EQ(surface_threshold(NAN), 1e-12);
+  EXPECT_DOUBLE_EQ(surface_threshold(0.5), 0.25e-12);
+  EXPECT_DOUBLE_EQ(surface_threshold(1e-3), 1e-18);
+  EXPECT_DOUBLE_EQ(surface_threshold(3e-9), 9e-30);
+  EXPECT_DOUBLE_EQ(surface_threshold(1e-10), 1e-32);
+  EXPECT_DOUBLE_EQ(surface_threshold(1e-20), 1e-32);
+  EXPECT_DOUBLE_EQ(surface_threshold(0.0), 1e-32);
+  // The kernels take it as a float: 1e-12 there is the literal they had.
+  EXPECT_EQ(static_cast<float>(surface_threshold(1.0)), 1e-12f);
+  // From the volume's range (or the range given).
+  Volume vol({5, 4, 3}, VoxelType::f32);
+  for (std::size_t i = 0; i < vol.voxel_count(); ++i)
+    vol.data()[i] = 1e-9f * static_cast<float>(i % 4);
+  const ViewGeometry v = make_view(vol, {0, 0, 0}, 8, 8, Sampling::voxel);
+  EXPECT_DOUBLE_EQ(make_shade_frame(vol, v, ShadeParams{}).surface_g2,
+                   surface_threshold(static_cast<double>(1e-9f * 3.0f)));
+  EXPECT_EQ(make_shade_frame(vol, v, ShadeParams{}, {-10.0f, 10.0f}).surface_g2, 1e-12);
+}
+
+// A volume in small units is lit as the same volume in larger ones: values
+// times 2^-40 (exact in float and double, so every gradient is the same
+// times 2^-40) give the same lighting bit for bit and |g| times 2^-40.
+// Before the threshold followed the span, |g|^2 < 1e-12 left every voxel of
+// the scaled volume ambient only.
+TEST(Shade, TinyValuesAreLitAsTheSameVolumeInLargerUnits) {
+  Volume vol({9, 8, 7}, VoxelType::f32);
+  uint32_t r = 12345;
+  for (float& f : vol.data()) {
+    r = r * 1664525u + 1013904223u;
+    f = static_cast<float>(r >> 8) / static_cast<float>(1 << 24);  // [0, 1)
+  }
+  for (int64_t x = 0; x < 9; ++x)  // a flat slab: no surface in either
+    for (int64_t y = 0; y < 8; ++y) vol.at(x, y, 0) = vol.at(x, y, 1) = vol.at(x, y, 2) = 0.5f;
+  Volume tiny = vol;
+  const float k = std::ldexp(1.0f, -40);
+  for (float& f : tiny.data()) f *= k;
+  const ViewGeometry view = make_view(vol, {30, 45, 10}, 16, 16, Sampling::voxel);
+  const ShadeParams p;
+  const auto a = shade(vol, view, p);
+  const auto b = shade(tiny, view, p);
+  std::size_t lit = 0, flat = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].diffuse, b[i].diffuse) << i;
+    ASSERT_EQ(a[i].specular, b[i].specular) << i;
+    ASSERT_EQ(a[i].gradient * k, b[i].gradient) << i;
+    lit += a[i].diffuse > static_cast<float>(p.ka);
+    flat += a[i].gradient == 0.0f;
+  }
+  EXPECT_GT(lit, a.size() / 2);
+  EXPECT_GE(flat, 9u * 8u);  // the slab's middle slice
 }
 
 TEST(Shade, GradientAlongLightGivesFullDiffuse) {

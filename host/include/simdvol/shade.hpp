@@ -51,7 +51,21 @@ struct ShadeFrame {
   /// such lengths rescaled (shade.cl, sv_grad_len), as the reference's
   /// double does.
   bool grad_over = false;
+  /// |g|^2 below it: no surface (N = 0, ambient light only):
+  /// surface_threshold(max - min) of the volume's value range.
+  double surface_g2 = 1e-12;
 };
+
+/// The squared gradient length below which a voxel counts as no surface, for
+/// a volume whose values span `span` (max - min): (1e-6 s)^2, s = span
+/// clamped to [1e-10, 1]. So 1e-12 for a span of 1 or more (every volume
+/// in value units of order one and up, as before), and for a smaller span
+/// the same test as on the volume scaled to a span of 1: a volume in small
+/// units (1e-9, say) is lit as the same volume in larger ones, where an
+/// absolute 1e-12 left it ambient only. Below a span of 1e-10 the squares of
+/// the kernels' float gradients would leave float's normal range, so the
+/// threshold stays at 1e-32 there. A span that is not finite counts as 1.
+double surface_threshold(double span);
 
 /// Checks the parameters (finite; a non-zero light; ka, kd, ks, n >= 0; k1 > 0
 /// and k1 + k2 > 0); ArgumentError naming the render option (--light,
@@ -59,7 +73,7 @@ struct ShadeFrame {
 void validate(const ShadeParams& p);
 
 /// Throws as validate(p) first. Takes the volume's value range (for
-/// grad_over) from `range`, or, without it, from vol.range() (a pass over
+/// grad_over and surface_g2) from `range`, or, without it, from vol.range() (a pass over
 /// the voxels: callers that render many frames keep the range).
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p);
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p,
