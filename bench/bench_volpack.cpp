@@ -31,11 +31,11 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <map>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -374,8 +374,7 @@ int main(int argc, char** argv) try {
       order);
 
   if (json) {
-    std::ofstream o(*json);
-    if (!o) throw FileError(*json, "cannot open for writing");
+    std::ostringstream o;
     o << "{\n  \"volume\": " << json_str(data.filename().string()) << ",\n  \"dims\": [" << vol.nx()
       << ", " << vol.ny() << ", " << vol.nz() << "],\n  \"volpack\": {\"version\": "
       << "\"1.0b3\", \"normals_ms\": " << json_num(example.normals_ms())
@@ -391,7 +390,7 @@ int main(int argc, char** argv) try {
     const auto un = vp::unmatched();
     for (std::size_t i = 0; i < un.size(); ++i) o << (i ? ",\n    " : "\n    ") << json_str(un[i]);
     o << "\n  ]\n}\n";
-    if (!o) throw FileError(*json, "write failed");
+    write_file_atomically(*json, {o.str()});
     std::printf("wrote %s\n", json->string().c_str());
   }
   return 0;

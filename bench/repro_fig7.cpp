@@ -33,8 +33,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -354,12 +354,13 @@ int main(int argc, char** argv) try {
   }
 
   // CSV and table.
-  std::ofstream csv(out / "fig7.csv");
+  std::ostringstream csv;
   csv << "dataset,scope,variant,streams,n,psnr_db,walks_per_ray,draws_per_ray,fallbacks\n";
   for (const Row& r : rows)
     csv << r.dataset << ',' << r.v->scope << ',' << r.v->name << ',' << streams_name(r.v->streams)
         << ',' << r.n << ',' << r.psnr << ',' << r.walks_per_ray << ',' << r.draws_per_ray << ','
         << r.fallbacks << '\n';
+  write_file_atomically(out / "fig7.csv", {csv.str()});
   for (const std::string& dn : names) {
     std::printf("\n%s: PSNR (dB) vs n  [walks per ray at n = 8]\n%-6s %-11s %-8s", dn.c_str(),
                 "scope", "variant", "streams");

@@ -14,13 +14,13 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <string>
 #include <vector>
 
 #include "bench_args.hpp"
 #include "simdvol/costmodel.hpp"
 #include "simdvol/error.hpp"
+#include "simdvol/io.hpp"
 #include "simdvol/match.hpp"
 #include "simdvol/mismatch.hpp"
 
@@ -338,15 +338,7 @@ int main(int argc, char** argv) try {
 
   std::fputs(doc.text.c_str(), stdout);
   if (!markdown.empty()) {
-    const std::string tmp = markdown + ".tmp";
-    {
-      std::ofstream out(tmp, std::ios::binary);
-      if (!out) throw FileError(tmp, "cannot open for writing");
-      out << doc.md;
-      if (!out) throw FileError(tmp, "write failed");
-    }
-    if (std::rename(tmp.c_str(), markdown.c_str()) != 0)
-      throw FileError(markdown, "cannot rename " + tmp + " into place");
+    write_file_atomically(markdown, {doc.md});
     std::fprintf(stderr, "wrote %s\n", markdown.c_str());
   }
   return 0;

@@ -1158,14 +1158,9 @@ int main(int argc, char** argv) {
     if (!o.scaling.empty() && !o.child) root["scaling"] = scaling(argc, argv, o);
 
     if (o.json) {
-      const std::filesystem::path tmp = o.json->string() + ".tmp";
-      {
-        std::ofstream out(tmp);
-        if (!out) throw FileError(tmp, "cannot open for writing");
-        out << root.dump(2) << "\n";
-        if (!out) throw FileError(tmp, "write failed");
-      }
-      std::filesystem::rename(tmp, *o.json);
+      // A temporary file renamed into place, removed where a write fails
+      // (a full disk): the file given keeps what it held.
+      write_file_atomically(*o.json, {root.dump(2), "\n"});
       std::printf("wrote %s\n", o.json->string().c_str());
     }
   } catch (const ArgumentError& e) {

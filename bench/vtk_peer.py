@@ -45,6 +45,7 @@ import os
 import statistics
 import struct
 import sys
+import tempfile
 import time
 
 DEN_HEADER = 62
@@ -501,10 +502,21 @@ def main(argv=None):
           f"{result['max_ms']:.2f}); ray cast (mapper's time to draw) median "
           f"{result['median_cast_ms']:.2f} ms")
     if args.json:
+        # A temporary file beside it, renamed into place: a failed write (a
+        # full disk) leaves the file as it was and no temporary behind.
+        tmp = None
         try:
-            with open(args.json, "w") as f:
+            fd, tmp = tempfile.mkstemp(prefix=os.path.basename(args.json)[:64] + ".tmp-",
+                                       dir=os.path.dirname(os.path.abspath(args.json)))
+            umask = os.umask(0)
+            os.umask(umask)
+            os.fchmod(fd, 0o666 & ~umask)  # as open() would make it
+            with os.fdopen(fd, "w") as f:
                 json.dump(result, f, indent=1)
+            os.replace(tmp, args.json)
         except OSError as e:
+            if tmp is not None and os.path.exists(tmp):
+                os.remove(tmp)
             print(f"{prog}: --json: cannot write {args.json}: {e.strerror}", file=sys.stderr)
             return 2
     return 0
