@@ -153,10 +153,15 @@ struct VolumeArgs {
   }
 };
 
+// name_0000.ext ...: at least 4 digits, more where the last frame's number
+// needs them (name_00000 ... name_10000 for 10,001 frames), so that the
+// names sort in frame order and take one printf pattern (%05d).
 fs::path numbered(const fs::path& out, int frame, int frames) {
   if (frames <= 1) return out;
+  int digits = 4;
+  for (int n = frames - 1; n >= 10000; n /= 10) ++digits;
   char buf[32];
-  std::snprintf(buf, sizeof buf, "_%04d", frame);
+  std::snprintf(buf, sizeof buf, "_%0*d", digits, frame);
   fs::path p = out;
   const std::string ext = p.extension().string();
   return p.replace_filename(p.stem().string() + buf + ext);

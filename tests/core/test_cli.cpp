@@ -14,6 +14,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "simdvol/image.hpp"
 #include "simdvol/io.hpp"
@@ -124,6 +125,27 @@ TEST_F(Cli, TurntableWritesNumberedFrames) {
   ASSERT_EQ(r.code, 0) << r.output;
   for (const char* f : {"t_0000.png", "t_0001.png", "t_0002.png"})
     EXPECT_TRUE(fs::exists(dir_ / f)) << f;
+}
+
+// Over 10,000 frames the numbers take five digits from the first frame on,
+// so that the names sort in frame order (before: t_0000 ... t_9999, then
+// t_10000, which sorts between t_1000 and t_1001). The reference engine on
+// a 2^3 phantom at 1 x 1 pixel: about a second for the 10,001 files.
+TEST_F(Cli, TurntableNamesSortInFrameOrderPastTenThousandFrames) {
+  const Result r =
+      run("render --engine reference --phantom-size 2 --size 1x1 --frames 10001 "
+          "--step 0.01 -o " +
+          path("t.png"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir_)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  ASSERT_EQ(names.size(), 10001u);
+  for (int f = 0; f < 10001; ++f) {
+    char want[32];
+    std::snprintf(want, sizeof want, "t_%05d.png", f);
+    ASSERT_EQ(names[static_cast<std::size_t>(f)], want);
+  }
 }
 
 // A turntable writes each frame while the next renders: a frame that cannot
