@@ -457,6 +457,8 @@ int main(int argc, char** argv) {
                     {"--pe", "--device", "--layout", "--balance-sweeps", "--no-skip-empty",
                      "--no-skip-pes", "--trace"},
                     "--engine opencl");
+      refuse_unless(!no_shade, {"--light", "--phong", "--depth-cue"},
+                    "lit renders (not with --no-shade)");
       const fs::path outp = out;
       check_output_path(outp, "-o");
       check_image_extension(outp);
@@ -480,6 +482,9 @@ int main(int argc, char** argv) {
                               std::to_string(phantom_size) + " is outside 2..1024");
         vol = shepp_logan(phantom_size, 4);  // partial-volume boundaries
       } else {
+        if (render->count("--phantom-size") > 0)
+          throw ArgumentError("--phantom-size",
+                              "applies only to the built-in phantom (a volume file is given)");
         vol = rv.load();
       }
       if (classify == "auto") classify = vol.range().min < -500.0f ? "ct" : "mri";
