@@ -5,8 +5,11 @@
 //            the compression layer
 //   2 mod 3: the rest is written as input.nii.gz unchanged (corrupt or
 //            truncated gzip streams, or plain bytes under a .gz name)
+// and (byte 0 / 3) mod 4 the volume index: 0 none, k the index k - 1 (so
+// that 4-D headers reach the reading of one volume)
 #include <zlib.h>
 
+#include <optional>
 #include <vector>
 
 #include "fuzz_common.hpp"
@@ -42,6 +45,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
       path = simdvol_fuzz::write_input("input.nii.gz", body, n);
       break;
   }
-  simdvol_fuzz::run_loader([&] { return simdvol::load_nifti(path); });
+  const int k = (data[0] / 3) % 4;
+  const std::optional<int64_t> index =
+      k == 0 ? std::nullopt : std::optional<int64_t>(static_cast<int64_t>(k - 1));
+  simdvol_fuzz::run_loader([&] { return simdvol::load_nifti(path, index); });
   return 0;
 }

@@ -99,6 +99,7 @@ struct VolumeArgs {
   std::string path;
   std::string raw_dims, raw_type = "u8", raw_endian = "little", raw_spacing;
   uint64_t raw_header = 0;
+  int64_t volume_index = 0;
   CLI::App* app = nullptr;
 
   void add(CLI::App* a) {
@@ -111,6 +112,9 @@ struct VolumeArgs {
     app->add_option("--raw-spacing", raw_spacing, "raw volumes: SX,SY,SZ (default 1,1,1)");
     app->add_option("--raw-header", raw_header, "raw volumes: bytes to skip before the voxels")
         ->check(kNotNegative);
+    app->add_option("--volume-index", volume_index,
+                    "NIfTI files of several 3-D volumes (a time or diffusion series): which "
+                    "one, from 0");
   }
 
   // The raw layout options do nothing for another kind of file (or for the
@@ -125,6 +129,13 @@ struct VolumeArgs {
         throw ArgumentError(
             name, "applies only to .raw volumes" + (path.empty() ? std::string(" (no volume given)")
                                                                  : " (" + path + " is not one)"));
+    const bool is_nifti = lower_path.ends_with(".nii") || lower_path.ends_with(".nii.gz");
+    if (!is_nifti && app && app->count("--volume-index") > 0)
+      throw ArgumentError("--volume-index", "applies only to NIfTI volumes (.nii, .nii.gz)" +
+                                                (path.empty() ? std::string(" (no volume given)")
+                                                              : " (" + path + " is not one)"));
+    if (volume_index < 0)
+      throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
   }
 
   Volume load() const {
@@ -149,7 +160,9 @@ struct VolumeArgs {
       l.header_bytes = raw_header;
       raw = l;
     }
-    return load_volume(path, raw);
+    std::optional<int64_t> index;
+    if (app && app->count("--volume-index") > 0) index = volume_index;
+    return load_volume(path, raw, index);
   }
 };
 

@@ -502,6 +502,7 @@ void nrrd_gzip_precheck(const fs::path& path, const fs::path& data, uint64_t off
 
 struct NiftiHeaderInfo {
   std::array<int64_t, 3> dims{};
+  int64_t volumes = 1;  ///< dim[4] * ... * dim[7]: 3-D volumes one after another
   int datatype = 0;
   int bitpix = 0;
   uint64_t vox_offset = 0;
@@ -509,8 +510,10 @@ struct NiftiHeaderInfo {
 
 /// Reads the 348-byte NIfTI-1 header (plain or gzip) and counts the
 /// decompressed bytes, so that a truncated or corrupt file is found before
-/// niftilib allocates or reads anything.
-NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size) {
+/// niftilib allocates or reads anything. A file of several 3-D volumes needs
+/// `index` (which one; the file must hold the volumes up to it).
+NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size,
+                               std::optional<int64_t> index) {
   gzFile gz = gzopen(path.c_str(), "rb");
   if (!gz) throw FileError(path, "cannot open file: " + errno_text(errno));
   struct GzCloser {
@@ -560,13 +563,19 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size) {
     if (d[i] <= 0)
       throw FileError(path, "non-positive dimension: dim[" + std::to_string(i) + "] is " +
                                 std::to_string(d[i]));
-  int64_t nvol = 1;
+  int64_t nvol = 1;  // at most 32767^4: no overflow
   for (int i = 4; i <= ndim; ++i) nvol *= d[i];
-  if (nvol > 1)
+  if (nvol > 1 && !index)
     throw FileError(path, "holds " + std::to_string(nvol) +
-                              " volumes (nt > 1); only a single 3-D volume is supported");
+                              " 3-D volumes (a 4-D image): give the index of one, 0.." +
+                              std::to_string(nvol - 1) + " (simdvol: --volume-index)");
+  if (index && (*index < 0 || *index >= nvol))
+    throw FileError(path, "volume index " + std::to_string(*index) + " is outside 0.." +
+                              std::to_string(nvol - 1) + " (the file holds " +
+                              std::to_string(nvol) + (nvol == 1 ? " volume)" : " volumes)"));
 
   NiftiHeaderInfo info;
+  info.volumes = nvol;
   info.dims = {ndim >= 1 ? d[1] : 1, ndim >= 2 ? d[2] : 1, ndim >= 3 ? d[3] : 1};
   info.datatype = i16(70);
   info.bitpix = i16(72);
@@ -603,9 +612,12 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size) {
   info.vox_offset = static_cast<uint64_t>(vox);
 
   const std::size_t n = checked_count(path, info.dims, static_cast<std::size_t>(want_bits / 8));
-  const uint64_t data_bytes = static_cast<uint64_t>(n) * static_cast<uint64_t>(want_bits / 8);
-  if (data_bytes > std::numeric_limits<uint64_t>::max() - info.vox_offset)
+  const uint64_t volume_bytes = static_cast<uint64_t>(n) * static_cast<uint64_t>(want_bits / 8);
+  // The bytes up to the end of the volume read (all of them for one volume).
+  const uint64_t through = static_cast<uint64_t>(index ? *index : 0) + 1;
+  if (volume_bytes > (std::numeric_limits<uint64_t>::max() - info.vox_offset) / through)
     throw FileError(path, "dims " + dims_text(info.dims) + " overflow the file size");
+  const uint64_t data_bytes = volume_bytes * through;
   const uint64_t need = info.vox_offset + data_bytes;
 
   const bool compressed = gzdirect(gz) == 0;
@@ -908,9 +920,10 @@ Volume load_nrrd(const std::filesystem::path& path) {
   return vol;
 }
 
-Volume load_nifti(const std::filesystem::path& path) {
+Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volume_index) {
   const uint64_t file_size = require_regular_file(path);
-  const NiftiHeaderInfo info = nifti_precheck(path, file_size);
+  const NiftiHeaderInfo info = nifti_precheck(path, file_size, volume_index);
+  const int64_t index = volume_index ? *volume_index : 0;
 
   nifti_set_debug_level(0);  // niftilib reports on stderr otherwise
   struct NimDeleter {
@@ -923,25 +936,29 @@ Volume load_nifti(const std::filesystem::path& path) {
   if (dims != info.dims)
     throw FileError(path, "niftilib dims " + dims_text(dims) + " disagree with the header " +
                               dims_text(info.dims));
-  if (nim->nt > 1 || nim->nu > 1 || nim->nv > 1 || nim->nw > 1)
-    throw FileError(path, "holds more than one volume (nt > 1)");
   const std::size_t n = checked_count(path, dims, static_cast<std::size_t>(nim->nbyper));
-  if (nim->nvox != n) throw FileError(path, "voxel count disagrees with the dims");
+  if (nim->nvox / n != static_cast<std::size_t>(info.volumes) || nim->nvox % n != 0)
+    throw FileError(path, "voxel count disagrees with the dims");
   // niftilib's reader (nifti_read_buffer) replaces every NaN and Inf of a
   // float volume by 0 as it reads, without a word: a background masked
   // with NaN would become voxels of value 0, which a classification may
   // make opaque. Float voxels are read as the file stores them instead
   // (znzlib, .nii and .nii.gz alike, from the image's offset, swapped as
   // niftilib swaps them); NaN voxels then render transparent
-  // (docs/HARDENING.md). Other types through niftilib.
+  // (docs/HARDENING.md). So is the one volume asked for of a 4-D file, of
+  // any type (niftilib would read them all). Other types through niftilib.
   std::vector<unsigned char> stored;
   const void* d = nullptr;
-  if (nim->datatype == DT_FLOAT32 || nim->datatype == DT_FLOAT64) {
+  if (nim->datatype == DT_FLOAT32 || nim->datatype == DT_FLOAT64 || info.volumes > 1) {
     const std::size_t bytes = n * static_cast<std::size_t>(nim->nbyper);
     stored.resize(bytes);
     znzFile fp = znzopen(path.c_str(), "rb", nifti_is_gzfile(path.c_str()));
     if (znz_isnull(fp)) throw FileError(path, "could not be opened for its voxels");
-    const bool at = nim->iname_offset >= 0 && znzseek(fp, nim->iname_offset, SEEK_SET) >= 0;
+    // (the pre-check bounded the offset: below the file's size, or its
+    // decompressed size, which it counted)
+    const auto offset =
+        static_cast<long>(nim->iname_offset) + static_cast<long>(index) * static_cast<long>(bytes);
+    const bool at = nim->iname_offset >= 0 && znzseek(fp, offset, SEEK_SET) >= 0;
     const std::size_t got = at ? znzread(stored.data(), 1, bytes, fp) : 0;
     znzclose(fp);
     if (got > bytes)  // (znzread of a .gz passes gzread's -1 on as a size_t)
@@ -1020,14 +1037,17 @@ Volume load_nifti(const std::filesystem::path& path) {
   return vol;
 }
 
-Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw) {
+Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
+                   std::optional<int64_t> volume_index) {
   refuse_directory(path);  // before the extension (a directory has none to speak of)
   const std::string name = lower(path.filename().string());
   auto ends_with = [&](const std::string& suffix) {
     return name.size() > suffix.size() &&
            name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
   };
-  if (ends_with(".nii.gz") || ends_with(".nii")) return load_nifti(path);
+  if (ends_with(".nii.gz") || ends_with(".nii")) return load_nifti(path, volume_index);
+  if (volume_index)
+    throw FileError(path, "a volume index applies only to NIfTI files (.nii, .nii.gz)");
   if (ends_with(".nrrd") || ends_with(".nhdr")) return load_nrrd(path);
   if (ends_with(".den")) return load_den(path);
   if (ends_with(".raw")) {

@@ -22,6 +22,8 @@
 #include "simdvol/render.hpp"
 #include "testing.hpp"
 
+#include <nifti/nifti1_io.h>
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -146,6 +148,54 @@ TEST_F(Cli, TurntableNamesSortInFrameOrderPastTenThousandFrames) {
     std::snprintf(want, sizeof want, "t_%05d.png", f);
     ASSERT_EQ(names[static_cast<std::size_t>(f)], want);
   }
+}
+
+// One volume of a 4-D NIfTI (--volume-index; `info` too): the image equals
+// the render of the same voxels as a 3-D file. Volume v of the file holds a
+// phantom scaled by v + 1 and shifted, so each volume's image differs.
+TEST_F(Cli, RendersOneVolumeOfAFourDNifti) {
+  const simdvol::Volume ph = simdvol::shepp_logan(24, 2);
+  const std::size_t n = ph.voxel_count();
+  const int dims[8] = {4, 24, 24, 24, 3, 1, 1, 1};
+  nifti_image* nim = nifti_make_new_nim(dims, DT_FLOAT32, 1);
+  ASSERT_NE(nim, nullptr);
+  ASSERT_EQ(nim->nvox, 3 * n);
+  auto* f = static_cast<float*>(nim->data);
+  for (int v = 0; v < 3; ++v)
+    for (std::size_t i = 0; i < n; ++i)
+      f[static_cast<std::size_t>(v) * n + i] = static_cast<float>(v + 1) * ph.data()[i] + 100.0f;
+  ASSERT_EQ(nifti_set_filenames(nim, path("series.nii.gz").c_str(), 0, 1), 0);
+  nifti_image_write(nim);
+  nifti_image_free(nim);
+  simdvol::Volume one({24, 24, 24}, simdvol::VoxelType::f32);
+  for (std::size_t i = 0; i < n; ++i) one.data()[i] = 2.0f * ph.data()[i] + 100.0f;  // volume 1
+  simdvol::save_nrrd(one, path("one.nrrd"));
+
+  const Result no_index = run("render " + path("series.nii.gz") + " -o " + path("x.png"));
+  EXPECT_EQ(no_index.code, 1);
+  EXPECT_NE(no_index.output.find("holds 3 3-D volumes"), std::string::npos) << no_index.output;
+  EXPECT_NE(no_index.output.find("--volume-index"), std::string::npos) << no_index.output;
+  const std::string common = " --size 32x32 --view 20,35,10 --classify mri -o ";
+  ASSERT_EQ(
+      run("render " + path("series.nii.gz") + " --volume-index 1" + common + path("a.tif")).code,
+      0);
+  ASSERT_EQ(run("render " + path("one.nrrd") + common + path("b.tif")).code, 0);
+  const simdvol::Image a = simdvol::read_image(path("a.tif")),
+                       b = simdvol::read_image(path("b.tif"));
+  ASSERT_EQ(a.pixels().size(), b.pixels().size());
+  double lit = 0;
+  for (std::size_t i = 0; i < a.pixels().size(); ++i) {
+    ASSERT_EQ(a.pixels()[i].r, b.pixels()[i].r) << i;
+    ASSERT_EQ(a.pixels()[i].a, b.pixels()[i].a) << i;
+    lit += a.pixels()[i].a;
+  }
+  EXPECT_GT(lit, 1.0);
+  const Result info = run("info " + path("series.nii.gz") + " --volume-index 2");
+  ASSERT_EQ(info.code, 0) << info.output;
+  std::ostringstream range;  // volume 2: 3 x the phantom's range + 100
+  range << "range:    " << 3.0f * ph.range().min + 100.0f << " .. "
+        << 3.0f * ph.range().max + 100.0f << "\n";
+  EXPECT_NE(info.output.find(range.str()), std::string::npos) << range.str() << info.output;
 }
 
 // A turntable writes each frame while the next renders: a frame that cannot
@@ -602,6 +652,11 @@ TEST_F(Cli, BadArgumentsFailClearly) {
        "--no-skip-pes: applies only to --engine opencl"},
       {"render --raw-dims 2,2,2 -o " + path("x.png"),
        "--raw-dims: applies only to .raw volumes (no volume given)"},
+      {"render --volume-index 1 -o " + path("x.png"),
+       "--volume-index: applies only to NIfTI volumes (.nii, .nii.gz) (no volume given)"},
+      {"info " + path("vol.raw") + " --raw-dims 2,2,2 --volume-index 0",
+       "--volume-index: applies only to NIfTI volumes (.nii, .nii.gz) (" + path("vol.raw") +
+           " is not one)"},
       {"render --no-shade --light 1,0,0 -o " + path("x.png"),
        "--light: applies only to lit renders (not with --no-shade)"},
       {"render --no-shade --phong 0.1,0.9,0,1 -o " + path("x.png"),

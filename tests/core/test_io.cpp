@@ -1042,10 +1042,76 @@ TEST_F(IoTest, NiftiMalformed) {
   std::memcpy(b.data() + 344, "ni1", 4);
   write_file(file("pair.nii"), b);
   expect_file_error([&] { simdvol::load_nifti(file("pair.nii")); }, file("pair.nii"), {"magic"});
-  // Several volumes (nt > 1).
+  // Several volumes (nt > 1) without an index: the count and the way out.
   write_nifti(file("4d.nii.gz"), DT_UINT8, {5, 4, 3, 2}, std::vector<uint8_t>(2 * kN, 1));
   expect_file_error([&] { simdvol::load_nifti(file("4d.nii.gz")); }, file("4d.nii.gz"),
-                    {"volumes"});
+                    {"holds 2 3-D volumes", "0..1", "--volume-index"});
+}
+
+// A 4-D NIfTI (a time or diffusion series): the volume at an index, every
+// type's path (the float read and the integer types' own read, with a
+// scaling), .nii and .nii.gz; volume v of the file written with niftilib
+// holds values that say v, so a wrong offset shows. An index past the
+// volumes, or a file cut before the volume asked for (the volumes before it
+// whole), is a FileError; a 3-D file takes index 0 only; an index for a file
+// other than NIfTI is refused.
+TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
+  constexpr int kVols = 5;
+  std::vector<float> all;
+  for (int v = 0; v < kVols; ++v)
+    for (std::size_t i = 0; i < kN; ++i) all.push_back(static_cast<float>(40 * v + i % 37));
+  for (const char* ext : {".nii", ".nii.gz"}) {
+    SCOPED_TRACE(ext);
+    const std::string u8 = std::string("u8") + ext, i16 = std::string("i16") + ext,
+                      f32 = std::string("f32") + ext, f64 = std::string("f64") + ext;
+    write_nifti(file(u8), DT_UINT8, {5, 4, 3, kVols}, as<uint8_t>(all), {0.5f, 2.0f, 3.0f});
+    write_nifti(file(i16), DT_INT16, {5, 4, 3, kVols}, as<int16_t>(all), {1, 1, 1}, 2.0f, -7.0f);
+    write_nifti(file(f32), DT_FLOAT32, {5, 4, 3, kVols}, all);
+    write_nifti(file(f64), DT_FLOAT64, {5, 4, 3, kVols}, as<double>(all));
+    for (int v = 0; v < kVols; ++v) {
+      SCOPED_TRACE("volume " + std::to_string(v));
+      const std::vector<float> want(all.begin() + static_cast<std::ptrdiff_t>(v * kN),
+                                    all.begin() + static_cast<std::ptrdiff_t>((v + 1) * kN));
+      std::vector<float> scaled(want);
+      for (float& x : scaled) x = 2.0f * x - 7.0f;
+      const Volume a = simdvol::load_nifti(file(u8), v);
+      EXPECT_EQ(a.dims(), kDims);
+      EXPECT_EQ(a.type(), VoxelType::u8);
+      EXPECT_EQ(a.spacing(), (std::array<double, 3>{0.5, 2.0, 3.0}));
+      EXPECT_EQ(a.data(), want);
+      const Volume b = simdvol::load_nifti(file(i16), v);
+      EXPECT_EQ(b.type(), VoxelType::f32);  // scaled
+      EXPECT_EQ(b.data(), scaled);
+      EXPECT_EQ(simdvol::load_nifti(file(f32), v).data(), want);
+      EXPECT_EQ(simdvol::load_volume(file(f64), std::nullopt, v).data(), want);
+    }
+    expect_file_error([&] { simdvol::load_nifti(file(u8), kVols); }, file(u8),
+                      {"volume index 5 is outside 0..4"});
+    expect_file_error([&] { simdvol::load_nifti(file(u8), -1); }, file(u8),
+                      {"volume index -1 is outside 0..4"});
+  }
+  // Cut inside volume 3: volumes 0..2 load, 3 and 4 are truncated.
+  const Bytes whole = read_file(file("u8.nii"));
+  const std::size_t offset = whole.size() - kVols * kN;  // after the header (and extensions)
+  write_file(
+      file("cut.nii"),
+      Bytes(whole.begin(), whole.begin() + static_cast<std::ptrdiff_t>(offset + 3 * kN + 10)));
+  EXPECT_EQ(simdvol::load_nifti(file("cut.nii"), 2).data(),
+            std::vector<float>(all.begin() + 2 * kN, all.begin() + 3 * kN));
+  for (int v : {3, 4})
+    expect_file_error([&] { simdvol::load_nifti(file("cut.nii"), v); }, file("cut.nii"),
+                      {"truncated"});
+  // A 3-D file: index 0 is the volume, 1 is outside.
+  const std::vector<float> first(all.begin(), all.begin() + kN);
+  write_nifti(file("3d.nii"), DT_UINT8, {5, 4, 3, 1}, as<uint8_t>(first));
+  EXPECT_EQ(simdvol::load_nifti(file("3d.nii"), 0).data(), first);
+  expect_file_error([&] { simdvol::load_nifti(file("3d.nii"), 1); }, file("3d.nii"),
+                    {"outside 0..0", "holds 1 volume"});
+  // Not NIfTI.
+  Volume n(kDims, VoxelType::u8);
+  simdvol::save_nrrd(n, file("v.nrrd"));
+  expect_file_error([&] { simdvol::load_volume(file("v.nrrd"), std::nullopt, 0); }, file("v.nrrd"),
+                    {"applies only to NIfTI"});
 }
 
 // ch2.nii.gz from Debian's mricron-data (Colin27 T1 template), sha256

@@ -39,15 +39,22 @@ Volume load_den(const std::filesystem::path& path);
 /// int64, uint64 and double load as f32. Spacing from "spacings" or the norms
 /// of "space directions", else 1. Not thread-safe (teem's biff is global).
 Volume load_nrrd(const std::filesystem::path& path);
-/// NIfTI-1 through niftilib: .nii and .nii.gz, 3-D scalar (or 4-D with one
-/// volume), scl_slope/scl_inter applied. The type follows the datatype as for
-/// NRRD, but a volume with a non-identity scaling loads as f32.
-Volume load_nifti(const std::filesystem::path& path);
+/// NIfTI-1 through niftilib: .nii and .nii.gz, 3-D scalar, scl_slope/
+/// scl_inter applied. The type follows the datatype as for NRRD, but a
+/// volume with a non-identity scaling loads as f32. A file of several 3-D
+/// volumes (dim[4] and up above 1: a time series, a diffusion series) loads
+/// the one at `volume_index` (0-based, volumes in file order; only its
+/// bytes are read); without an index such a file is a FileError that says
+/// how many it holds. An index outside the file's volumes is a FileError.
+Volume load_nifti(const std::filesystem::path& path,
+                  std::optional<int64_t> volume_index = std::nullopt);
 
 /// Chooses the loader by extension (.den, .nrrd, .nhdr, .nii, .nii.gz, and
-/// .raw which needs `raw`). Throws FileError for an unknown extension.
+/// .raw which needs `raw`). Throws FileError for an unknown extension, and
+/// for a `volume_index` given with a file other than NIfTI.
 Volume load_volume(const std::filesystem::path& path,
-                   const std::optional<RawLayout>& raw = std::nullopt);
+                   const std::optional<RawLayout>& raw = std::nullopt,
+                   std::optional<int64_t> volume_index = std::nullopt);
 
 /// Writes `parts`, one after another, to a new temporary file in `path`'s
 /// directory (named after at most the first 64 bytes of path's name, so any
