@@ -117,9 +117,9 @@ struct VolumeArgs {
                     "one, from 0");
   }
 
-  // The raw layout options do nothing for another kind of file (or for the
-  // built-in phantom): refused, not ignored.
-  void check_raw_options() const {
+  // The raw layout options, and --volume-index, do nothing for another kind
+  // of file (or for the built-in phantom): refused, not ignored.
+  void check_format_options() const {
     std::string lower_path = path;
     for (char& c : lower_path) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
     const bool is_raw = lower_path.size() > 4 && lower_path.ends_with(".raw");
@@ -139,7 +139,7 @@ struct VolumeArgs {
   }
 
   Volume load() const {
-    check_raw_options();
+    check_format_options();
     std::optional<RawLayout> raw;
     if (!raw_dims.empty()) {
       RawLayout l;
@@ -489,7 +489,7 @@ int main(int argc, char** argv) {
 
       Volume vol;
       if (rv.path.empty()) {
-        rv.check_raw_options();
+        rv.check_format_options();
         if (phantom_size < 2 || phantom_size > 1024)
           throw ArgumentError("--phantom-size",
                               std::to_string(phantom_size) + " is outside 2..1024");
