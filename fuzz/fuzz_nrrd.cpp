@@ -4,7 +4,10 @@
 //         ("\n\n"): the part up to it is input.nhdr, the remainder is written
 //         as data.raw beside it (seeds name it in "data file: data.raw";
 //         the fuzzer may name anything else).
+// and (byte 0 / 2) mod 4 the volume index: 0 none, k the index k - 1 (so
+// that 4-D headers reach the reading of one volume).
 // Files the previous input left behind are removed first.
+#include <optional>
 #include <string_view>
 
 #include "fuzz_common.hpp"
@@ -25,6 +28,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
     path = simdvol_fuzz::write_input("input.nhdr", body, hlen);
     simdvol_fuzz::write_input("data.raw", body + hlen, n - hlen);
   }
-  simdvol_fuzz::run_loader([&] { return simdvol::load_nrrd(path); });
+  const int k = (data[0] / 2) % 4;
+  const std::optional<int64_t> index =
+      k == 0 ? std::nullopt : std::optional<int64_t>(static_cast<int64_t>(k - 1));
+  simdvol_fuzz::run_loader([&] { return simdvol::load_nrrd(path, index); });
   return 0;
 }

@@ -113,8 +113,8 @@ struct VolumeArgs {
     app->add_option("--raw-header", raw_header, "raw volumes: bytes to skip before the voxels")
         ->check(kNotNegative);
     app->add_option("--volume-index", volume_index,
-                    "NIfTI files of several 3-D volumes (a time or diffusion series): which "
-                    "one, from 0");
+                    "4-D NIfTI and NRRD files (a time or diffusion series of 3-D volumes): "
+                    "which volume, from 0");
   }
 
   // The raw layout options, and --volume-index, do nothing for another kind
@@ -129,11 +129,13 @@ struct VolumeArgs {
         throw ArgumentError(
             name, "applies only to .raw volumes" + (path.empty() ? std::string(" (no volume given)")
                                                                  : " (" + path + " is not one)"));
-    const bool is_nifti = lower_path.ends_with(".nii") || lower_path.ends_with(".nii.gz");
-    if (!is_nifti && app && app->count("--volume-index") > 0)
-      throw ArgumentError("--volume-index", "applies only to NIfTI volumes (.nii, .nii.gz)" +
-                                                (path.empty() ? std::string(" (no volume given)")
-                                                              : " (" + path + " is not one)"));
+    const bool series = lower_path.ends_with(".nii") || lower_path.ends_with(".nii.gz") ||
+                        lower_path.ends_with(".nrrd") || lower_path.ends_with(".nhdr");
+    if (!series && app && app->count("--volume-index") > 0)
+      throw ArgumentError(
+          "--volume-index",
+          "applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr)" +
+              (path.empty() ? std::string(" (no volume given)") : " (" + path + " is not one)"));
     if (volume_index < 0)
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
   }

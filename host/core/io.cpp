@@ -176,6 +176,9 @@ struct NrrdShape {
   std::array<int64_t, 3> dims{};
   std::array<double, 3> spacing{1.0, 1.0, 1.0};
   std::array<unsigned int, 3> axes{0, 1, 2};  ///< which nrrd axes are x, y, z
+  int volume_axis = -1;                       ///< a 4-D nrrd's fourth axis (its volumes), else -1
+  int64_t volumes = 1;                        ///< that axis's size: 3-D volumes in the file
+  int64_t index = 0;                          ///< the volume read
 };
 
 double nrrd_axis_spacing(const Nrrd* n, unsigned int ax) {
@@ -193,24 +196,33 @@ double nrrd_axis_spacing(const Nrrd* n, unsigned int ax) {
   return 1.0;
 }
 
-/// Dims and spacing of a 3-D nrrd (or a 4-D one with one axis of size 1).
-NrrdShape nrrd_shape(const fs::path& path, const Nrrd* n) {
+/// Dims and spacing of a 3-D nrrd, or of the volume at `index` of a 4-D one.
+/// A 4-D nrrd's volume axis: its one axis of a kind that is not spatial (a
+/// list, a vector, ...: a diffusion series' gradients), else an axis of size
+/// 1, else the last (slowest) axis, as NIfTI's fourth (a time series).
+NrrdShape nrrd_shape(const fs::path& path, const Nrrd* n, std::optional<int64_t> index) {
   NrrdShape s;
   if (n->dim == 3) {
     // axes 0, 1, 2
   } else if (n->dim == 4) {
-    int drop = -1;
-    for (unsigned int a = 0; a < 4; ++a)
-      if (n->axis[a].size == 1) {
+    int drop = -1, components = 0;
+    for (unsigned int a = 0; a < 4; ++a) {
+      const int kind = n->axis[a].kind;
+      if (kind != nrrdKindUnknown && !nrrdKindIsDomain(kind)) {
+        ++components;
         drop = static_cast<int>(a);
-        break;
       }
-    if (drop < 0)
-      throw FileError(path, "4-D NRRD with sizes " + std::to_string(n->axis[0].size) + " " +
-                                std::to_string(n->axis[1].size) + " " +
-                                std::to_string(n->axis[2].size) + " " +
-                                std::to_string(n->axis[3].size) +
-                                " is not a scalar volume (a 3-D volume is expected)");
+    }
+    if (components > 1)
+      throw FileError(path, "4-D NRRD with " + std::to_string(components) +
+                                " axes of a non-spatial kind: not a series of 3-D volumes");
+    for (unsigned int a = 0; a < 4 && drop < 0; ++a)
+      if (n->axis[a].size == 1) drop = static_cast<int>(a);
+    if (drop < 0) drop = 3;
+    s.volume_axis = drop;
+    if (n->axis[drop].size > static_cast<size_t>(std::numeric_limits<int32_t>::max()))
+      throw FileError(path, "axis size " + std::to_string(n->axis[drop].size) + " overflows");
+    s.volumes = static_cast<int64_t>(n->axis[drop].size);
     unsigned int k = 0;
     for (unsigned int a = 0; a < 4; ++a)
       if (static_cast<int>(a) != drop) s.axes[k++] = a;
@@ -238,6 +250,17 @@ NrrdShape nrrd_shape(const fs::path& path, const Nrrd* n) {
     s.spacing[i] = nrrd_axis_spacing(n, s.axes[i]);
   }
   s.spacing = sane_spacing(s.spacing);
+  if (s.volumes > 1 && !index)
+    throw FileError(path, "holds " + std::to_string(s.volumes) + " 3-D volumes along axis " +
+                              std::to_string(s.volume_axis) + " (a 4-D image): give the index " +
+                              "of one, 0.." + std::to_string(s.volumes - 1) +
+                              " (simdvol: --volume-index)");
+  if (index && (*index < 0 || *index >= s.volumes))
+    throw FileError(path, "volume index " + std::to_string(*index) + " is outside 0.." +
+                              std::to_string(s.volumes - 1) + " (the file holds " +
+                              std::to_string(s.volumes) +
+                              (s.volumes == 1 ? " volume)" : " volumes)"));
+  s.index = index ? *index : 0;
   return s;
 }
 
@@ -268,10 +291,12 @@ VoxelType nrrd_voxel_type(const fs::path& path, int type) {
 
 template <typename T>
 void nrrd_copy(const Nrrd* n, const NrrdShape& s, float* out) {
-  const T* src = static_cast<const T*>(n->data);
-  // Strides of the nrrd axes (a dropped size-1 axis contributes nothing).
+  // Strides of the nrrd axes; the volume read starts at index times its
+  // axis's stride (0 for a 3-D nrrd).
   std::array<size_t, 4> stride{1, 1, 1, 1};
   for (unsigned int a = 1; a < n->dim; ++a) stride[a] = stride[a - 1] * n->axis[a - 1].size;
+  const T* src = static_cast<const T*>(n->data) +
+                 (s.volume_axis >= 0 ? static_cast<size_t>(s.index) * stride[s.volume_axis] : 0);
   const size_t sx = stride[s.axes[0]], sy = stride[s.axes[1]], sz = stride[s.axes[2]];
   size_t o = 0;
   for (int64_t z = 0; z < s.dims[2]; ++z)
@@ -781,7 +806,7 @@ Volume load_den(const std::filesystem::path& path) {
   return vol;
 }
 
-Volume load_nrrd(const std::filesystem::path& path) {
+Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volume_index) {
   const uint64_t file_size = require_regular_file(path);
   const std::string name = path.string();
   nrrd_prescan_header(path);
@@ -800,10 +825,12 @@ Volume load_nrrd(const std::filesystem::path& path) {
     if (nio->format != nrrdFormatNRRD)
       throw FileError(path,
                       std::string("not a NRRD file (teem read it as ") + nio->format->name + ")");
-    shape = nrrd_shape(path, hdr.get());
+    shape = nrrd_shape(path, hdr.get(), volume_index);
     vtype = nrrd_voxel_type(path, hdr->type);
     const std::size_t esize = nrrdElementSize(hdr.get());
-    const std::size_t n = checked_count(path, shape.dims, esize);
+    // Every volume of a 4-D nrrd: teem reads them all.
+    const std::size_t n = checked_count(path, shape.dims, esize * shape.volumes) *
+                          static_cast<std::size_t>(shape.volumes);
     const uint64_t need = static_cast<uint64_t>(n) * esize;
 
     uint64_t available = 0;
@@ -878,8 +905,9 @@ Volume load_nrrd(const std::filesystem::path& path) {
   if (nrrdLoad(nrrd.get(), name.c_str(), nio.get()))
     throw FileError(path, "cannot read NRRD data: " + biff_message(NRRD));
   if (!nrrd->data) throw FileError(path, "NRRD has no data");
-  const NrrdShape s = nrrd_shape(path, nrrd.get());
-  if (s.dims != shape.dims) throw FileError(path, "NRRD changed while being read");
+  const NrrdShape s = nrrd_shape(path, nrrd.get(), volume_index);
+  if (s.dims != shape.dims || s.volumes != shape.volumes || s.volume_axis != shape.volume_axis)
+    throw FileError(path, "NRRD changed while being read");
 
   Volume vol(s.dims, vtype, s.spacing);
   float* out = vol.data().data();
@@ -1046,9 +1074,11 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
            name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
   };
   if (ends_with(".nii.gz") || ends_with(".nii")) return load_nifti(path, volume_index);
+  if (ends_with(".nrrd") || ends_with(".nhdr")) return load_nrrd(path, volume_index);
   if (volume_index)
-    throw FileError(path, "a volume index applies only to NIfTI files (.nii, .nii.gz)");
-  if (ends_with(".nrrd") || ends_with(".nhdr")) return load_nrrd(path);
+    throw FileError(path,
+                    "a volume index applies only to NIfTI and NRRD files (.nii, .nii.gz, .nrrd, "
+                    ".nhdr)");
   if (ends_with(".den")) return load_den(path);
   if (ends_with(".raw")) {
     if (!raw)

@@ -653,10 +653,11 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --raw-dims 2,2,2 -o " + path("x.png"),
        "--raw-dims: applies only to .raw volumes (no volume given)"},
       {"render --volume-index 1 -o " + path("x.png"),
-       "--volume-index: applies only to NIfTI volumes (.nii, .nii.gz) (no volume given)"},
+       "--volume-index: applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr) (no "
+       "volume given)"},
       {"info " + path("vol.raw") + " --raw-dims 2,2,2 --volume-index 0",
-       "--volume-index: applies only to NIfTI volumes (.nii, .nii.gz) (" + path("vol.raw") +
-           " is not one)"},
+       "--volume-index: applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr) (" +
+           path("vol.raw") + " is not one)"},
       {"render --no-shade --light 1,0,0 -o " + path("x.png"),
        "--light: applies only to lit renders (not with --no-shade)"},
       {"render --no-shade --phong 0.1,0.9,0,1 -o " + path("x.png"),

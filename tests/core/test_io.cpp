@@ -618,7 +618,9 @@ TEST_F(IoTest, NrrdMalformed) {
              concat(std::string("NRRD0004\ntype: uchar\ndimension: 4\nsizes: 5 2 3 2\n"
                                 "encoding: raw\n\n"),
                     u8data));
-  expect_file_error([&] { simdvol::load_nrrd(file("4d.nrrd")); }, file("4d.nrrd"), {"scalar"});
+  // 4-D without an index (NrrdVolumeOfAFourDFile loads one).
+  expect_file_error([&] { simdvol::load_nrrd(file("4d.nrrd")); }, file("4d.nrrd"),
+                    {"holds 2 3-D volumes along axis 3", "--volume-index"});
   // An axis of a component kind: a colour image (x = 3 before), a vector
   // field; the kinds of a scalar volume still load.
   write_file(file("rgb.nrrd"),
@@ -631,8 +633,10 @@ TEST_F(IoTest, NrrdMalformed) {
              concat(std::string("NRRD0004\ntype: uchar\ndimension: 4\nsizes: 1 5 4 3\n"
                                 "kinds: none space space 3-vector\nencoding: raw\n\n"),
                     Bytes(60, 7)));
+  // (4-D: its vector components are its volumes, one loaded by index)
   expect_file_error([&] { simdvol::load_nrrd(file("vec.nrrd")); }, file("vec.nrrd"),
-                    {"axis 3 (size 3) is of kind '3-vector'"});
+                    {"holds 3 3-D volumes along axis 3"});
+  EXPECT_EQ(simdvol::load_nrrd(file("vec.nrrd"), 2).dims(), (std::array<int64_t, 3>{1, 5, 4}));
   write_file(file("kinds.nrrd"),
              concat(std::string("NRRD0004\ntype: uchar\ndimension: 4\nsizes: 5 4 3 1\n"
                                 "kinds: space domain time list\nencoding: raw\n\n"),
@@ -1107,11 +1111,81 @@ TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
   EXPECT_EQ(simdvol::load_nifti(file("3d.nii"), 0).data(), first);
   expect_file_error([&] { simdvol::load_nifti(file("3d.nii"), 1); }, file("3d.nii"),
                     {"outside 0..0", "holds 1 volume"});
-  // Not NIfTI.
-  Volume n(kDims, VoxelType::u8);
-  simdvol::save_nrrd(n, file("v.nrrd"));
-  expect_file_error([&] { simdvol::load_volume(file("v.nrrd"), std::nullopt, 0); }, file("v.nrrd"),
-                    {"applies only to NIfTI"});
+  // Neither NIfTI nor NRRD.
+  write_file(file("v.raw"), encode(VoxelType::u8, first, false));
+  simdvol::RawLayout raw;
+  raw.dims = kDims;
+  expect_file_error([&] { simdvol::load_volume(file("v.raw"), raw, 0); }, file("v.raw"),
+                    {"applies only to NIfTI and NRRD"});
+}
+
+// A 4-D NRRD: the volume at an index along its volume axis, which is its
+// one axis of a non-spatial kind (a diffusion series' list, first and
+// fastest as Slicer writes it, or last; a vector), else the last axis (no
+// kinds, or a time axis, which is a domain kind). Volume v holds values
+// that say v, so a wrong axis or offset shows; raw and gzip. Errors: no
+// index, an index past the volumes, two non-spatial axes.
+TEST_F(IoTest, NrrdVolumeOfAFourDFile) {
+  constexpr int kVols = 3;
+  // value of voxel (x, y, z) of volume v
+  auto value = [](int64_t x, int64_t y, int64_t z, int64_t v) {
+    return static_cast<float>(100 * v + x + 5 * y + 20 * z);
+  };
+  struct Form {
+    const char* sizes;
+    const char* kinds;
+    int axis;  // the volume axis
+  };
+  const Form forms[] = {
+      {"3 5 4 3", "kinds: list domain domain domain\n", 0},
+      {"5 4 3 3", "kinds: domain domain domain list\n", 3},
+      {"5 4 3 3", "", 3},
+      {"5 4 3 3", "kinds: space space space time\n", 3},
+      {"5 3 4 3", "kinds: domain vector domain domain\n", 1},
+  };
+  for (const Form& f : forms)
+    for (const std::string encoding : {"raw", "gzip"}) {
+      SCOPED_TRACE(std::string(f.sizes) + " " + f.kinds + encoding);
+      // The file's voxels in nrrd order, axis 0 fastest: the volume axis
+      // where the form puts it, x, y, z in the others.
+      int64_t size[4], k = 0;
+      for (int a = 0; a < 4; ++a)
+        size[a] = a == f.axis ? kVols : kDims[static_cast<std::size_t>(k++)];
+      std::vector<float> data;
+      for (int64_t i3 = 0; i3 < size[3]; ++i3)
+        for (int64_t i2 = 0; i2 < size[2]; ++i2)
+          for (int64_t i1 = 0; i1 < size[1]; ++i1)
+            for (int64_t i0 = 0; i0 < size[0]; ++i0) {
+              const int64_t i[4] = {i0, i1, i2, i3};
+              int64_t xyz[3], j = 0;
+              for (int a = 0; a < 4; ++a)
+                if (a != f.axis) xyz[j++] = i[a];
+              data.push_back(value(xyz[0], xyz[1], xyz[2], i[f.axis]));
+            }
+      Bytes body = encode(VoxelType::i16, data, false);
+      if (encoding == "gzip") body = gzip(body);
+      const fs::path p = file("series.nrrd");
+      write_file(p, concat(std::string("NRRD0004\ntype: short\ndimension: 4\nsizes: ") + f.sizes +
+                               "\n" + f.kinds + "endian: little\nencoding: " + encoding + "\n\n",
+                           body));
+      for (int v = 0; v < kVols; ++v) {
+        std::vector<float> want;
+        for (int64_t z = 0; z < 3; ++z)
+          for (int64_t y = 0; y < 4; ++y)
+            for (int64_t x = 0; x < 5; ++x) want.push_back(value(x, y, z, v));
+        expect_volume(simdvol::load_volume(p, std::nullopt, v), kDims, VoxelType::i16, want);
+      }
+      expect_file_error(
+          [&] { simdvol::load_nrrd(p); }, p,
+          {"holds 3 3-D volumes along axis " + std::to_string(f.axis), "0..2", "--volume-index"});
+      expect_file_error([&] { simdvol::load_nrrd(p, 3); }, p, {"volume index 3 is outside 0..2"});
+    }
+  const fs::path two = file("two.nrrd");
+  write_file(two, concat(std::string("NRRD0004\ntype: short\ndimension: 4\nsizes: 3 5 4 3\n"
+                                     "kinds: list domain domain vector\nendian: little\n"
+                                     "encoding: raw\n\n"),
+                         Bytes(2 * 3 * 5 * 4 * 3, 0)));
+  expect_file_error([&] { simdvol::load_nrrd(two, 0); }, two, {"2 axes of a non-spatial kind"});
 }
 
 // ch2.nii.gz from Debian's mricron-data (Colin27 T1 template), sha256

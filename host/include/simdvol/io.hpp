@@ -34,11 +34,16 @@ Volume load_raw(const std::filesystem::path& path, const RawLayout& layout);
 /// int16 map_warps; int32 map_length = voxel count), then 8-bit voxels.
 Volume load_den(const std::filesystem::path& path);
 /// NRRD through teem: attached and detached headers (.nrrd, .nhdr), raw and
-/// gzip encodings, 3-D scalar data (or 4-D with one axis of size 1). uint8,
+/// gzip encodings, 3-D scalar data (or one volume of 4-D data, below). uint8,
 /// uint16, int16 and float keep their type; int8 loads as i16; int32, uint32,
 /// int64, uint64 and double load as f32. Spacing from "spacings" or the norms
 /// of "space directions", else 1. Not thread-safe (teem's biff is global).
-Volume load_nrrd(const std::filesystem::path& path);
+/// A 4-D nrrd of several 3-D volumes loads the one at `volume_index`, as
+/// load_nifti; its volume axis is its one axis of a non-spatial kind (a
+/// list or vector: a diffusion series), else an axis of size 1, else the
+/// last axis (a time series). teem reads every volume; one is kept.
+Volume load_nrrd(const std::filesystem::path& path,
+                 std::optional<int64_t> volume_index = std::nullopt);
 /// NIfTI-1 through niftilib: .nii and .nii.gz, 3-D scalar, scl_slope/
 /// scl_inter applied. The type follows the datatype as for NRRD, but a
 /// volume with a non-identity scaling loads as f32. A file of several 3-D
@@ -51,7 +56,7 @@ Volume load_nifti(const std::filesystem::path& path,
 
 /// Chooses the loader by extension (.den, .nrrd, .nhdr, .nii, .nii.gz, and
 /// .raw which needs `raw`). Throws FileError for an unknown extension, and
-/// for a `volume_index` given with a file other than NIfTI.
+/// for a `volume_index` given with a file other than NIfTI or NRRD.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt);
