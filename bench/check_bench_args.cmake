@@ -84,6 +84,7 @@ expect_bad(BENCH --repeat --repeat 3,4)
 expect_bad(BENCH --turntable --turntable 721)
 expect_bad(BENCH --reference-runs --reference-runs 0)
 expect_bad(BENCH --sizes --sizes 256,0)
+expect_bad(BENCH --volumes --volumes phantom64,head.txt)
 
 if(checked LESS 20)
   message(FATAL_ERROR "only ${checked} refusals checked: a tool path is missing")

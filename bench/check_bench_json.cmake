@@ -9,7 +9,7 @@
 # the layout once (the default): the warm-up frame's layout timed, none in
 # the timed frames; the kernels' sum within their span within the wall;
 # then that a bad option value exits 2 naming the option
-# and leaves no JSON behind.
+# and leaves no JSON behind; then a volume file of the user's (below).
 file(REMOVE ${OUT})
 execute_process(
   COMMAND ${BENCH} --volumes phantom32 --sizes 64 --orders 1 --pes 64
@@ -184,5 +184,40 @@ execute_process(COMMAND ${BENCH} --quick --json ${OUT}.nodir/x.json
                 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(NOT rc EQUAL 2 OR NOT err MATCHES "--json: directory")
   message(FATAL_ERROR "--json into a missing directory: exit ${rc}, stderr ${err}")
+endif()
+# A volume file of the user's (${SIMDVOL} writes a 24^3 phantom in
+# Hounsfield units): its cases named by its file name, classified ct as
+# `simdvol render --classify auto` would, direct compositing equal to the
+# reference; a missing one exits 1 naming it.
+if(DEFINED SIMDVOL)
+  set(vol ${OUT}.user.nrrd)
+  execute_process(COMMAND ${SIMDVOL} phantom shepp-logan --size 24 -o ${vol}
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "simdvol phantom: exit ${rc}: ${err}")
+  endif()
+  file(REMOVE ${OUT})
+  execute_process(COMMAND ${BENCH} --volumes ${vol} --sizes 32 --pes 64 --compositing direct
+                          --repeat 1 --turntable 2 --no-volpack --json ${OUT}
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "simdvol-bench --volumes ${vol}: exit ${rc}:\n${out}\n${err}")
+  endif()
+  file(READ ${OUT} text)
+  get_filename_component(vname ${vol} NAME)
+  get(cls volumes 0 classifier)
+  get(id cases 0 id)
+  get(psnr cases 0 reference psnr_db)
+  get(identical cases 0 reference identical)
+  if(NOT cls STREQUAL "ct" OR NOT id STREQUAL "${vname}/32/o1/direct/P64"
+     OR (NOT identical AND (psnr STREQUAL "null" OR psnr LESS 80)))
+    message(FATAL_ERROR "volume file: classifier ${cls}, case ${id}, PSNR ${psnr} dB")
+  endif()
+  execute_process(COMMAND ${BENCH} --volumes ${OUT}.no-such.nii.gz --sizes 32
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 1 OR NOT err MATCHES "no-such.nii.gz: file not found")
+    message(FATAL_ERROR "a missing volume file: exit ${rc}, stderr ${err}")
+  endif()
+  file(REMOVE ${vol} ${OUT})
 endif()
 message(STATUS "simdvol-bench harness: ${ncases} cases checked")

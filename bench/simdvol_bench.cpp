@@ -24,7 +24,10 @@
 // Volumes:
 // phantomN (the N^3 Shepp-Logan CT phantom, shepp_logan(N, 4), preset ct),
 // brainsmall (data/brainsmall.den, preset volpack: VolPack's example
-// classification), ch2 (data/ch2.nii.gz, preset mri). Compositing: direct,
+// classification), ch2 (data/ch2.nii.gz, preset mri), or a volume file of
+// the user's (.nrrd, .nhdr, .nii, .nii.gz, .den: named by its file name in
+// the cases, preset ct for Hounsfield data, mri otherwise, as `simdvol
+// render --classify auto`). Compositing: direct,
 // adaptive (threshold 0.95), mcN (Monte Carlo, N walks per whole ray) or
 // mcNsub (per sub-ray, ch. 7.4). Per case a fresh RenderEngine renders one
 // warm-up frame (timed as "first": page faults of fresh buffers, program
@@ -71,6 +74,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -121,7 +125,9 @@ constexpr const char* kUsage =
     "                     [--turntable F] [--no-reference] [--reference-runs R]\n"
     "                     [--no-volpack] [--volpack-runs R]\n"
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
-    "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2\n"
+    "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2, or a volume file\n"
+    "    (.nrrd, .nhdr, .nii, .nii.gz, .den; classified as `simdvol render --classify auto`:\n"
+    "    ct for Hounsfield data, mri otherwise)\n"
     "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNx (exact opacity), mcNs (exact\n"
     "    opacity, stratified picks), each with sub for per sub-ray (mcNsub, mcNxsub, mcNssub)\n";
 
@@ -192,9 +198,10 @@ Comp parse_comp(const std::string& s) {
 // A volume by name, loaded once.
 struct VolumeSpec {
   std::string name;
-  std::string classifier;
+  std::string classifier;      // a preset; "auto" for a file given: ct or mri once loaded
   std::filesystem::path file;  // empty for phantoms
   int phantom = 0;
+  bool given = false;  // a volume file named on the command line (not brainsmall or ch2)
 };
 
 VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data) {
@@ -205,7 +212,17 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data)
   }
   if (s == "brainsmall") return {s, "volpack", data / "brainsmall.den", 0};
   if (s == "ch2") return {s, "mri", data / "ch2.nii.gz", 0};
-  throw ArgumentError("--volumes", "'" + s + "' is not phantomN, brainsmall or ch2");
+  // A volume file of the user's: named in the cases by its file name.
+  std::string lower = s;
+  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (const char* ext : {".nrrd", ".nhdr", ".nii", ".nii.gz", ".den"})
+    if (lower.size() > std::strlen(ext) && lower.ends_with(ext)) {
+      const std::filesystem::path p(s);
+      return {p.filename().string(), "auto", p, 0, true};
+    }
+  throw ArgumentError("--volumes", "'" + s +
+                                       "' is not phantomN, brainsmall, ch2 or a volume file "
+                                       "(.nrrd, .nhdr, .nii, .nii.gz, .den)");
 }
 
 Options parse_args(int argc, char** argv) {
@@ -1013,6 +1030,10 @@ int main(int argc, char** argv) {
       const auto t0 = Clock::now();
       if (L.spec.phantom) {
         L.vol = std::make_unique<Volume>(shepp_logan(L.spec.phantom, 4));
+      } else if (L.spec.given) {
+        L.vol = std::make_unique<Volume>(load_volume(L.spec.file));  // its errors name it
+        // As `simdvol render --classify auto`: ct for Hounsfield data.
+        L.spec.classifier = L.vol->range().min < -500.0f ? "ct" : "mri";
       } else {
         if (!std::filesystem::exists(L.spec.file)) {
           if (o.volumes_explicit) throw FileError(L.spec.file, "missing (run scripts/fetch-data)");
