@@ -176,7 +176,7 @@ struct NrrdShape {
   std::array<int64_t, 3> dims{};
   std::array<double, 3> spacing{1.0, 1.0, 1.0};
   std::array<unsigned int, 3> axes{0, 1, 2};  ///< which nrrd axes are x, y, z
-  int volume_axis = -1;                       ///< a 4-D nrrd's fourth axis (its volumes), else -1
+  int volume_axis = -1;                       ///< the axis of a 4-D nrrd's volumes, else -1
   int64_t volumes = 1;                        ///< that axis's size: 3-D volumes in the file
   int64_t index = 0;                          ///< the volume read
 };
