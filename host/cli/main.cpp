@@ -117,6 +117,14 @@ struct VolumeArgs {
                     "which volume, from 0");
   }
 
+  // A NIfTI or NRRD file: the formats that may hold several 3-D volumes.
+  bool series() const {
+    std::string l = path;
+    for (char& c : l) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return l.ends_with(".nii") || l.ends_with(".nii.gz") || l.ends_with(".nrrd") ||
+           l.ends_with(".nhdr");
+  }
+
   // The raw layout options, and --volume-index, do nothing for another kind
   // of file (or for the built-in phantom): refused, not ignored.
   void check_format_options() const {
@@ -129,9 +137,7 @@ struct VolumeArgs {
         throw ArgumentError(
             name, "applies only to .raw volumes" + (path.empty() ? std::string(" (no volume given)")
                                                                  : " (" + path + " is not one)"));
-    const bool series = lower_path.ends_with(".nii") || lower_path.ends_with(".nii.gz") ||
-                        lower_path.ends_with(".nrrd") || lower_path.ends_with(".nhdr");
-    if (!series && app && app->count("--volume-index") > 0)
+    if (!series() && app && app->count("--volume-index") > 0)
       throw ArgumentError(
           "--volume-index",
           "applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr)" +
@@ -140,7 +146,10 @@ struct VolumeArgs {
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
   }
 
-  Volume load() const {
+  // `first_of_series`: a 4-D NIfTI or NRRD without --volume-index loads its
+  // volume 0 (`info`), instead of the error that says how many it holds;
+  // `volumes` receives how many (1 for a 3-D file).
+  Volume load(bool first_of_series = false, int64_t* volumes = nullptr) const {
     check_format_options();
     std::optional<RawLayout> raw;
     if (!raw_dims.empty()) {
@@ -163,8 +172,11 @@ struct VolumeArgs {
       raw = l;
     }
     std::optional<int64_t> index;
-    if (app && app->count("--volume-index") > 0) index = volume_index;
-    return load_volume(path, raw, index);
+    if (app && app->count("--volume-index") > 0)
+      index = volume_index;
+    else if (first_of_series && series())
+      index = 0;
+    return load_volume(path, raw, index, volumes);
   }
 };
 
@@ -576,7 +588,12 @@ int main(int argc, char** argv) {
         std::cout << "wrote " << frames << " frames: " << fs::absolute(numbered(outp, 0, frames))
                   << " .. " << numbered(outp, frames - 1, frames).filename().string() << "\n";
     } else if (*info) {
-      print_info(std::cout, iv.path, iv.load());
+      int64_t volumes = 1;
+      print_info(std::cout, iv.path, iv.load(true, &volumes));
+      if (volumes > 1)
+        std::cout << "volumes:  " << volumes << " in the file (4-D); the figures above are volume "
+                  << (info->count("--volume-index") > 0 ? iv.volume_index : 0)
+                  << "'s (--volume-index N describes another)\n";
     } else if (*phantom) {
       if (phantom_n < 2 || phantom_n > 1024)
         throw ArgumentError("--size", std::to_string(phantom_n) + " is outside 2..1024");

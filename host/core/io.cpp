@@ -806,7 +806,8 @@ Volume load_den(const std::filesystem::path& path) {
   return vol;
 }
 
-Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volume_index) {
+Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volume_index,
+                 int64_t* volumes) {
   const uint64_t file_size = require_regular_file(path);
   const std::string name = path.string();
   nrrd_prescan_header(path);
@@ -908,6 +909,7 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
   const NrrdShape s = nrrd_shape(path, nrrd.get(), volume_index);
   if (s.dims != shape.dims || s.volumes != shape.volumes || s.volume_axis != shape.volume_axis)
     throw FileError(path, "NRRD changed while being read");
+  if (volumes) *volumes = s.volumes;
 
   Volume vol(s.dims, vtype, s.spacing);
   float* out = vol.data().data();
@@ -948,10 +950,12 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
   return vol;
 }
 
-Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volume_index) {
+Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volume_index,
+                  int64_t* volumes) {
   const uint64_t file_size = require_regular_file(path);
   const NiftiHeaderInfo info = nifti_precheck(path, file_size, volume_index);
   const int64_t index = volume_index ? *volume_index : 0;
+  if (volumes) *volumes = info.volumes;
 
   nifti_set_debug_level(0);  // niftilib reports on stderr otherwise
   struct NimDeleter {
@@ -1066,15 +1070,16 @@ Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volu
 }
 
 Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
-                   std::optional<int64_t> volume_index) {
+                   std::optional<int64_t> volume_index, int64_t* volumes) {
+  if (volumes) *volumes = 1;
   refuse_directory(path);  // before the extension (a directory has none to speak of)
   const std::string name = lower(path.filename().string());
   auto ends_with = [&](const std::string& suffix) {
     return name.size() > suffix.size() &&
            name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
   };
-  if (ends_with(".nii.gz") || ends_with(".nii")) return load_nifti(path, volume_index);
-  if (ends_with(".nrrd") || ends_with(".nhdr")) return load_nrrd(path, volume_index);
+  if (ends_with(".nii.gz") || ends_with(".nii")) return load_nifti(path, volume_index, volumes);
+  if (ends_with(".nrrd") || ends_with(".nhdr")) return load_nrrd(path, volume_index, volumes);
   if (volume_index)
     throw FileError(path,
                     "a volume index applies only to NIfTI and NRRD files (.nii, .nii.gz, .nrrd, "

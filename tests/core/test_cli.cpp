@@ -150,7 +150,8 @@ TEST_F(Cli, TurntableNamesSortInFrameOrderPastTenThousandFrames) {
   }
 }
 
-// One volume of a 4-D NIfTI (--volume-index; `info` too): the image equals
+// One volume of a 4-D NIfTI (--volume-index; `info` too, which without the
+// option describes volume 0 and says how many there are): the image equals
 // the render of the same voxels as a 3-D file. Volume v of the file holds a
 // phantom scaled by v + 1 and shifted, so each volume's image differs.
 TEST_F(Cli, RendersOneVolumeOfAFourDNifti) {
@@ -196,6 +197,18 @@ TEST_F(Cli, RendersOneVolumeOfAFourDNifti) {
   range << "range:    " << 3.0f * ph.range().min + 100.0f << " .. "
         << 3.0f * ph.range().max + 100.0f << "\n";
   EXPECT_NE(info.output.find(range.str()), std::string::npos) << range.str() << info.output;
+  EXPECT_NE(info.output.find("volumes:  3 in the file (4-D); the figures above are volume 2's"),
+            std::string::npos)
+      << info.output;
+  // Without an index `info` describes volume 0 and says how many there are.
+  const Result info0 = run("info " + path("series.nii.gz"));
+  ASSERT_EQ(info0.code, 0) << info0.output;
+  std::ostringstream range0;
+  range0 << "range:    " << ph.range().min + 100.0f << " .. " << ph.range().max + 100.0f << "\n";
+  EXPECT_NE(info0.output.find(range0.str()), std::string::npos) << range0.str() << info0.output;
+  EXPECT_NE(info0.output.find("volumes:  3 in the file (4-D); the figures above are volume 0's"),
+            std::string::npos)
+      << info0.output;
 }
 
 // A turntable writes each frame while the next renders: a frame that cannot

@@ -1087,7 +1087,9 @@ TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
       EXPECT_EQ(b.type(), VoxelType::f32);  // scaled
       EXPECT_EQ(b.data(), scaled);
       EXPECT_EQ(simdvol::load_nifti(file(f32), v).data(), want);
-      EXPECT_EQ(simdvol::load_volume(file(f64), std::nullopt, v).data(), want);
+      int64_t volumes = 0;
+      EXPECT_EQ(simdvol::load_volume(file(f64), std::nullopt, v, &volumes).data(), want);
+      EXPECT_EQ(volumes, kVols);
     }
     expect_file_error([&] { simdvol::load_nifti(file(u8), kVols); }, file(u8),
                       {"volume index 5 is outside 0..4"});
@@ -1108,7 +1110,9 @@ TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
   // A 3-D file: index 0 is the volume, 1 is outside.
   const std::vector<float> first(all.begin(), all.begin() + kN);
   write_nifti(file("3d.nii"), DT_UINT8, {5, 4, 3, 1}, as<uint8_t>(first));
-  EXPECT_EQ(simdvol::load_nifti(file("3d.nii"), 0).data(), first);
+  int64_t volumes = 0;
+  EXPECT_EQ(simdvol::load_nifti(file("3d.nii"), 0, &volumes).data(), first);
+  EXPECT_EQ(volumes, 1);
   expect_file_error([&] { simdvol::load_nifti(file("3d.nii"), 1); }, file("3d.nii"),
                     {"outside 0..0", "holds 1 volume"});
   // Neither NIfTI nor NRRD.
@@ -1173,7 +1177,10 @@ TEST_F(IoTest, NrrdVolumeOfAFourDFile) {
         for (int64_t z = 0; z < 3; ++z)
           for (int64_t y = 0; y < 4; ++y)
             for (int64_t x = 0; x < 5; ++x) want.push_back(value(x, y, z, v));
-        expect_volume(simdvol::load_volume(p, std::nullopt, v), kDims, VoxelType::i16, want);
+        int64_t volumes = 0;
+        expect_volume(simdvol::load_volume(p, std::nullopt, v, &volumes), kDims, VoxelType::i16,
+                      want);
+        EXPECT_EQ(volumes, kVols);
       }
       expect_file_error(
           [&] { simdvol::load_nrrd(p); }, p,

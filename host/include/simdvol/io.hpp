@@ -43,7 +43,7 @@ Volume load_den(const std::filesystem::path& path);
 /// list or vector: a diffusion series), else an axis of size 1, else the
 /// last axis (a time series). teem reads every volume; one is kept.
 Volume load_nrrd(const std::filesystem::path& path,
-                 std::optional<int64_t> volume_index = std::nullopt);
+                 std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 /// NIfTI-1 through niftilib: .nii and .nii.gz, 3-D scalar, scl_slope/
 /// scl_inter applied. The type follows the datatype as for NRRD, but a
 /// volume with a non-identity scaling loads as f32. A file of several 3-D
@@ -51,15 +51,17 @@ Volume load_nrrd(const std::filesystem::path& path,
 /// the one at `volume_index` (0-based, volumes in file order; only its
 /// bytes are read); without an index such a file is a FileError that says
 /// how many it holds. An index outside the file's volumes is a FileError.
+/// `volumes`, if given, receives how many 3-D volumes the file holds (1 for
+/// a 3-D file; so for load_nrrd and load_volume).
 Volume load_nifti(const std::filesystem::path& path,
-                  std::optional<int64_t> volume_index = std::nullopt);
+                  std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
 /// Chooses the loader by extension (.den, .nrrd, .nhdr, .nii, .nii.gz, and
 /// .raw which needs `raw`). Throws FileError for an unknown extension, and
 /// for a `volume_index` given with a file other than NIfTI or NRRD.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
-                   std::optional<int64_t> volume_index = std::nullopt);
+                   std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
 /// Writes `parts`, one after another, to a new temporary file in `path`'s
 /// directory (named after at most the first 64 bytes of path's name, so any
