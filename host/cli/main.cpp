@@ -13,6 +13,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "cli_commands.hpp"
@@ -117,31 +118,32 @@ struct VolumeArgs {
                     "which volume, from 0");
   }
 
-  // A NIfTI or NRRD file: the formats that may hold several 3-D volumes.
-  bool series() const {
+  // Whether the path ends in `suffix` (lower case), whatever its case.
+  bool has_extension(std::string_view suffix) const {
     std::string l = path;
     for (char& c : l) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    return l.ends_with(".nii") || l.ends_with(".nii.gz") || l.ends_with(".nrrd") ||
-           l.ends_with(".nhdr");
+    return l.size() > suffix.size() && l.ends_with(suffix);
+  }
+
+  // A NIfTI or NRRD file: the formats that may hold several 3-D volumes.
+  bool series() const {
+    return has_extension(".nii") || has_extension(".nii.gz") || has_extension(".nrrd") ||
+           has_extension(".nhdr");
   }
 
   // The raw layout options, and --volume-index, do nothing for another kind
   // of file (or for the built-in phantom): refused, not ignored.
   void check_format_options() const {
-    std::string lower_path = path;
-    for (char& c : lower_path) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    const bool is_raw = lower_path.size() > 4 && lower_path.ends_with(".raw");
+    const std::string which =
+        path.empty() ? std::string(" (no volume given)") : " (" + path + " is not one)";
     for (const char* name :
          {"--raw-dims", "--raw-type", "--raw-endian", "--raw-spacing", "--raw-header"})
-      if (!is_raw && app && app->count(name) > 0)
-        throw ArgumentError(
-            name, "applies only to .raw volumes" + (path.empty() ? std::string(" (no volume given)")
-                                                                 : " (" + path + " is not one)"));
+      if (!has_extension(".raw") && app && app->count(name) > 0)
+        throw ArgumentError(name, "applies only to .raw volumes" + which);
     if (!series() && app && app->count("--volume-index") > 0)
       throw ArgumentError(
           "--volume-index",
-          "applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr)" +
-              (path.empty() ? std::string(" (no volume given)") : " (" + path + " is not one)"));
+          "applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr)" + which);
     if (volume_index < 0)
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
   }
