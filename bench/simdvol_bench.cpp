@@ -25,7 +25,7 @@
 // phantomN (the N^3 Shepp-Logan CT phantom, shepp_logan(N, 4), preset ct),
 // brainsmall (data/brainsmall.den, preset volpack: VolPack's example
 // classification), ch2 (data/ch2.nii.gz, preset mri), or a volume file of
-// the user's (.nrrd, .nhdr, .nii, .nii.gz, .den: named by its file name in
+// the user's (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den: named by its file name in
 // the cases, preset ct for Hounsfield data, mri otherwise, as `simdvol
 // render --classify auto`). Compositing: direct,
 // adaptive (threshold 0.95), mcN (Monte Carlo, N walks per whole ray) or
@@ -126,7 +126,8 @@ constexpr const char* kUsage =
     "                     [--no-volpack] [--volpack-runs R]\n"
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
     "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2, or a volume file\n"
-    "    (.nrrd, .nhdr, .nii, .nii.gz, .den; classified as `simdvol render --classify auto`:\n"
+    "    (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den; classified as `simdvol render --classify "
+    "auto`:\n"
     "    ct for Hounsfield data, mri otherwise)\n"
     "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNx (exact opacity), mcNs (exact\n"
     "    opacity, stratified picks), each with sub for per sub-ray (mcNsub, mcNxsub, mcNssub)\n";
@@ -213,16 +214,13 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data)
   if (s == "brainsmall") return {s, "volpack", data / "brainsmall.den", 0};
   if (s == "ch2") return {s, "mri", data / "ch2.nii.gz", 0};
   // A volume file of the user's: named in the cases by its file name.
-  std::string lower = s;
-  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  for (const char* ext : {".nrrd", ".nhdr", ".nii", ".nii.gz", ".den"})
-    if (lower.size() > std::strlen(ext) && lower.ends_with(ext)) {
-      const std::filesystem::path p(s);
-      return {p.filename().string(), "auto", p, 0, true};
-    }
+  const std::filesystem::path p(s);
+  const VolumeFileKind kind = volume_file_kind(p);
+  if (kind != VolumeFileKind::unknown && kind != VolumeFileKind::raw)
+    return {p.filename().string(), "auto", p, 0, true};
   throw ArgumentError("--volumes", "'" + s +
                                        "' is not phantomN, brainsmall, ch2 or a volume file "
-                                       "(.nrrd, .nhdr, .nii, .nii.gz, .den)");
+                                       "(.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den)");
 }
 
 Options parse_args(int argc, char** argv) {

@@ -118,17 +118,10 @@ struct VolumeArgs {
                     "which volume, from 0");
   }
 
-  // Whether the path ends in `suffix` (lower case), whatever its case.
-  bool has_extension(std::string_view suffix) const {
-    std::string l = path;
-    for (char& c : l) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    return l.size() > suffix.size() && l.ends_with(suffix);
-  }
-
   // A NIfTI or NRRD file: the formats that may hold several 3-D volumes.
   bool series() const {
-    return has_extension(".nii") || has_extension(".nii.gz") || has_extension(".nrrd") ||
-           has_extension(".nhdr");
+    const VolumeFileKind k = volume_file_kind(path);
+    return !path.empty() && (k == VolumeFileKind::nifti || k == VolumeFileKind::nrrd);
   }
 
   // The raw layout options, and --volume-index, do nothing for another kind
@@ -138,12 +131,11 @@ struct VolumeArgs {
         path.empty() ? std::string(" (no volume given)") : " (" + path + " is not one)";
     for (const char* name :
          {"--raw-dims", "--raw-type", "--raw-endian", "--raw-spacing", "--raw-header"})
-      if (!has_extension(".raw") && app && app->count(name) > 0)
+      if (volume_file_kind(path) != VolumeFileKind::raw && app && app->count(name) > 0)
         throw ArgumentError(name, "applies only to .raw volumes" + which);
     if (!series() && app && app->count("--volume-index") > 0)
-      throw ArgumentError(
-          "--volume-index",
-          "applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr)" + which);
+      throw ArgumentError("--volume-index", "applies only to NIfTI and NRRD volumes (" +
+                                                std::string(kSeriesFileNames) + ")" + which);
     if (volume_index < 0)
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
   }
@@ -240,7 +232,7 @@ int main(int argc, char** argv) {
        exact_opacity = false, allocate = false;
   bool stratified = false;
   std::string swap_layout = "cut-and-stack", mc_scope = "whole";
-  render->add_option("volume", rv.path, "volume file (.den, .nrrd, .nhdr, .nii, .nii.gz, .raw)");
+  render->add_option("volume", rv.path, "volume file (" + std::string(kVolumeFileNames) + ")");
   rv.add(render);
   render->add_option("--view", view, "THETA,PHI,VARPHI in degrees (thesis eq 5.2)")
       ->capture_default_str();

@@ -29,7 +29,7 @@
 #include "simdvol/error.hpp"
 
 extern "C" {
-#include <nifti/nifti1_io.h>
+#include <nifti2_io.h>
 #include <teem/biff.h>
 #include <teem/nrrd.h>
 }
@@ -525,71 +525,193 @@ void nrrd_gzip_precheck(const fs::path& path, const fs::path& data, uint64_t off
 
 // ---------------------------------------------------------------- NIfTI
 
+/// The three headers of the NIfTI family, as niftilib reads them.
+enum class NiftiKind { analyze, nifti1, nifti2 };
+
 struct NiftiHeaderInfo {
+  NiftiKind kind = NiftiKind::nifti1;
+  bool pair = false;  ///< the header and the voxels in two files (.hdr and .img)
+  fs::path data;      ///< the file of the voxels (the header's own for a single file)
   std::array<int64_t, 3> dims{};
   int64_t volumes = 1;  ///< dim[4] * ... * dim[7]: 3-D volumes one after another
   int datatype = 0;
   int bitpix = 0;
-  uint64_t vox_offset = 0;
+  uint64_t vox_offset = 0;  ///< the voxels' first byte in `data`
+  /// An Analyze 7.5 header's bytes 112 and 116 (funused1, funused2), which
+  /// SPM writes as its scale factor and offset (niftilib ignores them).
+  double analyze_slope = 0.0, analyze_inter = 0.0;
 };
 
-/// Reads the 348-byte NIfTI-1 header (plain or gzip) and counts the
-/// decompressed bytes, so that a truncated or corrupt file is found before
-/// niftilib allocates or reads anything. A file of several 3-D volumes needs
-/// `index` (which one; the file must hold the volumes up to it).
-NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size,
-                               std::optional<int64_t> index) {
-  gzFile gz = gzopen(path.c_str(), "rb");
-  if (!gz) throw FileError(path, "cannot open file: " + errno_text(errno));
+/// niftilib's nifti_type code of a header, as its reader sets it: that
+/// reader gives a NIfTI-2 file the NIfTI-1 codes (3.0.1), so the code says
+/// Analyze, single file or pair.
+int nifti_type_code(const NiftiHeaderInfo& info) {
+  if (info.kind == NiftiKind::analyze) return NIFTI_FTYPE_ANALYZE;
+  return info.pair ? NIFTI_FTYPE_NIFTI1_2 : NIFTI_FTYPE_NIFTI1_1;
+}
+
+/// Whether `name` (lower case) is one half of a .hdr/.img pair.
+bool pair_name(const std::string& name) {
+  for (const char* s : {".hdr", ".hdr.gz", ".img", ".img.gz"})
+    if (name.size() > std::strlen(s) && name.ends_with(s)) return true;
+  return false;
+}
+
+/// The header of a pair named by its .img (or .img.gz); the path itself otherwise.
+fs::path nifti_header_path(const fs::path& path) {
+  const std::string name = lower(path.filename().string());
+  if (!name.ends_with(".img") && !name.ends_with(".img.gz")) return path;
+  std::unique_ptr<char, decltype(&std::free)> hdr(nifti_findhdrname(path.c_str()), &std::free);
+  if (!hdr)
+    throw FileError(path, "the header of this .img (the .hdr beside it, or .hdr.gz) is missing");
+  return fs::path(hdr.get());
+}
+
+/// Counts the bytes of `data` (plain or gzip), up to `need`; throws if it
+/// holds fewer. Errors name `path`, the file asked for.
+void nifti_count_bytes(const fs::path& path, const fs::path& data, uint64_t need,
+                       const std::string& what) {
+  const uint64_t file_size = require_regular_file(data);
+  gzFile gz = gzopen(data.c_str(), "rb");
+  if (!gz) throw FileError(path, "cannot open " + data.string() + ": " + errno_text(errno));
   struct GzCloser {
     gzFile g;
     ~GzCloser() { gzclose(g); }
   } closer{gz};
-
-  unsigned char h[348];
-  const int got = gzread(gz, h, sizeof h);
-  if (got < 0) {
-    int zerr = 0;
-    const char* msg = gzerror(gz, &zerr);
-    throw FileError(path, std::string("corrupt compressed data in header: ") + (msg ? msg : "?"));
+  const std::string in = data == path ? std::string() : " (in " + data.string() + ")";
+  if (gzdirect(gz) != 0) {
+    if (file_size < need)
+      throw FileError(path, "truncated data" + in + ": file has " + std::to_string(file_size) +
+                                " bytes, " + what + " needs " + std::to_string(need));
+    return;
   }
-  if (got < 4) throw FileError(path, "truncated header (" + std::to_string(got) + " bytes)");
+  // deflate expands at most ~1032:1: reject absurd claims before decompressing.
+  if (need / 1032 > file_size + 1024)
+    throw FileError(path, "truncated data" + in + ": " + std::to_string(file_size) +
+                              " compressed bytes cannot hold the " + std::to_string(need) +
+                              " bytes the " + what + " needs");
+  uint64_t total = 0;
+  std::vector<unsigned char> buf(1 << 16);
+  while (total < need) {
+    const int r = gzread(gz, buf.data(), static_cast<unsigned>(buf.size()));
+    if (r < 0) {
+      int zerr = 0;
+      const char* msg = gzerror(gz, &zerr);
+      throw FileError(path, "corrupt compressed data" + in + ": " + (msg ? msg : "?"));
+    }
+    if (r == 0) break;
+    total += static_cast<uint64_t>(r);
+  }
+  if (total < need)
+    throw FileError(path, "truncated data" + in + ": decompresses to " + std::to_string(total) +
+                              " bytes, " + what + " needs " + std::to_string(need));
+}
+
+/// Reads a NIfTI-1, NIfTI-2 or Analyze 7.5 header (plain or gzip) from
+/// `header` and counts the voxel file's bytes, so that a truncated or
+/// corrupt file is found before niftilib allocates or reads anything. A
+/// file of several 3-D volumes needs `index` (which one; the file must hold
+/// the volumes up to it). Errors name `path`, the file asked for.
+NiftiHeaderInfo nifti_precheck(const fs::path& path, const fs::path& header,
+                               std::optional<int64_t> index) {
+  require_regular_file(header);
+  const bool pair_named = pair_name(lower(header.filename().string()));
+  const std::string in = header == path ? std::string() : " (in " + header.string() + ")";
+  unsigned char h[540];
+  int got = 0;
+  {
+    gzFile gz = gzopen(header.c_str(), "rb");
+    if (!gz) throw FileError(path, "cannot open file: " + errno_text(errno));
+    struct GzCloser {
+      gzFile g;
+      ~GzCloser() { gzclose(g); }
+    } closer{gz};
+    got = gzread(gz, h, sizeof h);
+    if (got < 0) {
+      int zerr = 0;
+      const char* msg = gzerror(gz, &zerr);
+      throw FileError(path, "corrupt compressed data in header" + in + ": " + (msg ? msg : "?"));
+    }
+  }
+  if (got < 4)
+    throw FileError(path, "truncated header" + in + " (" + std::to_string(got) + " bytes)");
   const int32_t sizeof_hdr_le = load_scalar<int32_t>(h, std::endian::native == std::endian::big);
   const int32_t sizeof_hdr_be = load_scalar<int32_t>(h, std::endian::native == std::endian::little);
   bool file_be;  // byte order of the file
-  if (sizeof_hdr_le == 348)
+  int32_t sizeof_hdr;
+  if (sizeof_hdr_le == 348 || sizeof_hdr_le == 540) {
     file_be = false;
-  else if (sizeof_hdr_be == 348)
+    sizeof_hdr = sizeof_hdr_le;
+  } else if (sizeof_hdr_be == 348 || sizeof_hdr_be == 540) {
     file_be = true;
-  else if (sizeof_hdr_le == 540 || sizeof_hdr_be == 540)
-    throw FileError(path, "NIfTI-2 files are not supported (only NIfTI-1)");
-  else
-    throw FileError(path, "not a NIfTI-1 file (garbage header: sizeof_hdr is " +
-                              std::to_string(sizeof_hdr_le) + ", expected 348)");
-  if (got < 348)
-    throw FileError(path, "truncated header (" + std::to_string(got) + " of 348 bytes)");
+    sizeof_hdr = sizeof_hdr_be;
+  } else {
+    throw FileError(path, "not a NIfTI or Analyze file (garbage header" + in + ": sizeof_hdr is " +
+                              std::to_string(sizeof_hdr_le) + ", expected 348 or 540)");
+  }
+  if (got < sizeof_hdr)
+    throw FileError(
+        path, std::string(sizeof_hdr == 540 ? "truncated NIfTI-2 header" : "truncated header") +
+                  in + " (" + std::to_string(got) + " of " + std::to_string(sizeof_hdr) +
+                  " bytes)");
   const bool swap = file_be != (std::endian::native == std::endian::big);
   auto i16 = [&](int off) { return load_scalar<int16_t>(h + off, swap); };
   auto f32 = [&](int off) { return load_scalar<float>(h + off, swap); };
+  auto i64 = [&](int off) { return load_scalar<int64_t>(h + off, swap); };
 
-  if (std::memcmp(h + 344, "n+1", 4) != 0) {
-    if (std::memcmp(h + 344, "ni1", 4) == 0)
-      throw FileError(path,
-                      "a NIfTI-1 header-only file (magic ni1, .hdr/.img pair) is not "
-                      "supported; expected a single-file .nii (magic n+1)");
-    throw FileError(path, "not a single-file NIfTI-1 (bad magic; expected n+1)");
+  NiftiHeaderInfo info;
+  const char* single_name = ".nii";
+  if (sizeof_hdr == 348) {
+    if (std::memcmp(h + 344, "n+1", 4) == 0) {
+      info.kind = NiftiKind::nifti1;
+    } else if (std::memcmp(h + 344, "ni1", 4) == 0) {
+      info.kind = NiftiKind::nifti1;
+      info.pair = true;
+    } else if (pair_named) {
+      info.kind = NiftiKind::analyze;  // Analyze 7.5: no magic
+      info.pair = true;
+    } else {
+      throw FileError(path, "not a single-file NIfTI-1 (bad magic; expected n+1)");
+    }
+  } else {
+    // (The magic's last 4 bytes, "\r\n\032\n", are left unchecked, as
+    // niftilib does: its own writer leaves them 0.)
+    info.kind = NiftiKind::nifti2;
+    if (std::memcmp(h + 4, "n+2", 4) == 0)
+      info.pair = false;
+    else if (std::memcmp(h + 4, "ni2", 4) == 0)
+      info.pair = true;
+    else
+      throw FileError(path, "not a NIfTI-2 file (bad magic" + in + "; expected n+2 or ni2)");
+    single_name = ".nii (NIfTI-2)";
   }
-  const int ndim = i16(40);
+  if (info.pair != pair_named)
+    throw FileError(path, info.pair ? "holds the header of a .hdr/.img pair (magic ni1 or ni2), "
+                                      "but is not named .hdr"
+                                    : std::string("holds a single-file NIfTI (magic n+1 or n+2), "
+                                                  "but is named as half of a .hdr/.img pair; "
+                                                  "expected ") +
+                                          single_name);
+
+  // dim[0..7], datatype, bitpix, vox_offset: at their places in each header.
+  const bool v2 = info.kind == NiftiKind::nifti2;
+  auto dim = [&](int i) { return v2 ? i64(16 + 8 * i) : static_cast<int64_t>(i16(40 + 2 * i)); };
+  const int64_t ndim = dim(0);
   if (ndim < 1 || ndim > 7)
-    throw FileError(path, "garbage header: dim[0] is " + std::to_string(ndim) + " (1..7)");
+    throw FileError(path,
+                    "garbage header" + in + ": dim[0] is " + std::to_string(ndim) + " (1..7)");
   int64_t d[8];
-  for (int i = 0; i < 8; ++i) d[i] = i <= ndim ? i16(40 + 2 * i) : 1;
+  for (int i = 0; i < 8; ++i) d[i] = i <= ndim ? dim(i) : 1;
   for (int i = 1; i <= ndim; ++i)
     if (d[i] <= 0)
-      throw FileError(path, "non-positive dimension: dim[" + std::to_string(i) + "] is " +
+      throw FileError(path, "non-positive dimension" + in + ": dim[" + std::to_string(i) + "] is " +
                                 std::to_string(d[i]));
-  int64_t nvol = 1;  // at most 32767^4: no overflow
-  for (int i = 4; i <= ndim; ++i) nvol *= d[i];
+  int64_t nvol = 1;
+  for (int i = 4; i <= ndim; ++i) {
+    if (nvol > std::numeric_limits<int64_t>::max() / d[i])
+      throw FileError(path, "dims overflow" + in + ": dim[4..7] multiply past 2^63");
+    nvol *= d[i];
+  }
   if (nvol > 1 && !index)
     throw FileError(path, "holds " + std::to_string(nvol) +
                               " 3-D volumes (a 4-D image): give the index of one, 0.." +
@@ -599,11 +721,10 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size,
                               std::to_string(nvol - 1) + " (the file holds " +
                               std::to_string(nvol) + (nvol == 1 ? " volume)" : " volumes)"));
 
-  NiftiHeaderInfo info;
   info.volumes = nvol;
-  info.dims = {ndim >= 1 ? d[1] : 1, ndim >= 2 ? d[2] : 1, ndim >= 3 ? d[3] : 1};
-  info.datatype = i16(70);
-  info.bitpix = i16(72);
+  info.dims = {d[1], ndim >= 2 ? d[2] : 1, ndim >= 3 ? d[3] : 1};
+  info.datatype = v2 ? i16(12) : i16(70);
+  info.bitpix = v2 ? i16(14) : i16(72);
   int want_bits = 0;
   switch (info.datatype) {
     case DT_UINT8:
@@ -629,12 +750,19 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size,
                                 " (expected a scalar integer or float type)");
   }
   if (info.bitpix != want_bits)
-    throw FileError(path, "garbage header: bitpix " + std::to_string(info.bitpix) +
+    throw FileError(path, "garbage header" + in + ": bitpix " + std::to_string(info.bitpix) +
                               " does not match datatype " + std::to_string(info.datatype));
-  const float vox = f32(108);
-  if (!std::isfinite(vox) || vox < 348.0f || vox > 1e15f)
-    throw FileError(path, "garbage header: vox_offset " + std::to_string(vox));
+  // A single file's voxels follow its header; a pair's start where the
+  // header says in the .img (0, as a rule).
+  const double least = info.pair ? 0.0 : static_cast<double>(sizeof_hdr);
+  const double vox = v2 ? static_cast<double>(i64(168)) : static_cast<double>(f32(108));
+  if (!std::isfinite(vox) || vox < least || vox > 1e15)
+    throw FileError(path, "garbage header" + in + ": vox_offset " + std::to_string(vox));
   info.vox_offset = static_cast<uint64_t>(vox);
+  if (info.kind == NiftiKind::analyze) {
+    info.analyze_slope = f32(112);
+    info.analyze_inter = f32(116);
+  }
 
   const std::size_t n = checked_count(path, info.dims, static_cast<std::size_t>(want_bits / 8));
   const uint64_t volume_bytes = static_cast<uint64_t>(n) * static_cast<uint64_t>(want_bits / 8);
@@ -642,38 +770,20 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, uint64_t file_size,
   const uint64_t through = static_cast<uint64_t>(index ? *index : 0) + 1;
   if (volume_bytes > (std::numeric_limits<uint64_t>::max() - info.vox_offset) / through)
     throw FileError(path, "dims " + dims_text(info.dims) + " overflow the file size");
-  const uint64_t data_bytes = volume_bytes * through;
-  const uint64_t need = info.vox_offset + data_bytes;
+  const uint64_t need = info.vox_offset + volume_bytes * through;
 
-  const bool compressed = gzdirect(gz) == 0;
-  if (!compressed) {
-    if (file_size < need)
-      throw FileError(path, "truncated data: file has " + std::to_string(file_size) +
-                                " bytes, header (dims " + dims_text(info.dims) + ") needs " +
-                                std::to_string(need));
-    return info;
+  info.data = header;
+  if (info.pair) {
+    std::unique_ptr<char, decltype(&std::free)> img(
+        nifti_findimgname(header.c_str(), info.kind == NiftiKind::nifti2 ? NIFTI_FTYPE_NIFTI2_2
+                                                                         : nifti_type_code(info)),
+        &std::free);
+    if (!img)
+      throw FileError(path, "the voxels' file of the pair (the .img beside " +
+                                header.filename().string() + ", or .img.gz) is missing");
+    info.data = fs::path(img.get());
   }
-  // deflate expands at most ~1032:1: reject absurd claims before decompressing.
-  if (need / 1032 > file_size + 1024)
-    throw FileError(path, "truncated data: " + std::to_string(file_size) +
-                              " compressed bytes cannot hold the " + std::to_string(need) +
-                              " bytes the header (dims " + dims_text(info.dims) + ") needs");
-  uint64_t total = 348;
-  std::vector<unsigned char> buf(1 << 16);
-  while (total < need) {
-    const int r = gzread(gz, buf.data(), static_cast<unsigned>(buf.size()));
-    if (r < 0) {
-      int zerr = 0;
-      const char* msg = gzerror(gz, &zerr);
-      throw FileError(path, std::string("corrupt compressed data: ") + (msg ? msg : "?"));
-    }
-    if (r == 0) break;
-    total += static_cast<uint64_t>(r);
-  }
-  if (total < need)
-    throw FileError(path, "truncated data: decompresses to " + std::to_string(total) +
-                              " bytes, header (dims " + dims_text(info.dims) + ") needs " +
-                              std::to_string(need));
+  nifti_count_bytes(path, info.data, need, "header (dims " + dims_text(info.dims) + ")");
   return info;
 }
 
@@ -952,8 +1062,9 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
 
 Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volume_index,
                   int64_t* volumes) {
-  const uint64_t file_size = require_regular_file(path);
-  const NiftiHeaderInfo info = nifti_precheck(path, file_size, volume_index);
+  require_regular_file(path);
+  const fs::path header = nifti_header_path(path);
+  const NiftiHeaderInfo info = nifti_precheck(path, header, volume_index);
   const int64_t index = volume_index ? *volume_index : 0;
   if (volumes) *volumes = info.volumes;
 
@@ -962,35 +1073,48 @@ Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volu
     void operator()(nifti_image* p) const { nifti_image_free(p); }
   };
   // The header first; the voxels after the checks below.
-  std::unique_ptr<nifti_image, NimDeleter> nim(nifti_image_read(path.c_str(), 0));
+  std::unique_ptr<nifti_image, NimDeleter> nim(nifti_image_read(header.c_str(), 0));
   if (!nim) throw FileError(path, "niftilib could not read the file (corrupt or truncated)");
+  const int type_read = nim->nifti_type == NIFTI_FTYPE_NIFTI2_1   ? NIFTI_FTYPE_NIFTI1_1
+                        : nim->nifti_type == NIFTI_FTYPE_NIFTI2_2 ? NIFTI_FTYPE_NIFTI1_2
+                                                                  : nim->nifti_type;
+  if (type_read != nifti_type_code(info))
+    throw FileError(path, "niftilib reads the header as file type " +
+                              std::to_string(nim->nifti_type) + ", not " +
+                              std::to_string(nifti_type_code(info)));
   const std::array<int64_t, 3> dims{nim->nx, nim->ny, nim->nz};
   if (dims != info.dims)
     throw FileError(path, "niftilib dims " + dims_text(dims) + " disagree with the header " +
                               dims_text(info.dims));
+  if (nim->iname_offset < 0 || static_cast<uint64_t>(nim->iname_offset) != info.vox_offset)
+    throw FileError(path, "niftilib's voxel offset " + std::to_string(nim->iname_offset) +
+                              " disagrees with the header's " + std::to_string(info.vox_offset));
   const std::size_t n = checked_count(path, dims, static_cast<std::size_t>(nim->nbyper));
-  if (nim->nvox / n != static_cast<std::size_t>(info.volumes) || nim->nvox % n != 0)
+  if (nim->nvox <= 0 ||
+      static_cast<uint64_t>(nim->nvox) / n != static_cast<uint64_t>(info.volumes) ||
+      static_cast<uint64_t>(nim->nvox) % n != 0)
     throw FileError(path, "voxel count disagrees with the dims");
   // niftilib's reader (nifti_read_buffer) replaces every NaN and Inf of a
   // float volume by 0 as it reads, without a word: a background masked
   // with NaN would become voxels of value 0, which a classification may
   // make opaque. Float voxels are read as the file stores them instead
-  // (znzlib, .nii and .nii.gz alike, from the image's offset, swapped as
-  // niftilib swaps them); NaN voxels then render transparent
-  // (docs/HARDENING.md). So is the one volume asked for of a 4-D file, of
-  // any type (niftilib would read them all). Other types through niftilib.
+  // (znzlib, plain and gzip alike, from the image's offset in the voxels'
+  // file, swapped as niftilib swaps them); NaN voxels then render
+  // transparent (docs/HARDENING.md). So is the one volume asked for of a
+  // 4-D file, of any type (niftilib would read them all). Other types
+  // through niftilib.
   std::vector<unsigned char> stored;
   const void* d = nullptr;
   if (nim->datatype == DT_FLOAT32 || nim->datatype == DT_FLOAT64 || info.volumes > 1) {
     const std::size_t bytes = n * static_cast<std::size_t>(nim->nbyper);
     stored.resize(bytes);
-    znzFile fp = znzopen(path.c_str(), "rb", nifti_is_gzfile(path.c_str()));
+    znzFile fp = znzopen(info.data.c_str(), "rb", nifti_is_gzfile(info.data.c_str()));
     if (znz_isnull(fp)) throw FileError(path, "could not be opened for its voxels");
     // (the pre-check bounded the offset: below the file's size, or its
     // decompressed size, which it counted)
     const auto offset =
-        static_cast<long>(nim->iname_offset) + static_cast<long>(index) * static_cast<long>(bytes);
-    const bool at = nim->iname_offset >= 0 && znzseek(fp, offset, SEEK_SET) >= 0;
+        static_cast<long>(info.vox_offset) + static_cast<long>(index) * static_cast<long>(bytes);
+    const bool at = znzseek(fp, offset, SEEK_SET) >= 0;
     const std::size_t got = at ? znzread(stored.data(), 1, bytes, fp) : 0;
     znzclose(fp);
     if (got > bytes)  // (znzread of a .gz passes gzread's -1 on as a size_t)
@@ -999,7 +1123,7 @@ Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volu
       throw FileError(path, "holds " + std::to_string(got) + " of the " + std::to_string(bytes) +
                                 " bytes of voxel data its header promises (truncated?)");
     if (nim->byteorder != nifti_short_order() && nim->nbyper > 1)
-      nifti_swap_Nbytes(n, nim->nbyper, stored.data());
+      nifti_swap_Nbytes(static_cast<int64_t>(n), nim->nbyper, stored.data());
     d = stored.data();
   } else {
     if (nifti_image_load(nim.get()) != 0 || !nim->data)
@@ -1007,7 +1131,11 @@ Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volu
     d = nim->data;
   }
 
-  const double slope = nim->scl_slope, inter = nim->scl_inter;
+  // An Analyze header's scale is SPM's (bytes 112 and 116), which niftilib
+  // does not read; NIfTI's is scl_slope and scl_inter.
+  const bool analyze = info.kind == NiftiKind::analyze;
+  const double slope = analyze ? info.analyze_slope : nim->scl_slope;
+  const double inter = analyze ? info.analyze_inter : nim->scl_inter;
   const bool scaled = std::isfinite(slope) && slope != 0.0 &&
                       (slope != 1.0 || (std::isfinite(inter) && inter != 0.0));
   const double inter_used = std::isfinite(inter) ? inter : 0.0;
@@ -1069,29 +1197,37 @@ Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volu
   return vol;
 }
 
+VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
+  const std::string name = lower(path.filename().string());
+  auto ends_with = [&](std::string_view suffix) {
+    return name.size() > suffix.size() && name.ends_with(suffix);
+  };
+  for (const char* s : {".nii", ".nii.gz", ".hdr", ".hdr.gz", ".img", ".img.gz"})
+    if (ends_with(s)) return VolumeFileKind::nifti;
+  if (ends_with(".nrrd") || ends_with(".nhdr")) return VolumeFileKind::nrrd;
+  if (ends_with(".den")) return VolumeFileKind::den;
+  if (ends_with(".raw")) return VolumeFileKind::raw;
+  return VolumeFileKind::unknown;
+}
+
 Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
                    std::optional<int64_t> volume_index, int64_t* volumes) {
   if (volumes) *volumes = 1;
   refuse_directory(path);  // before the extension (a directory has none to speak of)
-  const std::string name = lower(path.filename().string());
-  auto ends_with = [&](const std::string& suffix) {
-    return name.size() > suffix.size() &&
-           name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
-  };
-  if (ends_with(".nii.gz") || ends_with(".nii")) return load_nifti(path, volume_index, volumes);
-  if (ends_with(".nrrd") || ends_with(".nhdr")) return load_nrrd(path, volume_index, volumes);
+  const VolumeFileKind kind = volume_file_kind(path);
+  if (kind == VolumeFileKind::nifti) return load_nifti(path, volume_index, volumes);
+  if (kind == VolumeFileKind::nrrd) return load_nrrd(path, volume_index, volumes);
   if (volume_index)
-    throw FileError(path,
-                    "a volume index applies only to NIfTI and NRRD files (.nii, .nii.gz, .nrrd, "
-                    ".nhdr)");
-  if (ends_with(".den")) return load_den(path);
-  if (ends_with(".raw")) {
+    throw FileError(path, std::string("a volume index applies only to NIfTI and NRRD files (") +
+                              std::string(kSeriesFileNames) + ")");
+  if (kind == VolumeFileKind::den) return load_den(path);
+  if (kind == VolumeFileKind::raw) {
     if (!raw)
       throw FileError(path, "a .raw file needs its layout (dims, type, endianness) to be given");
     return load_raw(path, *raw);
   }
   throw FileError(path, "unknown volume file extension '" + path.extension().string() +
-                            "' (expected .den, .nrrd, .nhdr, .nii, .nii.gz or .raw)");
+                            "' (expected " + std::string(kVolumeFileNames) + ")");
 }
 
 void refuse_non_regular_file(const fs::path& path, const char* noun) {

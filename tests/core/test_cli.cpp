@@ -22,7 +22,7 @@
 #include "simdvol/render.hpp"
 #include "testing.hpp"
 
-#include <nifti/nifti1_io.h>
+#include <nifti2_io.h>
 
 namespace fs = std::filesystem;
 
@@ -152,12 +152,13 @@ TEST_F(Cli, TurntableNamesSortInFrameOrderPastTenThousandFrames) {
 
 // One volume of a 4-D NIfTI (--volume-index; `info` too, which without the
 // option describes volume 0 and says how many there are): the image equals
-// the render of the same voxels as a 3-D file. Volume v of the file holds a
+// the render of the same voxels as a 3-D file, from a .nii.gz and from a
+// gzipped .hdr/.img pair named by its .img. Volume v of the file holds a
 // phantom scaled by v + 1 and shifted, so each volume's image differs.
 TEST_F(Cli, RendersOneVolumeOfAFourDNifti) {
   const simdvol::Volume ph = simdvol::shepp_logan(24, 2);
   const std::size_t n = ph.voxel_count();
-  const int dims[8] = {4, 24, 24, 24, 3, 1, 1, 1};
+  const int64_t dims[8] = {4, 24, 24, 24, 3, 1, 1, 1};
   nifti_image* nim = nifti_make_new_nim(dims, DT_FLOAT32, 1);
   ASSERT_NE(nim, nullptr);
   ASSERT_EQ(nim->nvox, 3 * n);
@@ -167,7 +168,11 @@ TEST_F(Cli, RendersOneVolumeOfAFourDNifti) {
       f[static_cast<std::size_t>(v) * n + i] = static_cast<float>(v + 1) * ph.data()[i] + 100.0f;
   ASSERT_EQ(nifti_set_filenames(nim, path("series.nii.gz").c_str(), 0, 1), 0);
   nifti_image_write(nim);
+  // The same volumes as a gzipped .hdr/.img pair (named by its .img below).
+  ASSERT_EQ(nifti_set_filenames(nim, path("pair.hdr.gz").c_str(), 0, 1), 0);
+  nifti_image_write(nim);
   nifti_image_free(nim);
+  ASSERT_TRUE(fs::exists(path("pair.img.gz")));
   simdvol::Volume one({24, 24, 24}, simdvol::VoxelType::f32);
   for (std::size_t i = 0; i < n; ++i) one.data()[i] = 2.0f * ph.data()[i] + 100.0f;  // volume 1
   simdvol::save_nrrd(one, path("one.nrrd"));
@@ -181,13 +186,19 @@ TEST_F(Cli, RendersOneVolumeOfAFourDNifti) {
       run("render " + path("series.nii.gz") + " --volume-index 1" + common + path("a.tif")).code,
       0);
   ASSERT_EQ(run("render " + path("one.nrrd") + common + path("b.tif")).code, 0);
+  ASSERT_EQ(
+      run("render " + path("pair.img.gz") + " --volume-index 1" + common + path("c.tif")).code, 0);
   const simdvol::Image a = simdvol::read_image(path("a.tif")),
-                       b = simdvol::read_image(path("b.tif"));
+                       b = simdvol::read_image(path("b.tif")),
+                       c = simdvol::read_image(path("c.tif"));
   ASSERT_EQ(a.pixels().size(), b.pixels().size());
+  ASSERT_EQ(c.pixels().size(), b.pixels().size());
   double lit = 0;
   for (std::size_t i = 0; i < a.pixels().size(); ++i) {
     ASSERT_EQ(a.pixels()[i].r, b.pixels()[i].r) << i;
     ASSERT_EQ(a.pixels()[i].a, b.pixels()[i].a) << i;
+    ASSERT_EQ(c.pixels()[i].r, b.pixels()[i].r) << i;
+    ASSERT_EQ(c.pixels()[i].a, b.pixels()[i].a) << i;
     lit += a.pixels()[i].a;
   }
   EXPECT_GT(lit, 1.0);
@@ -666,10 +677,12 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --raw-dims 2,2,2 -o " + path("x.png"),
        "--raw-dims: applies only to .raw volumes (no volume given)"},
       {"render --volume-index 1 -o " + path("x.png"),
-       "--volume-index: applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr) (no "
+       "--volume-index: applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .hdr/.img, .nrrd, "
+       ".nhdr) (no "
        "volume given)"},
       {"info " + path("vol.raw") + " --raw-dims 2,2,2 --volume-index 0",
-       "--volume-index: applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .nrrd, .nhdr) (" +
+       "--volume-index: applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .hdr/.img, .nrrd, "
+       ".nhdr) (" +
            path("vol.raw") + " is not one)"},
       {"render --no-shade --light 1,0,0 -o " + path("x.png"),
        "--light: applies only to lit renders (not with --no-shade)"},

@@ -30,7 +30,7 @@
 #include "testing.hpp"
 
 extern "C" {
-#include <nifti/nifti1_io.h>
+#include <nifti2_io.h>
 }
 
 namespace fs = std::filesystem;
@@ -801,11 +801,11 @@ TEST_F(IoTest, AFailedAtomicWriteKeepsTheFileAndLeavesNoTemporary) {
 template <typename T>
 void write_nifti(const fs::path& p, int datatype, std::array<int, 4> d, const std::vector<T>& data,
                  std::array<float, 3> pix = {1, 1, 1}, float slope = 0.0f, float inter = 0.0f) {
-  const int dims[8] = {d[3] > 1 ? 4 : 3, d[0], d[1], d[2], d[3], 1, 1, 1};
+  const int64_t dims[8] = {d[3] > 1 ? 4 : 3, d[0], d[1], d[2], d[3], 1, 1, 1};
   nifti_image* nim = nifti_make_new_nim(dims, datatype, 1);  // 1: allocate data
   ASSERT_NE(nim, nullptr);
   ASSERT_NE(nim->data, nullptr);
-  ASSERT_EQ(nim->nvox, data.size());
+  ASSERT_EQ(static_cast<std::size_t>(nim->nvox), data.size());
   ASSERT_EQ(static_cast<std::size_t>(nim->nbyper), sizeof(T));
   std::memcpy(nim->data, data.data(), data.size() * sizeof(T));
   nim->dx = nim->pixdim[1] = pix[0];
@@ -905,15 +905,16 @@ TEST_F(IoTest, NiftiKeepsNonFiniteFloats) {
     // swapped by swap_nifti_header, its voxels by nifti_swap_Nbytes).
     if (std::string(ext) == ".nii") {
       const fs::path be = file("be.nii");
-      const int dims[8] = {3, 5, 4, 3, 1, 1, 1, 1};
+      const int64_t dims[8] = {3, 5, 4, 3, 1, 1, 1, 1};
       nifti_image* nim = nifti_make_new_nim(dims, DT_FLOAT32, 1);
       ASSERT_NE(nim, nullptr);
-      nifti_1_header h = nifti_convert_nim2nhdr(nim);
+      nifti_1_header h{};
+      ASSERT_EQ(nifti_convert_nim2n1hdr(nim, &h), 0);
       nifti_image_free(nim);
       const int offset = static_cast<int>(h.vox_offset);
       swap_nifti_header(&h, 1);
       std::vector<float> data = v;
-      nifti_swap_Nbytes(data.size(), 4, data.data());
+      nifti_swap_Nbytes(static_cast<int64_t>(data.size()), 4, data.data());
       std::string bytes(reinterpret_cast<const char*>(&h), sizeof h);
       bytes.resize(static_cast<std::size_t>(offset), '\0');  // (no extension)
       bytes.append(reinterpret_cast<const char*>(data.data()), data.size() * sizeof(float));
@@ -1121,6 +1122,211 @@ TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
   raw.dims = kDims;
   expect_file_error([&] { simdvol::load_volume(file("v.raw"), raw, 0); }, file("v.raw"),
                     {"applies only to NIfTI and NRRD"});
+}
+
+// ----------------------------------------- NIfTI-2, .hdr/.img pairs, Analyze
+
+/// The three headers of the NIfTI family.
+enum class NiftiForm { nifti1, nifti2, analyze };
+
+/// Writes a volume in `form` by hand from niftilib's own header (its
+/// nifti_convert_nim2n1hdr or nim2n2hdr): niftilib 3.0.1's writer leaves a
+/// single-file NIfTI-2 without its header, writes native byte order only,
+/// and drops an Analyze header's scale. `p` names a single file (.nii,
+/// .nii.gz) or the .hdr of a pair (.hdr or .hdr.gz; the voxels go to the
+/// .img beside it, gzipped with `img_gz`). Big-endian files are swapped by
+/// swap_nifti_header and nifti_swap_Nbytes. `scale` is written to the
+/// header's slope and intercept (for Analyze, at SPM's bytes 112 and 116).
+template <typename T>
+void write_nifti_by_hand(const fs::path& p, NiftiForm form, bool big, int datatype,
+                         std::array<int64_t, 4> d, const std::vector<T>& data,
+                         std::array<double, 3> pix = {1, 1, 1},
+                         std::array<double, 2> scale = {0, 0}, bool img_gz = false) {
+  const std::string name = p.filename().string();
+  const bool pair = name.find(".hdr") != std::string::npos;
+  const bool hdr_gz = name.ends_with(".gz");
+  const int64_t dims[8] = {d[3] > 1 ? 4 : 3, d[0], d[1], d[2], d[3], 1, 1, 1};
+  nifti_image* nim = nifti_make_new_nim(dims, datatype, 0);
+  ASSERT_NE(nim, nullptr);
+  ASSERT_EQ(static_cast<std::size_t>(nim->nbyper), sizeof(T));
+  ASSERT_EQ(static_cast<std::size_t>(nim->nvox), data.size());
+  nim->dx = nim->pixdim[1] = pix[0];
+  nim->dy = nim->pixdim[2] = pix[1];
+  nim->dz = nim->pixdim[3] = pix[2];
+  nim->scl_slope = scale[0];
+  nim->scl_inter = scale[1];
+  const bool v2 = form == NiftiForm::nifti2;
+  nim->nifti_type = form == NiftiForm::analyze ? NIFTI_FTYPE_ANALYZE
+                    : v2 ? (pair ? NIFTI_FTYPE_NIFTI2_2 : NIFTI_FTYPE_NIFTI2_1)
+                         : (pair ? NIFTI_FTYPE_NIFTI1_2 : NIFTI_FTYPE_NIFTI1_1);
+  const int64_t header_bytes = v2 ? 540 : 348;
+  // A single file: the header, 4 bytes of "no extensions", the voxels.
+  nim->iname_offset = pair ? 0 : header_bytes + 4;
+  std::string hdr(static_cast<std::size_t>(header_bytes), '\0');
+  if (v2) {
+    nifti_2_header h{};
+    ASSERT_EQ(nifti_convert_nim2n2hdr(nim, &h), 0);
+    if (big) swap_nifti_header(&h, 2);
+    std::memcpy(hdr.data(), &h, sizeof h);
+  } else {
+    nifti_1_header h{};
+    ASSERT_EQ(nifti_convert_nim2n1hdr(nim, &h), 0);
+    if (form == NiftiForm::analyze) {
+      std::memset(h.magic, 0, sizeof h.magic);
+      h.scl_slope = static_cast<float>(scale[0]);  // SPM's funused1, funused2
+      h.scl_inter = static_cast<float>(scale[1]);
+    }
+    if (big) swap_nifti_header(&h, form == NiftiForm::analyze ? 0 : 1);
+    std::memcpy(hdr.data(), &h, sizeof h);
+  }
+  nifti_image_free(nim);
+  std::vector<T> voxels = data;
+  if (big && sizeof(T) > 1)
+    nifti_swap_Nbytes(static_cast<int64_t>(voxels.size()), static_cast<int>(sizeof(T)),
+                      voxels.data());
+  const std::string vox(reinterpret_cast<const char*>(voxels.data()), voxels.size() * sizeof(T));
+  auto put_file = [](const fs::path& f, const std::string& bytes, bool gz) {
+    write_file(f, gz ? gzip(Bytes(bytes.begin(), bytes.end())) : Bytes(bytes.begin(), bytes.end()));
+  };
+  if (!pair) {
+    put_file(p, hdr + std::string(4, '\0') + vox, hdr_gz);
+    return;
+  }
+  if (form != NiftiForm::analyze) hdr += std::string(4, '\0');
+  put_file(p, hdr, hdr_gz);
+  const std::string stem = name.substr(0, name.find(".hdr"));
+  put_file(p.parent_path() / (stem + (img_gz ? ".img.gz" : ".img")), vox, img_gz);
+}
+
+// NIfTI-2 (single file and pair), NIfTI-1 pairs and Analyze 7.5 pairs, in
+// both byte orders, plain and gzipped: every form loads the voxels and
+// spacing written (integer and float types, by either half of a pair
+// through load_volume), one volume of a 4-D file, and the scales: NIfTI's
+// scl_slope and scl_inter, an Analyze header's SPM scale (niftilib reads
+// none for Analyze), and no scale where SPM's bytes hold 0.
+TEST_F(IoTest, NiftiTwoPairsAndAnalyze) {
+  const auto i16 = test_values(VoxelType::i16, kN);
+  const auto f32 = test_values(VoxelType::f32, kN);
+  const std::array<double, 3> pix{0.5, 2.0, 3.0};
+  struct Case {
+    NiftiForm form;
+    const char* name;
+  };
+  for (const Case c : {Case{NiftiForm::nifti2, "a.nii"}, Case{NiftiForm::nifti2, "b.nii.gz"},
+                       Case{NiftiForm::nifti2, "c.hdr"}, Case{NiftiForm::nifti1, "d.hdr"},
+                       Case{NiftiForm::nifti1, "e.hdr.gz"}, Case{NiftiForm::analyze, "f.hdr"},
+                       Case{NiftiForm::analyze, "g.hdr.gz"}})
+    for (const bool big : {false, true})
+      for (const bool img_gz : {false, true}) {
+        const std::string base = std::string(big ? "be_" : "le_") + (img_gz ? "z_" : "") + c.name;
+        const bool pair = base.find(".hdr") != std::string::npos;
+        if (img_gz && !pair) continue;
+        SCOPED_TRACE(base);
+        write_nifti_by_hand(file("i16" + base), c.form, big, DT_INT16, {5, 4, 3, 1},
+                            as<int16_t>(i16), pix, {0, 0}, img_gz);
+        expect_volume(simdvol::load_nifti(file("i16" + base)), kDims, VoxelType::i16, i16, pix);
+        write_nifti_by_hand(file("f32" + base), c.form, big, DT_FLOAT32, {5, 4, 3, 1}, f32, pix,
+                            {0, 0}, img_gz);
+        expect_volume(simdvol::load_volume(file("f32" + base)), kDims, VoxelType::f32, f32, pix);
+        if (pair) {  // by its .img too
+          const std::string img = base.substr(0, base.find(".hdr")) + (img_gz ? ".img.gz" : ".img");
+          expect_volume(simdvol::load_volume(file("f32" + img)), kDims, VoxelType::f32, f32, pix);
+        }
+        // Scaled: slope 2, intercept -7 (Analyze: SPM's), exact in float.
+        std::vector<float> scaled(i16);
+        for (float& x : scaled) x = 2.0f * x - 7.0f;
+        write_nifti_by_hand(file("s" + base), c.form, big, DT_INT16, {5, 4, 3, 1}, as<int16_t>(i16),
+                            pix, {2, -7}, img_gz);
+        expect_volume(simdvol::load_nifti(file("s" + base)), kDims, VoxelType::f32, scaled, pix);
+        // 4-D: volume v holds i16 + 3 v.
+        std::vector<float> all;
+        for (int v = 0; v < 3; ++v)
+          for (float x : i16) all.push_back(std::clamp(x + 3.0f * v, -32768.0f, 32767.0f));
+        write_nifti_by_hand(file("t" + base), c.form, big, DT_INT16, {5, 4, 3, 3}, as<int16_t>(all),
+                            pix, {0, 0}, img_gz);
+        int64_t volumes = 0;
+        EXPECT_EQ(simdvol::load_nifti(file("t" + base), 2, &volumes).data(),
+                  std::vector<float>(all.begin() + 2 * kN, all.end()));
+        EXPECT_EQ(volumes, 3);
+        expect_file_error([&] { simdvol::load_nifti(file("t" + base)); }, file("t" + base),
+                          {"holds 3 3-D volumes"});
+      }
+  // SPM's bytes holding 0 (as most Analyze writers leave them): no scale,
+  // the type kept.
+  write_nifti_by_hand(file("noscale.hdr"), NiftiForm::analyze, false, DT_INT16, {5, 4, 3, 1},
+                      as<int16_t>(i16), pix, {0, 5});
+  expect_volume(simdvol::load_nifti(file("noscale.hdr")), kDims, VoxelType::i16, i16, pix);
+  // NaN in a NIfTI-2 float volume is kept, as in NIfTI-1.
+  std::vector<float> nan = f32;
+  nan[7] = std::numeric_limits<float>::quiet_NaN();
+  write_nifti_by_hand(file("nan.nii"), NiftiForm::nifti2, false, DT_FLOAT32, {5, 4, 3, 1}, nan);
+  EXPECT_TRUE(std::isnan(simdvol::load_nifti(file("nan.nii")).data()[7]));
+  EXPECT_EQ(simdvol::volume_file_kind("X.HDR.GZ"), simdvol::VolumeFileKind::nifti);
+  EXPECT_EQ(simdvol::volume_file_kind("x.img"), simdvol::VolumeFileKind::nifti);
+  EXPECT_EQ(simdvol::volume_file_kind("x.hdrx"), simdvol::VolumeFileKind::unknown);
+}
+
+// What goes wrong with a pair or a NIfTI-2 header is a FileError naming
+// the file asked for: a missing or cut .img, a .img without its .hdr, a
+// header named as the other kind of file, a NIfTI-2 header with a bad
+// magic, cut short, or with dims, an offset or a type beyond reason.
+TEST_F(IoTest, NiftiTwoAndPairsMalformed) {
+  const auto u8 = test_values(VoxelType::u8, kN);
+  write_nifti_by_hand(file("p.hdr"), NiftiForm::nifti1, false, DT_UINT8, {5, 4, 3, 1},
+                      as<uint8_t>(u8));
+  const Bytes img = read_file(file("p.img"));
+  fs::remove(file("p.img"));
+  expect_file_error([&] { simdvol::load_nifti(file("p.hdr")); }, file("p.hdr"),
+                    {".img beside p.hdr", "missing"});
+  write_file(file("p.img"), Bytes(img.begin(), img.end() - 1));
+  expect_file_error([&] { simdvol::load_nifti(file("p.hdr")); }, file("p.hdr"),
+                    {"truncated data (in"});
+  write_file(file("p.img.gz"), gzip(Bytes(img.begin(), img.end() - 1)));
+  fs::remove(file("p.img"));
+  expect_file_error([&] { simdvol::load_nifti(file("p.hdr")); }, file("p.hdr"),
+                    {"truncated data (in"});
+  fs::remove(file("p.img.gz"));
+  fs::create_directory(file("p.img"));
+  expect_file_error([&] { simdvol::load_nifti(file("p.hdr")); }, file("p.img"), {"directory"});
+  write_file(file("lone.img"), img);
+  expect_file_error([&] { simdvol::load_volume(file("lone.img")); }, file("lone.img"),
+                    {"header of this .img"});
+  // A pair's header named .nii, a single file's named .hdr.
+  write_nifti_by_hand(file("q.hdr"), NiftiForm::nifti2, false, DT_UINT8, {5, 4, 3, 1},
+                      as<uint8_t>(u8));
+  fs::copy_file(file("q.hdr"), file("q.nii"));
+  expect_file_error([&] { simdvol::load_nifti(file("q.nii")); }, file("q.nii"),
+                    {"header of a .hdr/.img pair"});
+  write_nifti_by_hand(file("r.nii"), NiftiForm::nifti2, false, DT_UINT8, {5, 4, 3, 1},
+                      as<uint8_t>(u8));
+  fs::copy_file(file("r.nii"), file("r.hdr"));
+  expect_file_error([&] { simdvol::load_nifti(file("r.hdr")); }, file("r.hdr"),
+                    {"single-file NIfTI"});
+  // NIfTI-2 headers gone wrong.
+  const Bytes good = read_file(file("r.nii"));
+  EXPECT_EQ(simdvol::load_nifti(file("r.nii")).data(), u8);
+  auto bad = [&](const std::string& name, const std::function<void(Bytes&)>& edit,
+                 std::initializer_list<std::string> words) {
+    Bytes b = good;
+    edit(b);
+    write_file(file(name), b);
+    expect_file_error([&] { simdvol::load_nifti(file(name)); }, file(name), words);
+  };
+  bad("magic.nii", [](Bytes& b) { b[5] = 'x'; }, {"not a NIfTI-2 file (bad magic"});
+  bad("cut.nii", [](Bytes& b) { b.resize(500); }, {"truncated NIfTI-2 header (500 of 540"});
+  bad("ndim.nii", [](Bytes& b) { poke<int64_t>(b, 16, 8); }, {"dim[0] is 8"});
+  bad("zero.nii", [](Bytes& b) { poke<int64_t>(b, 24, 0); }, {"non-positive dimension"});
+  bad("huge.nii", [](Bytes& b) { poke<int64_t>(b, 24, int64_t{1} << 40); }, {"dims", "too"});
+  bad("over.nii",
+      [](Bytes& b) {
+        poke<int64_t>(b, 16, 6);
+        for (int i = 4; i <= 6; ++i) poke<int64_t>(b, 16 + 8 * i, int64_t{1} << 30);
+      },
+      {"dims overflow"});
+  bad("type.nii", [](Bytes& b) { poke<int16_t>(b, 12, DT_COMPLEX64); }, {"unsupported"});
+  bad("bitpix.nii", [](Bytes& b) { poke<int16_t>(b, 14, 16); }, {"bitpix"});
+  bad("voxoff.nii", [](Bytes& b) { poke<int64_t>(b, 168, 100); }, {"vox_offset"});
+  bad("voxfar.nii", [](Bytes& b) { poke<int64_t>(b, 168, 4000); }, {"truncated data"});
 }
 
 // A 4-D NRRD: the volume at an index along its volume axis, which is its

@@ -44,9 +44,13 @@ Volume load_den(const std::filesystem::path& path);
 /// last axis (a time series). teem reads every volume; one is kept.
 Volume load_nrrd(const std::filesystem::path& path,
                  std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
-/// NIfTI-1 through niftilib: .nii and .nii.gz, 3-D scalar, scl_slope/
-/// scl_inter applied. The type follows the datatype as for NRRD, but a
-/// volume with a non-identity scaling loads as f32. A file of several 3-D
+/// NIfTI through niftilib: NIfTI-1 and NIfTI-2, each as a single file
+/// (.nii, .nii.gz) or a .hdr/.img pair (either half may be named, each
+/// plain or gzipped: .hdr.gz, .img.gz), and Analyze 7.5 pairs (a .hdr with
+/// no NIfTI magic). 3-D scalar, scl_slope/scl_inter applied; an Analyze
+/// header's scale is SPM's (bytes 112 and 116, which niftilib ignores),
+/// applied by the same rule. The type follows the datatype as for NRRD, but
+/// a volume with a non-identity scaling loads as f32. A file of several 3-D
 /// volumes (dim[4] and up above 1: a time series, a diffusion series) loads
 /// the one at `volume_index` (0-based, volumes in file order; only its
 /// bytes are read); without an index such a file is a FileError that says
@@ -56,9 +60,19 @@ Volume load_nrrd(const std::filesystem::path& path,
 Volume load_nifti(const std::filesystem::path& path,
                   std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
-/// Chooses the loader by extension (.den, .nrrd, .nhdr, .nii, .nii.gz, and
-/// .raw which needs `raw`). Throws FileError for an unknown extension, and
-/// for a `volume_index` given with a file other than NIfTI or NRRD.
+/// The kinds of volume file load_volume reads, told by the name's ending
+/// (whatever its case).
+enum class VolumeFileKind { unknown, den, nrrd, nifti, raw };
+VolumeFileKind volume_file_kind(const std::filesystem::path& path);
+/// The endings volume_file_kind knows, for messages.
+inline constexpr std::string_view kVolumeFileNames =
+    ".den, .nrrd, .nhdr, .nii, .nii.gz, .hdr/.img (NIfTI or Analyze pairs, plain or .gz) or .raw";
+/// The endings of the files that may hold several 3-D volumes (NIfTI, NRRD).
+inline constexpr std::string_view kSeriesFileNames = ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr";
+
+/// Chooses the loader by volume_file_kind (.raw needs `raw`). Throws
+/// FileError for an unknown extension, and for a `volume_index` given with
+/// a file other than NIfTI or NRRD.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
