@@ -20,7 +20,7 @@
 #include "simdvol/volume.hpp"
 
 extern "C" {
-#include <nifti/nifti1_io.h>
+#include <nifti2_io.h>
 #include <teem/nrrd.h>
 }
 
@@ -135,8 +135,7 @@ Bytes nrrd_via_teem(const Volume& v, const char* encoding, const fs::path& tmp) 
 }
 
 Bytes nifti_via_niftilib(const Volume& v, int datatype, float slope, const fs::path& tmp) {
-  int dims[8] = {
-      3, static_cast<int>(v.nx()), static_cast<int>(v.ny()), static_cast<int>(v.nz()), 1, 1, 1, 1};
+  const int64_t dims[8] = {3, v.nx(), v.ny(), v.nz(), 1, 1, 1, 1};
   nifti_image* nim = nifti_make_new_nim(dims, datatype, 1);
   if (!nim) return {};
   for (std::size_t i = 0; i < v.voxel_count(); ++i) {
@@ -160,6 +159,47 @@ Bytes nifti_via_niftilib(const Volume& v, int datatype, float slope, const fs::p
   nifti_image_free(nim);
   Bytes out = read_bytes(tmp);
   fs::remove(tmp);
+  return out;
+}
+
+/// A header by niftilib's own conversion (nifti_convert_nim2n1hdr or
+/// nim2n2hdr; its writer leaves a single NIfTI-2 file headerless) and the
+/// voxels: `version` 2 NIfTI-2, 1 NIfTI-1, 0 Analyze 7.5 (no magic, SPM's
+/// scale 2 at byte 112); a single file (4 bytes of "no extensions" between)
+/// or, with `pair`, the header then the .img's bytes, as the target's pair
+/// form splits them. Byte-swapped when `big`.
+Bytes nifti_by_hand(const Volume& v, int version, bool pair, bool big) {
+  const int64_t dims[8] = {3, v.nx(), v.ny(), v.nz(), 1, 1, 1, 1};
+  nifti_image* nim = nifti_make_new_nim(dims, DT_INT16, 0);
+  if (!nim) return {};
+  nim->nifti_type = version == 0   ? NIFTI_FTYPE_ANALYZE
+                    : version == 2 ? (pair ? NIFTI_FTYPE_NIFTI2_2 : NIFTI_FTYPE_NIFTI2_1)
+                                   : (pair ? NIFTI_FTYPE_NIFTI1_2 : NIFTI_FTYPE_NIFTI1_1);
+  const std::size_t header = version == 2 ? 540 : 348;
+  nim->iname_offset = pair ? 0 : static_cast<int64_t>(header + 4);
+  Bytes out(header);
+  if (version == 2) {
+    nifti_2_header h{};
+    nifti_convert_nim2n2hdr(nim, &h);
+    if (big) swap_nifti_header(&h, 2);
+    std::memcpy(out.data(), &h, header);
+  } else {
+    nifti_1_header h{};
+    nifti_convert_nim2n1hdr(nim, &h);
+    if (version == 0) {
+      std::memset(h.magic, 0, sizeof h.magic);
+      h.scl_slope = 2.0f;
+    }
+    if (big) swap_nifti_header(&h, version);
+    std::memcpy(out.data(), &h, header);
+  }
+  nifti_image_free(nim);
+  if (!pair) out.resize(header + 4, 0);
+  std::vector<int16_t> vox(v.voxel_count());
+  for (std::size_t i = 0; i < vox.size(); ++i) vox[i] = static_cast<int16_t>(v.data()[i]);
+  if (big) nifti_swap_Nbytes(static_cast<int64_t>(vox.size()), 2, vox.data());
+  const auto* p = reinterpret_cast<const unsigned char*>(vox.data());
+  out.insert(out.end(), p, p + vox.size() * 2);
   return out;
 }
 
@@ -254,7 +294,8 @@ int main(int argc, char** argv) {
            "data file: LIST\ndata.raw\n\n",
            Bytes(32, 9));
 
-  // NIfTI: byte 0 mod 3: 0 plain .nii, 1 compressed by the target, 2 .nii.gz as is.
+  // NIfTI: byte 0 mod 4: 0 plain .nii, 1 compressed by the target, 2 .nii.gz
+  // as is, 3 a .hdr/.img pair (16 added: loaded by its .img).
   const fs::path nifti = root / "nifti";
   const Bytes nii_u8 = nifti_via_niftilib(c8, DT_UINT8, 1.0f, tmpdir / "a.nii");
   const Bytes nii_i16 = nifti_via_niftilib(c16, DT_INT16, 1.0f, tmpdir / "b.nii");
@@ -267,6 +308,12 @@ int main(int argc, char** argv) {
   write_seed(nifti, "gz_i16", framed(1, nii_i16));
   write_seed(nifti, "niigz_raw", framed(2, niigz));
   write_seed(nifti, "real_start", framed(2, read_bytes(data / "ch2.nii.gz", 4096)));
+  write_seed(nifti, "nifti2", framed(0, nifti_by_hand(c16, 2, false, false)));
+  write_seed(nifti, "nifti2_be_gz", framed(1, nifti_by_hand(c16, 2, false, true)));
+  write_seed(nifti, "pair_nifti1", framed(3, nifti_by_hand(c16, 1, true, false)));
+  write_seed(nifti, "pair_nifti2_be", framed(3, nifti_by_hand(c16, 2, true, true)));
+  write_seed(nifti, "pair_analyze_be", framed(3, nifti_by_hand(c16, 0, true, true)));
+  write_seed(nifti, "pair_analyze_by_img", framed(3 + 16, nifti_by_hand(c16, 0, true, false)));
   fs::remove_all(tmpdir);
   std::cout << "make_seeds: corpora written under " << root.string() << "\n";
   return 0;
