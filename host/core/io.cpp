@@ -561,8 +561,11 @@ bool pair_name(const std::string& name) {
 fs::path nifti_header_path(const fs::path& path) {
   const std::string name = lower(path.filename().string());
   if (!name.ends_with(".img") && !name.ends_with(".img.gz")) return path;
+  // (niftilib may offer a single file of the same name, x.nii for x.img:
+  // not this image's header.)
   std::unique_ptr<char, decltype(&std::free)> hdr(nifti_findhdrname(path.c_str()), &std::free);
-  if (!hdr)
+  const std::string found = hdr ? lower(fs::path(hdr.get()).filename().string()) : std::string();
+  if (!hdr || !(found.ends_with(".hdr") || found.ends_with(".hdr.gz")))
     throw FileError(path, "the header of this .img (the .hdr beside it, or .hdr.gz) is missing");
   return fs::path(hdr.get());
 }
@@ -778,7 +781,8 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, const fs::path& header,
         nifti_findimgname(header.c_str(), info.kind == NiftiKind::nifti2 ? NIFTI_FTYPE_NIFTI2_2
                                                                          : nifti_type_code(info)),
         &std::free);
-    if (!img)
+    const std::string found = img ? lower(fs::path(img.get()).filename().string()) : std::string();
+    if (!img || !(found.ends_with(".img") || found.ends_with(".img.gz")))
       throw FileError(path, "the voxels' file of the pair (the .img beside " +
                                 header.filename().string() + ", or .img.gz) is missing");
     info.data = fs::path(img.get());

@@ -1291,6 +1291,12 @@ TEST_F(IoTest, NiftiTwoAndPairsMalformed) {
   write_file(file("lone.img"), img);
   expect_file_error([&] { simdvol::load_volume(file("lone.img")); }, file("lone.img"),
                     {"header of this .img"});
+  // Beside a single file of the same name, which niftilib would take for
+  // its header: still no header.
+  write_nifti_by_hand(file("lone.nii"), NiftiForm::nifti1, false, DT_UINT8, {5, 4, 3, 1},
+                      as<uint8_t>(u8));
+  expect_file_error([&] { simdvol::load_volume(file("lone.img")); }, file("lone.img"),
+                    {"header of this .img"});
   // A pair's header named .nii, a single file's named .hdr.
   write_nifti_by_hand(file("q.hdr"), NiftiForm::nifti2, false, DT_UINT8, {5, 4, 3, 1},
                       as<uint8_t>(u8));
