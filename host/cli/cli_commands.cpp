@@ -29,6 +29,39 @@ void check_output_path(const fs::path& p, const char* arg) {
     throw ArgumentError(arg, "directory " + dir.string() + " of " + p.string() + " does not exist");
 }
 
+namespace {
+
+/// "left, front, top" for "LAS".
+std::string anatomical_words(const std::string& code) {
+  std::string words;
+  for (char c : code) {
+    if (!words.empty()) words += ", ";
+    switch (c) {
+      case 'R':
+        words += "right";
+        break;
+      case 'L':
+        words += "left";
+        break;
+      case 'A':
+        words += "front";
+        break;
+      case 'P':
+        words += "back";
+        break;
+      case 'S':
+        words += "top";
+        break;
+      default:
+        words += "bottom";
+        break;
+    }
+  }
+  return words;
+}
+
+}  // namespace
+
 void print_info(std::ostream& os, const fs::path& path, const Volume& vol) {
   const auto& d = vol.dims();
   const auto& s = vol.spacing();
@@ -38,6 +71,11 @@ void print_info(std::ostream& os, const fs::path& path, const Volume& vol) {
      << " voxels)\n";
   os << "type:     " << to_string(vol.type()) << "\n";
   os << "spacing:  " << s[0] << " x " << s[1] << " x " << s[2] << "\n";
+  if (vol.orientation().empty())
+    os << "axes:     the file does not say where they point in the patient\n";
+  else
+    os << "axes:     " << vol.orientation() << " (x, y, z point to the patient's "
+       << anatomical_words(vol.orientation()) << ")\n";
   os << "range:    " << r.min << " .. " << r.max << "\n";
   std::size_t nonfinite = 0;
   double sum = 0;

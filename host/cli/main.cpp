@@ -40,6 +40,11 @@ const CLI::Validator kNotNegative(
     },
     "", "not negative");
 
+std::string upper(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  return s;
+}
+
 std::vector<std::string> split(const std::string& s, char sep) {
   std::vector<std::string> out;
   std::stringstream ss(s);
@@ -101,6 +106,7 @@ struct VolumeArgs {
   std::string raw_dims, raw_type = "u8", raw_endian = "little", raw_spacing;
   uint64_t raw_header = 0;
   int64_t volume_index = 0;
+  std::string orient;
   CLI::App* app = nullptr;
 
   void add(CLI::App* a) {
@@ -116,6 +122,11 @@ struct VolumeArgs {
     app->add_option("--volume-index", volume_index,
                     "4-D NIfTI and NRRD files (a time or diffusion series of 3-D volumes): "
                     "which volume, from 0");
+    app->add_option("--orient", orient,
+                    "turn the volume's axes to point this way in the patient, as its NIfTI or "
+                    "NRRD header says they lie: CODE is three letters, one each of R/L, A/P, "
+                    "S/I (RAS: x to the right, y to the front, z up); by default the voxels "
+                    "keep the file's order");
   }
 
   // A NIfTI or NRRD file: the formats that may hold several 3-D volumes.
@@ -138,6 +149,15 @@ struct VolumeArgs {
                                                 std::string(kSeriesFileNames) + ")" + which);
     if (volume_index < 0)
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
+    if (!series() && app && app->count("--orient") > 0)
+      throw ArgumentError("--orient",
+                          "applies only to NIfTI and NRRD volumes, whose headers say "
+                          "where their axes point (" +
+                              std::string(kSeriesFileNames) + ")" + which);
+    if (app && app->count("--orient") > 0 && !valid_orientation(upper(orient)))
+      throw ArgumentError("--orient", "'" + orient +
+                                          "' is not three letters, one each of R/L, A/P and "
+                                          "S/I (such as RAS or LPS)");
   }
 
   // `first_of_series`: a 4-D NIfTI or NRRD without --volume-index loads its
@@ -170,7 +190,16 @@ struct VolumeArgs {
       index = volume_index;
     else if (first_of_series && series())
       index = 0;
-    return load_volume(path, raw, index, volumes);
+    Volume vol = load_volume(path, raw, index, volumes);
+    if (app && app->count("--orient") > 0) {
+      if (vol.orientation().empty())
+        throw ArgumentError("--orient", path +
+                                            ": the file does not say where its axes point in the "
+                                            "patient (no NIfTI sform or qform, no NRRD anatomical "
+                                            "space and directions), so they cannot be turned");
+      vol = reorient(vol, upper(orient), "--orient");
+    }
+    return vol;
   }
 };
 

@@ -196,6 +196,75 @@ double nrrd_axis_spacing(const Nrrd* n, unsigned int ax) {
   return 1.0;
 }
 
+/// The orientation letters of the axes `axes` (x, y, z) of a nrrd in an
+/// anatomical space (RAS, LAS, LPS, or one of them with time): each axis
+/// takes the space axis its direction lies closest to (the permutation of
+/// the three with the largest sum of |cos|), with the sign of that
+/// component. Empty for another space or a direction that is missing, 0
+/// or not finite.
+std::string nrrd_orientation(const Nrrd* n, const std::array<unsigned int, 3>& axes) {
+  const char* world = nullptr;  // the letters of the space's +x, +y, +z
+  switch (n->space) {
+    case nrrdSpaceRightAnteriorSuperior:
+    case nrrdSpaceRightAnteriorSuperiorTime:
+      world = "RAS";
+      break;
+    case nrrdSpaceLeftAnteriorSuperior:
+    case nrrdSpaceLeftAnteriorSuperiorTime:
+      world = "LAS";
+      break;
+    case nrrdSpaceLeftPosteriorSuperior:
+    case nrrdSpaceLeftPosteriorSuperiorTime:
+      world = "LPS";
+      break;
+    default:
+      return {};
+  }
+  if (n->spaceDim < 3) return {};
+  double d[3][3];
+  for (int i = 0; i < 3; ++i) {
+    double s2 = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      d[i][c] = n->axis[axes[i]].spaceDirection[c];
+      if (!std::isfinite(d[i][c])) return {};
+      s2 += d[i][c] * d[i][c];
+    }
+    if (!(s2 > 0.0)) return {};
+    for (int c = 0; c < 3; ++c) d[i][c] /= std::sqrt(s2);
+  }
+  std::array<int, 3> p{0, 1, 2}, best = p;
+  double best_score = -1.0;
+  do {
+    const double score = std::fabs(d[0][p[0]]) + std::fabs(d[1][p[1]]) + std::fabs(d[2][p[2]]);
+    if (score > best_score) {
+      best_score = score;
+      best = p;
+    }
+  } while (std::next_permutation(p.begin(), p.end()));
+  auto opposite = [](char c) {
+    switch (c) {
+      case 'R':
+        return 'L';
+      case 'L':
+        return 'R';
+      case 'A':
+        return 'P';
+      case 'P':
+        return 'A';
+      case 'S':
+        return 'I';
+      default:
+        return 'S';
+    }
+  };
+  std::string letters;
+  for (int i = 0; i < 3; ++i) {
+    const char w = world[best[i]];
+    letters += d[i][best[i]] >= 0.0 ? w : opposite(w);
+  }
+  return letters;
+}
+
 /// Dims and spacing of a 3-D nrrd, or of the volume at `index` of a 4-D one.
 /// A 4-D nrrd's volume axis: its one axis of a kind that is not spatial (a
 /// list, a vector, ...: a diffusion series' gradients), else an axis of size
@@ -802,6 +871,49 @@ void nifti_copy(const void* data, std::size_t n, float* out, double slope, doubl
     for (std::size_t i = 0; i < n; ++i) out[i] = static_cast<float>(src[i]);
 }
 
+/// The orientation letters of a NIfTI image's axes: from its sform where
+/// sform_code > 0, else its qform where qform_code > 0 (niftilib's
+/// nifti_dmat44_to_orientation: the closest axes of an oblique matrix);
+/// empty for Analyze, for neither, or for a matrix niftilib cannot read.
+std::string nifti_orientation(const nifti_image* nim, const NiftiHeaderInfo& info) {
+  if (info.kind == NiftiKind::analyze) return {};
+  const nifti_dmat44* m = nim->sform_code > 0   ? &nim->sto_xyz
+                          : nim->qform_code > 0 ? &nim->qto_xyz
+                                                : nullptr;
+  if (!m) return {};
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      if (!std::isfinite(m->m[r][c])) return {};
+  int code[3] = {0, 0, 0};
+  nifti_dmat44_to_orientation(*m, &code[0], &code[1], &code[2]);
+  std::string letters;
+  for (int c : code) {
+    switch (c) {
+      case NIFTI_L2R:
+        letters += 'R';
+        break;
+      case NIFTI_R2L:
+        letters += 'L';
+        break;
+      case NIFTI_P2A:
+        letters += 'A';
+        break;
+      case NIFTI_A2P:
+        letters += 'P';
+        break;
+      case NIFTI_I2S:
+        letters += 'S';
+        break;
+      case NIFTI_S2I:
+        letters += 'I';
+        break;
+      default:
+        return {};
+    }
+  }
+  return valid_orientation(letters) ? letters : std::string();
+}
+
 // ---------------------------------------------------------------- writing
 
 template <typename T>
@@ -1061,6 +1173,7 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
     default:
       throw FileError(path, "unsupported NRRD type");
   }
+  vol.set_orientation(nrrd_orientation(nrrd.get(), s.axes));
   return vol;
 }
 
@@ -1198,6 +1311,7 @@ Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volu
     default:
       throw FileError(path, "unsupported NIfTI datatype " + std::to_string(nim->datatype));
   }
+  vol.set_orientation(nifti_orientation(nim.get(), info));
   return vol;
 }
 
@@ -1342,8 +1456,27 @@ void save_nrrd(const Volume& vol, const std::filesystem::path& path) {
   header += "dimension: 3\n";
   header += "sizes: " + std::to_string(vol.nx()) + " " + std::to_string(vol.ny()) + " " +
             std::to_string(vol.nz()) + "\n";
-  header += "spacings: " + format_double(vol.spacing()[0]) + " " + format_double(vol.spacing()[1]) +
-            " " + format_double(vol.spacing()[2]) + "\n";
+  if (vol.orientation().empty()) {
+    header += "spacings: " + format_double(vol.spacing()[0]) + " " +
+              format_double(vol.spacing()[1]) + " " + format_double(vol.spacing()[2]) + "\n";
+  } else {
+    // Where the axes point: each axis's direction in RAS space, its length
+    // the spacing (teem takes no spacings beside space directions).
+    header += "space: right-anterior-superior\nspace directions:";
+    for (int a = 0; a < 3; ++a) {
+      const char c = vol.orientation()[static_cast<std::size_t>(a)];
+      const int axis = c == 'R' || c == 'L' ? 0 : c == 'A' || c == 'P' ? 1 : 2;
+      const double len = (c == 'R' || c == 'A' || c == 'S') ? vol.spacing()[a] : -vol.spacing()[a];
+      std::string dir = " (";
+      for (int k = 0; k < 3; ++k) {
+        if (k > 0) dir += ',';
+        dir += format_double(k == axis ? len : 0.0);
+      }
+      header += dir;
+      header += ')';
+    }
+    header += "\n";
+  }
   if (bpv > 1)
     header += std::string("endian: ") +
               (std::endian::native == std::endian::little ? "little" : "big") + "\n";

@@ -86,6 +86,104 @@ float Volume::at_clamped(int64_t x, int64_t y, int64_t z) const {
   return at(x, y, z);
 }
 
+namespace {
+
+/// The axis (0 R/L, 1 A/P, 2 S/I) a letter names, and whether it is the
+/// first letter of its pair (R, A, S: the direction of increasing RAS
+/// coordinates); -1 for another letter.
+int anatomical_axis(char c, bool* positive) {
+  switch (c) {
+    case 'R':
+    case 'L':
+      *positive = c == 'R';
+      return 0;
+    case 'A':
+    case 'P':
+      *positive = c == 'A';
+      return 1;
+    case 'S':
+    case 'I':
+      *positive = c == 'S';
+      return 2;
+    default:
+      return -1;
+  }
+}
+
+}  // namespace
+
+bool valid_orientation(std::string_view code) {
+  if (code.size() != 3) return false;
+  bool seen[3] = {false, false, false};
+  for (char c : code) {
+    bool positive = false;
+    const int a = anatomical_axis(c, &positive);
+    if (a < 0 || seen[a]) return false;
+    seen[a] = true;
+  }
+  return true;
+}
+
+void Volume::set_orientation(std::string code) {
+  if (!code.empty() && !valid_orientation(code))
+    throw ArgumentError("orientation", "'" + code +
+                                           "' is not an orientation (three letters, one each of "
+                                           "R/L, A/P and S/I, such as RAS)");
+  orientation_ = std::move(code);
+}
+
+Volume reorient(const Volume& v, std::string_view to, const std::string& argument) {
+  if (!valid_orientation(to))
+    throw ArgumentError(argument, "'" + std::string(to) +
+                                      "' is not an orientation (three letters, one each of R/L, "
+                                      "A/P and S/I, such as RAS or LPS)");
+  const std::string& from = v.orientation();
+  if (from.empty())
+    throw ArgumentError(argument,
+                        "the volume's file does not say how its axes lie in the patient (no "
+                        "NIfTI qform or sform, no NRRD anatomical space), so it cannot be "
+                        "turned to " +
+                            std::string(to));
+  // Output axis t takes input axis src[t], reversed where the letters differ.
+  std::array<int, 3> src{};
+  std::array<bool, 3> reverse{};
+  for (int t = 0; t < 3; ++t) {
+    bool pt = false;
+    const int at = anatomical_axis(to[t], &pt);
+    for (int i = 0; i < 3; ++i) {
+      bool pi = false;
+      if (anatomical_axis(from[i], &pi) == at) {
+        src[t] = i;
+        reverse[t] = pi != pt;
+      }
+    }
+  }
+  std::array<int64_t, 3> dims{};
+  std::array<double, 3> spacing{};
+  for (int t = 0; t < 3; ++t) {
+    dims[t] = v.dims()[src[t]];
+    spacing[t] = v.spacing()[src[t]];
+  }
+  Volume out(dims, v.type(), spacing);
+  out.set_orientation(std::string(to));
+  // The input's index steps along each output axis (negative where reversed).
+  std::array<int64_t, 3> in_stride{1, v.nx(), v.nx() * v.ny()};
+  std::array<int64_t, 3> step{};
+  int64_t start = 0;
+  for (int t = 0; t < 3; ++t) {
+    step[t] = reverse[t] ? -in_stride[src[t]] : in_stride[src[t]];
+    if (reverse[t]) start += (dims[t] - 1) * in_stride[src[t]];
+  }
+  const float* in = v.data().data();
+  float* o = out.data().data();
+  for (int64_t z = 0; z < dims[2]; ++z)
+    for (int64_t y = 0; y < dims[1]; ++y) {
+      int64_t at = start + z * step[2] + y * step[1];
+      for (int64_t x = 0; x < dims[0]; ++x, at += step[0]) *o++ = in[at];
+    }
+  return out;
+}
+
 ValueRange Volume::range() const {
   // Sixteen running minima and maxima, each a select of finite values
   // only (|v| <= FLT_MAX is false for NaN and infinities), without a

@@ -1335,6 +1335,148 @@ TEST_F(IoTest, NiftiTwoAndPairsMalformed) {
   bad("voxfar.nii", [](Bytes& b) { poke<int64_t>(b, 168, 4000); }, {"truncated data"});
 }
 
+// ------------------------------------------------------------- orientation
+
+// reorient permutes and reverses the axes as the letters say, keeps the
+// type and moves the spacing with its axis, and turning back gives the
+// volume again, voxel for voxel. Codes that are not one each of R/L, A/P,
+// S/I, and a volume without an orientation, are ArgumentErrors.
+TEST(Volume, ReorientPermutesAndReverses) {
+  Volume v({3, 4, 5}, VoxelType::i16, {0.5, 2.0, 3.0});
+  for (int64_t z = 0; z < 5; ++z)
+    for (int64_t y = 0; y < 4; ++y)
+      for (int64_t x = 0; x < 3; ++x) v.at(x, y, z) = static_cast<float>(x + 10 * y + 100 * z);
+  v.set_orientation("LAS");
+  const Volume ras = simdvol::reorient(v, "RAS");
+  EXPECT_EQ(ras.orientation(), "RAS");
+  EXPECT_EQ(ras.dims(), (std::array<int64_t, 3>{3, 4, 5}));
+  EXPECT_EQ(ras.type(), VoxelType::i16);
+  for (int64_t z = 0; z < 5; ++z)
+    for (int64_t y = 0; y < 4; ++y)
+      for (int64_t x = 0; x < 3; ++x) ASSERT_EQ(ras.at(x, y, z), v.at(2 - x, y, z));
+  // x to the back, y down, z to the right: RAS takes z, then x reversed,
+  // then y reversed.
+  v.set_orientation("PIR");
+  const Volume r = simdvol::reorient(v, "RAS");
+  EXPECT_EQ(r.dims(), (std::array<int64_t, 3>{5, 3, 4}));
+  EXPECT_EQ(r.spacing(), (std::array<double, 3>{3.0, 0.5, 2.0}));
+  for (int64_t Z = 0; Z < 4; ++Z)
+    for (int64_t Y = 0; Y < 3; ++Y)
+      for (int64_t X = 0; X < 5; ++X) ASSERT_EQ(r.at(X, Y, Z), v.at(2 - Y, 3 - Z, X));
+  const Volume back = simdvol::reorient(r, "PIR");
+  EXPECT_EQ(back.dims(), v.dims());
+  EXPECT_EQ(back.spacing(), v.spacing());
+  EXPECT_EQ(back.data(), v.data());
+  EXPECT_EQ(simdvol::reorient(v, "PIR").data(), v.data());  // already so
+  for (const char* bad : {"RRS", "RA", "XYZ", "ras", "RASR", ""})
+    EXPECT_THROW(simdvol::reorient(v, bad), simdvol::ArgumentError) << bad;
+  EXPECT_THROW(v.set_orientation("RLS"), simdvol::ArgumentError);
+  v.set_orientation("");
+  EXPECT_THROW(simdvol::reorient(v, "RAS"), simdvol::ArgumentError);
+  EXPECT_TRUE(simdvol::valid_orientation("IPL"));
+  EXPECT_FALSE(simdvol::valid_orientation("IPI"));
+}
+
+/// Writes a 5 x 4 x 3 uint8 NIfTI-1 with niftilib's writer and the given
+/// sform (rows of sto_xyz; sform_code 0 where empty) and qform (quatern
+/// b, c, d and qfac; qform_code 0 where empty).
+void write_oriented_nifti(const fs::path& p,
+                          std::optional<std::array<std::array<double, 4>, 3>> sform,
+                          std::optional<std::array<double, 4>> qform) {
+  const int64_t dims[8] = {3, 5, 4, 3, 1, 1, 1, 1};
+  nifti_image* nim = nifti_make_new_nim(dims, DT_UINT8, 1);
+  ASSERT_NE(nim, nullptr);
+  nim->sform_code = sform ? NIFTI_XFORM_SCANNER_ANAT : 0;
+  if (sform)
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = (*sform)[r][c];
+  nim->qform_code = qform ? NIFTI_XFORM_SCANNER_ANAT : 0;
+  if (qform) {
+    nim->quatern_b = (*qform)[0];
+    nim->quatern_c = (*qform)[1];
+    nim->quatern_d = (*qform)[2];
+    nim->qfac = (*qform)[3];
+  }
+  ASSERT_EQ(nifti_set_filenames(nim, p.c_str(), 0, 1), 0);
+  nifti_image_write(nim);
+  nifti_image_free(nim);
+}
+
+// A NIfTI's orientation comes from its sform where sform_code > 0, else
+// its qform (a rotation by quaternion, qfac -1 reversing k), else none;
+// an oblique sform gives its closest axes; Analyze has none.
+TEST_F(IoTest, NiftiOrientationFromSformOrQform) {
+  using Rows = std::array<std::array<double, 4>, 3>;
+  write_oriented_nifti(file("las.nii"), Rows{{{-2, 0, 0, 0}, {0, 2, 0, 0}, {0, 0, 2, 0}}},
+                       std::nullopt);
+  EXPECT_EQ(simdvol::load_nifti(file("las.nii")).orientation(), "LAS");
+  // The sform wins over the qform (identity: RAS).
+  write_oriented_nifti(file("both.nii.gz"), Rows{{{0, 0, 1, 0}, {-1, 0, 0, 0}, {0, -1, 0, 0}}},
+                       std::array<double, 4>{0, 0, 0, 1});
+  EXPECT_EQ(simdvol::load_nifti(file("both.nii.gz")).orientation(), "PIR");
+  write_oriented_nifti(file("q.nii"), std::nullopt, std::array<double, 4>{0, 0, 0, -1});
+  EXPECT_EQ(simdvol::load_nifti(file("q.nii")).orientation(), "RAI");
+  // 180 degrees about z (quaternion (0, 0, 1)): x to the left, y to the back.
+  write_oriented_nifti(file("q180.nii"), std::nullopt, std::array<double, 4>{0, 0, 1, 1});
+  EXPECT_EQ(simdvol::load_nifti(file("q180.nii")).orientation(), "LPS");
+  // 20 degrees oblique about z: the closest axes.
+  const double c = std::cos(20 * M_PI / 180), s = std::sin(20 * M_PI / 180);
+  write_oriented_nifti(file("oblique.nii"), Rows{{{c, -s, 0, 0}, {s, c, 0, 0}, {0, 0, -1, 0}}},
+                       std::nullopt);
+  EXPECT_EQ(simdvol::load_nifti(file("oblique.nii")).orientation(), "RAI");
+  write_oriented_nifti(file("none.nii"), std::nullopt, std::nullopt);
+  EXPECT_EQ(simdvol::load_nifti(file("none.nii")).orientation(), "");
+  write_nifti_by_hand(file("an.hdr"), NiftiForm::analyze, false, DT_UINT8, {5, 4, 3, 1},
+                      std::vector<uint8_t>(kN, 1));
+  EXPECT_EQ(simdvol::load_nifti(file("an.hdr")).orientation(), "");
+}
+
+// A NRRD's orientation comes from an anatomical space and the spatial
+// axes' space directions (the closest axes of oblique ones; a 4-D file's
+// list axis skipped); another space, or none, gives none. save_nrrd writes
+// an oriented volume's axes as RAS space directions, so they load back
+// with the spacing.
+TEST_F(IoTest, NrrdOrientationFromSpaceDirections) {
+  auto nrrd = [&](const std::string& name, const std::string& lines, int dim = 3) {
+    std::string h = "NRRD0004\ntype: uint8\ndimension: " + std::to_string(dim) + "\n";
+    h += dim == 3 ? "sizes: 5 4 3\n" : "sizes: 2 5 4 3\n";
+    h += lines + "encoding: raw\n\n";
+    write_file(file(name), h + std::string(static_cast<std::size_t>(dim == 3 ? 1 : 2) * kN, '\1'));
+    return simdvol::load_nrrd(file(name), dim == 3 ? std::nullopt : std::optional<int64_t>(1));
+  };
+  EXPECT_EQ(nrrd("lps.nrrd",
+                 "space: left-posterior-superior\n"
+                 "space directions: (-1,0,0) (0,1,0) (0,0,2)\n")
+                .orientation(),
+            "RPS");
+  EXPECT_EQ(
+      nrrd("perm.nrrd", "space: RAS\nspace directions: (0,0,1) (1,0,0) (0,-1,0)\n").orientation(),
+      "SRP");
+  const Volume ob =
+      nrrd("oblique.nrrd", "space: LPS\nspace directions: (0.94,0.34,0) (-0.34,0.94,0) (0,0,3)\n");
+  EXPECT_EQ(ob.orientation(), "LPS");
+  EXPECT_DOUBLE_EQ(ob.spacing()[2], 3.0);
+  EXPECT_EQ(nrrd("list.nrrd",
+                 "kinds: list domain domain domain\nspace: LAS\n"
+                 "space directions: none (1,0,0) (0,-1,0) (0,0,1)\n",
+                 4)
+                .orientation(),
+            "LPS");
+  EXPECT_EQ(nrrd("scanner.nrrd", "space: scanner-xyz\nspace directions: (1,0,0) (0,1,0) (0,0,1)\n")
+                .orientation(),
+            "");
+  EXPECT_EQ(nrrd("plain.nrrd", "spacings: 1 2 3\n").orientation(), "");
+  // save_nrrd and back: the orientation and the spacing.
+  Volume v({5, 4, 3}, VoxelType::u8, {0.5, 2.0, 3.0});
+  for (std::size_t i = 0; i < kN; ++i) v.data()[i] = static_cast<float>(i);
+  v.set_orientation("PIR");
+  simdvol::save_nrrd(v, file("saved.nrrd"));
+  const Volume w = simdvol::load_nrrd(file("saved.nrrd"));
+  EXPECT_EQ(w.orientation(), "PIR");
+  EXPECT_EQ(w.spacing(), v.spacing());
+  EXPECT_EQ(w.data(), v.data());
+}
+
 // A 4-D NRRD: the volume at an index along its volume axis, which is its
 // one axis of a non-spatial kind (a diffusion series' list, first and
 // fastest as Slicer writes it, or last; a vector), else the last axis (no

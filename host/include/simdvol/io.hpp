@@ -56,7 +56,10 @@ Volume load_nrrd(const std::filesystem::path& path,
 /// bytes are read); without an index such a file is a FileError that says
 /// how many it holds. An index outside the file's volumes is a FileError.
 /// `volumes`, if given, receives how many 3-D volumes the file holds (1 for
-/// a 3-D file; so for load_nrrd and load_volume).
+/// a 3-D file; so for load_nrrd and load_volume). The volume's orientation
+/// is its sform's where sform_code > 0, else its qform's where qform_code
+/// > 0, else none (and none for Analyze); load_nrrd gives that of an
+/// anatomical space (RAS, LAS, LPS) and its space directions.
 Volume load_nifti(const std::filesystem::path& path,
                   std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
@@ -86,7 +89,9 @@ void write_file_atomically(const std::filesystem::path& path,
                            std::initializer_list<std::string_view> parts);
 
 /// Writes an attached-header NRRD (raw encoding) in the volume's own type,
-/// atomically: a temporary file beside `path`, then rename.
+/// atomically: a temporary file beside `path`, then rename. A volume with
+/// an orientation is written in RAS space, its axes' directions scaled by
+/// the spacing (so load_nrrd gives both back); others with "spacings".
 void save_nrrd(const Volume& vol, const std::filesystem::path& path);
 
 }  // namespace simdvol

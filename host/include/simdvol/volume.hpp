@@ -56,12 +56,34 @@ class Volume {
   /// Smallest and largest finite value (computed on demand).
   ValueRange range() const;
 
+  /// Where each index axis (x, y, z) points in the patient, as the file's
+  /// header says: three letters, one of R/L, one of A/P, one of S/I ("LAS":
+  /// x runs to the patient's left, y to the front, z up), the closest axes
+  /// of an oblique scan; empty where the file says nothing (a raw or .den
+  /// file, Analyze, NIfTI without a qform or sform, NRRD without an
+  /// anatomical space). The voxels keep the file's order: see reorient.
+  const std::string& orientation() const { return orientation_; }
+  /// Throws ArgumentError unless `code` is empty or valid_orientation.
+  void set_orientation(std::string code);
+
  private:
   std::array<int64_t, 3> dims_{0, 0, 0};
   std::array<double, 3> spacing_{1.0, 1.0, 1.0};
   VoxelType type_ = VoxelType::f32;
   std::vector<float> data_;
+  std::string orientation_;
 };
+
+/// Whether `code` names each of the axes R/L, A/P, S/I once, in upper case
+/// ("RAS", "LPS", "PIR", ...).
+bool valid_orientation(std::string_view code);
+
+/// `v` with its axes permuted and reversed so that its orientation is `to`
+/// (a valid_orientation code, such as "RAS"): voxels, spacing and
+/// orientation follow, the type is kept, and no value is resampled. Throws
+/// ArgumentError (naming `argument`) if `to` is not a code or `v` has no
+/// orientation.
+Volume reorient(const Volume& v, std::string_view to, const std::string& argument = "orientation");
 
 /// Multiplies the three dims, throwing ArgumentError (naming `what`) if any is
 /// non-positive or the product (times `bytes_per_voxel`) overflows size_t.
