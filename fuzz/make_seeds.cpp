@@ -211,7 +211,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path data(argv[1]), root(argv[2]);
-  for (const char* t : {"raw", "den", "nrrd", "nifti"}) fs::create_directories(root / t);
+  for (const char* t : {"raw", "den", "nrrd", "nifti", "dicom"}) fs::create_directories(root / t);
   const fs::path tmpdir = root / "tmp";
   fs::create_directories(tmpdir);
   nifti_set_debug_level(0);
@@ -314,6 +314,13 @@ int main(int argc, char** argv) {
   write_seed(nifti, "pair_nifti2_be", framed(3, nifti_by_hand(c16, 2, true, true)));
   write_seed(nifti, "pair_analyze_be", framed(3, nifti_by_hand(c16, 0, true, true)));
   write_seed(nifti, "pair_analyze_by_img", framed(3 + 16, nifti_by_hand(c16, 0, true, false)));
+  // DICOM: the real files scripts/fetch-data brings (pydicom's: MR in five
+  // transfer syntaxes, an RT dose grid, a CT slice), whole.
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(data / "dicom", ec), end; !ec && it != end;
+       it.increment(ec))
+    if (it->is_regular_file())
+      write_seed(root / "dicom", it->path().filename().string(), read_bytes(it->path()));
   fs::remove_all(tmpdir);
   std::cout << "make_seeds: corpora written under " << root.string() << "\n";
   return 0;

@@ -149,11 +149,14 @@ struct VolumeArgs {
                                                 std::string(kSeriesFileNames) + ")" + which);
     if (volume_index < 0)
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
-    if (!series() && app && app->count("--orient") > 0)
+    const VolumeFileKind kind = volume_file_kind(path);
+    if (app && app->count("--orient") > 0 &&
+        (path.empty() || (kind != VolumeFileKind::nifti && kind != VolumeFileKind::nrrd &&
+                          kind != VolumeFileKind::dicom)))
       throw ArgumentError("--orient",
-                          "applies only to NIfTI and NRRD volumes, whose headers say "
+                          "applies only to NIfTI, NRRD and DICOM volumes, whose headers say "
                           "where their axes point (" +
-                              std::string(kSeriesFileNames) + ")" + which);
+                              std::string(kSeriesFileNames) + ", DICOM)" + which);
     if (app && app->count("--orient") > 0 && !valid_orientation(upper(orient)))
       throw ArgumentError("--orient", "'" + orient +
                                           "' is not three letters, one each of R/L, A/P and "
@@ -196,7 +199,8 @@ struct VolumeArgs {
         throw ArgumentError("--orient", path +
                                             ": the file does not say where its axes point in the "
                                             "patient (no NIfTI sform or qform, no NRRD anatomical "
-                                            "space and directions), so they cannot be turned");
+                                            "space and directions, a multi-frame DICOM "
+                                            "file), so they cannot be turned");
       vol = reorient(vol, upper(orient), "--orient");
     }
     return vol;

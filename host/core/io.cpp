@@ -197,11 +197,9 @@ double nrrd_axis_spacing(const Nrrd* n, unsigned int ax) {
 }
 
 /// The orientation letters of the axes `axes` (x, y, z) of a nrrd in an
-/// anatomical space (RAS, LAS, LPS, or one of them with time): each axis
-/// takes the space axis its direction lies closest to (the permutation of
-/// the three with the largest sum of |cos|), with the sign of that
-/// component. Empty for another space or a direction that is missing, 0
-/// or not finite.
+/// anatomical space (RAS, LAS, LPS, or one of them with time): the closest
+/// axes of their space directions. Empty for another space or a direction
+/// that is missing, 0 or not finite.
 std::string nrrd_orientation(const Nrrd* n, const std::array<unsigned int, 3>& axes) {
   const char* world = nullptr;  // the letters of the space's +x, +y, +z
   switch (n->space) {
@@ -221,48 +219,10 @@ std::string nrrd_orientation(const Nrrd* n, const std::array<unsigned int, 3>& a
       return {};
   }
   if (n->spaceDim < 3) return {};
-  double d[3][3];
-  for (int i = 0; i < 3; ++i) {
-    double s2 = 0.0;
-    for (int c = 0; c < 3; ++c) {
-      d[i][c] = n->axis[axes[i]].spaceDirection[c];
-      if (!std::isfinite(d[i][c])) return {};
-      s2 += d[i][c] * d[i][c];
-    }
-    if (!(s2 > 0.0)) return {};
-    for (int c = 0; c < 3; ++c) d[i][c] /= std::sqrt(s2);
-  }
-  std::array<int, 3> p{0, 1, 2}, best = p;
-  double best_score = -1.0;
-  do {
-    const double score = std::fabs(d[0][p[0]]) + std::fabs(d[1][p[1]]) + std::fabs(d[2][p[2]]);
-    if (score > best_score) {
-      best_score = score;
-      best = p;
-    }
-  } while (std::next_permutation(p.begin(), p.end()));
-  auto opposite = [](char c) {
-    switch (c) {
-      case 'R':
-        return 'L';
-      case 'L':
-        return 'R';
-      case 'A':
-        return 'P';
-      case 'P':
-        return 'A';
-      case 'S':
-        return 'I';
-      default:
-        return 'S';
-    }
-  };
-  std::string letters;
-  for (int i = 0; i < 3; ++i) {
-    const char w = world[best[i]];
-    letters += d[i][best[i]] >= 0.0 ? w : opposite(w);
-  }
-  return letters;
+  std::array<std::array<double, 3>, 3> d{};
+  for (int i = 0; i < 3; ++i)
+    for (int c = 0; c < 3; ++c) d[i][c] = n->axis[axes[i]].spaceDirection[c];
+  return closest_orientation(d, world);
 }
 
 /// Dims and spacing of a 3-D nrrd, or of the volume at `index` of a 4-D one.
@@ -1325,19 +1285,29 @@ VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
   if (ends_with(".nrrd") || ends_with(".nhdr")) return VolumeFileKind::nrrd;
   if (ends_with(".den")) return VolumeFileKind::den;
   if (ends_with(".raw")) return VolumeFileKind::raw;
+  if (ends_with(".dcm") || ends_with(".dicom") || ends_with(".ima")) return VolumeFileKind::dicom;
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) return VolumeFileKind::dicom;
+  if (fs::is_regular_file(path, ec)) {
+    std::ifstream in(path, std::ios::binary);
+    char b[132] = {};
+    if (in.read(b, sizeof b) && std::memcmp(b + 128, "DICM", 4) == 0) return VolumeFileKind::dicom;
+  }
   return VolumeFileKind::unknown;
 }
 
 Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
                    std::optional<int64_t> volume_index, int64_t* volumes) {
   if (volumes) *volumes = 1;
-  refuse_directory(path);  // before the extension (a directory has none to speak of)
   const VolumeFileKind kind = volume_file_kind(path);
+  // A directory is a DICOM series, unless its name says another format.
+  if (kind != VolumeFileKind::dicom) refuse_directory(path);
   if (kind == VolumeFileKind::nifti) return load_nifti(path, volume_index, volumes);
   if (kind == VolumeFileKind::nrrd) return load_nrrd(path, volume_index, volumes);
   if (volume_index)
     throw FileError(path, std::string("a volume index applies only to NIfTI and NRRD files (") +
                               std::string(kSeriesFileNames) + ")");
+  if (kind == VolumeFileKind::dicom) return load_dicom(path);
   if (kind == VolumeFileKind::den) return load_den(path);
   if (kind == VolumeFileKind::raw) {
     if (!raw)

@@ -124,6 +124,40 @@ bool valid_orientation(std::string_view code) {
   return true;
 }
 
+std::string closest_orientation(const std::array<std::array<double, 3>, 3>& dirs,
+                                std::string_view world) {
+  if (!valid_orientation(world)) return {};
+  double d[3][3];
+  for (int i = 0; i < 3; ++i) {
+    double s2 = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      d[i][c] = dirs[i][c];
+      if (!std::isfinite(d[i][c])) return {};
+      s2 += d[i][c] * d[i][c];
+    }
+    if (!(s2 > 0.0) || !std::isfinite(s2)) return {};
+    for (int c = 0; c < 3; ++c) d[i][c] /= std::sqrt(s2);
+  }
+  std::array<int, 3> p{0, 1, 2}, best = p;
+  double best_score = -1.0;
+  do {
+    const double score = std::fabs(d[0][p[0]]) + std::fabs(d[1][p[1]]) + std::fabs(d[2][p[2]]);
+    if (score > best_score) {
+      best_score = score;
+      best = p;
+    }
+  } while (std::next_permutation(p.begin(), p.end()));
+  static constexpr std::string_view kPairs = "RLAPSI";
+  std::string letters;
+  for (int i = 0; i < 3; ++i) {
+    const char w = world[static_cast<std::size_t>(best[i])];
+    const std::size_t at = kPairs.find(w);
+    const char opposite = kPairs[at ^ 1];
+    letters += d[i][best[i]] >= 0.0 ? w : opposite;
+  }
+  return letters;
+}
+
 void Volume::set_orientation(std::string code) {
   if (!code.empty() && !valid_orientation(code))
     throw ArgumentError("orientation", "'" + code +

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "dicom_testing.hpp"
 #include "simdvol/image.hpp"
 #include "simdvol/io.hpp"
 #include "simdvol/phantom.hpp"
@@ -28,6 +29,8 @@
 namespace fs = std::filesystem;
 
 namespace {
+
+using simdvol::testing::write_dicom_slice;
 
 struct Result {
   int code = -1;
@@ -285,12 +288,59 @@ TEST_F(Cli, OrientTurnsTheAxesAsTheHeaderSays) {
            {"render " + path("flipped.nrrd") + " --orient RAS -o " + path("x.png"),
             "the file does not say where its axes point"},
            {"render --orient RAS -o " + path("x.png"),
-            "--orient: applies only to NIfTI and NRRD volumes"}}) {
+            "--orient: applies only to NIfTI, NRRD and DICOM volumes"}}) {
     const Result r = run(args);
     EXPECT_EQ(r.code, 1) << args << "\n" << r.output;  // simdvol's errors
     EXPECT_NE(r.output.find(needle), std::string::npos) << args << "\n" << r.output;
     EXPECT_FALSE(fs::exists(path("x.png")));
   }
+}
+
+// A DICOM CT series renders as the same Hounsfield values saved as a NRRD:
+// its slices (files named against their order) sorted by position,
+// Rescale Intercept applied, `auto` taking them for CT; from the directory
+// and from one slice, bit for bit. `info` describes the series.
+TEST_F(Cli, RendersADicomSeries) {
+  const simdvol::Volume ph = simdvol::shepp_logan(24, 2);
+  const fs::path dir = dir_ / "series";
+  fs::create_directories(dir);
+  simdvol::Volume hu(ph.dims(), simdvol::VoxelType::f32, {0.5, 0.7, 1.25});
+  for (int64_t z = 0; z < 24; ++z) {
+    std::vector<int16_t> px(24 * 24);
+    for (int64_t y = 0; y < 24; ++y)
+      for (int64_t x = 0; x < 24; ++x) {
+        px[static_cast<std::size_t>(y * 24 + x)] =
+            static_cast<int16_t>(std::lround(ph.at(x, y, z)) + 1024);  // (HU -1000 .. 520)
+        hu.at(x, y, z) = static_cast<float>(px[static_cast<std::size_t>(y * 24 + x)]) - 1024.0f;
+      }
+    simdvol::testing::DicomSlice s;
+    s.position = {-20, 30, 7.5 + 1.25 * static_cast<double>(z)};
+    s.intercept = -1024;
+    write_dicom_slice(dir / ("IM" + std::to_string(1000 - z)), 24, 24, px, s);
+  }
+  simdvol::save_nrrd(hu, path("hu.nrrd"));
+  const std::string common = " --size 32x32 --view 20,35,10 -o ";
+  ASSERT_EQ(run("render " + dir.string() + common + path("a.tif")).code, 0);
+  ASSERT_EQ(run("render " + (dir / "IM990").string() + common + path("b.tif")).code, 0);
+  ASSERT_EQ(run("render " + path("hu.nrrd") + common + path("c.tif")).code, 0);
+  const simdvol::Image a = simdvol::read_image(path("a.tif")),
+                       b = simdvol::read_image(path("b.tif")),
+                       c = simdvol::read_image(path("c.tif"));
+  ASSERT_EQ(a.pixels().size(), c.pixels().size());
+  double lit = 0;
+  for (std::size_t i = 0; i < a.pixels().size(); ++i) {
+    ASSERT_EQ(a.pixels()[i].r, c.pixels()[i].r) << i;
+    ASSERT_EQ(a.pixels()[i].a, c.pixels()[i].a) << i;
+    ASSERT_EQ(b.pixels()[i].r, c.pixels()[i].r) << i;
+    lit += a.pixels()[i].a;
+  }
+  EXPECT_GT(lit, 1.0);
+  const Result info = run("info " + dir.string());
+  ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("dims:     24 x 24 x 24"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("spacing:  0.5 x 0.7 x 1.25"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("axes:     LPS"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("range:    -1000 .. "), std::string::npos) << info.output;
 }
 
 // A turntable writes each frame while the next renders: a frame that cannot
@@ -681,7 +731,7 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render " + path("missing.nrrd") + " -o " + path("x.png"), "missing.nrrd"},
       {"render " + path("vol.xyz") + " -o " + path("x.png"), "vol.xyz"},
       {"info " + path("missing.den"), "missing.den"},
-      {"info " + path("adir"), "adir: is a directory"},
+      {"info " + path("adir"), "adir: holds no DICOM image"},  // (a directory is a DICOM series)
       {"render --classify " + path("adir") + " -o " + path("x.png"), "adir: is a directory"},
       {"compare " + path("adir") + " " + path("adir"), "adir: is a directory"},
       {"render " + path("adir.nrrd") + " -o " + path("x.png"), "adir.nrrd: is a directory"},

@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "dicom_testing.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
 #include "simdvol/volume.hpp"
@@ -41,6 +42,9 @@ using simdvol::Volume;
 using simdvol::VoxelType;
 
 namespace {
+
+using simdvol::testing::DicomSlice;
+using simdvol::testing::write_dicom_slice;
 
 using Bytes = std::vector<unsigned char>;
 
@@ -1475,6 +1479,182 @@ TEST_F(IoTest, NrrdOrientationFromSpaceDirections) {
   EXPECT_EQ(w.orientation(), "PIR");
   EXPECT_EQ(w.spacing(), v.spacing());
   EXPECT_EQ(w.data(), v.data());
+}
+
+// ------------------------------------------------------------------ DICOM
+
+// A DICOM series loads from its directory or from any one slice: the
+// slices sorted by their position along the normal (the files' names in
+// another order), Pixel Spacing as x then y, the slices' gap as z, Rescale
+// Slope and Intercept applied per slice (so CT values come out in
+// Hounsfield units), the orientation from Image Orientation (Patient) and
+// the slice order in LPS. Without a scale the type follows the pixels.
+TEST_F(IoTest, DicomSeriesSortedScaledAndOriented) {
+  constexpr int nx = 5, ny = 4, nz = 4;
+  const fs::path dir = file("ct");
+  fs::create_directories(dir);
+  // Slice k (position z = 10 + 2.5 k) holds 100 i + k; file names in
+  // reverse order of position; slice 2 with its own slope.
+  const char* names[nz] = {"IM4", "IM3", "b", "a"};
+  std::vector<float> want;
+  for (int k = 0; k < nz; ++k) {
+    std::vector<int16_t> px(nx * ny);
+    DicomSlice s;
+    s.position = {-30, -40, 10 + 2.5 * k};
+    s.slope = k == 2 ? 3.0 : 2.0;
+    s.intercept = -1024;
+    for (int i = 0; i < nx * ny; ++i) {
+      px[i] = static_cast<int16_t>(100 * i + k);
+      want.push_back(static_cast<float>(px[i] * s.slope + s.intercept));
+    }
+    write_dicom_slice(dir / names[k], nx, ny, px, s);
+  }
+  std::ofstream(dir / "notes.txt") << "not DICOM";  // skipped
+  for (const fs::path& p : {dir, dir / "b"}) {
+    SCOPED_TRACE(p.string());
+    const Volume v = simdvol::load_volume(p);
+    EXPECT_EQ(v.dims(), (std::array<int64_t, 3>{nx, ny, nz}));
+    EXPECT_EQ(v.type(), VoxelType::f32);
+    EXPECT_EQ(v.spacing()[0], 0.5);
+    EXPECT_EQ(v.spacing()[1], 0.7);
+    EXPECT_DOUBLE_EQ(v.spacing()[2], 2.5);
+    EXPECT_EQ(v.data(), want);
+    EXPECT_EQ(v.orientation(), "LPS");
+  }
+  EXPECT_EQ(simdvol::volume_file_kind(dir), simdvol::VolumeFileKind::dicom);
+  EXPECT_EQ(simdvol::volume_file_kind(dir / "IM4"), simdvol::VolumeFileKind::dicom);  // DICM
+
+  // Rows running to the patient's right (-x in LPS), columns to the back:
+  // the normal points down, so the slices run from the highest z.
+  const fs::path flip = file("flip");
+  fs::create_directories(flip);
+  std::vector<float> fwant;
+  for (int k = 0; k < 3; ++k) {
+    std::vector<uint8_t> px(nx * ny);
+    for (int i = 0; i < nx * ny; ++i) px[i] = static_cast<uint8_t>(10 * i + k);
+    DicomSlice s;
+    s.cosines = {-1, 0, 0, 0, 1, 0};
+    s.position = {0, 0, 5.0 - 1.25 * k};  // k = 0 highest: first along the normal
+    write_dicom_slice(flip / ("s" + std::to_string(k) + ".dcm"), nx, ny, px, s);
+    for (uint8_t x : px) fwant.push_back(x);
+  }
+  const Volume f = simdvol::load_dicom(flip);
+  EXPECT_EQ(f.type(), VoxelType::u8);
+  EXPECT_EQ(f.orientation(), "RPI");
+  EXPECT_DOUBLE_EQ(f.spacing()[2], 1.25);
+  EXPECT_EQ(f.data(), fwant);
+}
+
+// A directory of two series (listed, each with a file to give), slices at
+// one position, a slice missing, slices of two sizes or planes, colour, a
+// file that is not DICOM, an empty directory: each a FileError naming the
+// path and the problem.
+TEST_F(IoTest, DicomSeriesMalformed) {
+  constexpr int nx = 4, ny = 3;
+  auto series = [&](const std::string& name, const std::vector<double>& z,
+                    const std::function<void(int, DicomSlice&, int&)>& edit = {}) {
+    const fs::path d = file(name);
+    fs::create_directories(d);
+    for (std::size_t k = 0; k < z.size(); ++k) {
+      DicomSlice s;
+      s.position = {0, 0, z[k]};
+      int w = nx;
+      if (edit) edit(static_cast<int>(k), s, w);
+      std::string name = "i";
+      name += std::to_string(k);
+      write_dicom_slice(d / name, w, ny, std::vector<int16_t>(w * ny, 7), s);
+    }
+    return d;
+  };
+  const fs::path two = series("two", {0, 1, 2, 3}, [](int k, DicomSlice& s, int&) {
+    if (k >= 2) s.series = "1.2.826.0.1.3680043.10.1.2";
+  });
+  expect_file_error([&] { simdvol::load_volume(two); }, two,
+                    {"holds 2 DICOM series; give one file of the series to load"});
+  // Given one file, its own series only.
+  EXPECT_EQ(simdvol::load_volume(two / "i3").dims(), (std::array<int64_t, 3>{nx, ny, 2}));
+  const fs::path dup = series("dup", {0, 1, 1, 2});
+  expect_file_error([&] { simdvol::load_volume(dup); }, dup, {"two slices lie at the same"});
+  const fs::path gap = series("gap", {0, 1, 2, 4, 5});
+  expect_file_error([&] { simdvol::load_volume(gap); }, gap, {"not evenly spaced"});
+  const fs::path wide = series("wide", {0, 1, 2}, [](int k, DicomSlice&, int& w) {
+    if (k == 1) w = 5;
+  });
+  expect_file_error([&] { simdvol::load_volume(wide); }, wide, {"differ in size"});
+  const fs::path tilted = series("tilted", {0, 1, 2}, [](int k, DicomSlice& s, int&) {
+    if (k == 2) s.cosines = {0, 1, 0, 0, 0, 1};
+  });
+  expect_file_error([&] { simdvol::load_volume(tilted); }, tilted, {"different planes"});
+  const fs::path rgb = file("rgb");
+  fs::create_directories(rgb);
+  DicomSlice c;
+  c.samples = 3;
+  write_dicom_slice(rgb / "c.dcm", nx, ny, std::vector<uint8_t>(3 * nx * ny, 9), c);
+  expect_file_error([&] { simdvol::load_volume(rgb / "c.dcm"); }, rgb / "c.dcm",
+                    {"samples per pixel"});
+  write_file(file("junk.dcm"), Bytes(400, 0x41));
+  expect_file_error([&] { simdvol::load_volume(file("junk.dcm")); }, file("junk.dcm"),
+                    {"not a DICOM"});
+  // Cut inside the pixels.
+  const Bytes whole = read_file(dup / "i0");
+  write_file(file("cut.dcm"), Bytes(whole.begin(), whole.end() - 9));
+  expect_file_error([&] { simdvol::load_volume(file("cut.dcm")); }, file("cut.dcm"),
+                    {"truncated: its pixel data end before"});
+  fs::create_directories(file("empty"));
+  expect_file_error([&] { simdvol::load_volume(file("empty")); }, file("empty"),
+                    {"holds no DICOM image"});
+  expect_file_error([&] { simdvol::load_volume(file("gone.dcm")); }, file("gone.dcm"),
+                    {"not found"});
+  EXPECT_THROW(simdvol::load_volume(dup, std::nullopt, 0), simdvol::FileError);  // no index
+}
+
+// Real DICOM files nobody here made (pydicom's test files, from Debian's
+// python3-pydicom by scripts/fetch-data), checked against the values
+// pydicom's own tests assert (tests/test_numpy_pixel_data.py): MR_small in
+// five transfer syntaxes (uncompressed little- and big-endian, RLE,
+// JPEG-LS lossless, JPEG 2000 lossless) gives the same pixels; rtdose, a
+// 15-frame RT dose grid, its dose in Gy (Dose Grid Scaling 1e-6).
+TEST(IoReal, DicomPydicomFiles) {
+  const fs::path d = simdvol::testing::data_dir() / "dicom";
+  for (const char* f :
+       {"mr/MR_small.dcm", "mr-be/MR_small_bigendian.dcm", "mr-rle/MR_small_RLE.dcm",
+        "mr-jls/MR_small_jpeg_ls_lossless.dcm", "mr-j2k/MR_small_jp2klossless.dcm"}) {
+    SCOPED_TRACE(f);
+    SIMDVOL_REQUIRE_FILE(d / f);
+    const Volume v = simdvol::load_volume(d / f);
+    ASSERT_EQ(v.dims(), (std::array<int64_t, 3>{64, 64, 1}));
+    EXPECT_EQ(v.type(), VoxelType::i16);
+    EXPECT_EQ(v.at(31, 0, 0), 422.0f);  // pydicom: arr[0, 31:34] == (422, 319, 361)
+    EXPECT_EQ(v.at(32, 0, 0), 319.0f);
+    EXPECT_EQ(v.at(33, 0, 0), 361.0f);
+    EXPECT_EQ(v.at(0, 31, 0), 366.0f);  // arr[31, :3] == (366, 363, 322)
+    EXPECT_EQ(v.at(1, 31, 0), 363.0f);
+    EXPECT_EQ(v.at(2, 31, 0), 322.0f);
+    EXPECT_EQ(v.at(61, 63, 0), 1369.0f);  // arr[-1, -3:] == (1369, 1129, 862)
+    EXPECT_EQ(v.at(62, 63, 0), 1129.0f);
+    EXPECT_EQ(v.at(63, 63, 0), 862.0f);
+  }
+  SIMDVOL_REQUIRE_FILE(d / "rtdose/rtdose.dcm");
+  const Volume r = simdvol::load_volume(d / "rtdose/rtdose.dcm");
+  ASSERT_EQ(r.dims(), (std::array<int64_t, 3>{10, 10, 15}));
+  EXPECT_EQ(r.type(), VoxelType::f32);
+  // pydicom: arr[0, 0, :3], arr[0, 4, 3:6], arr[0, -1, -3:], arr[7, 0, :3]
+  // (frame, row, column) == (1249000, 1249000, 1250000), (1031000,
+  // 1029000, 1027000), (803000, 801000, 798000), (1253000, 1253000, 1249000).
+  const std::array<std::array<int, 4>, 12> at{{{0, 0, 0, 1249000},
+                                               {1, 0, 0, 1249000},
+                                               {2, 0, 0, 1250000},
+                                               {3, 4, 0, 1031000},
+                                               {4, 4, 0, 1029000},
+                                               {5, 4, 0, 1027000},
+                                               {7, 9, 0, 803000},
+                                               {8, 9, 0, 801000},
+                                               {9, 9, 0, 798000},
+                                               {0, 0, 7, 1253000},
+                                               {1, 0, 7, 1253000},
+                                               {2, 0, 7, 1249000}}};
+  for (const auto& [x, y, z, raw] : at)
+    EXPECT_FLOAT_EQ(r.at(x, y, z), static_cast<float>(raw * 1e-6)) << x << "," << y << "," << z;
 }
 
 // A 4-D NRRD: the volume at an index along its volume axis, which is its

@@ -63,13 +63,30 @@ Volume load_nrrd(const std::filesystem::path& path,
 Volume load_nifti(const std::filesystem::path& path,
                   std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
+/// DICOM through GDCM: `path` names a directory holding one series' slices,
+/// one slice of a series (the series' other slices are found beside it by
+/// their Series Instance UID), or one multi-frame file. Slices are sorted by
+/// their position along the normal of their plane and must lie evenly
+/// spaced in one plane orientation, of one size and pixel format; grey
+/// scale only (any transfer syntax GDCM decodes: JPEG, JPEG 2000, JPEG-LS,
+/// RLE). Rescale Slope and Intercept are applied per slice (Hounsfield
+/// units for CT), the type following the pixels as for NIfTI (f32 where
+/// any slice is scaled). The spacing: Pixel Spacing, and the slices' mean
+/// gap (a multi-frame file's from GDCM). The orientation: Image
+/// Orientation (Patient) and the slice order, in DICOM's LPS space (none
+/// for a multi-frame file). A directory of several series is a FileError
+/// that lists them.
+Volume load_dicom(const std::filesystem::path& path);
+
 /// The kinds of volume file load_volume reads, told by the name's ending
-/// (whatever its case).
-enum class VolumeFileKind { unknown, den, nrrd, nifti, raw };
+/// (whatever its case), else by being a directory (DICOM) or by "DICM" at
+/// byte 128 (a DICOM file of any name).
+enum class VolumeFileKind { unknown, den, nrrd, nifti, raw, dicom };
 VolumeFileKind volume_file_kind(const std::filesystem::path& path);
 /// The endings volume_file_kind knows, for messages.
 inline constexpr std::string_view kVolumeFileNames =
-    ".den, .nrrd, .nhdr, .nii, .nii.gz, .hdr/.img (NIfTI or Analyze pairs, plain or .gz) or .raw";
+    ".den, .nrrd, .nhdr, .nii, .nii.gz, .hdr/.img (NIfTI or Analyze pairs, plain or .gz), "
+    "DICOM (.dcm, a file of any name, or a directory of one series) or .raw";
 /// The endings of the files that may hold several 3-D volumes (NIfTI, NRRD).
 inline constexpr std::string_view kSeriesFileNames = ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr";
 

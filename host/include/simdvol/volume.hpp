@@ -78,6 +78,15 @@ class Volume {
 /// ("RAS", "LPS", "PIR", ...).
 bool valid_orientation(std::string_view code);
 
+/// The orientation code of three index axes whose directions (x, y, z) are
+/// given in a world whose +x, +y, +z point to `world` ("RAS" for NIfTI,
+/// "LPS" for DICOM): each axis takes the world axis it lies closest to (the
+/// permutation of the three with the largest sum of |cos|), with the sign
+/// of that component. Empty if a direction is 0 or not finite, or `world`
+/// is not a valid_orientation.
+std::string closest_orientation(const std::array<std::array<double, 3>, 3>& dirs,
+                                std::string_view world);
+
 /// `v` with its axes permuted and reversed so that its orientation is `to`
 /// (a valid_orientation code, such as "RAS"): voxels, spacing and
 /// orientation follow, the type is kept, and no value is resampled. Throws
