@@ -82,7 +82,7 @@ constexpr const char* kUsage =
     "usage: simdvol-bench-shade [--size N | --volume FILE] [--pes P] [--runs R]\n"
     "                           [--classifier NAME] [--no-reference] [--sweep]\n"
     "  N: 8..1024 (the N^3 phantom); FILE: a volume (.den, .nrrd, .nhdr, .nii, .nii.gz, "
-    ".hdr/.img)\n"
+    ".hdr/.img, DICOM)\n"
     "  instead of the phantom; P: a power of two in 1..1048576; R: 1..1000;\n"
     "  NAME: a classifier preset or file (default ct)\n";
 

@@ -25,7 +25,7 @@
 // phantomN (the N^3 Shepp-Logan CT phantom, shepp_logan(N, 4), preset ct),
 // brainsmall (data/brainsmall.den, preset volpack: VolPack's example
 // classification), ch2 (data/ch2.nii.gz, preset mri), or a volume file of
-// the user's (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den: named by its file name in
+// the user's (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den, DICOM: named by its file name in
 // the cases, preset ct for Hounsfield data, mri otherwise, as `simdvol
 // render --classify auto`). Compositing: direct,
 // adaptive (threshold 0.95), mcN (Monte Carlo, N walks per whole ray) or
@@ -126,7 +126,8 @@ constexpr const char* kUsage =
     "                     [--no-volpack] [--volpack-runs R]\n"
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
     "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2, or a volume file\n"
-    "    (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den; classified as `simdvol render --classify "
+    "    (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den, a DICOM series; classified as `simdvol "
+    "render --classify "
     "auto`:\n"
     "    ct for Hounsfield data, mri otherwise)\n"
     "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNx (exact opacity), mcNs (exact\n"
@@ -220,7 +221,7 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data)
     return {p.filename().string(), "auto", p, 0, true};
   throw ArgumentError("--volumes", "'" + s +
                                        "' is not phantomN, brainsmall, ch2 or a volume file "
-                                       "(.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den)");
+                                       "(.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den, DICOM)");
 }
 
 Options parse_args(int argc, char** argv) {

@@ -8,11 +8,21 @@
 #include <gdcmTag.h>
 #include <gdcmTrace.h>
 
+#include <fcntl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
+#include <cctype>
+#include <cerrno>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -168,11 +178,199 @@ bool supported(const gdcm::PixelFormat& pf) {
   }
 }
 
+/// Walks a DICOM file's element headers (tag, VR, length) without reading
+/// their values, so that an element that claims more bytes than the file
+/// holds is found before GDCM allocates them: GDCM's reader sizes a value
+/// by its claimed length first (a 10 kB file claiming 2.7 GB cost 2.7 GB).
+/// Sequences and items are walked into; encapsulated pixel data's fragments
+/// are checked and skipped. A deflated data set is left to GDCM (its
+/// lengths are of inflated bytes). Returns false where the bytes do not
+/// parse as DICOM at all (so a directory's other files can be skipped).
+class DicomWalker {
+ public:
+  DicomWalker(const fs::path& path, const fs::path& file, uint64_t size)
+      : path_(path), file_(file), in_(file, std::ios::binary), size_(size) {}
+
+  bool check() {
+    if (!in_) throw FileError(path_, "cannot open " + file_.string());
+    unsigned char b[132];
+    uint64_t at = 0;
+    if (size_ >= 132 && read(0, b, 132) && std::memcmp(b + 128, "DICM", 4) == 0) {
+      at = 132;
+      marked_ = true;
+      // The file meta group (0002,xxxx): explicit VR, little-endian.
+      std::string syntax;
+      for (;;) {
+        unsigned char h[12];
+        if (at + 8 > size_ || !read(at, h, 8) || le16(h) != 0x0002) break;
+        const uint64_t len = explicit_length(h, at);
+        const uint64_t header = long_vr(h + 4) ? 12 : 8;
+        if (!fits(at, header, len, h)) return false;
+        if (le16(h + 2) == 0x0010 && len < 256) {  // Transfer Syntax UID
+          syntax.resize(len);
+          if (!read(at + header, syntax.data(), len)) return true;
+          while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' '))
+            syntax.pop_back();
+        }
+        at += header + len;
+      }
+      if (syntax == "1.2.840.10008.1.2.1.99") return true;  // deflated: GDCM's to check
+      explicit_ = syntax != "1.2.840.10008.1.2";
+      big_ = syntax == "1.2.840.10008.1.2.2";
+    } else {
+      // No preamble (old ACR-NEMA style): explicit VR if a VR's letters stand
+      // where they would, else implicit; little-endian.
+      if (size_ < 8 || !read(0, b, 8)) return false;
+      explicit_ = std::isupper(b[4]) && std::isupper(b[5]);
+    }
+    return walk(at, size_, false, 0) != kNotDicom;
+  }
+
+ private:
+  static constexpr uint64_t kNotDicom = ~uint64_t{0};
+  static constexpr uint32_t kUndefined = 0xffffffffu;
+
+  bool read(uint64_t at, void* buf, uint64_t n) {
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(at));
+    in_.read(static_cast<char*>(buf), static_cast<std::streamsize>(n));
+    return static_cast<uint64_t>(in_.gcount()) == n;
+  }
+  static uint16_t le16(const unsigned char* p) { return static_cast<uint16_t>(p[0] | p[1] << 8); }
+  uint16_t u16(const unsigned char* p) const {
+    return big_ ? static_cast<uint16_t>(p[0] << 8 | p[1]) : le16(p);
+  }
+  uint32_t u32(const unsigned char* p) const {
+    return big_ ? (uint32_t{p[0]} << 24 | uint32_t{p[1]} << 16 | uint32_t{p[2]} << 8 | p[3])
+                : (uint32_t{p[3]} << 24 | uint32_t{p[2]} << 16 | uint32_t{p[1]} << 8 | p[0]);
+  }
+  static bool long_vr(const unsigned char* vr) {
+    static constexpr const char* kLong[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
+                                            "SV", "UC", "UN", "UR", "UT", "UV"};
+    for (const char* v : kLong)
+      if (vr[0] == v[0] && vr[1] == v[1]) return true;
+    return false;
+  }
+  /// An explicit-VR element's length (its header read from `at`).
+  uint64_t explicit_length(unsigned char* h, uint64_t at) {
+    if (!long_vr(h + 4)) return u16(h + 6);
+    if (!read(at + 8, h + 8, 4)) return 0;
+    return u32(h + 8);
+  }
+  std::string tag_text(const unsigned char* h) const {
+    char t[16];
+    std::snprintf(t, sizeof t, "(%04x,%04x)", u16(h), u16(h + 2));
+    return t;
+  }
+  /// Whether a value of `len` bytes after the header at `at` ends within
+  /// the file; where it does not, a file marked DICOM (by its preamble) is
+  /// an error, another is taken for something else (false).
+  bool fits(uint64_t at, uint64_t header, uint64_t len, const unsigned char* h) const {
+    if (len == kUndefined) return true;
+    const uint64_t left = at + header <= size_ ? size_ - (at + header) : 0;
+    if (len <= left) return true;
+    if (!marked_) return false;
+    throw FileError(
+        path_, "truncated or corrupt: element " + tag_text(h) + " claims " + std::to_string(len) +
+                   " bytes, but only " + std::to_string(left) + " follow it" +
+                   (file_ == path_ ? std::string() : " (in " + file_.filename().string() + ")"));
+  }
+
+  /// Walks elements from `at` to `end`, or to a delimiter where
+  /// `until_delimiter`; returns where it stopped (kNotDicom: not DICOM).
+  uint64_t walk(uint64_t at, uint64_t end, bool until_delimiter, int depth) {
+    if (depth > 64) throw FileError(path_, "corrupt: sequences nested more than 64 deep");
+    while (at + 8 <= end) {
+      unsigned char h[12];
+      if (!read(at, h, 8)) return at;
+      const uint16_t group = u16(h), element = u16(h + 2);
+      if (group == 0xfffe) {
+        const uint32_t len = u32(h + 4);
+        if (element == 0xe0dd || element == 0xe00d) return at + 8;  // a delimiter
+        if (element != 0xe000) return depth == 0 ? kNotDicom : at;
+        if (!fits(at, 8, len, h)) return kNotDicom;  // an item
+        if (len == kUndefined) {
+          at = walk(at + 8, end, true, depth + 1);
+          if (at == kNotDicom) return kNotDicom;
+        } else {
+          if (walk(at + 8, at + 8 + len, false, depth + 1) == kNotDicom) return kNotDicom;
+          at += 8 + len;
+        }
+        continue;
+      }
+      uint64_t header = 8, len = 0;
+      bool sequence = false;
+      if (explicit_) {
+        if (!std::isupper(h[4]) || !std::isupper(h[5])) return depth == 0 ? kNotDicom : at;
+        header = long_vr(h + 4) ? 12 : 8;
+        len = explicit_length(h, at);
+        sequence = h[4] == 'S' && h[5] == 'Q';
+      } else {
+        len = u32(h + 4);
+      }
+      if (!fits(at, header, len, h)) return kNotDicom;
+      if (len == kUndefined) {
+        // A sequence (or UN holding one), or encapsulated pixel data whose
+        // items are fragments of bytes.
+        const bool fragments = group == 0x7fe0 || (explicit_ && (h[4] == 'O'));
+        at = fragments ? skip_fragments(at + header, end, h)
+                       : walk(at + header, end, true, depth + 1);
+        if (at == kNotDicom) return kNotDicom;
+        continue;
+      }
+      if (!sequence && !explicit_ && len >= 8) {
+        // Implicit VR: a defined-length value that begins with an item is a
+        // sequence, as GDCM reads it.
+        unsigned char v[4];
+        if (read(at + header, v, 4) && u16(v) == 0xfffe && u16(v + 2) == 0xe000) sequence = true;
+      }
+      if (sequence && walk(at + header, at + header + len, false, depth + 1) == kNotDicom)
+        return kNotDicom;
+      at += header + len;
+    }
+    (void)until_delimiter;
+    return at;
+  }
+
+  /// Encapsulated pixel data: items of bytes up to the sequence delimiter.
+  uint64_t skip_fragments(uint64_t at, uint64_t end, const unsigned char* owner) {
+    while (at + 8 <= end) {
+      unsigned char h[8];
+      if (!read(at, h, 8)) return at;
+      if (u16(h) != 0xfffe) return at;
+      if (u16(h + 2) == 0xe0dd) return at + 8;
+      const uint32_t len = u32(h + 4);
+      if (len == kUndefined) return at;  // (not a fragment: GDCM's to judge)
+      if (!fits(at, 8, len, owner)) return kNotDicom;
+      at += 8 + len;
+    }
+    return at;
+  }
+
+  const fs::path& path_;
+  const fs::path& file_;
+  std::ifstream in_;
+  uint64_t size_;
+  bool explicit_ = true;
+  bool big_ = false;
+  bool marked_ = false;  ///< "DICM" at byte 128
+};
+
+/// DicomWalker::check on `file`: throws FileError for a claimed length
+/// past the file's end; false where the bytes are not DICOM.
+bool dicom_lengths_fit(const fs::path& path, const fs::path& file) {
+  std::error_code ec;
+  const uintmax_t size = fs::file_size(file, ec);
+  if (ec) throw FileError(path, "cannot read the size of " + file.string() + ": " + ec.message());
+  DicomWalker w(path, file, static_cast<uint64_t>(size));
+  return w.check();
+}
+
 /// The series a directory's images belong to, by Series Instance UID, with
 /// their files (in name order); files GDCM does not read as DICOM, and
-/// DICOMDIR, are skipped.
-std::map<std::string, std::vector<fs::path>> scan_series(const fs::path& path,
-                                                         const fs::path& dir) {
+/// DICOMDIR, are skipped (and where not `strict`, those cut short).
+std::map<std::string, std::vector<fs::path>> scan_series(const fs::path& path, const fs::path& dir,
+                                                         bool strict) {
   std::vector<fs::path> files;
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
@@ -180,6 +378,16 @@ std::map<std::string, std::vector<fs::path>> scan_series(const fs::path& path,
     if (!it->is_regular_file(sec)) continue;
     const std::string name = it->path().filename().string();
     if (name == "DICOMDIR" || name.starts_with(".")) continue;
+    // A file that is not DICOM is skipped; one whose lengths run past its
+    // end is an error that names it where the directory was asked for, and
+    // skipped beside a file asked for (a slice of its series then shows as
+    // missing).
+    try {
+      if (!dicom_lengths_fit(path, it->path())) continue;
+    } catch (const FileError&) {
+      if (strict) throw;
+      continue;
+    }
     files.push_back(it->path());
   }
   if (ec) throw FileError(path, "cannot list the directory " + dir.string() + ": " + ec.message());
@@ -216,7 +424,7 @@ Volume load_dicom_files(const fs::path& path) {
   // The files of the volume: one multi-frame file, or a series' slices.
   std::vector<fs::path> files;
   if (is_dir) {
-    const auto series = scan_series(path, path);
+    const auto series = scan_series(path, path, true);
     if (series.empty())
       throw FileError(path, "holds no DICOM image (a directory of one series' slices is read)");
     if (series.size() > 1) {
@@ -233,7 +441,8 @@ Volume load_dicom_files(const fs::path& path) {
     gdcm::Scanner scanner;
     scanner.AddTag(kSeriesUid);
     scanner.AddTag(kNumberOfFrames);
-    if (!scanner.Scan({path.string()}) || !scanner.IsKey(path.c_str()))
+    if (!dicom_lengths_fit(path, path) || !scanner.Scan({path.string()}) ||
+        !scanner.IsKey(path.c_str()))
       throw FileError(path, "is not a DICOM file GDCM can read");
     const char* frames = scanner.GetValue(path.c_str(), kNumberOfFrames);
     const char* uid = scanner.GetValue(path.c_str(), kSeriesUid);
@@ -242,7 +451,7 @@ Volume load_dicom_files(const fs::path& path) {
     } else {
       // The slices of its series beside it.
       const fs::path dir = path.has_parent_path() ? path.parent_path() : fs::path(".");
-      const auto series = scan_series(path, dir);
+      const auto series = scan_series(path, dir, false);
       const auto it = series.find(uid);
       files = it != series.end() ? it->second : std::vector<fs::path>{path};
     }
@@ -357,9 +566,8 @@ Volume load_dicom_files(const fs::path& path) {
   return vol;
 }
 
-}  // namespace
-
-Volume load_dicom(const std::filesystem::path& path) {
+/// load_dicom_files, GDCM's exceptions made FileErrors.
+Volume load_dicom_here(const fs::path& path) {
   try {
     return load_dicom_files(path);
   } catch (const Error&) {
@@ -369,6 +577,173 @@ Volume load_dicom(const std::filesystem::path& path) {
   } catch (const std::exception& e) {  // GDCM's own exceptions (malformed data)
     throw FileError(path, std::string("GDCM could not read it: ") + e.what());
   }
+}
+
+/// What the reading process sends back before the voxels.
+struct DicomReply {
+  int32_t status = 0;  ///< 0 a volume follows, 1 a FileError, 2 out of memory
+  int32_t type = 0;
+  int64_t dims[3] = {0, 0, 0};
+  double spacing[3] = {1, 1, 1};
+  char orientation[4] = {0, 0, 0, 0};
+  uint32_t text_bytes = 0;  ///< status 1: the error's path, a NUL, its problem
+};
+
+bool write_all(int fd, const void* p, std::size_t n) {
+  const char* c = static_cast<const char*>(p);
+  while (n > 0) {
+    const ssize_t w = ::write(fd, c, std::min<std::size_t>(n, std::size_t{1} << 20));
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      return false;
+    }
+    c += w;
+    n -= static_cast<std::size_t>(w);
+  }
+  return true;
+}
+
+bool read_all(int fd, void* p, std::size_t n) {
+  char* c = static_cast<char*>(p);
+  while (n > 0) {
+    const ssize_t r = ::read(fd, c, std::min<std::size_t>(n, std::size_t{1} << 20));
+    if (r < 0) {
+      if (errno == EINTR) continue;
+      return false;
+    }
+    if (r == 0) return false;
+    c += r;
+    n -= static_cast<std::size_t>(r);
+  }
+  return true;
+}
+
+/// The reading process: loads, sends the volume or the error down `fd`.
+[[noreturn]] void dicom_child(const fs::path& path, int fd) {
+  DicomReply reply;
+  try {
+    const Volume v = load_dicom_here(path);
+    reply.type = static_cast<int32_t>(v.type());
+    for (int a = 0; a < 3; ++a) {
+      reply.dims[a] = v.dims()[a];
+      reply.spacing[a] = v.spacing()[a];
+    }
+    std::memcpy(reply.orientation, v.orientation().data(),
+                std::min<std::size_t>(3, v.orientation().size()));
+    const bool ok = write_all(fd, &reply, sizeof reply) &&
+                    write_all(fd, v.data().data(), v.data().size() * sizeof(float));
+    ::_exit(ok ? 0 : 3);
+  } catch (const FileError& e) {
+    reply.status = 1;
+    std::string text = e.path().string();
+    text += '\0';
+    text += e.problem();
+    reply.text_bytes = static_cast<uint32_t>(text.size());
+    const bool ok = write_all(fd, &reply, sizeof reply) && write_all(fd, text.data(), text.size());
+    ::_exit(ok ? 0 : 3);
+  } catch (const std::bad_alloc&) {
+    reply.status = 2;
+    ::_exit(write_all(fd, &reply, sizeof reply) ? 0 : 3);
+  } catch (...) {
+    ::_exit(4);
+  }
+}
+
+/// The last line a crashed reader wrote (GDCM's assertion, say), trimmed.
+std::string last_line(int fd) {
+  std::string all;
+  ::lseek(fd, 0, SEEK_SET);
+  char b[4096];
+  for (ssize_t r; (r = ::read(fd, b, sizeof b)) > 0;) all.append(b, static_cast<std::size_t>(r));
+  while (!all.empty() && (all.back() == '\n' || all.back() == ' ')) all.pop_back();
+  const std::size_t nl = all.rfind('\n');
+  std::string line = nl == std::string::npos ? all : all.substr(nl + 1);
+  if (line.size() > 300) line = line.substr(0, 300) + "...";
+  return line;
+}
+
+}  // namespace
+
+Volume load_dicom(const std::filesystem::path& path) {
+  // GDCM (and the codecs under it) stop the process with assert() or worse
+  // on some files, valid ones among them (Debian's GDCM 3.0.21 aborts in
+  // GetSpacingValue on an RT dose grid of one frame): the files are read in
+  // a child process, which sends the volume back through a pipe, so that
+  // such a file is an error, not the end of the program. The child's
+  // messages go to a temporary file, quoted in that error.
+  // SIMDVOL_DICOM_IN_PROCESS=1 reads in this process (the fuzz target).
+  if (const char* e = std::getenv("SIMDVOL_DICOM_IN_PROCESS"); e && std::string(e) == "1")
+    return load_dicom_here(path);
+  int fds[2];
+  if (::pipe2(fds, O_CLOEXEC) != 0)
+    throw FileError(path, std::string("cannot make a pipe to read it: ") + std::strerror(errno));
+  std::FILE* log = std::tmpfile();
+  std::fflush(stdout);
+  std::fflush(stderr);
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    const int err = errno;
+    ::close(fds[0]);
+    ::close(fds[1]);
+    if (log) std::fclose(log);
+    throw FileError(path, std::string("cannot start a process to read it: ") + std::strerror(err));
+  }
+  if (pid == 0) {
+    ::close(fds[0]);
+    if (log) ::dup2(::fileno(log), 2);
+    dicom_child(path, fds[1]);
+  }
+  ::close(fds[1]);
+  struct Closer {
+    int fd;
+    std::FILE* log;
+    pid_t pid;
+    int status = 0;
+    bool waited = false;
+    ~Closer() {
+      ::close(fd);
+      if (!waited) ::waitpid(pid, &status, 0);
+      if (log) std::fclose(log);
+    }
+    void wait() {
+      ::close(fd);
+      fd = -1;
+      while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+      }
+      waited = true;
+    }
+  } child{fds[0], log, pid};
+  DicomReply reply;
+  const bool got = read_all(fds[0], &reply, sizeof reply);
+  if (got && reply.status == 0) {
+    const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
+    Volume vol(dims, static_cast<VoxelType>(reply.type),
+               {reply.spacing[0], reply.spacing[1], reply.spacing[2]});
+    if (read_all(fds[0], vol.data().data(), vol.data().size() * sizeof(float))) {
+      vol.set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
+      child.wait();
+      return vol;
+    }
+  } else if (got && reply.status == 1 && reply.text_bytes < (1u << 20)) {
+    std::string text(reply.text_bytes, '\0');
+    if (read_all(fds[0], text.data(), text.size())) {
+      const std::size_t nul = text.find('\0');
+      child.wait();
+      throw FileError(fs::path(text.substr(0, nul)), text.substr(nul + 1));
+    }
+  } else if (got && reply.status == 2) {
+    child.wait();
+    throw std::bad_alloc();
+  }
+  child.wait();
+  const std::string said = log ? last_line(::fileno(log)) : std::string();
+  if (WIFSIGNALED(child.status))
+    throw FileError(path, "GDCM stopped on it (signal " + std::to_string(WTERMSIG(child.status)) +
+                              (said.empty() ? std::string() : ": " + said) +
+                              "): a file GDCM cannot read");
+  throw FileError(path, "the process reading it failed (exit status " +
+                            std::to_string(WEXITSTATUS(child.status)) + ")" +
+                            (said.empty() ? std::string() : ": " + said));
 }
 
 }  // namespace simdvol
