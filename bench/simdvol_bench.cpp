@@ -217,8 +217,12 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data)
   // A volume file of the user's: named in the cases by its file name.
   const std::filesystem::path p(s);
   const VolumeFileKind kind = volume_file_kind(p);
-  if (kind != VolumeFileKind::unknown && kind != VolumeFileKind::raw)
-    return {p.filename().string(), "auto", p, 0, true};
+  if (kind != VolumeFileKind::unknown && kind != VolumeFileKind::raw) {
+    // (a DICOM directory given as "ct/" is named "ct")
+    const std::string name =
+        p.filename().empty() ? p.parent_path().filename().string() : p.filename().string();
+    return {name, "auto", p, 0, true};
+  }
   throw ArgumentError("--volumes", "'" + s +
                                        "' is not phantomN, brainsmall, ch2 or a volume file "
                                        "(.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den, DICOM)");
