@@ -562,7 +562,11 @@ Volume load_dicom_files(const fs::path& path) {
 
   // Where the axes point: rows, columns and the slices' order, in DICOM's
   // LPS space. A multi-frame file's frame order is not known here.
-  if (frames == 1) vol.set_orientation(closest_orientation({row, col, normal}, "LPS"));
+  // (GDCM gives rows along x and columns along y where the file says
+  // nothing: no orientation then.)
+  const bool said =
+      slices.front().reader->GetFile().GetDataSet().FindDataElement(gdcm::Tag(0x0020, 0x0037));
+  if (frames == 1 && said) vol.set_orientation(closest_orientation({row, col, normal}, "LPS"));
   return vol;
 }
 

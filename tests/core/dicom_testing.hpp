@@ -4,7 +4,9 @@
 #include <gdcmAttribute.h>
 #include <gdcmImage.h>
 #include <gdcmImageWriter.h>
+#include <gdcmReader.h>
 #include <gdcmTrace.h>
+#include <gdcmWriter.h>
 #include <gtest/gtest.h>
 
 #include <array>
@@ -27,6 +29,7 @@ struct DicomSlice {
   double slope = 1.0, intercept = 0.0;
   std::string series = "1.2.826.0.1.3680043.10.1.1";
   int samples = 1;
+  bool orientation = true;  ///< false: Image Orientation (Patient) taken out
 };
 
 template <typename T>
@@ -64,6 +67,16 @@ void write_dicom_slice(const std::filesystem::path& p, int nx, int ny, const std
   ds.Replace(uid.GetAsDataElement());
   w.SetFileName(p.c_str());
   ASSERT_TRUE(w.Write()) << p;
+  if (!s.orientation) {  // (GDCM's image writer always writes it)
+    gdcm::Reader r;
+    r.SetFileName(p.c_str());
+    ASSERT_TRUE(r.Read()) << p;
+    r.GetFile().GetDataSet().Remove(gdcm::Tag(0x0020, 0x0037));
+    gdcm::Writer again;
+    again.SetFile(r.GetFile());
+    again.SetFileName(p.c_str());
+    ASSERT_TRUE(again.Write()) << p;
+  }
 }
 
 }  // namespace simdvol::testing

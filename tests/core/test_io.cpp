@@ -1543,6 +1543,15 @@ TEST_F(IoTest, DicomSeriesSortedScaledAndOriented) {
   EXPECT_EQ(f.orientation(), "RPI");
   EXPECT_DOUBLE_EQ(f.spacing()[2], 1.25);
   EXPECT_EQ(f.data(), fwant);
+  // A slice whose file does not say how it lies has no orientation (GDCM
+  // would give it the identity).
+  fs::create_directories(file("plain"));
+  DicomSlice bare;
+  bare.orientation = false;
+  write_dicom_slice(file("plain") / "p.dcm", nx, ny, std::vector<int16_t>(nx * ny, 3), bare);
+  const Volume p = simdvol::load_dicom(file("plain") / "p.dcm");
+  EXPECT_EQ(p.dims(), (std::array<int64_t, 3>{nx, ny, 1}));
+  EXPECT_EQ(p.orientation(), "");
 }
 
 // A directory of two series (listed, each with a file to give), slices at
