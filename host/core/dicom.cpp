@@ -497,6 +497,12 @@ Volume load_dicom_files(const fs::path& path) {
                         "its slices lie in different planes (Image Orientation (Patient) "
                         "differs" +
                             which + "): not one volume");
+    if (slices.size() > 1 &&
+        !s.reader->GetFile().GetDataSet().FindDataElement(gdcm::Tag(0x0020, 0x0032)))
+      throw FileError(path,
+                      "a slice of its series has no Image Position (Patient), so its place "
+                      "in the volume is unknown" +
+                          which);
     const double* o = im.GetOrigin();
     s.position = o[0] * normal[0] + o[1] * normal[1] + o[2] * normal[2];
   }

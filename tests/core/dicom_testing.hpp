@@ -29,7 +29,8 @@ struct DicomSlice {
   double slope = 1.0, intercept = 0.0;
   std::string series = "1.2.826.0.1.3680043.10.1.1";
   int samples = 1;
-  bool orientation = true;  ///< false: Image Orientation (Patient) taken out
+  bool orientation = true;   ///< false: Image Orientation (Patient) taken out
+  bool has_position = true;  ///< false: Image Position (Patient) taken out
 };
 
 template <typename T>
@@ -67,11 +68,12 @@ void write_dicom_slice(const std::filesystem::path& p, int nx, int ny, const std
   ds.Replace(uid.GetAsDataElement());
   w.SetFileName(p.c_str());
   ASSERT_TRUE(w.Write()) << p;
-  if (!s.orientation) {  // (GDCM's image writer always writes it)
+  if (!s.orientation || !s.has_position) {  // (GDCM's image writer always writes them)
     gdcm::Reader r;
     r.SetFileName(p.c_str());
     ASSERT_TRUE(r.Read()) << p;
-    r.GetFile().GetDataSet().Remove(gdcm::Tag(0x0020, 0x0037));
+    if (!s.orientation) r.GetFile().GetDataSet().Remove(gdcm::Tag(0x0020, 0x0037));
+    if (!s.has_position) r.GetFile().GetDataSet().Remove(gdcm::Tag(0x0020, 0x0032));
     gdcm::Writer again;
     again.SetFile(r.GetFile());
     again.SetFileName(p.c_str());

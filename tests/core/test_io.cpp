@@ -1582,6 +1582,11 @@ TEST_F(IoTest, DicomSeriesMalformed) {
                     {"holds 2 DICOM series; give one file of the series to load"});
   // Given one file, its own series only.
   EXPECT_EQ(simdvol::load_volume(two / "i3").dims(), (std::array<int64_t, 3>{nx, ny, 2}));
+  const fs::path nowhere = series("nowhere", {0, 1, 2}, [](int k, DicomSlice& s, int&) {
+    if (k == 1) s.has_position = false;
+  });
+  expect_file_error([&] { simdvol::load_volume(nowhere); }, nowhere,
+                    {"has no Image Position (Patient)"});
   const fs::path dup = series("dup", {0, 1, 1, 2});
   expect_file_error([&] { simdvol::load_volume(dup); }, dup, {"two slices lie at the same"});
   const fs::path gap = series("gap", {0, 1, 2, 4, 5});
