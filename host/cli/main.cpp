@@ -129,10 +129,15 @@ struct VolumeArgs {
                     "keep the file's order");
   }
 
+  // The kind of file (by name, by being a directory or by DICOM's marker);
+  // unknown for the phantom (no path).
+  VolumeFileKind kind() const {
+    return path.empty() ? VolumeFileKind::unknown : volume_file_kind(path);
+  }
+
   // A NIfTI or NRRD file: the formats that may hold several 3-D volumes.
-  bool series() const {
-    const VolumeFileKind k = volume_file_kind(path);
-    return !path.empty() && (k == VolumeFileKind::nifti || k == VolumeFileKind::nrrd);
+  static bool series(VolumeFileKind k) {
+    return k == VolumeFileKind::nifti || k == VolumeFileKind::nrrd;
   }
 
   // The raw layout options, and --volume-index, do nothing for another kind
@@ -140,19 +145,17 @@ struct VolumeArgs {
   void check_format_options() const {
     const std::string which =
         path.empty() ? std::string(" (no volume given)") : " (" + path + " is not one)";
+    const VolumeFileKind k = kind();
     for (const char* name :
          {"--raw-dims", "--raw-type", "--raw-endian", "--raw-spacing", "--raw-header"})
-      if (volume_file_kind(path) != VolumeFileKind::raw && app && app->count(name) > 0)
+      if (k != VolumeFileKind::raw && app && app->count(name) > 0)
         throw ArgumentError(name, "applies only to .raw volumes" + which);
-    if (!series() && app && app->count("--volume-index") > 0)
+    if (!series(k) && app && app->count("--volume-index") > 0)
       throw ArgumentError("--volume-index", "applies only to NIfTI and NRRD volumes (" +
                                                 std::string(kSeriesFileNames) + ")" + which);
     if (volume_index < 0)
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
-    const VolumeFileKind kind = volume_file_kind(path);
-    if (app && app->count("--orient") > 0 &&
-        (path.empty() || (kind != VolumeFileKind::nifti && kind != VolumeFileKind::nrrd &&
-                          kind != VolumeFileKind::dicom)))
+    if (app && app->count("--orient") > 0 && !series(k) && k != VolumeFileKind::dicom)
       throw ArgumentError("--orient",
                           "applies only to NIfTI, NRRD and DICOM volumes, whose headers say "
                           "where their axes point (" +
@@ -191,7 +194,7 @@ struct VolumeArgs {
     std::optional<int64_t> index;
     if (app && app->count("--volume-index") > 0)
       index = volume_index;
-    else if (first_of_series && series())
+    else if (first_of_series && series(kind()))
       index = 0;
     Volume vol = load_volume(path, raw, index, volumes);
     if (app && app->count("--orient") > 0) {

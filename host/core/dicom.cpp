@@ -119,63 +119,58 @@ VoxelType voxel_type(const gdcm::PixelFormat& pf) {
   }
 }
 
+/// Calls `f` with a value of the C++ type GDCM decodes `pf` to; false
+/// (and no call) for a type the loader does not take (1-bit, 12-bit
+/// packed, ...).
+template <typename F>
+bool with_scalar_type(const gdcm::PixelFormat& pf, F&& f) {
+  switch (pf.GetScalarType()) {
+    case gdcm::PixelFormat::UINT8:
+      f(uint8_t{});
+      return true;
+    case gdcm::PixelFormat::INT8:
+      f(int8_t{});
+      return true;
+    case gdcm::PixelFormat::UINT16:
+      f(uint16_t{});
+      return true;
+    case gdcm::PixelFormat::INT16:
+      f(int16_t{});
+      return true;
+    case gdcm::PixelFormat::UINT32:
+      f(uint32_t{});
+      return true;
+    case gdcm::PixelFormat::INT32:
+      f(int32_t{});
+      return true;
+    case gdcm::PixelFormat::FLOAT32:
+      f(float{});
+      return true;
+    case gdcm::PixelFormat::FLOAT64:
+      f(double{});
+      return true;
+    default:
+      return false;
+  }
+}
+
+/// Whether the loader takes the scalar type GDCM decodes `pf` to.
+bool supported(const gdcm::PixelFormat& pf) {
+  return with_scalar_type(pf, [](auto) {});
+}
+
 /// Appends `n` decoded pixels of `pf` from `buf` to `out`, times `slope`
 /// plus `inter`.
 void convert(const std::vector<char>& buf, const gdcm::PixelFormat& pf, std::size_t n, double slope,
              double inter, float* out) {
-  auto copy = [&](auto tag) {
+  with_scalar_type(pf, [&](auto tag) {
     using T = decltype(tag);
     for (std::size_t i = 0; i < n; ++i) {
       T v;
       std::memcpy(&v, buf.data() + i * sizeof(T), sizeof(T));
       out[i] = static_cast<float>(static_cast<double>(v) * slope + inter);
     }
-  };
-  switch (pf.GetScalarType()) {
-    case gdcm::PixelFormat::UINT8:
-      copy(uint8_t{});
-      break;
-    case gdcm::PixelFormat::INT8:
-      copy(int8_t{});
-      break;
-    case gdcm::PixelFormat::UINT16:
-      copy(uint16_t{});
-      break;
-    case gdcm::PixelFormat::INT16:
-      copy(int16_t{});
-      break;
-    case gdcm::PixelFormat::UINT32:
-      copy(uint32_t{});
-      break;
-    case gdcm::PixelFormat::INT32:
-      copy(int32_t{});
-      break;
-    case gdcm::PixelFormat::FLOAT32:
-      copy(float{});
-      break;
-    case gdcm::PixelFormat::FLOAT64:
-      copy(double{});
-      break;
-    default:
-      break;  // refused before
-  }
-}
-
-/// Whether GDCM decodes `pf` to one of the scalar types convert() takes.
-bool supported(const gdcm::PixelFormat& pf) {
-  switch (pf.GetScalarType()) {
-    case gdcm::PixelFormat::UINT8:
-    case gdcm::PixelFormat::INT8:
-    case gdcm::PixelFormat::UINT16:
-    case gdcm::PixelFormat::INT16:
-    case gdcm::PixelFormat::UINT32:
-    case gdcm::PixelFormat::INT32:
-    case gdcm::PixelFormat::FLOAT32:
-    case gdcm::PixelFormat::FLOAT64:
-      return true;
-    default:
-      return false;
-  }
+  });
 }
 
 /// Walks a DICOM file's element headers (tag, VR, length) without reading
@@ -599,35 +594,6 @@ struct DicomReply {
   uint32_t text_bytes = 0;  ///< status 1: the error's path, a NUL, its problem
 };
 
-bool write_all(int fd, const void* p, std::size_t n) {
-  const char* c = static_cast<const char*>(p);
-  while (n > 0) {
-    const ssize_t w = ::write(fd, c, std::min<std::size_t>(n, std::size_t{1} << 20));
-    if (w < 0) {
-      if (errno == EINTR) continue;
-      return false;
-    }
-    c += w;
-    n -= static_cast<std::size_t>(w);
-  }
-  return true;
-}
-
-bool read_all(int fd, void* p, std::size_t n) {
-  char* c = static_cast<char*>(p);
-  while (n > 0) {
-    const ssize_t r = ::read(fd, c, std::min<std::size_t>(n, std::size_t{1} << 20));
-    if (r < 0) {
-      if (errno == EINTR) continue;
-      return false;
-    }
-    if (r == 0) return false;
-    c += r;
-    n -= static_cast<std::size_t>(r);
-  }
-  return true;
-}
-
 /// The reading process: loads, sends the volume or the error down `fd`.
 [[noreturn]] void dicom_child(const fs::path& path, int fd) {
   DicomReply reply;
@@ -640,8 +606,8 @@ bool read_all(int fd, void* p, std::size_t n) {
     }
     std::memcpy(reply.orientation, v.orientation().data(),
                 std::min<std::size_t>(3, v.orientation().size()));
-    const bool ok = write_all(fd, &reply, sizeof reply) &&
-                    write_all(fd, v.data().data(), v.data().size() * sizeof(float));
+    const bool ok = write_fully(fd, &reply, sizeof reply) &&
+                    write_fully(fd, v.data().data(), v.data().size() * sizeof(float));
     ::_exit(ok ? 0 : 3);
   } catch (const FileError& e) {
     reply.status = 1;
@@ -649,11 +615,12 @@ bool read_all(int fd, void* p, std::size_t n) {
     text += '\0';
     text += e.problem();
     reply.text_bytes = static_cast<uint32_t>(text.size());
-    const bool ok = write_all(fd, &reply, sizeof reply) && write_all(fd, text.data(), text.size());
+    const bool ok =
+        write_fully(fd, &reply, sizeof reply) && write_fully(fd, text.data(), text.size());
     ::_exit(ok ? 0 : 3);
   } catch (const std::bad_alloc&) {
     reply.status = 2;
-    ::_exit(write_all(fd, &reply, sizeof reply) ? 0 : 3);
+    ::_exit(write_fully(fd, &reply, sizeof reply) ? 0 : 3);
   } catch (...) {
     ::_exit(4);
   }
@@ -724,19 +691,19 @@ Volume load_dicom(const std::filesystem::path& path) {
     }
   } child{fds[0], log, pid};
   DicomReply reply;
-  const bool got = read_all(fds[0], &reply, sizeof reply);
+  const bool got = read_fully(fds[0], &reply, sizeof reply);
   if (got && reply.status == 0) {
     const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
     Volume vol(dims, static_cast<VoxelType>(reply.type),
                {reply.spacing[0], reply.spacing[1], reply.spacing[2]});
-    if (read_all(fds[0], vol.data().data(), vol.data().size() * sizeof(float))) {
+    if (read_fully(fds[0], vol.data().data(), vol.data().size() * sizeof(float))) {
       vol.set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
       child.wait();
       return vol;
     }
   } else if (got && reply.status == 1 && reply.text_bytes < (1u << 20)) {
     std::string text(reply.text_bytes, '\0');
-    if (read_all(fds[0], text.data(), text.size())) {
+    if (read_fully(fds[0], text.data(), text.size())) {
       const std::size_t nul = text.find('\0');
       child.wait();
       throw FileError(fs::path(text.substr(0, nul)), text.substr(nul + 1));

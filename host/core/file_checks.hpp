@@ -2,7 +2,10 @@
 // installed).
 #pragma once
 
+#include <cstddef>
 #include <filesystem>
+#include <initializer_list>
+#include <string_view>
 
 namespace simdvol {
 
@@ -19,5 +22,16 @@ void refuse_non_regular_file(const std::filesystem::path& path, const char* noun
 /// output through a link replaces the link's target and keeps the link.
 /// FileError after 40 links (a loop).
 std::filesystem::path write_target(const std::filesystem::path& path);
+
+/// Writes all `n` bytes to `fd` (retrying short writes and EINTR); false
+/// on an error, errno set.
+bool write_fully(int fd, const void* p, std::size_t n);
+/// Reads exactly `n` bytes from `fd` (retrying short reads and EINTR);
+/// false on an error or an early end.
+bool read_fully(int fd, void* p, std::size_t n);
+
+/// Whether `name` (already lower case) ends in one of `suffixes` and has
+/// something before it.
+bool has_suffix(std::string_view name, std::initializer_list<std::string_view> suffixes);
 
 }  // namespace simdvol

@@ -581,20 +581,18 @@ int nifti_type_code(const NiftiHeaderInfo& info) {
 
 /// Whether `name` (lower case) is one half of a .hdr/.img pair.
 bool pair_name(const std::string& name) {
-  for (const char* s : {".hdr", ".hdr.gz", ".img", ".img.gz"})
-    if (name.size() > std::strlen(s) && name.ends_with(s)) return true;
-  return false;
+  return has_suffix(name, {".hdr", ".hdr.gz", ".img", ".img.gz"});
 }
 
 /// The header of a pair named by its .img (or .img.gz); the path itself otherwise.
 fs::path nifti_header_path(const fs::path& path) {
   const std::string name = lower(path.filename().string());
-  if (!name.ends_with(".img") && !name.ends_with(".img.gz")) return path;
+  if (!has_suffix(name, {".img", ".img.gz"})) return path;
   // (niftilib may offer a single file of the same name, x.nii for x.img:
   // not this image's header.)
   std::unique_ptr<char, decltype(&std::free)> hdr(nifti_findhdrname(path.c_str()), &std::free);
   const std::string found = hdr ? lower(fs::path(hdr.get()).filename().string()) : std::string();
-  if (!hdr || !(found.ends_with(".hdr") || found.ends_with(".hdr.gz")))
+  if (!hdr || !has_suffix(found, {".hdr", ".hdr.gz"}))
     throw FileError(path, "the header of this .img (the .hdr beside it, or .hdr.gz) is missing");
   return fs::path(hdr.get());
 }
@@ -646,7 +644,7 @@ void nifti_count_bytes(const fs::path& path, const fs::path& data, uint64_t need
 /// the volumes up to it). Errors name `path`, the file asked for.
 NiftiHeaderInfo nifti_precheck(const fs::path& path, const fs::path& header,
                                std::optional<int64_t> index) {
-  require_regular_file(header);
+  if (header != path) require_regular_file(header);  // (load_nifti checked `path`)
   const bool pair_named = pair_name(lower(header.filename().string()));
   const std::string in = header == path ? std::string() : " (in " + header.string() + ")";
   unsigned char h[540];
@@ -811,7 +809,7 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, const fs::path& header,
                                                                          : nifti_type_code(info)),
         &std::free);
     const std::string found = img ? lower(fs::path(img.get()).filename().string()) : std::string();
-    if (!img || !(found.ends_with(".img") || found.ends_with(".img.gz")))
+    if (!img || !has_suffix(found, {".img", ".img.gz"}))
       throw FileError(path, "the voxels' file of the pair (the .img beside " +
                                 header.filename().string() + ", or .img.gz) is missing");
     info.data = fs::path(img.get());
@@ -1277,15 +1275,12 @@ Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volu
 
 VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
   const std::string name = lower(path.filename().string());
-  auto ends_with = [&](std::string_view suffix) {
-    return name.size() > suffix.size() && name.ends_with(suffix);
-  };
-  for (const char* s : {".nii", ".nii.gz", ".hdr", ".hdr.gz", ".img", ".img.gz"})
-    if (ends_with(s)) return VolumeFileKind::nifti;
-  if (ends_with(".nrrd") || ends_with(".nhdr")) return VolumeFileKind::nrrd;
-  if (ends_with(".den")) return VolumeFileKind::den;
-  if (ends_with(".raw")) return VolumeFileKind::raw;
-  if (ends_with(".dcm") || ends_with(".dicom") || ends_with(".ima")) return VolumeFileKind::dicom;
+  if (has_suffix(name, {".nii", ".nii.gz", ".hdr", ".hdr.gz", ".img", ".img.gz"}))
+    return VolumeFileKind::nifti;
+  if (has_suffix(name, {".nrrd", ".nhdr"})) return VolumeFileKind::nrrd;
+  if (has_suffix(name, {".den"})) return VolumeFileKind::den;
+  if (has_suffix(name, {".raw"})) return VolumeFileKind::raw;
+  if (has_suffix(name, {".dcm", ".dicom", ".ima"})) return VolumeFileKind::dicom;
   std::error_code ec;
   if (fs::is_directory(path, ec)) return VolumeFileKind::dicom;
   if (fs::is_regular_file(path, ec)) {
@@ -1338,6 +1333,41 @@ fs::path write_target(const fs::path& path) {
   throw FileError(path, "too many levels of symbolic links");
 }
 
+bool write_fully(int fd, const void* p, std::size_t n) {
+  const char* c = static_cast<const char*>(p);
+  while (n > 0) {
+    const ssize_t w = ::write(fd, c, std::min<std::size_t>(n, std::size_t{1} << 30));
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      return false;
+    }
+    c += w;
+    n -= static_cast<std::size_t>(w);
+  }
+  return true;
+}
+
+bool read_fully(int fd, void* p, std::size_t n) {
+  char* c = static_cast<char*>(p);
+  while (n > 0) {
+    const ssize_t r = ::read(fd, c, std::min<std::size_t>(n, std::size_t{1} << 30));
+    if (r < 0) {
+      if (errno == EINTR) continue;
+      return false;
+    }
+    if (r == 0) return false;
+    c += r;
+    n -= static_cast<std::size_t>(r);
+  }
+  return true;
+}
+
+bool has_suffix(std::string_view name, std::initializer_list<std::string_view> suffixes) {
+  for (std::string_view s : suffixes)
+    if (name.size() > s.size() && name.ends_with(s)) return true;
+  return false;
+}
+
 // ================================================================ writer
 
 void write_file_atomically(const fs::path& path, std::initializer_list<std::string_view> parts) {
@@ -1362,20 +1392,8 @@ void write_file_atomically(const fs::path& path, std::initializer_list<std::stri
     throw FileError(path, problem);
   };
   ::fchmod(fd, 0644);
-  auto write_all = [&](const char* p, std::size_t len) {
-    while (len > 0) {
-      const ssize_t w = ::write(fd, p, std::min<std::size_t>(len, std::size_t{1} << 30));
-      if (w < 0) {
-        if (errno == EINTR) continue;
-        return false;
-      }
-      p += w;
-      len -= static_cast<std::size_t>(w);
-    }
-    return true;
-  };
   bool ok = true;
-  for (std::string_view part : parts) ok = ok && write_all(part.data(), part.size());
+  for (std::string_view part : parts) ok = ok && write_fully(fd, part.data(), part.size());
   const int write_errno = errno;
   if (!ok) {
     ::close(fd);
