@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "dicom_enhanced.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
 #include "simdvol/volume.hpp"
@@ -321,6 +322,17 @@ int main(int argc, char** argv) {
        it.increment(ec))
     if (it->is_regular_file())
       write_seed(root / "dicom", it->path().filename().string(), read_bytes(it->path()));
+  // An enhanced multi-frame file (as the tests write it): two time points of
+  // three frames, one frame with its own scale.
+  std::vector<simdvol::testing::EnhancedFrame> frames(6);
+  for (int k = 0; k < 6; ++k) {
+    frames[k].position = std::array<double, 3>{0, 0, 2.5 * (k % 3)};
+    if (k == 4) frames[k].scale = std::array<double, 2>{2.0, -1024.0};
+    frames[k].pixels.assign(12, static_cast<int16_t>(100 * k));
+  }
+  simdvol::testing::write_enhanced_dicom(tmpdir / "enhanced.dcm", 4, 3, frames, {1, 0, 0, 0, 1, 0},
+                                         {0.5, 0.7}, std::array<double, 2>{1.0, -1024.0});
+  write_seed(root / "dicom", "enhanced.dcm", read_bytes(tmpdir / "enhanced.dcm"));
   fs::remove_all(tmpdir);
   std::cout << "make_seeds: corpora written under " << root.string() << "\n";
   return 0;

@@ -120,13 +120,15 @@ struct VolumeArgs {
     app->add_option("--raw-header", raw_header, "raw volumes: bytes to skip before the voxels")
         ->check(kNotNegative);
     app->add_option("--volume-index", volume_index,
-                    "4-D NIfTI and NRRD files (a time or diffusion series of 3-D volumes): "
+                    "4-D NIfTI and NRRD files (a time or diffusion series of 3-D volumes), and "
+                    "DICOM series with several images at each position (time points, echoes): "
                     "which volume, from 0");
-    app->add_option("--orient", orient,
-                    "turn the volume's axes to point this way in the patient, as its NIfTI or "
-                    "NRRD header says they lie: CODE is three letters, one each of R/L, A/P, "
-                    "S/I (RAS: x to the right, y to the front, z up); by default the voxels "
-                    "keep the file's order");
+    app->add_option(
+        "--orient", orient,
+        "turn the volume's axes to point this way in the patient, as its NIfTI, "
+        "NRRD or DICOM header says they lie: CODE is three letters, one each of R/L, A/P, "
+        "S/I (RAS: x to the right, y to the front, z up); by default the voxels "
+        "keep the file's order");
   }
 
   // The kind of file (by name, by being a directory or by DICOM's marker);
@@ -135,9 +137,10 @@ struct VolumeArgs {
     return path.empty() ? VolumeFileKind::unknown : volume_file_kind(path);
   }
 
-  // A NIfTI or NRRD file: the formats that may hold several 3-D volumes.
+  // A NIfTI, NRRD or DICOM file: the formats that may hold several 3-D
+  // volumes, and whose headers say where their axes point.
   static bool series(VolumeFileKind k) {
-    return k == VolumeFileKind::nifti || k == VolumeFileKind::nrrd;
+    return k == VolumeFileKind::nifti || k == VolumeFileKind::nrrd || k == VolumeFileKind::dicom;
   }
 
   // The raw layout options, and --volume-index, do nothing for another kind
@@ -151,15 +154,15 @@ struct VolumeArgs {
       if (k != VolumeFileKind::raw && app && app->count(name) > 0)
         throw ArgumentError(name, "applies only to .raw volumes" + which);
     if (!series(k) && app && app->count("--volume-index") > 0)
-      throw ArgumentError("--volume-index", "applies only to NIfTI and NRRD volumes (" +
+      throw ArgumentError("--volume-index", "applies only to NIfTI, NRRD and DICOM volumes (" +
                                                 std::string(kSeriesFileNames) + ")" + which);
     if (volume_index < 0)
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
-    if (app && app->count("--orient") > 0 && !series(k) && k != VolumeFileKind::dicom)
+    if (app && app->count("--orient") > 0 && !series(k))
       throw ArgumentError("--orient",
                           "applies only to NIfTI, NRRD and DICOM volumes, whose headers say "
                           "where their axes point (" +
-                              std::string(kSeriesFileNames) + ", DICOM)" + which);
+                              std::string(kSeriesFileNames) + ")" + which);
     if (app && app->count("--orient") > 0 && !valid_orientation(upper(orient)))
       throw ArgumentError("--orient", "'" + orient +
                                           "' is not three letters, one each of R/L, A/P and "
@@ -202,8 +205,9 @@ struct VolumeArgs {
         throw ArgumentError("--orient", path +
                                             ": the file does not say where its axes point in the "
                                             "patient (no NIfTI sform or qform, no NRRD anatomical "
-                                            "space and directions, a multi-frame DICOM "
-                                            "file), so they cannot be turned");
+                                            "space and directions, no DICOM Image Orientation "
+                                            "(Patient) or frame positions), so they cannot be "
+                                            "turned");
       vol = reorient(vol, upper(orient), "--orient");
     }
     return vol;
@@ -621,7 +625,9 @@ int main(int argc, char** argv) {
       int64_t volumes = 1;
       print_info(std::cout, iv.path, iv.load(true, &volumes));
       if (volumes > 1)
-        std::cout << "volumes:  " << volumes << " in the file (4-D); the figures above are volume "
+        std::cout << "volumes:  " << volumes << " in the "
+                  << (iv.kind() == VolumeFileKind::dicom ? "series" : "file")
+                  << " (4-D); the figures above are volume "
                   << (info->count("--volume-index") > 0 ? iv.volume_index : 0)
                   << "'s (--volume-index N describes another)\n";
     } else if (*phantom) {

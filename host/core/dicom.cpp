@@ -5,6 +5,7 @@
 #include <gdcmPhotometricInterpretation.h>
 #include <gdcmPixelFormat.h>
 #include <gdcmScanner.h>
+#include <gdcmSequenceOfItems.h>
 #include <gdcmTag.h>
 #include <gdcmTrace.h>
 
@@ -25,6 +26,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <system_error>
@@ -41,13 +43,85 @@ namespace fs = std::filesystem;
 
 const gdcm::Tag kSeriesUid(0x0020, 0x000e);
 const gdcm::Tag kNumberOfFrames(0x0028, 0x0008);
+const gdcm::Tag kInstanceNumber(0x0020, 0x0013);
+const gdcm::Tag kAcquisitionNumber(0x0020, 0x0012);
+const gdcm::Tag kTemporalPosition(0x0020, 0x0100);
+const gdcm::Tag kEchoNumbers(0x0018, 0x0086);
+const gdcm::Tag kPosition(0x0020, 0x0032);     // Image Position (Patient)
+const gdcm::Tag kOrientation(0x0020, 0x0037);  // Image Orientation (Patient)
+const gdcm::Tag kRescaleIntercept(0x0028, 0x1052);
+const gdcm::Tag kRescaleSlope(0x0028, 0x1053);
+const gdcm::Tag kSharedGroups(0x5200, 0x9229);    // Shared Functional Groups Sequence
+const gdcm::Tag kPerFrameGroups(0x5200, 0x9230);  // Per-frame Functional Groups Sequence
+const gdcm::Tag kPlanePosition(0x0020, 0x9113);
+const gdcm::Tag kPlaneOrientation(0x0020, 0x9116);
+const gdcm::Tag kPixelMeasures(0x0028, 0x9110);
+const gdcm::Tag kPixelSpacing(0x0028, 0x0030);  // rows' spacing (y), then columns' (x)
+const gdcm::Tag kPixelValueTransformation(0x0028, 0x9145);
+const gdcm::Tag kGridFrameOffsets(0x3004, 0x000c);  // an RT dose grid's frames
 
 /// One image file read by GDCM, its pixels not yet decoded.
 struct Slice {
   fs::path file;
   std::unique_ptr<gdcm::ImageReader> reader = std::make_unique<gdcm::ImageReader>();
-  double position = 0.0;  ///< Image Position (Patient) along the slices' normal
+  unsigned frames = 1;
 };
+
+/// One 2-D image of the volume: a slice of a series, or a frame of a
+/// multi-frame file, with where it lies and how its values scale.
+struct Frame {
+  std::size_t slice = 0;                        ///< its file, in the slices
+  unsigned frame = 0;                           ///< its frame in that file
+  std::optional<std::array<double, 3>> origin;  ///< Image Position (Patient)
+  double position = 0.0;                        ///< the origin along the normal
+  std::array<double, 6> cosines{1, 0, 0, 0, 1, 0};
+  bool oriented = false;                ///< the file says how it lies (else GDCM's identity)
+  std::array<double, 2> spacing{1, 1};  ///< between columns (x), between rows (y)
+  double slope = 1.0, intercept = 0.0;
+  /// Acquisition order among the frames at one position: a slice's Temporal
+  /// Position Identifier, Echo Numbers, Acquisition Number and Instance
+  /// Number (0 where missing); a frame's place in its file.
+  std::array<double, 4> order{0, 0, 0, 0};
+};
+
+/// The numbers of a DS or IS element of `ds` (split at backslashes);
+/// empty where it is missing or any part is not a number.
+std::vector<double> numbers(const gdcm::DataSet& ds, const gdcm::Tag& tag) {
+  if (!ds.FindDataElement(tag)) return {};
+  const gdcm::ByteValue* bv = ds.GetDataElement(tag).GetByteValue();
+  if (!bv || bv->GetLength() == 0 || bv->GetLength() > 4096) return {};
+  const std::string text(bv->GetPointer(), bv->GetLength());
+  std::vector<double> out;
+  for (std::size_t at = 0;;) {
+    const std::size_t end = text.find('\\', at);
+    std::string part = text.substr(at, end == std::string::npos ? std::string::npos : end - at);
+    while (!part.empty() && (part.back() == ' ' || part.back() == '\0')) part.pop_back();
+    const std::size_t lead = part.find_first_not_of(' ');
+    part = lead == std::string::npos ? std::string() : part.substr(lead);
+    char* stop = nullptr;
+    const double v = std::strtod(part.c_str(), &stop);
+    if (part.empty() || *stop != '\0' || !std::isfinite(v)) return {};
+    out.push_back(v);
+    if (end == std::string::npos) return out;
+    at = end + 1;
+  }
+}
+
+/// A sequence element of `ds`; null where it is missing or not a sequence.
+gdcm::SmartPointer<gdcm::SequenceOfItems> sequence(const gdcm::DataSet& ds, const gdcm::Tag& tag) {
+  if (!ds.FindDataElement(tag)) return nullptr;
+  return ds.GetDataElement(tag).GetValueAsSQ();
+}
+
+/// The numbers of `tag` in the first item of the sequence `group` of `ds`
+/// (a functional group's macro), where there are `count` of them.
+std::vector<double> group_numbers(const gdcm::DataSet& ds, const gdcm::Tag& group,
+                                  const gdcm::Tag& tag, std::size_t count) {
+  const auto sq = sequence(ds, group);
+  if (!sq || sq->GetNumberOfItems() < 1) return {};
+  std::vector<double> v = numbers(sq->GetItem(1).GetNestedDataSet(), tag);
+  return v.size() == count ? v : std::vector<double>{};
+}
 
 std::string format_mm(double v) {
   char b[32];
@@ -161,13 +235,13 @@ bool supported(const gdcm::PixelFormat& pf) {
 
 /// Appends `n` decoded pixels of `pf` from `buf` to `out`, times `slope`
 /// plus `inter`.
-void convert(const std::vector<char>& buf, const gdcm::PixelFormat& pf, std::size_t n, double slope,
+void convert(const char* buf, const gdcm::PixelFormat& pf, std::size_t n, double slope,
              double inter, float* out) {
   with_scalar_type(pf, [&](auto tag) {
     using T = decltype(tag);
     for (std::size_t i = 0; i < n; ++i) {
       T v;
-      std::memcpy(&v, buf.data() + i * sizeof(T), sizeof(T));
+      std::memcpy(&v, buf + i * sizeof(T), sizeof(T));
       out[i] = static_cast<float>(static_cast<double>(v) * slope + inter);
     }
   });
@@ -408,7 +482,123 @@ std::string trim_uid(std::string s) {
   return s;
 }
 
-Volume load_dicom_files(const fs::path& path) {
+/// A frame's name in messages: its file in a series, "frame N" (from 1)
+/// of a multi-frame file.
+std::string frame_label(const std::vector<Slice>& slices, const Frame& f) {
+  if (slices[f.slice].frames > 1) return "frame " + std::to_string(f.frame + 1);
+  return slices[f.slice].file.filename().string();
+}
+std::string frame_name(const std::vector<Slice>& slices, const Frame& f) {
+  return " (" + frame_label(slices, f) + ")";
+}
+
+/// The one frame of a slice of a series (slice `i`): GDCM's plane, origin
+/// and scale; its numbers order it among slices at one position.
+/// A slice without a position is refused where it is one of several.
+Frame single_frame(const fs::path& path, const Slice& s, std::size_t i, bool in_series) {
+  const gdcm::Image& im = s.reader->GetImage();
+  const gdcm::DataSet& ds = s.reader->GetFile().GetDataSet();
+  Frame f;
+  f.slice = i;
+  std::copy(im.GetDirectionCosines(), im.GetDirectionCosines() + 6, f.cosines.begin());
+  f.oriented = ds.FindDataElement(kOrientation);
+  if (ds.FindDataElement(kPosition))
+    f.origin = {im.GetOrigin()[0], im.GetOrigin()[1], im.GetOrigin()[2]};
+  else if (in_series)
+    throw FileError(path,
+                    "a slice of its series has no Image Position (Patient), so its place "
+                    "in the volume is unknown (" +
+                        s.file.filename().string() + ")");
+  f.spacing = {im.GetSpacing(0), im.GetSpacing(1)};
+  f.slope = im.GetSlope();
+  f.intercept = im.GetIntercept();
+  const gdcm::Tag keys[4] = {kTemporalPosition, kEchoNumbers, kAcquisitionNumber, kInstanceNumber};
+  for (int k = 0; k < 4; ++k) {
+    const std::vector<double> n = numbers(ds, keys[k]);
+    f.order[k] = n.size() == 1 ? n[0] : 0.0;
+  }
+  return f;
+}
+
+/// The frames of a multi-frame file, in the file's order. An enhanced
+/// image (Enhanced CT, MR, PET: Per-frame Functional Groups) gives each
+/// frame's position, plane and scale in its functional groups (a frame's
+/// own, else the shared ones); an RT dose grid places its frames by its
+/// Grid Frame Offset Vector along the normal; other multi-frame files
+/// (GDCM's spacing, no positions) keep their frames as stored.
+std::vector<Frame> multi_frame(const fs::path& path, const Slice& s) {
+  const gdcm::Image& im = s.reader->GetImage();
+  const gdcm::DataSet& ds = s.reader->GetFile().GetDataSet();
+  const unsigned n = s.frames;
+  Frame base;
+  std::copy(im.GetDirectionCosines(), im.GetDirectionCosines() + 6, base.cosines.begin());
+  base.oriented = ds.FindDataElement(kOrientation);
+  base.spacing = {im.GetSpacing(0), im.GetSpacing(1)};
+  base.slope = im.GetSlope();
+  base.intercept = im.GetIntercept();
+  std::vector<Frame> frames(n, base);
+  for (unsigned k = 0; k < n; ++k) frames[k].frame = k, frames[k].order = {0, 0, 0, double(k)};
+
+  if (const auto per = sequence(ds, kPerFrameGroups)) {
+    if (per->GetNumberOfItems() != n)
+      throw FileError(path, "its Per-frame Functional Groups Sequence holds " +
+                                std::to_string(per->GetNumberOfItems()) + " items for its " +
+                                std::to_string(n) + " frames");
+    const auto shared_sq = sequence(ds, kSharedGroups);
+    const gdcm::DataSet* shared = shared_sq && shared_sq->GetNumberOfItems() >= 1
+                                      ? &shared_sq->GetItem(1).GetNestedDataSet()
+                                      : nullptr;
+    // A frame's own value, else the shared one, else (scale only) the
+    // image's.
+    auto value = [&](const gdcm::DataSet& own, const gdcm::Tag& group, const gdcm::Tag& tag,
+                     std::size_t count) {
+      std::vector<double> v = group_numbers(own, group, tag, count);
+      if (v.empty() && shared) v = group_numbers(*shared, group, tag, count);
+      return v;
+    };
+    const std::vector<double> top_slope = numbers(ds, kRescaleSlope),
+                              top_intercept = numbers(ds, kRescaleIntercept);
+    for (unsigned k = 0; k < n; ++k) {
+      Frame& f = frames[k];
+      const gdcm::DataSet& own = per->GetItem(k + 1).GetNestedDataSet();
+      const std::vector<double> pos = value(own, kPlanePosition, kPosition, 3);
+      if (pos.empty())
+        throw FileError(path, "frame " + std::to_string(k + 1) +
+                                  " has no Image Position (Patient) in its functional groups, "
+                                  "so its place in the volume is unknown");
+      f.origin = {pos[0], pos[1], pos[2]};
+      const std::vector<double> rows_columns = value(own, kPixelMeasures, kPixelSpacing, 2);
+      if (!rows_columns.empty()) f.spacing = {rows_columns[1], rows_columns[0]};
+      const std::vector<double> cos = value(own, kPlaneOrientation, kOrientation, 6);
+      if (!cos.empty()) {
+        std::copy(cos.begin(), cos.end(), f.cosines.begin());
+        f.oriented = true;
+      }
+      const std::vector<double> slope = value(own, kPixelValueTransformation, kRescaleSlope, 1),
+                                inter = value(own, kPixelValueTransformation, kRescaleIntercept, 1);
+      f.slope = !slope.empty() ? slope[0] : top_slope.size() == 1 ? top_slope[0] : 1.0;
+      f.intercept = !inter.empty() ? inter[0] : top_intercept.size() == 1 ? top_intercept[0] : 0.0;
+    }
+    return frames;
+  }
+
+  const std::vector<double> offsets = numbers(ds, kGridFrameOffsets);
+  if (offsets.size() == n && ds.FindDataElement(kPosition)) {
+    // Offsets along the normal from the first frame (relative where the
+    // first is 0; absolute, as older files write them, otherwise).
+    const std::array<double, 6>& c = base.cosines;
+    const std::array<double, 3> normal{c[1] * c[5] - c[2] * c[4], c[2] * c[3] - c[0] * c[5],
+                                       c[0] * c[4] - c[1] * c[3]};
+    for (unsigned k = 0; k < n; ++k) {
+      std::array<double, 3> o;
+      for (int a = 0; a < 3; ++a) o[a] = im.GetOrigin()[a] + (offsets[k] - offsets[0]) * normal[a];
+      frames[k].origin = o;
+    }
+  }
+  return frames;
+}
+
+Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int64_t* volumes) {
   GdcmWarnings warnings;
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
@@ -456,6 +646,8 @@ Volume load_dicom_files(const fs::path& path) {
   for (std::size_t i = 0; i < files.size(); ++i) {
     slices[i].file = files[i];
     read_image(path, slices[i], warnings);
+    const gdcm::Image& im = slices[i].reader->GetImage();
+    slices[i].frames = im.GetNumberOfDimensions() > 2 ? im.GetDimension(2) : 1;
   }
   const gdcm::Image& first = slices.front().reader->GetImage();
   const gdcm::PixelFormat pf = first.GetPixelFormat();
@@ -466,16 +658,11 @@ Volume load_dicom_files(const fs::path& path) {
     throw FileError(path, std::string("pixel format ") + pf.GetScalarTypeAsString() +
                               " is not supported (8, 16 or 32-bit integers, or floats)");
   const unsigned int nx = first.GetDimension(0), ny = first.GetDimension(1);
-  const unsigned int frames = first.GetNumberOfDimensions() > 2 ? first.GetDimension(2) : 1;
-  if (slices.size() > 1 && frames > 1)
+  const unsigned int nframes = slices.front().frames;
+  if (slices.size() > 1 && nframes > 1)
     throw FileError(path, "its series mixes multi-frame files (" +
                               slices.front().file.filename().string() + " holds " +
-                              std::to_string(frames) + " frames); give one of them");
-  const double* cos = first.GetDirectionCosines();
-  std::array<double, 3> row{cos[0], cos[1], cos[2]}, col{cos[3], cos[4], cos[5]};
-  const std::array<double, 3> normal{row[1] * col[2] - row[2] * col[1],
-                                     row[2] * col[0] - row[0] * col[2],
-                                     row[0] * col[1] - row[1] * col[0]};
+                              std::to_string(nframes) + " frames); give one of them");
   for (Slice& s : slices) {
     const gdcm::Image& im = s.reader->GetImage();
     const std::string which = " (" + s.file.filename().string() + ")";
@@ -485,96 +672,173 @@ Volume load_dicom_files(const fs::path& path) {
                                 " x " + std::to_string(im.GetDimension(1)) + which);
     if (!(im.GetPixelFormat() == pf))
       throw FileError(path, "its slices differ in pixel format" + which);
-    const double* c = im.GetDirectionCosines();
+  }
+
+  // The frames: a series' slices, or a multi-frame file's frames, each with
+  // its plane, position and scale.
+  std::vector<Frame> frames;
+  if (nframes > 1)
+    frames = multi_frame(path, slices.front());
+  else
+    for (std::size_t i = 0; i < slices.size(); ++i)
+      frames.push_back(single_frame(path, slices[i], i, slices.size() > 1));
+  const std::array<double, 6> cos = frames.front().cosines;
+  for (const Frame& f : frames)
     for (int k = 0; k < 6; ++k)
-      if (!(std::fabs(c[k] - cos[k]) <= 1e-4))
+      if (!(std::fabs(f.cosines[k] - cos[k]) <= 1e-4))
         throw FileError(path,
                         "its slices lie in different planes (Image Orientation (Patient) "
                         "differs" +
-                            which + "): not one volume");
-    if (slices.size() > 1 &&
-        !s.reader->GetFile().GetDataSet().FindDataElement(gdcm::Tag(0x0020, 0x0032)))
-      throw FileError(path,
-                      "a slice of its series has no Image Position (Patient), so its place "
-                      "in the volume is unknown" +
-                          which);
-    const double* o = im.GetOrigin();
-    s.position = o[0] * normal[0] + o[1] * normal[1] + o[2] * normal[2];
+                            frame_name(slices, f) + "): not one volume");
+  const std::array<double, 2> pixel = frames.front().spacing;
+  for (const Frame& f : frames)
+    for (int a = 0; a < 2; ++a)
+      if (!(std::fabs(f.spacing[a] - pixel[a]) <= 1e-4 * std::fabs(pixel[a])))
+        throw FileError(path, "its slices differ in Pixel Spacing: " + format_mm(pixel[0]) + " x " +
+                                  format_mm(pixel[1]) + " mm and " + format_mm(f.spacing[0]) +
+                                  " x " + format_mm(f.spacing[1]) + " mm" + frame_name(slices, f) +
+                                  ": not one volume");
+  const std::array<double, 3> row{cos[0], cos[1], cos[2]}, col{cos[3], cos[4], cos[5]};
+  const std::array<double, 3> normal{row[1] * col[2] - row[2] * col[1],
+                                     row[2] * col[0] - row[0] * col[2],
+                                     row[0] * col[1] - row[1] * col[0]};
+  const bool placed = std::all_of(frames.begin(), frames.end(),
+                                  [](const Frame& f) { return f.origin.has_value(); });
+  for (Frame& f : frames) {
+    if (f.origin && !(std::isfinite((*f.origin)[0]) && std::isfinite((*f.origin)[1]) &&
+                      std::isfinite((*f.origin)[2])))
+      throw FileError(
+          path, "the Image Position (Patient) of " + frame_label(slices, f) + " is not a number");
+    if (f.origin)
+      f.position =
+          (*f.origin)[0] * normal[0] + (*f.origin)[1] * normal[1] + (*f.origin)[2] * normal[2];
   }
-  std::stable_sort(slices.begin(), slices.end(),
-                   [](const Slice& a, const Slice& b) { return a.position < b.position; });
 
-  // The spacing: columns, rows, and the slices' positions (a multi-frame
-  // file's from GDCM, which reads its frame positions or offsets).
-  std::array<double, 3> spacing{first.GetSpacing(0), first.GetSpacing(1), first.GetSpacing(2)};
-  if (slices.size() > 1) {
-    const double span = slices.back().position - slices.front().position;
-    const double mean = span / static_cast<double>(slices.size() - 1);
-    for (std::size_t i = 1; i < slices.size(); ++i)
-      if (!(slices[i].position - slices[i - 1].position > 1e-3 * std::max(1.0, std::fabs(mean))))
-        throw FileError(path, "two slices lie at the same position (" +
-                                  format_mm(slices[i].position) +
-                                  " mm: " + slices[i - 1].file.filename().string() + " and " +
-                                  slices[i].file.filename().string() +
-                                  "): several acquisitions in one series?");
-    for (std::size_t i = 1; i < slices.size(); ++i) {
-      const double gap = slices[i].position - slices[i - 1].position;
-      if (std::fabs(gap - mean) > 0.01 * mean + 1e-3)
-        throw FileError(path, "its slices are not evenly spaced: " + format_mm(gap) +
-                                  " mm between " + slices[i - 1].file.filename().string() +
-                                  " and " + slices[i].file.filename().string() + ", " +
-                                  format_mm(mean) + " mm on average (a slice missing?)");
+  // The frames of the volume asked for, in order along the normal: where
+  // several lie at each position (time points, echoes, acquisitions), the
+  // index-th of each in acquisition order.
+  std::array<double, 3> spacing{pixel[0], pixel[1], first.GetSpacing(2)};
+  std::vector<const Frame*> chosen;
+  int64_t nvol = 1;
+  if (!placed || frames.size() == 1) {
+    // A multi-frame file that gives no frame positions: its frames as
+    // stored, its z spacing GDCM's.
+    for (const Frame& f : frames) chosen.push_back(&f);
+  } else {
+    std::vector<const Frame*> order;
+    for (const Frame& f : frames) order.push_back(&f);
+    std::stable_sort(order.begin(), order.end(), [](const Frame* a, const Frame* b) {
+      return a->position != b->position ? a->position < b->position : a->order < b->order;
+    });
+    const double span = order.back()->position - order.front()->position;
+    const double tol = 1e-3 * std::max(1.0, span / static_cast<double>(order.size() - 1));
+    std::vector<std::vector<const Frame*>> at;  // the frames at each position
+    for (const Frame* f : order) {
+      if (at.empty() || f->position - at.back().front()->position > tol) at.emplace_back();
+      at.back().push_back(f);
     }
-    spacing[2] = mean;
+    nvol = static_cast<int64_t>(at.front().size());
+    for (const auto& here : at)
+      if (static_cast<int64_t>(here.size()) != nvol) {
+        const auto& fewer = here.size() < at.front().size() ? here : at.front();
+        const auto& more = here.size() < at.front().size() ? at.front() : here;
+        auto names = [&](const std::vector<const Frame*>& fs) {
+          std::string n;
+          for (std::size_t i = 0; i < fs.size() && i < 4; ++i)
+            n += (i ? ", " : "") + frame_label(slices, *fs[i]);
+          return n + (fs.size() > 4 ? ", ..." : "");
+        };
+        throw FileError(path,
+                        "its slices do not make whole volumes: " + std::to_string(more.size()) +
+                            " lie at " + format_mm(more.front()->position) + " mm (" + names(more) +
+                            ") but " + std::to_string(fewer.size()) + " at " +
+                            format_mm(fewer.front()->position) + " mm (" + names(fewer) +
+                            "): a slice missing, or slices of several acquisitions in one series?");
+      }
+    if (nvol > 1 && !index)
+      throw FileError(path, "holds " + std::to_string(nvol) + " 3-D volumes (" +
+                                std::to_string(nvol) + " slices at each of " +
+                                std::to_string(at.size()) +
+                                " positions: time points, echoes or acquisitions): give the "
+                                "index of one, 0.." +
+                                std::to_string(nvol - 1) + " (simdvol: --volume-index)");
+    const int64_t v = index ? *index : 0;
+    if (v < 0 || v >= nvol)
+      throw FileError(path, "volume index " + std::to_string(v) + " is outside 0.." +
+                                std::to_string(nvol - 1) + " (the series holds " +
+                                std::to_string(nvol) + (nvol == 1 ? " volume)" : " volumes)"));
+    for (const auto& here : at) chosen.push_back(here[static_cast<std::size_t>(v)]);
+    if (chosen.size() > 1) {
+      const double mean = (chosen.back()->position - chosen.front()->position) /
+                          static_cast<double>(chosen.size() - 1);
+      for (std::size_t i = 1; i < chosen.size(); ++i) {
+        const double gap = chosen[i]->position - chosen[i - 1]->position;
+        if (std::fabs(gap - mean) > 0.01 * mean + 1e-3)
+          throw FileError(path, "its slices are not evenly spaced: " + format_mm(gap) +
+                                    " mm between " + frame_label(slices, *chosen[i - 1]) + " and " +
+                                    frame_label(slices, *chosen[i]) + ", " + format_mm(mean) +
+                                    " mm on average (a slice missing?)");
+      }
+      spacing[2] = mean;
+    }
   }
+  if (volumes) *volumes = nvol;
+  if (index && (!placed || frames.size() == 1) && *index != 0)
+    throw FileError(path, "volume index " + std::to_string(*index) +
+                              " is outside 0..0 (the series holds 1 volume)");
   for (double& s : spacing)
     if (!(s > 0.0) || !std::isfinite(s)) s = 1.0;
 
-  const int64_t nz = static_cast<int64_t>(slices.size()) * frames;
-  const std::array<int64_t, 3> dims{nx, ny, nz};
-  // Rescale Slope and Intercept, per slice (they may differ from slice to
-  // slice); a volume any slice of which is scaled loads as f32.
+  // Rescale Slope and Intercept, per frame (they may differ from slice to
+  // slice); a volume any frame of which is scaled loads as f32.
   bool scaled = false;
-  for (const Slice& s : slices) {
-    const gdcm::Image& im = s.reader->GetImage();
-    if (!std::isfinite(im.GetSlope()) || !std::isfinite(im.GetIntercept()) || im.GetSlope() == 0.0)
-      throw FileError(path, "Rescale Slope " + format_mm(im.GetSlope()) + " / Intercept " +
-                                format_mm(im.GetIntercept()) + " of " + s.file.filename().string() +
+  for (const Frame* f : chosen) {
+    if (!std::isfinite(f->slope) || !std::isfinite(f->intercept) || f->slope == 0.0)
+      throw FileError(path, "Rescale Slope " + format_mm(f->slope) + " / Intercept " +
+                                format_mm(f->intercept) + " of " + frame_label(slices, *f) +
                                 " are not usable");
-    scaled = scaled || im.GetSlope() != 1.0 || im.GetIntercept() != 0.0;
+    scaled = scaled || f->slope != 1.0 || f->intercept != 0.0;
   }
+  const std::array<int64_t, 3> dims{nx, ny, static_cast<int64_t>(chosen.size())};
   Volume vol(dims, scaled ? VoxelType::f32 : voxel_type(pf), spacing);
-  const std::size_t per_file = static_cast<std::size_t>(nx) * ny * frames;
+  const std::size_t per_frame = static_cast<std::size_t>(nx) * ny;
+  const std::size_t frame_bytes = per_frame * pf.GetPixelSize();
   std::vector<char> buf;
+  std::size_t decoded = slices.size();  // the slice whose pixels `buf` holds
   float* out = vol.data().data();
-  for (const Slice& s : slices) {
-    const gdcm::Image& im = s.reader->GetImage();
-    const unsigned long len = im.GetBufferLength();
-    if (len < per_file * pf.GetPixelSize())
-      throw FileError(
-          path, "holds fewer pixels than its header says (" + s.file.filename().string() + ")");
-    buf.resize(len);
-    if (!im.GetBuffer(buf.data()))
-      throw FileError(path, "GDCM could not decode the pixels of " + s.file.filename().string() +
-                                " (corrupt, or a compression it cannot read)");
-    convert(buf, pf, per_file, im.GetSlope(), im.GetIntercept(), out);
-    out += per_file;
+  for (const Frame* f : chosen) {
+    if (f->slice != decoded) {
+      const Slice& s = slices[f->slice];
+      const gdcm::Image& im = s.reader->GetImage();
+      const unsigned long len = im.GetBufferLength();
+      if (len < frame_bytes * s.frames)
+        throw FileError(
+            path, "holds fewer pixels than its header says (" + s.file.filename().string() + ")");
+      buf.resize(len);
+      if (!im.GetBuffer(buf.data()))
+        throw FileError(path, "GDCM could not decode the pixels of " + s.file.filename().string() +
+                                  " (corrupt, or a compression it cannot read)");
+      decoded = f->slice;
+    }
+    convert(buf.data() + f->frame * frame_bytes, pf, per_frame, f->slope, f->intercept, out);
+    out += per_frame;
   }
 
-  // Where the axes point: rows, columns and the slices' order, in DICOM's
-  // LPS space. A multi-frame file's frame order is not known here.
-  // (GDCM gives rows along x and columns along y where the file says
-  // nothing: no orientation then.)
+  // Where the axes point: rows, columns and the frames' order along the
+  // normal, in DICOM's LPS space; none where a file does not say how its
+  // images lie (GDCM gives rows along x and columns along y where the file
+  // says nothing) or a multi-frame file does not place its frames.
   const bool said =
-      slices.front().reader->GetFile().GetDataSet().FindDataElement(gdcm::Tag(0x0020, 0x0037));
-  if (frames == 1 && said) vol.set_orientation(closest_orientation({row, col, normal}, "LPS"));
+      std::all_of(frames.begin(), frames.end(), [](const Frame& f) { return f.oriented; });
+  if (said && (placed || frames.size() == 1))
+    vol.set_orientation(closest_orientation({row, col, normal}, "LPS"));
   return vol;
 }
 
 /// load_dicom_files, GDCM's exceptions made FileErrors.
-Volume load_dicom_here(const fs::path& path) {
+Volume load_dicom_here(const fs::path& path, std::optional<int64_t> index, int64_t* volumes) {
   try {
-    return load_dicom_files(path);
+    return load_dicom_files(path, index, volumes);
   } catch (const Error&) {
     throw;
   } catch (const std::bad_alloc&) {
@@ -591,14 +855,15 @@ struct DicomReply {
   int64_t dims[3] = {0, 0, 0};
   double spacing[3] = {1, 1, 1};
   char orientation[4] = {0, 0, 0, 0};
+  int64_t volumes = 1;      ///< 3-D volumes in the series (status 0 and 1)
   uint32_t text_bytes = 0;  ///< status 1: the error's path, a NUL, its problem
 };
 
 /// The reading process: loads, sends the volume or the error down `fd`.
-[[noreturn]] void dicom_child(const fs::path& path, int fd) {
+[[noreturn]] void dicom_child(const fs::path& path, std::optional<int64_t> index, int fd) {
   DicomReply reply;
   try {
-    const Volume v = load_dicom_here(path);
+    const Volume v = load_dicom_here(path, index, &reply.volumes);
     reply.type = static_cast<int32_t>(v.type());
     for (int a = 0; a < 3; ++a) {
       reply.dims[a] = v.dims()[a];
@@ -641,7 +906,9 @@ std::string last_line(int fd) {
 
 }  // namespace
 
-Volume load_dicom(const std::filesystem::path& path) {
+Volume load_dicom(const std::filesystem::path& path, std::optional<int64_t> volume_index,
+                  int64_t* volumes) {
+  if (volumes) *volumes = 1;
   // GDCM (and the codecs under it) stop the process with assert() or worse
   // on some files, valid ones among them (Debian's GDCM 3.0.21 aborts in
   // GetSpacingValue on an RT dose grid of one frame): the files are read in
@@ -650,7 +917,7 @@ Volume load_dicom(const std::filesystem::path& path) {
   // messages go to a temporary file, quoted in that error.
   // SIMDVOL_DICOM_IN_PROCESS=1 reads in this process (the fuzz target).
   if (const char* e = std::getenv("SIMDVOL_DICOM_IN_PROCESS"); e && std::string(e) == "1")
-    return load_dicom_here(path);
+    return load_dicom_here(path, volume_index, volumes);
   int fds[2];
   if (::pipe2(fds, O_CLOEXEC) != 0)
     throw FileError(path, std::string("cannot make a pipe to read it: ") + std::strerror(errno));
@@ -668,7 +935,7 @@ Volume load_dicom(const std::filesystem::path& path) {
   if (pid == 0) {
     ::close(fds[0]);
     if (log) ::dup2(::fileno(log), 2);
-    dicom_child(path, fds[1]);
+    dicom_child(path, volume_index, fds[1]);
   }
   ::close(fds[1]);
   struct Closer {
@@ -692,6 +959,7 @@ Volume load_dicom(const std::filesystem::path& path) {
   } child{fds[0], log, pid};
   DicomReply reply;
   const bool got = read_fully(fds[0], &reply, sizeof reply);
+  if (got && volumes && reply.volumes >= 1) *volumes = reply.volumes;
   if (got && reply.status == 0) {
     const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
     Volume vol(dims, static_cast<VoxelType>(reply.type),

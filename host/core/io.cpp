@@ -1299,10 +1299,10 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
   if (kind != VolumeFileKind::dicom) refuse_directory(path);
   if (kind == VolumeFileKind::nifti) return load_nifti(path, volume_index, volumes);
   if (kind == VolumeFileKind::nrrd) return load_nrrd(path, volume_index, volumes);
+  if (kind == VolumeFileKind::dicom) return load_dicom(path, volume_index, volumes);
   if (volume_index)
-    throw FileError(path, std::string("a volume index applies only to NIfTI and NRRD files (") +
+    throw FileError(path, std::string("a volume index applies only to NIfTI, NRRD and DICOM (") +
                               std::string(kSeriesFileNames) + ")");
-  if (kind == VolumeFileKind::dicom) return load_dicom(path);
   if (kind == VolumeFileKind::den) return load_den(path);
   if (kind == VolumeFileKind::raw) {
     if (!raw)

@@ -16,6 +16,8 @@
 #include <type_traits>
 #include <vector>
 
+#include "dicom_enhanced.hpp"
+
 namespace simdvol::testing {
 
 /// One slice of a classic (single-frame) DICOM series, as GDCM's writer
@@ -31,6 +33,8 @@ struct DicomSlice {
   int samples = 1;
   bool orientation = true;   ///< false: Image Orientation (Patient) taken out
   bool has_position = true;  ///< false: Image Position (Patient) taken out
+  int instance = 0;          ///< Instance Number, where not 0
+  int temporal = 0;          ///< Temporal Position Identifier, where not 0
 };
 
 template <typename T>
@@ -66,6 +70,16 @@ void write_dicom_slice(const std::filesystem::path& p, int nx, int ny, const std
   gdcm::Attribute<0x0020, 0x000e> uid;
   uid.SetValue(s.series);
   ds.Replace(uid.GetAsDataElement());
+  if (s.instance != 0) {
+    gdcm::Attribute<0x0020, 0x0013> number;
+    number.SetValue(s.instance);
+    ds.Replace(number.GetAsDataElement());
+  }
+  if (s.temporal != 0) {
+    gdcm::Attribute<0x0020, 0x0100> when;
+    when.SetValue(s.temporal);
+    ds.Replace(when.GetAsDataElement());
+  }
   w.SetFileName(p.c_str());
   ASSERT_TRUE(w.Write()) << p;
   if (!s.orientation || !s.has_position) {  // (GDCM's image writer always writes them)

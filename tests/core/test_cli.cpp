@@ -306,12 +306,17 @@ TEST_F(Cli, OrientTurnsTheAxesAsTheHeaderSays) {
 // A DICOM CT series renders as the same Hounsfield values saved as a NRRD:
 // its slices (files named against their order) sorted by position,
 // Rescale Intercept applied, `auto` taking them for CT; from the directory
-// and from one slice, bit for bit. `info` describes the series.
+// and from one slice, bit for bit; so does the second time point of an
+// enhanced multi-frame file by --volume-index, which without it is refused
+// with how many volumes it holds. `info` describes the series.
 TEST_F(Cli, RendersADicomSeries) {
   const simdvol::Volume ph = simdvol::shepp_logan(24, 2);
   const fs::path dir = dir_ / "series";
   fs::create_directories(dir);
   simdvol::Volume hu(ph.dims(), simdvol::VoxelType::f32, {0.5, 0.7, 1.25});
+  // The same as the time point 1 of an enhanced multi-frame file whose
+  // time point 0 is air, its frames stored from the top down.
+  std::vector<simdvol::testing::EnhancedFrame> frames(48);
   for (int64_t z = 0; z < 24; ++z) {
     std::vector<int16_t> px(24 * 24);
     for (int64_t y = 0; y < 24; ++y)
@@ -324,7 +329,14 @@ TEST_F(Cli, RendersADicomSeries) {
     s.position = {-20, 30, 7.5 + 1.25 * static_cast<double>(z)};
     s.intercept = -1024;
     write_dicom_slice(dir / ("IM" + std::to_string(1000 - z)), 24, 24, px, s);
+    for (int t = 0; t < 2; ++t) {
+      auto& f = frames[static_cast<std::size_t>(t * 24 + 23 - z)];
+      f.position = s.position;
+      f.pixels = t == 1 ? px : std::vector<int16_t>(px.size(), 24);
+    }
   }
+  simdvol::testing::write_enhanced_dicom(path("enhanced.dcm"), 24, 24, frames, {1, 0, 0, 0, 1, 0},
+                                         {0.5, 0.7}, std::array<double, 2>{1.0, -1024.0});
   simdvol::save_nrrd(hu, path("hu.nrrd"));
   const std::string common = " --size 32x32 --view 20,35,10 -o ";
   ASSERT_EQ(run("render " + dir.string() + common + path("a.tif")).code, 0);
@@ -336,6 +348,21 @@ TEST_F(Cli, RendersADicomSeries) {
   expect_same_pixels(a, c);
   expect_same_pixels(b, c);
   EXPECT_GT(alpha_sum(a), 1.0);
+  ASSERT_EQ(
+      run("render " + path("enhanced.dcm") + " --volume-index 1" + common + path("d.tif")).code, 0);
+  expect_same_pixels(simdvol::read_image(path("d.tif")), c);
+  const Result four = run("render " + path("enhanced.dcm") + common + path("e.tif"));
+  EXPECT_EQ(four.code, 1);
+  EXPECT_NE(four.output.find("holds 2 3-D volumes (2 slices at each of 24 positions"),
+            std::string::npos)
+      << four.output;
+  EXPECT_FALSE(fs::exists(path("e.tif")));
+  const Result info4 = run("info " + path("enhanced.dcm"));
+  ASSERT_EQ(info4.code, 0) << info4.output;
+  EXPECT_NE(info4.output.find("volumes:  2 in the series (4-D); the figures above are volume 0's"),
+            std::string::npos)
+      << info4.output;
+  EXPECT_NE(info4.output.find("range:    -1000 .. -1000"), std::string::npos) << info4.output;
   const Result info = run("info " + dir.string());
   ASSERT_EQ(info.code, 0) << info.output;
   EXPECT_NE(info.output.find("dims:     24 x 24 x 24"), std::string::npos) << info.output;
@@ -799,12 +826,11 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --raw-dims 2,2,2 -o " + path("x.png"),
        "--raw-dims: applies only to .raw volumes (no volume given)"},
       {"render --volume-index 1 -o " + path("x.png"),
-       "--volume-index: applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .hdr/.img, .nrrd, "
-       ".nhdr) (no "
-       "volume given)"},
+       "--volume-index: applies only to NIfTI, NRRD and DICOM volumes (.nii, .nii.gz, .hdr/.img, "
+       ".nrrd, .nhdr, DICOM) (no volume given)"},
       {"info " + path("vol.raw") + " --raw-dims 2,2,2 --volume-index 0",
-       "--volume-index: applies only to NIfTI and NRRD volumes (.nii, .nii.gz, .hdr/.img, .nrrd, "
-       ".nhdr) (" +
+       "--volume-index: applies only to NIfTI, NRRD and DICOM volumes (.nii, .nii.gz, .hdr/.img, "
+       ".nrrd, .nhdr, DICOM) (" +
            path("vol.raw") + " is not one)"},
       {"render --no-shade --light 1,0,0 -o " + path("x.png"),
        "--light: applies only to lit renders (not with --no-shade)"},

@@ -1120,12 +1120,12 @@ TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
   EXPECT_EQ(volumes, 1);
   expect_file_error([&] { simdvol::load_nifti(file("3d.nii"), 1); }, file("3d.nii"),
                     {"outside 0..0", "holds 1 volume"});
-  // Neither NIfTI nor NRRD.
+  // Neither NIfTI, NRRD nor DICOM.
   write_file(file("v.raw"), encode(VoxelType::u8, first, false));
   simdvol::RawLayout raw;
   raw.dims = kDims;
   expect_file_error([&] { simdvol::load_volume(file("v.raw"), raw, 0); }, file("v.raw"),
-                    {"applies only to NIfTI and NRRD"});
+                    {"applies only to NIfTI, NRRD and DICOM"});
 }
 
 // ----------------------------------------- NIfTI-2, .hdr/.img pairs, Analyze
@@ -1588,7 +1588,9 @@ TEST_F(IoTest, DicomSeriesMalformed) {
   expect_file_error([&] { simdvol::load_volume(nowhere); }, nowhere,
                     {"has no Image Position (Patient)"});
   const fs::path dup = series("dup", {0, 1, 1, 2});
-  expect_file_error([&] { simdvol::load_volume(dup); }, dup, {"two slices lie at the same"});
+  expect_file_error([&] { simdvol::load_volume(dup); }, dup,
+                    {"its slices do not make whole volumes: 2 lie at 1 mm (i1, i2) but 1 at 0 mm "
+                     "(i0): a slice missing, or slices of several acquisitions in one series?"});
   const fs::path gap = series("gap", {0, 1, 2, 4, 5});
   expect_file_error([&] { simdvol::load_volume(gap); }, gap, {"not evenly spaced"});
   const fs::path wide = series("wide", {0, 1, 2}, [](int k, DicomSlice&, int& w) {
@@ -1599,6 +1601,11 @@ TEST_F(IoTest, DicomSeriesMalformed) {
     if (k == 2) s.cosines = {0, 1, 0, 0, 0, 1};
   });
   expect_file_error([&] { simdvol::load_volume(tilted); }, tilted, {"different planes"});
+  const fs::path fine = series("fine", {0, 1, 2}, [](int k, DicomSlice& s, int&) {
+    if (k == 1) s.spacing = {0.5, 0.35};
+  });
+  expect_file_error([&] { simdvol::load_volume(fine); }, fine,
+                    {"its slices differ in Pixel Spacing: 0.5 x 0.7 mm and 0.5 x 0.35 mm (i1)"});
   const fs::path rgb = file("rgb");
   fs::create_directories(rgb);
   DicomSlice c;
@@ -1637,7 +1644,149 @@ TEST_F(IoTest, DicomSeriesMalformed) {
                     {"holds no DICOM image"});
   expect_file_error([&] { simdvol::load_volume(file("gone.dcm")); }, file("gone.dcm"),
                     {"not found"});
-  EXPECT_THROW(simdvol::load_volume(dup, std::nullopt, 0), simdvol::FileError);  // no index
+  EXPECT_EQ(simdvol::load_volume(two / "i3", std::nullopt, 0).dims()[2], 2);  // one volume
+  expect_file_error([&] { simdvol::load_volume(two / "i0", std::nullopt, 1); }, two / "i0",
+                    {"volume index 1 is outside 0..0 (the series holds 1 volume)"});
+}
+
+// A series of several acquisitions (time points, echoes): every position
+// holds the same number of slices, and volume v is the v-th of each in
+// acquisition order (Temporal Position Identifier, Echo Numbers, Acquisition
+// Number, Instance Number; whatever the files' names), as a 4-D
+// NIfTI's volumes by --volume-index; without an index it is an error that
+// says how many there are.
+TEST_F(IoTest, DicomSeriesOfSeveralVolumes) {
+  constexpr int nx = 3, ny = 2, nz = 4, nt = 3;
+  // Slice z of time point t holds 1000 t + 10 z + i; its file's name puts
+  // the time points out of order at every position. "instances": instance
+  // numbers run through the positions of one time point after another;
+  // "temporal": they start again at each time point, whose Temporal
+  // Position Identifier tells them apart.
+  for (const bool temporal : {false, true}) {
+    const fs::path dir = file(temporal ? "temporal" : "instances");
+    SCOPED_TRACE(dir.string());
+    fs::create_directories(dir);
+    for (int t = 0; t < nt; ++t)
+      for (int z = 0; z < nz; ++z) {
+        std::vector<int16_t> px(nx * ny);
+        for (int i = 0; i < nx * ny; ++i) px[i] = static_cast<int16_t>(1000 * t + 10 * z + i);
+        DicomSlice s;
+        s.position = {0, 0, -5.0 + 2.0 * z};
+        s.instance = temporal ? 1 + z : 1 + t * nz + z;
+        s.temporal = temporal ? 1 + t : 0;
+        const std::string name = std::to_string((5 * (t * nz + z) + 3) % 12);
+        write_dicom_slice(dir / name, nx, ny, px, s);
+      }
+    expect_file_error([&] { simdvol::load_volume(dir); }, dir,
+                      {"holds 3 3-D volumes (3 slices at each of 4 positions: time points, "
+                       "echoes or acquisitions): give the index of one, 0..2 (simdvol: "
+                       "--volume-index)"});
+    for (int t = 0; t < nt; ++t) {
+      SCOPED_TRACE(t);
+      int64_t volumes = 0;
+      const Volume v = simdvol::load_volume(dir / "5", std::nullopt, t, &volumes);
+      EXPECT_EQ(volumes, nt);
+      ASSERT_EQ(v.dims(), (std::array<int64_t, 3>{nx, ny, nz}));
+      EXPECT_EQ(v.type(), VoxelType::i16);
+      EXPECT_DOUBLE_EQ(v.spacing()[2], 2.0);
+      EXPECT_EQ(v.orientation(), "LPS");
+      for (int z = 0; z < nz; ++z)
+        for (int i = 0; i < nx * ny; ++i)
+          EXPECT_EQ(v.at(i % nx, i / nx, z), static_cast<float>(1000 * t + 10 * z + i));
+    }
+    expect_file_error([&] { simdvol::load_volume(dir, std::nullopt, 3); }, dir,
+                      {"volume index 3 is outside 0..2 (the series holds 3 volumes)"});
+  }
+}
+
+// An enhanced multi-frame file (Enhanced CT, MR: PS3.3 C.7.6.16) places
+// each frame by its own functional groups: frames stored in any order are
+// sorted along the normal, each scaled by its own Rescale Slope and
+// Intercept (else the shared ones), the plane and the spacing from the
+// shared groups, the orientation from both; several frames at each
+// position are several volumes. Broken groups are errors naming the frame.
+TEST_F(IoTest, DicomEnhancedMultiFrame) {
+  using simdvol::testing::EnhancedFrame;
+  using simdvol::testing::write_enhanced_dicom;
+  constexpr int nx = 4, ny = 3, nz = 5;
+  // Stored frame k lies at z = 10 + 2.5 perm[k] and holds 100 perm[k] + i;
+  // odd ones have their own slope.
+  const int perm[nz] = {2, 0, 4, 1, 3};
+  std::vector<EnhancedFrame> frames(nz);
+  std::vector<float> want(static_cast<std::size_t>(nx * ny * nz));
+  for (int k = 0; k < nz; ++k) {
+    EnhancedFrame& f = frames[k];
+    f.position = std::array<double, 3>{-30, -40, 10 + 2.5 * perm[k]};
+    if (k % 2) f.scale = std::array<double, 2>{3.0, -1000.0};
+    for (int i = 0; i < nx * ny; ++i) {
+      f.pixels.push_back(static_cast<int16_t>(100 * perm[k] + i));
+      want[static_cast<std::size_t>(perm[k] * nx * ny + i)] =
+          static_cast<float>((100 * perm[k] + i) * (k % 2 ? 3.0 : 2.0) - (k % 2 ? 1000 : 1024));
+    }
+  }
+  const std::array<double, 6> axial{1, 0, 0, 0, 1, 0};
+  write_enhanced_dicom(file("ect.dcm"), nx, ny, frames, axial, {0.5, 0.7},
+                       std::array<double, 2>{2.0, -1024.0});
+  const Volume v = simdvol::load_volume(file("ect.dcm"));
+  ASSERT_EQ(v.dims(), (std::array<int64_t, 3>{nx, ny, nz}));
+  EXPECT_EQ(v.type(), VoxelType::f32);
+  EXPECT_DOUBLE_EQ(v.spacing()[0], 0.5);
+  EXPECT_DOUBLE_EQ(v.spacing()[1], 0.7);
+  EXPECT_DOUBLE_EQ(v.spacing()[2], 2.5);
+  EXPECT_EQ(v.orientation(), "LPS");
+  EXPECT_EQ(v.data(), want);
+
+  // Sagittal frames (rows to the back, columns down: the normal points to
+  // the patient's right, -x in LPS) of two time points, stored time point
+  // by time point; no scale anywhere, so the type follows the pixels.
+  const std::array<double, 6> sagittal{0, 1, 0, 0, 0, -1};
+  std::vector<EnhancedFrame> dyn;
+  for (int t = 0; t < 2; ++t)
+    for (int z = 0; z < 3; ++z) {
+      EnhancedFrame f;
+      f.position = std::array<double, 3>{-4.0 * z, 0, 0};  // along the normal
+      for (int i = 0; i < nx * ny; ++i)
+        f.pixels.push_back(static_cast<int16_t>(1000 * t + 10 * z + i));
+      dyn.push_back(f);
+    }
+  write_enhanced_dicom(file("dyn.dcm"), nx, ny, dyn, sagittal, {0.9, 0.9}, std::nullopt);
+  expect_file_error([&] { simdvol::load_volume(file("dyn.dcm")); }, file("dyn.dcm"),
+                    {"holds 2 3-D volumes (2 slices at each of 3 positions"});
+  for (int t = 0; t < 2; ++t) {
+    int64_t volumes = 0;
+    const Volume d = simdvol::load_volume(file("dyn.dcm"), std::nullopt, t, &volumes);
+    EXPECT_EQ(volumes, 2);
+    ASSERT_EQ(d.dims(), (std::array<int64_t, 3>{nx, ny, 3}));
+    EXPECT_EQ(d.type(), VoxelType::i16);
+    EXPECT_DOUBLE_EQ(d.spacing()[2], 4.0);
+    EXPECT_EQ(d.orientation(), "PIR");
+    for (int z = 0; z < 3; ++z)
+      for (int i = 0; i < nx * ny; ++i)
+        EXPECT_EQ(d.at(i % nx, i / nx, z), static_cast<float>(1000 * t + 10 * z + i));
+  }
+
+  // Broken: a frame without its position, fewer items than frames, an
+  // uneven gap, a position with one frame too few.
+  std::vector<EnhancedFrame> lost = frames;
+  lost[3].position.reset();
+  write_enhanced_dicom(file("lost.dcm"), nx, ny, lost, axial, {0.5, 0.7}, std::nullopt);
+  expect_file_error([&] { simdvol::load_volume(file("lost.dcm")); }, file("lost.dcm"),
+                    {"frame 4 has no Image Position (Patient) in its functional groups"});
+  write_enhanced_dicom(file("few.dcm"), nx, ny, frames, axial, {0.5, 0.7}, std::nullopt, 4);
+  expect_file_error([&] { simdvol::load_volume(file("few.dcm")); }, file("few.dcm"),
+                    {"its Per-frame Functional Groups Sequence holds 4 items for its 5 frames"});
+  std::vector<EnhancedFrame> uneven = frames;
+  (*uneven[2].position)[2] = 30;  // perm 4: z 20 -> 30
+  write_enhanced_dicom(file("uneven.dcm"), nx, ny, uneven, axial, {0.5, 0.7}, std::nullopt);
+  expect_file_error([&] { simdvol::load_volume(file("uneven.dcm")); }, file("uneven.dcm"),
+                    {"not evenly spaced: 2.5 mm between frame 2 and frame 4, 5 mm on average"});
+  std::vector<EnhancedFrame> odd = dyn;
+  odd.pop_back();
+  write_enhanced_dicom(file("odd.dcm"), nx, ny, odd, sagittal, {0.9, 0.9}, std::nullopt);
+  expect_file_error([&] { simdvol::load_volume(file("odd.dcm"), std::nullopt, 0); },
+                    file("odd.dcm"),
+                    {"do not make whole volumes: 2 lie at 0 mm (frame 1, frame 4) but 1 at 8 mm "
+                     "(frame 3)"});
 }
 
 // Real DICOM files nobody here made (pydicom's test files, from Debian's
@@ -1687,6 +1836,10 @@ TEST(IoReal, DicomPydicomFiles) {
                                                {2, 0, 7, 1249000}}};
   for (const auto& [x, y, z, raw] : at)
     EXPECT_FLOAT_EQ(r.at(x, y, z), static_cast<float>(raw * 1e-6)) << x << "," << y << "," << z;
+  // Its frames lie along the normal by its Grid Frame Offset Vector (0, 5,
+  // ..., 70 mm), its planes axial (Image Orientation (Patient) 1,0,0,0,1,0).
+  EXPECT_DOUBLE_EQ(r.spacing()[2], 5.0);
+  EXPECT_EQ(r.orientation(), "LPS");
   // Its one-frame version stops Debian's GDCM 3.0.21 with an assertion (in
   // ImageHelper::GetSpacingValue): read in a child process, it is an error
   // that quotes GDCM, and this process goes on.

@@ -65,18 +65,28 @@ Volume load_nifti(const std::filesystem::path& path,
 
 /// DICOM through GDCM: `path` names a directory holding one series' slices,
 /// one slice of a series (the series' other slices are found beside it by
-/// their Series Instance UID), or one multi-frame file. Slices are sorted by
-/// their position along the normal of their plane and must lie evenly
-/// spaced in one plane orientation, of one size and pixel format; grey
-/// scale only (any transfer syntax GDCM decodes: JPEG, JPEG 2000, JPEG-LS,
-/// RLE). Rescale Slope and Intercept are applied per slice (Hounsfield
-/// units for CT), the type following the pixels as for NIfTI (f32 where
-/// any slice is scaled). The spacing: Pixel Spacing, and the slices' mean
-/// gap (a multi-frame file's from GDCM). The orientation: Image
-/// Orientation (Patient) and the slice order, in DICOM's LPS space (none
-/// for a multi-frame file). A directory of several series is a FileError
-/// that lists them.
-Volume load_dicom(const std::filesystem::path& path);
+/// their Series Instance UID), or one multi-frame file: an enhanced one
+/// (Enhanced CT, MR, PET) places each frame by its functional groups (a
+/// frame's own, else the shared ones: position, plane, Pixel Spacing,
+/// scale), an RT dose grid by its Grid Frame Offset Vector; other
+/// multi-frame files keep their frames as stored. Slices and placed frames
+/// are sorted by their position along the normal of their plane and must
+/// lie evenly spaced in one plane orientation, of one size, Pixel Spacing
+/// and pixel format; grey scale only (any transfer syntax GDCM decodes:
+/// JPEG, JPEG 2000, JPEG-LS, RLE). Rescale Slope and Intercept are applied
+/// per slice or frame (Hounsfield units for CT), the type following the
+/// pixels as for NIfTI (f32 where any is scaled). The spacing: Pixel
+/// Spacing, and the mean gap (an unplaced multi-frame file's from GDCM).
+/// The orientation: Image Orientation (Patient) and the slice order, in
+/// DICOM's LPS space (none for unplaced frames). Where every position
+/// holds K images (time points, echoes), the series holds K volumes:
+/// `volume_index` picks one (volume v: the v-th at each position in
+/// acquisition order: Temporal Position Identifier, Echo Numbers,
+/// Acquisition Number, Instance Number; a frame's place in its file), and
+/// is needed where K > 1; `volumes` receives K. A directory of several
+/// series is a FileError that lists them.
+Volume load_dicom(const std::filesystem::path& path,
+                  std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
 /// The kinds of volume file load_volume reads, told by the name's ending
 /// (whatever its case), else by being a directory (DICOM) or by "DICM" at
@@ -87,12 +97,13 @@ VolumeFileKind volume_file_kind(const std::filesystem::path& path);
 inline constexpr std::string_view kVolumeFileNames =
     ".den, .nrrd, .nhdr, .nii, .nii.gz, .hdr/.img (NIfTI or Analyze pairs, plain or .gz), "
     "DICOM (.dcm, a file of any name, or a directory of one series) or .raw";
-/// The endings of the files that may hold several 3-D volumes (NIfTI, NRRD).
-inline constexpr std::string_view kSeriesFileNames = ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr";
+/// The files that may hold several 3-D volumes (NIfTI, NRRD, DICOM).
+inline constexpr std::string_view kSeriesFileNames =
+    ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, DICOM";
 
 /// Chooses the loader by volume_file_kind (.raw needs `raw`). Throws
 /// FileError for an unknown extension, and for a `volume_index` given with
-/// a file other than NIfTI or NRRD.
+/// a file other than NIfTI, NRRD or DICOM.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
