@@ -85,6 +85,8 @@ expect_bad(BENCH --turntable --turntable 721)
 expect_bad(BENCH --reference-runs --reference-runs 0)
 expect_bad(BENCH --sizes --sizes 256,0)
 expect_bad(BENCH --volumes --volumes phantom64,head.txt)
+expect_bad(BENCH --volume-index --volume-index -1)
+expect_bad(BENCH --volume-index --volumes phantom64,brainsmall --volume-index 1)
 
 if(checked LESS 20)
   message(FATAL_ERROR "only ${checked} refusals checked: a tool path is missing")

@@ -213,6 +213,27 @@ if(DEFINED SIMDVOL)
      OR (NOT identical AND (psnr STREQUAL "null" OR psnr LESS 80)))
     message(FATAL_ERROR "volume file: classifier ${cls}, case ${id}, PSNR ${psnr} dB")
   endif()
+  # --volume-index: the volume of a 4-D file (index 0 of this 3-D one; 1
+  # is past its one volume: exit 1 naming the file).
+  file(REMOVE ${OUT})
+  execute_process(COMMAND ${BENCH} --volumes ${vol} --volume-index 0 --sizes 32 --pes 64
+                          --compositing direct --repeat 1 --turntable 0 --no-volpack
+                          --no-reference --json ${OUT}
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "simdvol-bench --volume-index 0: exit ${rc}:\n${out}\n${err}")
+  endif()
+  file(READ ${OUT} text)
+  get(id cases 0 id)
+  if(NOT id STREQUAL "${vname}@0/32/o1/direct/P64")
+    message(FATAL_ERROR "--volume-index 0: case ${id}")
+  endif()
+  execute_process(COMMAND ${BENCH} --volumes ${vol} --volume-index 1 --sizes 32 --pes 64
+                          --no-volpack --no-reference
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 1 OR NOT err MATCHES "user.nrrd: volume index 1 is outside 0..0")
+    message(FATAL_ERROR "--volume-index past the volumes: exit ${rc}, stderr ${err}")
+  endif()
   execute_process(COMMAND ${BENCH} --volumes ${OUT}.no-such.nii.gz --sizes 32
                   RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
   if(NOT rc EQUAL 1 OR NOT err MATCHES "no-such.nii.gz: file not found")

@@ -84,6 +84,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -125,11 +126,13 @@ constexpr const char* kUsage =
     "                     [--turntable F] [--no-reference] [--reference-runs R]\n"
     "                     [--no-volpack] [--volpack-runs R]\n"
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
+    "                     [--volume-index N]\n"
     "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2, or a volume file\n"
     "    (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den, a DICOM series; classified as `simdvol "
     "render --classify "
     "auto`:\n"
-    "    ct for Hounsfield data, mri otherwise)\n"
+    "    ct for Hounsfield data, mri otherwise); --volume-index N: volume N of each 4-D file\n"
+    "    given (NIfTI, NRRD, a DICOM series of time points), its cases named FILE@N\n"
     "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNx (exact opacity), mcNs (exact\n"
     "    opacity, stratified picks), each with sub for per sub-ray (mcNsub, mcNxsub, mcNssub)\n";
 
@@ -153,7 +156,8 @@ struct Options {
   std::vector<int64_t> scaling;
   std::filesystem::path data = SIMDVOL_BENCH_DATA_DIR;
   std::optional<std::filesystem::path> json;
-  bool child = false;  // a --scaling child: no peers, no triad
+  std::optional<int64_t> volume_index;  // of the volume files given (4-D)
+  bool child = false;                   // a --scaling child: no peers, no triad
 };
 
 struct Comp {
@@ -204,9 +208,11 @@ struct VolumeSpec {
   std::filesystem::path file;  // empty for phantoms
   int phantom = 0;
   bool given = false;  // a volume file named on the command line (not brainsmall or ch2)
+  std::optional<int64_t> index = std::nullopt;  // its volume, of a 4-D file (--volume-index)
 };
 
-VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data) {
+VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data,
+                        std::optional<int64_t> index = std::nullopt) {
   if (s.rfind("phantom", 0) == 0) {
     const int64_t n = parse_int(s.substr(7), "--volumes");
     if (n < 8 || n > 1024) throw ArgumentError("--volumes", "'" + s + "': N must lie in 8..1024");
@@ -221,7 +227,7 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data)
     // (a DICOM directory given as "ct/" is named "ct")
     const std::string name =
         p.filename().empty() ? p.parent_path().filename().string() : p.filename().string();
-    return {name, "auto", p, 0, true};
+    return {index ? name + "@" + std::to_string(*index) : name, "auto", p, 0, true, index};
   }
   throw ArgumentError("--volumes", "'" + s +
                                        "' is not phantomN, brainsmall, ch2 or a volume file "
@@ -294,6 +300,8 @@ Options parse_args(int argc, char** argv) {
       o.scaling = parse_int_list(next(), a, 1, 256);
     } else if (a == "--data") {
       o.data = next();
+    } else if (a == "--volume-index") {
+      o.volume_index = parse_int(next(), a, 0, std::numeric_limits<int32_t>::max());
     } else if (a == "--json") {
       o.json = next();
       // Checked now, not after minutes of frames.
@@ -327,7 +335,12 @@ Options parse_args(int argc, char** argv) {
   if (comps) o.compositing = *comps;
   if (repeat) o.repeat = *repeat;
   if (turntable) o.turntable = *turntable;
-  for (const auto& v : o.volumes) parse_volume(v, o.data);
+  bool given = false;
+  for (const auto& v : o.volumes) given = parse_volume(v, o.data, o.volume_index).given || given;
+  if (o.volume_index && !given)
+    throw ArgumentError("--volume-index",
+                        "applies only to volume files given in --volumes (NIfTI, NRRD, DICOM), "
+                        "not to phantomN, brainsmall or ch2");
   return o;
 }
 
@@ -1029,12 +1042,13 @@ int main(int argc, char** argv) {
     json jv = json::array();
     for (const auto& name : o.volumes) {
       Loaded L;
-      L.spec = parse_volume(name, o.data);
+      L.spec = parse_volume(name, o.data, o.volume_index);
       const auto t0 = Clock::now();
       if (L.spec.phantom) {
         L.vol = std::make_unique<Volume>(shepp_logan(L.spec.phantom, 4));
       } else if (L.spec.given) {
-        L.vol = std::make_unique<Volume>(load_volume(L.spec.file));  // its errors name it
+        L.vol = std::make_unique<Volume>(
+            load_volume(L.spec.file, std::nullopt, L.spec.index));  // its errors name it
         // As `simdvol render --classify auto`: ct for Hounsfield data.
         L.spec.classifier = L.vol->range().min < -500.0f ? "ct" : "mri";
       } else {
