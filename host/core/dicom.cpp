@@ -10,6 +10,7 @@
 #include <gdcmTrace.h>
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -912,82 +913,69 @@ Volume load_dicom(const std::filesystem::path& path, std::optional<int64_t> volu
   // GDCM (and the codecs under it) stop the process with assert() or worse
   // on some files, valid ones among them (Debian's GDCM 3.0.21 aborts in
   // GetSpacingValue on an RT dose grid of one frame): the files are read in
-  // a child process, which sends the volume back through a pipe, so that
+  // a child process, which sends the volume back in a memory file, so that
   // such a file is an error, not the end of the program. The child's
   // messages go to a temporary file, quoted in that error.
   // SIMDVOL_DICOM_IN_PROCESS=1 reads in this process (the fuzz target).
   if (const char* e = std::getenv("SIMDVOL_DICOM_IN_PROCESS"); e && std::string(e) == "1")
     return load_dicom_here(path, volume_index, volumes);
-  int fds[2];
-  if (::pipe2(fds, O_CLOEXEC) != 0)
-    throw FileError(path, std::string("cannot make a pipe to read it: ") + std::strerror(errno));
-  std::FILE* log = std::tmpfile();
+  // The child writes its reply and the voxels into a memory file that this
+  // process reads once the child has ended (through a pipe, the two
+  // processes took turns over each MiB: 0.4 s more for a 300-slice CT).
+  struct Files {
+    int mem = -1;
+    std::FILE* log = nullptr;
+    ~Files() {
+      if (mem >= 0) ::close(mem);
+      if (log) std::fclose(log);
+    }
+  } f;
+  f.mem = ::memfd_create("simdvol-dicom", MFD_CLOEXEC);
+  if (f.mem < 0)
+    throw FileError(
+        path, std::string("cannot make a memory file to read it into: ") + std::strerror(errno));
+  f.log = std::tmpfile();
   std::fflush(stdout);
   std::fflush(stderr);
   const pid_t pid = ::fork();
-  if (pid < 0) {
-    const int err = errno;
-    ::close(fds[0]);
-    ::close(fds[1]);
-    if (log) std::fclose(log);
-    throw FileError(path, std::string("cannot start a process to read it: ") + std::strerror(err));
-  }
+  if (pid < 0)
+    throw FileError(path,
+                    std::string("cannot start a process to read it: ") + std::strerror(errno));
   if (pid == 0) {
-    ::close(fds[0]);
-    if (log) ::dup2(::fileno(log), 2);
-    dicom_child(path, volume_index, fds[1]);
+    if (f.log) ::dup2(::fileno(f.log), 2);
+    dicom_child(path, volume_index, f.mem);
   }
-  ::close(fds[1]);
-  struct Closer {
-    int fd;
-    std::FILE* log;
-    pid_t pid;
-    int status = 0;
-    bool waited = false;
-    ~Closer() {
-      ::close(fd);
-      if (!waited) ::waitpid(pid, &status, 0);
-      if (log) std::fclose(log);
-    }
-    void wait() {
-      ::close(fd);
-      fd = -1;
-      while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-      }
-      waited = true;
-    }
-  } child{fds[0], log, pid};
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
   DicomReply reply;
-  const bool got = read_fully(fds[0], &reply, sizeof reply);
+  const bool got = WIFEXITED(status) && WEXITSTATUS(status) == 0 &&
+                   ::lseek(f.mem, 0, SEEK_SET) == 0 && read_fully(f.mem, &reply, sizeof reply);
   if (got && volumes && reply.volumes >= 1) *volumes = reply.volumes;
   if (got && reply.status == 0) {
     const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
     Volume vol(dims, static_cast<VoxelType>(reply.type),
                {reply.spacing[0], reply.spacing[1], reply.spacing[2]});
-    if (read_fully(fds[0], vol.data().data(), vol.data().size() * sizeof(float))) {
+    if (read_fully(f.mem, vol.data().data(), vol.data().size() * sizeof(float))) {
       vol.set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
-      child.wait();
       return vol;
     }
   } else if (got && reply.status == 1 && reply.text_bytes < (1u << 20)) {
     std::string text(reply.text_bytes, '\0');
-    if (read_fully(fds[0], text.data(), text.size())) {
+    if (read_fully(f.mem, text.data(), text.size())) {
       const std::size_t nul = text.find('\0');
-      child.wait();
       throw FileError(fs::path(text.substr(0, nul)), text.substr(nul + 1));
     }
   } else if (got && reply.status == 2) {
-    child.wait();
     throw std::bad_alloc();
   }
-  child.wait();
-  const std::string said = log ? last_line(::fileno(log)) : std::string();
-  if (WIFSIGNALED(child.status))
-    throw FileError(path, "GDCM stopped on it (signal " + std::to_string(WTERMSIG(child.status)) +
+  const std::string said = f.log ? last_line(::fileno(f.log)) : std::string();
+  if (WIFSIGNALED(status))
+    throw FileError(path, "GDCM stopped on it (signal " + std::to_string(WTERMSIG(status)) +
                               (said.empty() ? std::string() : ": " + said) +
                               "): a file GDCM cannot read");
   throw FileError(path, "the process reading it failed (exit status " +
-                            std::to_string(WEXITSTATUS(child.status)) + ")" +
+                            std::to_string(WEXITSTATUS(status)) + ")" +
                             (said.empty() ? std::string() : ": " + said));
 }
 
