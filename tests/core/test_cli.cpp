@@ -130,6 +130,28 @@ TEST_F(Cli, PhantomRoundTripsThroughInfoAndLoader) {
   EXPECT_EQ(simdvol::load_volume(path("m.nrrd")).nx(), 16);
 }
 
+// `info`'s figures on a volume whose answers are known: the values 0 .. 99
+// in a scrambled order, a second 0 and three NaNs (a raw f32 file): mean
+// 4950 / 101, the NaNs counted apart, 16 bins of 99 / 16 wide (8 values in
+// the first: 0, 0, 1 .. 6), percentiles p1, p50, p99 at ranks 1, 50, 99 of
+// the 101 finite values (0, 49, 98).
+TEST_F(Cli, InfoFiguresOfAKnownVolume) {
+  std::vector<float> v;
+  for (int i = 0; i < 100; ++i) v.push_back(static_cast<float>((37 * i) % 100));
+  v.insert(v.begin() + 10, 3, std::numeric_limits<float>::quiet_NaN());
+  v.push_back(0.0f);  // (104 = 8 x 13 x 1 voxels)
+  {
+    std::ofstream out(path("known.raw"), std::ios::binary);
+    out.write(reinterpret_cast<const char*>(v.data()),
+              static_cast<std::streamsize>(v.size() * sizeof(float)));
+  }
+  const Result info = run("info " + path("known.raw") + " --raw-dims 8,13,1 --raw-type f32");
+  ASSERT_EQ(info.code, 0) << info.output;
+  for (const char* want : {"range:    0 .. 99\n", "mean:     49.0099\n", "nonfinite voxels: 3\n",
+                           "            0          8 ", "percentiles: p1=0 p50=49 p99=98\n"})
+    EXPECT_NE(info.output.find(want), std::string::npos) << want << "\n" << info.output;
+}
+
 TEST_F(Cli, RenderWritesTheImageItNames) {
   const Result r = run("render --phantom-size 32 --size 48x40 -o " + path("r.png"));
   ASSERT_EQ(r.code, 0) << r.output;
