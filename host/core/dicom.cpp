@@ -6,6 +6,7 @@
 #include <gdcmPixelFormat.h>
 #include <gdcmScanner.h>
 #include <gdcmSequenceOfItems.h>
+#include <gdcmSplitMosaicFilter.h>
 #include <gdcmTag.h>
 #include <gdcmTrace.h>
 
@@ -60,12 +61,19 @@ const gdcm::Tag kPixelMeasures(0x0028, 0x9110);
 const gdcm::Tag kPixelSpacing(0x0028, 0x0030);  // rows' spacing (y), then columns' (x)
 const gdcm::Tag kPixelValueTransformation(0x0028, 0x9145);
 const gdcm::Tag kGridFrameOffsets(0x3004, 0x000c);  // an RT dose grid's frames
+const gdcm::Tag kImageType(0x0008, 0x0008);
+const gdcm::Tag kSpacingBetweenSlices(0x0018, 0x0088);
+const gdcm::Tag kSliceThickness(0x0018, 0x0050);
 
 /// One image file read by GDCM, its pixels not yet decoded.
 struct Slice {
   fs::path file;
   std::unique_ptr<gdcm::ImageReader> reader = std::make_unique<gdcm::ImageReader>();
   unsigned frames = 1;
+  unsigned nx = 0, ny = 0;  ///< a frame's size (a mosaic's tile)
+  unsigned tiles = 0;       ///< a Siemens mosaic: tiles per row of its image; 0: none
+  double mosaic_position[3] = {0, 0, 0},
+         mosaic_normal[3] = {0, 0, 0};  ///< its tile 0, its CSA normal
 };
 
 /// One 2-D image of the volume: a slice of a series, or a frame of a
@@ -599,6 +607,80 @@ std::vector<Frame> multi_frame(const fs::path& path, const Slice& s) {
   return frames;
 }
 
+/// Whether `ds` is a Siemens mosaic: one image whose tiles, left to right
+/// and top to bottom, are the slices of a volume (ImageType has MOSAIC).
+bool is_mosaic(const gdcm::DataSet& ds) {
+  if (!ds.FindDataElement(kImageType)) return false;
+  const gdcm::ByteValue* bv = ds.GetDataElement(kImageType).GetByteValue();
+  return bv && std::string(bv->GetPointer(), bv->GetLength()).find("MOSAIC") != std::string::npos;
+}
+
+/// A slice's frame size, and for a Siemens mosaic its tiles: how many
+/// images it holds, their size (the Acquisition Matrix), and where its
+/// first tile lies and which way the tiles run (the CSA header's slice
+/// array, through GDCM's SplitMosaicFilter).
+void find_tiles(const fs::path& path, Slice& s) {
+  const gdcm::Image& im = s.reader->GetImage();
+  s.nx = im.GetDimension(0);
+  s.ny = im.GetDimension(1);
+  s.frames = im.GetNumberOfDimensions() > 2 ? im.GetDimension(2) : 1;
+  if (s.frames != 1 || !is_mosaic(s.reader->GetFile().GetDataSet())) return;
+  const std::string which = " (" + s.file.filename().string() + ")";
+  gdcm::SplitMosaicFilter filter;
+  filter.SetImage(im);
+  filter.SetFile(s.reader->GetFile());
+  unsigned dims[3] = {0, 0, 0};
+  double normal[3] = {0, 0, 0}, position[3] = {0, 0, 0};
+  bool inverted = false;
+  if (!filter.ComputeMOSAICDimensions(dims) || dims[0] == 0 || dims[1] == 0 || dims[2] == 0)
+    throw FileError(path,
+                    "is a Siemens mosaic (ImageType MOSAIC) whose number of images or their "
+                    "size GDCM cannot find (no Number Of Images In Mosaic in its CSA header?)" +
+                        which);
+  if (!filter.ComputeMOSAICSliceNormal(normal, inverted) ||
+      !filter.ComputeMOSAICSlicePosition(position, false))
+    throw FileError(path,
+                    "is a Siemens mosaic (ImageType MOSAIC) whose slices' positions GDCM cannot "
+                    "find (no slice array in its CSA header?)" +
+                        which);
+  const auto tiles = static_cast<unsigned>(std::ceil(std::sqrt(static_cast<double>(dims[2]))));
+  if (uint64_t{tiles} * dims[0] > s.nx || uint64_t{tiles} * dims[1] > s.ny)
+    throw FileError(path, "is a Siemens mosaic of " + std::to_string(dims[2]) + " images of " +
+                              std::to_string(dims[0]) + " x " + std::to_string(dims[1]) +
+                              ", which do not fit in its " + std::to_string(s.nx) + " x " +
+                              std::to_string(s.ny) + " pixels" + which);
+  s.frames = dims[2];
+  s.nx = dims[0];
+  s.ny = dims[1];
+  s.tiles = tiles;
+  std::copy(position, position + 3, s.mosaic_position);
+  std::copy(normal, normal + 3, s.mosaic_normal);
+}
+
+/// The slices of a Siemens mosaic (slice `i` of its series): tile t lies at
+/// the first tile's position plus t times the slices' spacing (Spacing
+/// Between Slices, else Slice Thickness) along the CSA header's normal;
+/// plane, scale and acquisition order are the file's.
+std::vector<Frame> mosaic_frames(const fs::path& path, const Slice& s, std::size_t i) {
+  const Frame base = single_frame(path, s, i, false);
+  const gdcm::DataSet& ds = s.reader->GetFile().GetDataSet();
+  std::vector<double> dz = numbers(ds, kSpacingBetweenSlices);
+  if (dz.size() != 1 || !(dz[0] > 0)) dz = numbers(ds, kSliceThickness);
+  if (dz.size() != 1 || !(dz[0] > 0))
+    throw FileError(path,
+                    "is a Siemens mosaic without Spacing Between Slices or Slice Thickness, so "
+                    "its slices cannot be placed (" +
+                        s.file.filename().string() + ")");
+  std::vector<Frame> frames(s.frames, base);
+  for (unsigned t = 0; t < s.frames; ++t) {
+    frames[t].frame = t;
+    std::array<double, 3> o;
+    for (int a = 0; a < 3; ++a) o[a] = s.mosaic_position[a] + t * dz[0] * s.mosaic_normal[a];
+    frames[t].origin = o;
+  }
+  return frames;
+}
+
 Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int64_t* volumes) {
   GdcmWarnings warnings;
   std::error_code ec;
@@ -647,8 +729,7 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
   for (std::size_t i = 0; i < files.size(); ++i) {
     slices[i].file = files[i];
     read_image(path, slices[i], warnings);
-    const gdcm::Image& im = slices[i].reader->GetImage();
-    slices[i].frames = im.GetNumberOfDimensions() > 2 ? im.GetDimension(2) : 1;
+    find_tiles(path, slices[i]);
   }
   const gdcm::Image& first = slices.front().reader->GetImage();
   const gdcm::PixelFormat pf = first.GetPixelFormat();
@@ -658,19 +739,24 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
   if (!supported(pf))
     throw FileError(path, std::string("pixel format ") + pf.GetScalarTypeAsString() +
                               " is not supported (8, 16 or 32-bit integers, or floats)");
-  const unsigned int nx = first.GetDimension(0), ny = first.GetDimension(1);
+  const unsigned int nx = slices.front().nx, ny = slices.front().ny;
   const unsigned int nframes = slices.front().frames;
-  if (slices.size() > 1 && nframes > 1)
+  const bool mosaics = slices.front().tiles > 0;
+  if (slices.size() > 1 && nframes > 1 && !mosaics)
     throw FileError(path, "its series mixes multi-frame files (" +
                               slices.front().file.filename().string() + " holds " +
                               std::to_string(nframes) + " frames); give one of them");
   for (Slice& s : slices) {
     const gdcm::Image& im = s.reader->GetImage();
     const std::string which = " (" + s.file.filename().string() + ")";
-    if (im.GetDimension(0) != nx || im.GetDimension(1) != ny)
-      throw FileError(path, "its slices differ in size: " + std::to_string(nx) + " x " +
-                                std::to_string(ny) + " and " + std::to_string(im.GetDimension(0)) +
-                                " x " + std::to_string(im.GetDimension(1)) + which);
+    if (im.GetDimension(0) != first.GetDimension(0) || im.GetDimension(1) != first.GetDimension(1))
+      throw FileError(path, "its slices differ in size: " + std::to_string(first.GetDimension(0)) +
+                                " x " + std::to_string(first.GetDimension(1)) + " and " +
+                                std::to_string(im.GetDimension(0)) + " x " +
+                                std::to_string(im.GetDimension(1)) + which);
+    if ((s.tiles > 0) != mosaics || s.nx != nx || s.ny != ny || s.frames != nframes)
+      throw FileError(path, "its images differ in how many slices they hold (Siemens mosaics " +
+                                std::string(mosaics ? "and" : "among") + " other images)" + which);
     if (!(im.GetPixelFormat() == pf))
       throw FileError(path, "its slices differ in pixel format" + which);
   }
@@ -678,7 +764,12 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
   // The frames: a series' slices, or a multi-frame file's frames, each with
   // its plane, position and scale.
   std::vector<Frame> frames;
-  if (nframes > 1)
+  if (mosaics)
+    for (std::size_t i = 0; i < slices.size(); ++i) {
+      const std::vector<Frame> tiles = mosaic_frames(path, slices[i], i);
+      frames.insert(frames.end(), tiles.begin(), tiles.end());
+    }
+  else if (nframes > 1)
     frames = multi_frame(path, slices.front());
   else
     for (std::size_t i = 0; i < slices.size(); ++i)
@@ -812,7 +903,8 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
       const Slice& s = slices[f->slice];
       const gdcm::Image& im = s.reader->GetImage();
       const unsigned long len = im.GetBufferLength();
-      if (len < frame_bytes * s.frames)
+      if (len < uint64_t{im.GetDimension(0)} * im.GetDimension(1) * (s.tiles ? 1 : s.frames) *
+                    pf.GetPixelSize())
         throw FileError(
             path, "holds fewer pixels than its header says (" + s.file.filename().string() + ")");
       buf.resize(len);
@@ -821,7 +913,17 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
                                   " (corrupt, or a compression it cannot read)");
       decoded = f->slice;
     }
-    convert(buf.data() + f->frame * frame_bytes, pf, per_frame, f->slope, f->intercept, out);
+    const Slice& s = slices[f->slice];
+    if (s.tiles > 0) {
+      // Tile t of a mosaic: row t / tiles, column t % tiles of nx x ny tiles.
+      const std::size_t row = f->frame / s.tiles, col = f->frame % s.tiles;
+      const std::size_t stride = static_cast<std::size_t>(s.reader->GetImage().GetDimension(0));
+      for (std::size_t y = 0; y < ny; ++y)
+        convert(buf.data() + ((row * ny + y) * stride + col * nx) * pf.GetPixelSize(), pf, nx,
+                f->slope, f->intercept, out + y * nx);
+    } else {
+      convert(buf.data() + f->frame * frame_bytes, pf, per_frame, f->slope, f->intercept, out);
+    }
     out += per_frame;
   }
 

@@ -35,6 +35,7 @@ struct DicomSlice {
   bool has_position = true;  ///< false: Image Position (Patient) taken out
   int instance = 0;          ///< Instance Number, where not 0
   int temporal = 0;          ///< Temporal Position Identifier, where not 0
+  std::string image_type;    ///< Image Type, where not empty
 };
 
 template <typename T>
@@ -74,6 +75,12 @@ void write_dicom_slice(const std::filesystem::path& p, int nx, int ny, const std
     gdcm::Attribute<0x0020, 0x0013> number;
     number.SetValue(s.instance);
     ds.Replace(number.GetAsDataElement());
+  }
+  if (!s.image_type.empty()) {
+    gdcm::DataElement type(gdcm::Tag(0x0008, 0x0008));
+    type.SetVR(gdcm::VR::CS);
+    type.SetByteValue(s.image_type.data(), static_cast<uint32_t>(s.image_type.size()));
+    ds.Replace(type);
   }
   if (s.temporal != 0) {
     gdcm::Attribute<0x0020, 0x0100> when;

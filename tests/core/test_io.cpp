@@ -24,6 +24,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 #include "dicom_testing.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
@@ -1606,6 +1608,12 @@ TEST_F(IoTest, DicomSeriesMalformed) {
   });
   expect_file_error([&] { simdvol::load_volume(fine); }, fine,
                     {"its slices differ in Pixel Spacing: 0.5 x 0.7 mm and 0.5 x 0.35 mm (i1)"});
+  const fs::path mosaic = series("tiled", {0}, [](int, DicomSlice& s, int&) {
+    s.image_type = "ORIGINAL\\PRIMARY\\M\\ND\\MOSAIC";  // without its CSA header
+  });
+  expect_file_error([&] { simdvol::load_volume(mosaic); }, mosaic,
+                    {"is a Siemens mosaic (ImageType MOSAIC) whose number of images or their size "
+                     "GDCM cannot find (no Number Of Images In Mosaic in its CSA header?) (i0)"});
   const fs::path rgb = file("rgb");
   fs::create_directories(rgb);
   DicomSlice c;
@@ -1853,6 +1861,80 @@ TEST(IoReal, DicomPydicomFiles) {
     EXPECT_NE(std::string(e.what()).find("GDCM stopped on it (signal 6"), std::string::npos)
         << e.what();
   }
+}
+
+// Real scanners' multi-image files from nibabel's tests (Debian's
+// python3-nibabel, by scripts/fetch-data; their pixels are zeros, their
+// headers real). A Philips Enhanced MR MPRAGE: 176 sagittal frames of 256 x
+// 256, each placed by its own functional groups (1 mm apart along the
+// normal, as pydicom reads their positions; Pixel Spacing 1 x 1; Rescale
+// Slope 2.1079 per frame, so f32), its rows to the back and columns down,
+// slices to the patient's right: PIR. Two Siemens mosaics of one diffusion
+// series (b = 0 and 1000): 48 tiles of 128 x 128 each (nibabel's tests
+// assert that shape and 1.796875 mm pixels, 3 mm slices, an affine whose
+// axes run left, back, up: LPS); alone, one volume; together, two. And
+// the tiles' layout: the b = 1000 mosaic with its pixels replaced by a
+// pattern that says which tile and where, left to right and top to bottom.
+TEST(IoReal, DicomEnhancedAndMosaicFiles) {
+  const fs::path d = simdvol::testing::data_dir() / "dicom";
+  SIMDVOL_REQUIRE_FILE(d / "mprage/philips_mprage.dcm");
+  const Volume m = simdvol::load_volume(d / "mprage/philips_mprage.dcm");
+  EXPECT_EQ(m.dims(), (std::array<int64_t, 3>{256, 256, 176}));
+  EXPECT_EQ(m.type(), VoxelType::f32);
+  EXPECT_DOUBLE_EQ(m.spacing()[0], 1.0);
+  EXPECT_DOUBLE_EQ(m.spacing()[1], 1.0);
+  EXPECT_NEAR(m.spacing()[2], 1.0000015, 1e-6);
+  EXPECT_EQ(m.orientation(), "PIR");
+
+  SIMDVOL_REQUIRE_FILE(d / "dwi/siemens_dwi_0.dcm");
+  SIMDVOL_REQUIRE_FILE(d / "dwi/siemens_dwi_1000.dcm");
+  const fs::path dir = fs::temp_directory_path() / ("simdvol_mosaic_" + std::to_string(::getpid()));
+  fs::create_directories(dir / "one");
+  fs::copy_file(d / "dwi/siemens_dwi_0.dcm", dir / "one/b0.dcm");
+  int64_t volumes = 0;
+  const Volume b0 = simdvol::load_volume(dir / "one", std::nullopt, std::nullopt, &volumes);
+  EXPECT_EQ(volumes, 1);
+  EXPECT_EQ(b0.dims(), (std::array<int64_t, 3>{128, 128, 48}));
+  EXPECT_EQ(b0.type(), VoxelType::u16);
+  EXPECT_DOUBLE_EQ(b0.spacing()[0], 1.796875);
+  EXPECT_DOUBLE_EQ(b0.spacing()[1], 1.796875);
+  EXPECT_NEAR(b0.spacing()[2], 3.0, 1e-4);
+  EXPECT_EQ(b0.orientation(), "LPS");
+  expect_file_error([&] { simdvol::load_volume(d / "dwi"); }, d / "dwi",
+                    {"holds 2 3-D volumes (2 slices at each of 48 positions"});
+  EXPECT_EQ(simdvol::load_volume(d / "dwi/siemens_dwi_0.dcm", std::nullopt, 1, &volumes).dims(),
+            (std::array<int64_t, 3>{128, 128, 48}));
+  EXPECT_EQ(volumes, 2);
+
+  // The pattern: mosaic pixel (X, Y) of tile t = 7 (Y / 128) + X / 128
+  // holds 64 t + (3 x + 5 y) % 64 for x = X % 128, y = Y % 128 (under 4096:
+  // 12 bits stored).
+  gdcm::Reader r;
+  r.SetFileName((d / "dwi/siemens_dwi_1000.dcm").c_str());
+  ASSERT_TRUE(r.Read());
+  std::vector<uint16_t> px(896 * 896);
+  for (int Y = 0; Y < 896; ++Y)
+    for (int X = 0; X < 896; ++X)
+      px[static_cast<std::size_t>(Y * 896 + X)] = static_cast<uint16_t>(
+          64 * (7 * (Y / 128) + X / 128) + (3 * (X % 128) + 5 * (Y % 128)) % 64);
+  gdcm::DataElement pd = r.GetFile().GetDataSet().GetDataElement(gdcm::Tag(0x7fe0, 0x0010));
+  pd.SetByteValue(reinterpret_cast<const char*>(px.data()),
+                  static_cast<uint32_t>(px.size() * sizeof(uint16_t)));
+  r.GetFile().GetDataSet().Replace(pd);
+  gdcm::Writer w;
+  w.SetFile(r.GetFile());
+  fs::create_directories(dir / "pattern");
+  w.SetFileName((dir / "pattern/b1000.dcm").c_str());
+  ASSERT_TRUE(w.Write());
+  const Volume p = simdvol::load_volume(dir / "pattern/b1000.dcm");
+  ASSERT_EQ(p.dims(), (std::array<int64_t, 3>{128, 128, 48}));
+  int64_t wrong = 0;
+  for (int64_t z = 0; z < 48; ++z)
+    for (int64_t y = 0; y < 128; ++y)
+      for (int64_t x = 0; x < 128; ++x)
+        wrong += p.at(x, y, z) != static_cast<float>(64 * z + (3 * x + 5 * y) % 64);
+  EXPECT_EQ(wrong, 0);
+  fs::remove_all(dir);
 }
 
 // A 4-D NRRD: the volume at an index along its volume axis, which is its

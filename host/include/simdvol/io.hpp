@@ -69,7 +69,9 @@ Volume load_nifti(const std::filesystem::path& path,
 /// (Enhanced CT, MR, PET) places each frame by its functional groups (a
 /// frame's own, else the shared ones: position, plane, Pixel Spacing,
 /// scale), an RT dose grid by its Grid Frame Offset Vector; other
-/// multi-frame files keep their frames as stored. Slices and placed frames
+/// multi-frame files keep their frames as stored. A Siemens mosaic (Image
+/// Type MOSAIC) is unpacked: its tiles, left to right and top to bottom,
+/// are slices placed by its CSA header (GDCM's SplitMosaicFilter). Slices and placed frames
 /// are sorted by their position along the normal of their plane and must
 /// lie evenly spaced in one plane orientation, of one size, Pixel Spacing
 /// and pixel format; grey scale only (any transfer syntax GDCM decodes:
