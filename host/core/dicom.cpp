@@ -492,10 +492,12 @@ std::string trim_uid(std::string s) {
 }
 
 /// A frame's name in messages: its file in a series, "frame N" (from 1)
-/// of a multi-frame file.
+/// of a multi-frame file (or mosaic), "frame N of FILE" in a series of them.
 std::string frame_label(const std::vector<Slice>& slices, const Frame& f) {
-  if (slices[f.slice].frames > 1) return "frame " + std::to_string(f.frame + 1);
-  return slices[f.slice].file.filename().string();
+  const Slice& s = slices[f.slice];
+  if (s.frames == 1) return s.file.filename().string();
+  return "frame " + std::to_string(f.frame + 1) +
+         (slices.size() > 1 ? " of " + s.file.filename().string() : std::string());
 }
 std::string frame_name(const std::vector<Slice>& slices, const Frame& f) {
   return " (" + frame_label(slices, f) + ")";
