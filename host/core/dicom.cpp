@@ -26,6 +26,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -609,6 +610,31 @@ std::vector<Frame> multi_frame(const fs::path& path, const Slice& s) {
   return frames;
 }
 
+/// Resamples an nx x ny slice in place at (i - dx, j - dy), bilinearly;
+/// where that falls outside the slice, the slice's smallest value.
+void shift_slice(float* s, std::size_t nx, std::size_t ny, double dx, double dy) {
+  if (dx == 0.0 && dy == 0.0) return;
+  const std::vector<float> src(s, s + nx * ny);
+  float fill = std::numeric_limits<float>::infinity();
+  for (float v : src) fill = std::fmin(fill, v);
+  for (std::size_t j = 0; j < ny; ++j)
+    for (std::size_t i = 0; i < nx; ++i) {
+      const double x = static_cast<double>(i) - dx, y = static_cast<double>(j) - dy;
+      float& to = s[j * nx + i];
+      if (!(x >= 0.0 && y >= 0.0 && x <= static_cast<double>(nx - 1) &&
+            y <= static_cast<double>(ny - 1))) {
+        to = fill;
+        continue;
+      }
+      const auto x0 = static_cast<std::size_t>(x), y0 = static_cast<std::size_t>(y);
+      const std::size_t x1 = std::min(x0 + 1, nx - 1), y1 = std::min(y0 + 1, ny - 1);
+      const double fx = x - static_cast<double>(x0), fy = y - static_cast<double>(y0);
+      const double top = (1 - fx) * src[y0 * nx + x0] + fx * src[y0 * nx + x1];
+      const double bottom = (1 - fx) * src[y1 * nx + x0] + fx * src[y1 * nx + x1];
+      to = static_cast<float>((1 - fy) * top + fy * bottom);
+    }
+}
+
 /// Whether `ds` is a Siemens mosaic: one image whose tiles, left to right
 /// and top to bottom, are the slices of a volume (ImageType has MOSAIC).
 bool is_mosaic(const gdcm::DataSet& ds) {
@@ -883,6 +909,34 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
   for (double& s : spacing)
     if (!(s > 0.0) || !std::isfinite(s)) s = 1.0;
 
+  // A slice whose origin lies off the line through the first one's along
+  // the normal (a CT gantry tilt shears the slices, each shifted in its
+  // plane by the tilt's tangent times its depth): the shift in pixels, by
+  // which the slice is resampled so that the volume's grid is orthogonal,
+  // as dcm2niix corrects a tilt. Below a twentieth of a pixel it is left
+  // alone (positions written to a few decimals).
+  std::vector<std::array<double, 2>> shift(chosen.size(), {0.0, 0.0});
+  bool sheared = false;
+  if (placed && chosen.size() > 1) {
+    const std::array<double, 3>& o0 = *chosen.front()->origin;
+    for (std::size_t k = 0; k < chosen.size(); ++k) {
+      const std::array<double, 3>& o = *chosen[k]->origin;
+      double u = 0, v = 0;
+      for (int a = 0; a < 3; ++a) {
+        u += (o[a] - o0[a]) * row[a];
+        v += (o[a] - o0[a]) * col[a];
+      }
+      shift[k] = {u / spacing[0], v / spacing[1]};
+      if (!(std::fabs(shift[k][0]) < nx && std::fabs(shift[k][1]) < ny))
+        throw FileError(path, "its slices lie beside each other, not one behind another: " +
+                                  frame_label(slices, *chosen[k]) + " is " + format_mm(u) + " x " +
+                                  format_mm(v) + " mm off the line through " +
+                                  frame_label(slices, *chosen.front()) +
+                                  " along the normal, more than the image's size");
+      sheared = sheared || std::fabs(shift[k][0]) > 0.05 || std::fabs(shift[k][1]) > 0.05;
+    }
+  }
+
   // Rescale Slope and Intercept, per frame (they may differ from slice to
   // slice); a volume any frame of which is scaled loads as f32.
   bool scaled = false;
@@ -894,13 +948,14 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
     scaled = scaled || f->slope != 1.0 || f->intercept != 0.0;
   }
   const std::array<int64_t, 3> dims{nx, ny, static_cast<int64_t>(chosen.size())};
-  Volume vol(dims, scaled ? VoxelType::f32 : voxel_type(pf), spacing);
+  Volume vol(dims, scaled || sheared ? VoxelType::f32 : voxel_type(pf), spacing);
   const std::size_t per_frame = static_cast<std::size_t>(nx) * ny;
   const std::size_t frame_bytes = per_frame * pf.GetPixelSize();
   std::vector<char> buf;
   std::size_t decoded = slices.size();  // the slice whose pixels `buf` holds
   float* out = vol.data().data();
-  for (const Frame* f : chosen) {
+  for (std::size_t k = 0; k < chosen.size(); ++k) {
+    const Frame* f = chosen[k];
     if (f->slice != decoded) {
       const Slice& s = slices[f->slice];
       const gdcm::Image& im = s.reader->GetImage();
@@ -926,6 +981,7 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
     } else {
       convert(buf.data() + f->frame * frame_bytes, pf, per_frame, f->slope, f->intercept, out);
     }
+    if (sheared) shift_slice(out, nx, ny, shift[k][0], shift[k][1]);
     out += per_frame;
   }
 

@@ -1657,6 +1657,57 @@ TEST_F(IoTest, DicomSeriesMalformed) {
                     {"volume index 1 is outside 0..0 (the series holds 1 volume)"});
 }
 
+// A CT series taken with the gantry tilted: each slice's origin lies 1.25
+// mm further along the columns per slice (a tilt of atan(1.25 / 2) = 32
+// degrees at 2 mm slices), so its pixels are sheared against the
+// patient. Each slice is resampled in its plane so that the grid is
+// orthogonal: an object fixed in the patient (a ramp in y, 4 per mm,
+// written into slice k at its own origin: 2 b + 5 k at row b of 0.5 mm)
+// comes out the same in every slice (2 j), exactly where the slice covers
+// it (linear in y, so bilinear resampling is exact), and the slice's
+// smallest value where it does not. Slices offset by more than their size
+// are not one volume.
+TEST_F(IoTest, DicomGantryTiltResampled) {
+  constexpr int nx = 6, ny = 20, nz = 4;
+  const fs::path dir = file("tilt");
+  fs::create_directories(dir);
+  for (int k = 0; k < nz; ++k) {
+    std::vector<int16_t> px(nx * ny);
+    for (int b = 0; b < ny; ++b)
+      for (int a = 0; a < nx; ++a) px[b * nx + a] = static_cast<int16_t>(2 * b + 5 * k);
+    DicomSlice s;
+    s.spacing = {0.7, 0.5};
+    s.position = {-30, -40 + 1.25 * k, 10 + 2.0 * k};
+    std::string name = "t";
+    name += std::to_string(k);
+    write_dicom_slice(dir / name, nx, ny, px, s);
+  }
+  const Volume v = simdvol::load_volume(dir);
+  ASSERT_EQ(v.dims(), (std::array<int64_t, 3>{nx, ny, nz}));
+  EXPECT_EQ(v.type(), VoxelType::f32);
+  EXPECT_DOUBLE_EQ(v.spacing()[2], 2.0);  // along the normal
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        // Row j of slice k lies 2.5 k rows into its own pixels.
+        const double b = j - 2.5 * k;
+        const float want = b >= 0 ? static_cast<float>(2 * j) : static_cast<float>(5 * k);
+        EXPECT_EQ(v.at(i, j, k), want) << i << "," << j << "," << k;
+      }
+  const fs::path apart = file("apart");
+  fs::create_directories(apart);
+  for (int k = 0; k < 3; ++k) {
+    DicomSlice s;
+    s.position = {k == 2 ? 50.0 : 0.0, 0, 1.0 * k};
+    std::string name = "a";
+    name += std::to_string(k);
+    write_dicom_slice(apart / name, 4, 3, std::vector<int16_t>(12, 1), s);
+  }
+  expect_file_error([&] { simdvol::load_volume(apart); }, apart,
+                    {"its slices lie beside each other, not one behind another: a2 is 50 x 0 mm "
+                     "off the line through a0 along the normal"});
+}
+
 // A series of several acquisitions (time points, echoes): every position
 // holds the same number of slices, and volume v is the v-th of each in
 // acquisition order (Temporal Position Identifier, Echo Numbers, Acquisition

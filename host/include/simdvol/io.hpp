@@ -74,7 +74,9 @@ Volume load_nifti(const std::filesystem::path& path,
 /// are slices placed by its CSA header (GDCM's SplitMosaicFilter). Slices and placed frames
 /// are sorted by their position along the normal of their plane and must
 /// lie evenly spaced in one plane orientation, of one size, Pixel Spacing
-/// and pixel format; grey scale only (any transfer syntax GDCM decodes:
+/// and pixel format (slices whose origins lie off the line along the normal,
+/// as a CT gantry tilt leaves them, are resampled in their plane, bilinearly,
+/// so that the grid is orthogonal; f32 then); grey scale only (any transfer syntax GDCM decodes:
 /// JPEG, JPEG 2000, JPEG-LS, RLE). Rescale Slope and Intercept are applied
 /// per slice or frame (Hounsfield units for CT), the type following the
 /// pixels as for NIfTI (f32 where any is scaled). The spacing: Pixel
