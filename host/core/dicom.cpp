@@ -45,6 +45,8 @@ namespace {
 namespace fs = std::filesystem;
 
 const gdcm::Tag kSeriesUid(0x0020, 0x000e);
+const gdcm::Tag kModality(0x0008, 0x0060);
+const gdcm::Tag kSeriesDescription(0x0008, 0x103e);
 const gdcm::Tag kNumberOfFrames(0x0028, 0x0008);
 const gdcm::Tag kInstanceNumber(0x0020, 0x0013);
 const gdcm::Tag kAcquisitionNumber(0x0020, 0x0012);
@@ -445,51 +447,87 @@ bool dicom_lengths_fit(const fs::path& path, const fs::path& file) {
   return w.check();
 }
 
-/// The series a directory's images belong to, by Series Instance UID, with
-/// their files (in name order); files GDCM does not read as DICOM, and
-/// DICOMDIR, are skipped (and where not `strict`, those cut short).
-std::map<std::string, std::vector<fs::path>> scan_series(const fs::path& path, const fs::path& dir,
-                                                         bool strict) {
+/// One series found in a directory: its images' files (in name order),
+/// and what it is, for a list of several.
+struct SeriesFiles {
   std::vector<fs::path> files;
+  std::string modality, description;
+};
+
+/// Trims the blanks and NULs DICOM pads its values with.
+std::string trim_value(const char* v) {
+  std::string s = v ? v : "";
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
+  return s;
+}
+
+/// The series a directory's images belong to, by Series Instance UID, with
+/// their files; files GDCM does not read as DICOM, and DICOMDIR, are
+/// skipped (and where not `strict`, those cut short). `recursive`: the
+/// directories below it too (a CD's DICOM/PA0/ST0/SE0/... tree), hidden
+/// ones left out, at most 16 deep and 100,000 files.
+std::map<std::string, SeriesFiles> scan_series(const fs::path& path, const fs::path& dir,
+                                               bool strict, bool recursive) {
+  constexpr std::size_t kMaxFiles = 100000;
+  std::vector<fs::path> files;
+  std::size_t seen = 0;
   std::error_code ec;
-  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+  auto take = [&](const fs::directory_entry& e) {
     std::error_code sec;
-    if (!it->is_regular_file(sec)) continue;
-    const std::string name = it->path().filename().string();
-    if (name == "DICOMDIR" || name.starts_with(".")) continue;
+    if (!e.is_regular_file(sec)) return;
+    const std::string name = e.path().filename().string();
+    if (name == "DICOMDIR" || name.starts_with(".")) return;
+    if (++seen > kMaxFiles)
+      throw FileError(path, "holds more than " + std::to_string(kMaxFiles) +
+                                " files in the directories below it; give the directory of "
+                                "one series");
     // A file that is not DICOM is skipped; one whose lengths run past its
     // end is an error that names it where the directory was asked for, and
     // skipped beside a file asked for (a slice of its series then shows as
     // missing).
     try {
-      if (!dicom_lengths_fit(path, it->path())) continue;
+      if (!dicom_lengths_fit(path, e.path())) return;
     } catch (const FileError&) {
       if (strict) throw;
-      continue;
+      return;
     }
-    files.push_back(it->path());
+    files.push_back(e.path());
+  };
+  if (recursive) {
+    for (fs::recursive_directory_iterator
+             it(dir, fs::directory_options::skip_permission_denied, ec),
+         end;
+         !ec && it != end; it.increment(ec)) {
+      std::error_code sec;
+      if (it->is_directory(sec) &&
+          (it.depth() >= 16 || it->path().filename().string().starts_with(".")))
+        it.disable_recursion_pending();
+      take(*it);
+    }
+  } else {
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) take(*it);
   }
   if (ec) throw FileError(path, "cannot list the directory " + dir.string() + ": " + ec.message());
   std::sort(files.begin(), files.end());
   gdcm::Scanner scanner;
   scanner.AddTag(kSeriesUid);
+  scanner.AddTag(kModality);
+  scanner.AddTag(kSeriesDescription);
   std::vector<std::string> names;
   for (const fs::path& f : files) names.push_back(f.string());
   if (!names.empty() && !scanner.Scan(names))
     throw FileError(path, "GDCM could not scan the directory " + dir.string());
-  std::map<std::string, std::vector<fs::path>> series;
+  std::map<std::string, SeriesFiles> series;
   for (const fs::path& f : files) {
     if (!scanner.IsKey(f.c_str())) continue;
-    const char* uid = scanner.GetValue(f.c_str(), kSeriesUid);
-    series[uid ? std::string(uid) : std::string()].push_back(f);
+    SeriesFiles& s = series[trim_value(scanner.GetValue(f.c_str(), kSeriesUid))];
+    if (s.files.empty()) {
+      s.modality = trim_value(scanner.GetValue(f.c_str(), kModality));
+      s.description = trim_value(scanner.GetValue(f.c_str(), kSeriesDescription));
+    }
+    s.files.push_back(f);
   }
   return series;
-}
-
-/// Trims the blanks and NULs DICOM pads a UID with.
-std::string trim_uid(std::string s) {
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
-  return s;
 }
 
 /// A frame's name in messages: its file in a series, "frame N" (from 1)
@@ -714,25 +752,33 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
   if (ec || !fs::exists(st)) throw FileError(path, "file not found (no such file or directory)");
-  const bool is_dir = fs::is_directory(st);
+  // A DICOMDIR (a CD's index) stands for the tree of files beside it.
+  const bool dicomdir = path.filename() == "DICOMDIR" && fs::is_regular_file(st);
+  const bool is_dir = fs::is_directory(st) || dicomdir;
   if (!is_dir) refuse_non_regular_file(path, "a DICOM file");
 
   // The files of the volume: one multi-frame file, or a series' slices.
   std::vector<fs::path> files;
   if (is_dir) {
-    const auto series = scan_series(path, path, true);
+    const fs::path dir =
+        dicomdir ? (path.has_parent_path() ? path.parent_path() : fs::path(".")) : path;
+    const auto series = scan_series(path, dir, true, true);
     if (series.empty())
-      throw FileError(path, "holds no DICOM image (a directory of one series' slices is read)");
+      throw FileError(path, std::string("holds no DICOM image") +
+                                (dicomdir ? " beside it" : " (nor do the directories below it)"));
     if (series.size() > 1) {
       std::string list;
-      for (const auto& [uid, fs_] : series)
-        list += "\n  " + (uid.empty() ? std::string("(no Series Instance UID)") : trim_uid(uid)) +
-                ": " + std::to_string(fs_.size()) + " image(s), e.g. " +
-                fs_.front().filename().string();
+      for (const auto& [uid, s] : series) {
+        list += "\n  " + (uid.empty() ? std::string("(no Series Instance UID)") : uid) + ": ";
+        if (!s.modality.empty()) list += s.modality + ", ";
+        if (!s.description.empty()) list += "'" + s.description + "', ";
+        list += std::to_string(s.files.size()) + " image(s), e.g. " +
+                s.files.front().lexically_relative(dir).string();
+      }
       throw FileError(path, "holds " + std::to_string(series.size()) +
                                 " DICOM series; give one file of the series to load:" + list);
     }
-    files = series.begin()->second;
+    files = series.begin()->second.files;
   } else {
     gdcm::Scanner scanner;
     scanner.AddTag(kSeriesUid);
@@ -747,9 +793,9 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
     } else {
       // The slices of its series beside it.
       const fs::path dir = path.has_parent_path() ? path.parent_path() : fs::path(".");
-      const auto series = scan_series(path, dir, false);
-      const auto it = series.find(uid);
-      files = it != series.end() ? it->second : std::vector<fs::path>{path};
+      const auto series = scan_series(path, dir, false, false);
+      const auto it = series.find(trim_value(uid));
+      files = it != series.end() ? it->second.files : std::vector<fs::path>{path};
     }
   }
 

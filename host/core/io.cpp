@@ -1280,7 +1280,8 @@ VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
   if (has_suffix(name, {".nrrd", ".nhdr"})) return VolumeFileKind::nrrd;
   if (has_suffix(name, {".den"})) return VolumeFileKind::den;
   if (has_suffix(name, {".raw"})) return VolumeFileKind::raw;
-  if (has_suffix(name, {".dcm", ".dicom", ".ima"})) return VolumeFileKind::dicom;
+  if (has_suffix(name, {".dcm", ".dicom", ".ima"}) || name == "dicomdir")
+    return VolumeFileKind::dicom;
   std::error_code ec;
   if (fs::is_directory(path, ec)) return VolumeFileKind::dicom;
   if (fs::is_regular_file(path, ec)) {

@@ -36,6 +36,7 @@ struct DicomSlice {
   int instance = 0;          ///< Instance Number, where not 0
   int temporal = 0;          ///< Temporal Position Identifier, where not 0
   std::string image_type;    ///< Image Type, where not empty
+  std::string description;   ///< Series Description, where not empty
 };
 
 template <typename T>
@@ -75,6 +76,14 @@ void write_dicom_slice(const std::filesystem::path& p, int nx, int ny, const std
     gdcm::Attribute<0x0020, 0x0013> number;
     number.SetValue(s.instance);
     ds.Replace(number.GetAsDataElement());
+  }
+  gdcm::Attribute<0x0008, 0x0060> modality;
+  modality.SetValue("CT");
+  ds.Replace(modality.GetAsDataElement());
+  if (!s.description.empty()) {
+    gdcm::Attribute<0x0008, 0x103e> description;
+    description.SetValue(s.description);
+    ds.Replace(description.GetAsDataElement());
   }
   if (!s.image_type.empty()) {
     gdcm::DataElement type(gdcm::Tag(0x0008, 0x0008));

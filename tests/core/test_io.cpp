@@ -1578,10 +1578,12 @@ TEST_F(IoTest, DicomSeriesMalformed) {
     return d;
   };
   const fs::path two = series("two", {0, 1, 2, 3}, [](int k, DicomSlice& s, int&) {
-    if (k >= 2) s.series = "1.2.826.0.1.3680043.10.1.2";
+    if (k >= 2) s.series = "1.2.826.0.1.3680043.10.1.2", s.description = "late";
   });
   expect_file_error([&] { simdvol::load_volume(two); }, two,
-                    {"holds 2 DICOM series; give one file of the series to load"});
+                    {"holds 2 DICOM series; give one file of the series to load:\n"
+                     "  1.2.826.0.1.3680043.10.1.1: CT, 2 image(s), e.g. i0\n"
+                     "  1.2.826.0.1.3680043.10.1.2: CT, 'late', 2 image(s), e.g. i2"});
   // Given one file, its own series only.
   EXPECT_EQ(simdvol::load_volume(two / "i3").dims(), (std::array<int64_t, 3>{nx, ny, 2}));
   const fs::path nowhere = series("nowhere", {0, 1, 2}, [](int k, DicomSlice& s, int&) {
@@ -1706,6 +1708,48 @@ TEST_F(IoTest, DicomGantryTiltResampled) {
   expect_file_error([&] { simdvol::load_volume(apart); }, apart,
                     {"its slices lie beside each other, not one behind another: a2 is 50 x 0 mm "
                      "off the line through a0 along the normal"});
+}
+
+// A CD's tree (DICOMDIR beside DICOM/ST0/SE0/... directories): the tree
+// below a directory given, or below a DICOMDIR's directory, is searched;
+// its one series loads; several are listed with their modality,
+// description and a file under the directory to give; a tree without an
+// image says so.
+TEST_F(IoTest, DicomTreesAndDicomdir) {
+  const fs::path cd = file("cd");
+  fs::create_directories(cd / "DICOM/ST0/SE0");
+  fs::create_directories(cd / "DICOM/ST0/SE1");
+  fs::create_directories(cd / ".hidden");
+  for (int k = 0; k < 3; ++k) {
+    DicomSlice s;
+    s.position = {0, 0, 2.0 * k};
+    std::string name = "IM";
+    name += std::to_string(k);
+    write_dicom_slice(cd / "DICOM/ST0/SE0" / name, 4, 3, std::vector<int16_t>(12, 10 + k), s);
+    s.series = "1.2.826.0.1.3680043.10.1.5";  // (hidden: not searched)
+    write_dicom_slice(cd / ".hidden" / name, 4, 3, std::vector<int16_t>(12, 1), s);
+  }
+  write_file(cd / "DICOMDIR", Bytes(200, 0));  // (only its name counts)
+  for (const fs::path& p : {cd, cd / "DICOMDIR", cd / "DICOM"}) {
+    SCOPED_TRACE(p.string());
+    const Volume v = simdvol::load_volume(p);
+    ASSERT_EQ(v.dims(), (std::array<int64_t, 3>{4, 3, 3}));
+    EXPECT_EQ(v.at(0, 0, 2), 12.0f);
+  }
+  DicomSlice other;
+  other.series = "1.2.826.0.1.3680043.10.1.6";
+  other.description = "T1 SAG";
+  write_dicom_slice(cd / "DICOM/ST0/SE1/IM0", 4, 3, std::vector<int16_t>(12, 5), other);
+  expect_file_error([&] { simdvol::load_volume(cd / "DICOMDIR"); }, cd / "DICOMDIR",
+                    {"holds 2 DICOM series; give one file of the series to load:\n"
+                     "  1.2.826.0.1.3680043.10.1.1: CT, 3 image(s), e.g. DICOM/ST0/SE0/IM0\n"
+                     "  1.2.826.0.1.3680043.10.1.6: CT, 'T1 SAG', 1 image(s), e.g. "
+                     "DICOM/ST0/SE1/IM0"});
+  EXPECT_EQ(simdvol::load_volume(cd / "DICOM/ST0/SE1/IM0").dims()[2], 1);
+  fs::create_directories(file("bare/a/b"));
+  write_file(file("bare/a/b/notes.txt"), Bytes(10, 0x41));
+  expect_file_error([&] { simdvol::load_volume(file("bare")); }, file("bare"),
+                    {"holds no DICOM image (nor do the directories below it)"});
 }
 
 // A series of several acquisitions (time points, echoes): every position

@@ -63,9 +63,10 @@ Volume load_nrrd(const std::filesystem::path& path,
 Volume load_nifti(const std::filesystem::path& path,
                   std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
-/// DICOM through GDCM: `path` names a directory holding one series' slices,
-/// one slice of a series (the series' other slices are found beside it by
-/// their Series Instance UID), or one multi-frame file: an enhanced one
+/// DICOM through GDCM: `path` names a directory holding one series' slices
+/// (in it or in the directories below it, as on a CD; a DICOMDIR stands for
+/// the tree beside it), one slice of a series (the series' other slices are
+/// found beside it by their Series Instance UID), or one multi-frame file: an enhanced one
 /// (Enhanced CT, MR, PET) places each frame by its functional groups (a
 /// frame's own, else the shared ones: position, plane, Pixel Spacing,
 /// scale), an RT dose grid by its Grid Frame Offset Vector; other
@@ -88,13 +89,13 @@ Volume load_nifti(const std::filesystem::path& path,
 /// acquisition order: Temporal Position Identifier, Echo Numbers,
 /// Acquisition Number, Instance Number; a frame's place in its file), and
 /// is needed where K > 1; `volumes` receives K. A directory of several
-/// series is a FileError that lists them.
+/// series is a FileError that lists them (modality, description, a file).
 Volume load_dicom(const std::filesystem::path& path,
                   std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
 /// The kinds of volume file load_volume reads, told by the name's ending
-/// (whatever its case), else by being a directory (DICOM) or by "DICM" at
-/// byte 128 (a DICOM file of any name).
+/// (whatever its case; a DICOMDIR is DICOM), else by being a directory
+/// (DICOM) or by "DICM" at byte 128 (a DICOM file of any name).
 enum class VolumeFileKind { unknown, den, nrrd, nifti, raw, dicom };
 VolumeFileKind volume_file_kind(const std::filesystem::path& path);
 /// The endings volume_file_kind knows, for messages.
