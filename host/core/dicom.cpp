@@ -598,8 +598,8 @@ std::vector<Frame> multi_frame(const fs::path& path, const Slice& s) {
     const gdcm::DataSet* shared = shared_sq && shared_sq->GetNumberOfItems() >= 1
                                       ? &shared_sq->GetItem(1).GetNestedDataSet()
                                       : nullptr;
-    // A frame's own value, else the shared one, else (scale only) the
-    // image's.
+    // A frame's own value, else the shared one (and for the scale, else
+    // the top level's, else none).
     auto value = [&](const gdcm::DataSet& own, const gdcm::Tag& group, const gdcm::Tag& tag,
                      std::size_t count) {
       std::vector<double> v = group_numbers(own, group, tag, count);

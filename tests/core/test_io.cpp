@@ -1971,15 +1971,20 @@ TEST(IoReal, DicomPydicomFiles) {
 // the tiles' layout: the b = 1000 mosaic with its pixels replaced by a
 // pattern that says which tile and where, left to right and top to bottom.
 TEST(IoReal, DicomEnhancedAndMosaicFiles) {
+  // The dims, type, spacing (z within `dz`) and axes of a volume.
+  auto expect_geometry = [](const Volume& v, std::array<int64_t, 3> dims, VoxelType type,
+                            std::array<double, 3> spacing, double dz, const char* axes) {
+    EXPECT_EQ(v.dims(), dims);
+    EXPECT_EQ(v.type(), type);
+    EXPECT_DOUBLE_EQ(v.spacing()[0], spacing[0]);
+    EXPECT_DOUBLE_EQ(v.spacing()[1], spacing[1]);
+    EXPECT_NEAR(v.spacing()[2], spacing[2], dz);
+    EXPECT_EQ(v.orientation(), axes);
+  };
   const fs::path d = simdvol::testing::data_dir() / "dicom";
   SIMDVOL_REQUIRE_FILE(d / "mprage/philips_mprage.dcm");
-  const Volume m = simdvol::load_volume(d / "mprage/philips_mprage.dcm");
-  EXPECT_EQ(m.dims(), (std::array<int64_t, 3>{256, 256, 176}));
-  EXPECT_EQ(m.type(), VoxelType::f32);
-  EXPECT_DOUBLE_EQ(m.spacing()[0], 1.0);
-  EXPECT_DOUBLE_EQ(m.spacing()[1], 1.0);
-  EXPECT_NEAR(m.spacing()[2], 1.0000015, 1e-6);
-  EXPECT_EQ(m.orientation(), "PIR");
+  expect_geometry(simdvol::load_volume(d / "mprage/philips_mprage.dcm"), {256, 256, 176},
+                  VoxelType::f32, {1.0, 1.0, 1.0000015}, 1e-6, "PIR");
 
   SIMDVOL_REQUIRE_FILE(d / "dwi/siemens_dwi_0.dcm");
   SIMDVOL_REQUIRE_FILE(d / "dwi/siemens_dwi_1000.dcm");
@@ -1987,14 +1992,9 @@ TEST(IoReal, DicomEnhancedAndMosaicFiles) {
   fs::create_directories(dir / "one");
   fs::copy_file(d / "dwi/siemens_dwi_0.dcm", dir / "one/b0.dcm");
   int64_t volumes = 0;
-  const Volume b0 = simdvol::load_volume(dir / "one", std::nullopt, std::nullopt, &volumes);
+  expect_geometry(simdvol::load_volume(dir / "one", std::nullopt, std::nullopt, &volumes),
+                  {128, 128, 48}, VoxelType::u16, {1.796875, 1.796875, 3.0}, 1e-4, "LPS");
   EXPECT_EQ(volumes, 1);
-  EXPECT_EQ(b0.dims(), (std::array<int64_t, 3>{128, 128, 48}));
-  EXPECT_EQ(b0.type(), VoxelType::u16);
-  EXPECT_DOUBLE_EQ(b0.spacing()[0], 1.796875);
-  EXPECT_DOUBLE_EQ(b0.spacing()[1], 1.796875);
-  EXPECT_NEAR(b0.spacing()[2], 3.0, 1e-4);
-  EXPECT_EQ(b0.orientation(), "LPS");
   expect_file_error([&] { simdvol::load_volume(d / "dwi"); }, d / "dwi",
                     {"holds 2 3-D volumes (2 slices at each of 48 positions"});
   EXPECT_EQ(simdvol::load_volume(d / "dwi/siemens_dwi_0.dcm", std::nullopt, 1, &volumes).dims(),
