@@ -76,6 +76,7 @@ void print_info(std::ostream& os, const fs::path& path, const Volume& vol) {
   else
     os << "axes:     " << vol.orientation() << " (x, y, z point to the patient's "
        << anatomical_words(vol.orientation()) << ")\n";
+  for (const std::string& n : vol.notes()) os << "note:     " << n << "\n";
   os << "range:    " << r.min << " .. " << r.max << "\n";
   std::size_t nonfinite = 0;
   double sum = 0;

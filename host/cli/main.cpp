@@ -547,6 +547,7 @@ int main(int argc, char** argv) {
           throw ArgumentError("--phantom-size",
                               "applies only to the built-in phantom (a volume file is given)");
         vol = rv.load();
+        for (const std::string& n : vol.notes()) std::cerr << "simdvol: note: " << n << "\n";
       }
       if (classify == "auto") classify = vol.range().min < -500.0f ? "ct" : "mri";
       opt.classifier = classifier_from_spec(classify);

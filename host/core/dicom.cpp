@@ -982,6 +982,18 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
       sheared = sheared || std::fabs(shift[k][0]) > 0.05 || std::fabs(shift[k][1]) > 0.05;
     }
   }
+  std::string shear_note;
+  if (sheared) {
+    // The tilt from the last slice: its offset in the plane against its
+    // distance along the normal.
+    const double du = shift.back()[0] * spacing[0], dv = shift.back()[1] * spacing[1];
+    const double depth = chosen.back()->position - chosen.front()->position;
+    shear_note = "its " + std::to_string(chosen.size()) +
+                 " slices were resampled in their plane to undo a gantry tilt of " +
+                 format_mm(std::atan2(std::hypot(du, dv), depth) * 180.0 / M_PI) +
+                 " degrees (the last lies " + format_mm(std::hypot(du, dv)) +
+                 " mm off the first one's line along the normal)";
+  }
 
   // Rescale Slope and Intercept, per frame (they may differ from slice to
   // slice); a volume any frame of which is scaled loads as f32.
@@ -1039,6 +1051,7 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
       std::all_of(frames.begin(), frames.end(), [](const Frame& f) { return f.oriented; });
   if (said && (placed || frames.size() == 1))
     vol.set_orientation(closest_orientation({row, col, normal}, "LPS"));
+  if (!shear_note.empty()) vol.add_note(shear_note);
   return vol;
 }
 
@@ -1064,6 +1077,7 @@ struct DicomReply {
   char orientation[4] = {0, 0, 0, 0};
   int64_t volumes = 1;      ///< 3-D volumes in the series (status 0 and 1)
   uint32_t text_bytes = 0;  ///< status 1: the error's path, a NUL, its problem
+  uint32_t note_bytes = 0;  ///< status 0: the notes after the voxels, each ending in a NUL
 };
 
 /// The reading process: loads, sends the volume or the error down `fd`.
@@ -1078,8 +1092,12 @@ struct DicomReply {
     }
     std::memcpy(reply.orientation, v.orientation().data(),
                 std::min<std::size_t>(3, v.orientation().size()));
+    std::string notes;
+    for (const std::string& n : v.notes()) notes += n + '\0';
+    reply.note_bytes = static_cast<uint32_t>(notes.size());
     const bool ok = write_fully(fd, &reply, sizeof reply) &&
-                    write_fully(fd, v.data().data(), v.data().size() * sizeof(float));
+                    write_fully(fd, v.data().data(), v.data().size() * sizeof(float)) &&
+                    write_fully(fd, notes.data(), notes.size());
     ::_exit(ok ? 0 : 3);
   } catch (const FileError& e) {
     reply.status = 1;
@@ -1162,8 +1180,16 @@ Volume load_dicom(const std::filesystem::path& path, std::optional<int64_t> volu
     const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
     Volume vol(dims, static_cast<VoxelType>(reply.type),
                {reply.spacing[0], reply.spacing[1], reply.spacing[2]});
-    if (read_fully(f.mem, vol.data().data(), vol.data().size() * sizeof(float))) {
+    std::string notes(reply.note_bytes < (1u << 20) ? reply.note_bytes : 0, '\0');
+    if (reply.note_bytes < (1u << 20) &&
+        read_fully(f.mem, vol.data().data(), vol.data().size() * sizeof(float)) &&
+        read_fully(f.mem, notes.data(), notes.size())) {
       vol.set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
+      for (std::size_t at = 0; at < notes.size();) {
+        const std::size_t end = notes.find('\0', at);
+        vol.add_note(notes.substr(at, end - at));
+        at = end == std::string::npos ? notes.size() : end + 1;
+      }
       return vol;
     }
   } else if (got && reply.status == 1 && reply.text_bytes < (1u << 20)) {

@@ -385,8 +385,23 @@ TEST_F(Cli, RendersADicomSeries) {
             std::string::npos)
       << info4.output;
   EXPECT_NE(info4.output.find("range:    -1000 .. -1000"), std::string::npos) << info4.output;
+  // A tilted copy of three slices: resampled, and the user told so.
+  fs::create_directories(dir_ / "tilted");
+  for (int64_t z = 0; z < 3; ++z) {
+    simdvol::testing::DicomSlice s;
+    s.position = {0, 2.0 * static_cast<double>(z), 5.0 * static_cast<double>(z)};
+    write_dicom_slice(dir_ / "tilted" / ("T" + std::to_string(z + 10)), 24, 24,
+                      std::vector<int16_t>(24 * 24, 7), s);
+  }
+  const std::string note = "its 3 slices were resampled in their plane to undo a gantry tilt";
+  const Result tilted = run("info " + (dir_ / "tilted").string());
+  EXPECT_NE(tilted.output.find("note:     " + note), std::string::npos) << tilted.output;
+  const Result drawn = run("render " + (dir_ / "tilted").string() + common + path("t.tif"));
+  EXPECT_EQ(drawn.code, 0) << drawn.output;
+  EXPECT_NE(drawn.output.find("simdvol: note: " + note), std::string::npos) << drawn.output;
   const Result info = run("info " + dir.string());
   ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_EQ(info.output.find("note:"), std::string::npos) << info.output;
   EXPECT_NE(info.output.find("dims:     24 x 24 x 24"), std::string::npos) << info.output;
   EXPECT_NE(info.output.find("spacing:  0.5 x 0.7 x 1.25"), std::string::npos) << info.output;
   EXPECT_NE(info.output.find("axes:     LPS"), std::string::npos) << info.output;

@@ -1522,6 +1522,7 @@ TEST_F(IoTest, DicomSeriesSortedScaledAndOriented) {
     EXPECT_DOUBLE_EQ(v.spacing()[2], 2.5);
     EXPECT_EQ(v.data(), want);
     EXPECT_EQ(v.orientation(), "LPS");
+    EXPECT_TRUE(v.notes().empty());  // (straight slices: nothing resampled)
   }
   EXPECT_EQ(simdvol::volume_file_kind(dir), simdvol::VolumeFileKind::dicom);
   EXPECT_EQ(simdvol::volume_file_kind(dir / "IM4"), simdvol::VolumeFileKind::dicom);  // DICM
@@ -1688,6 +1689,12 @@ TEST_F(IoTest, DicomGantryTiltResampled) {
   ASSERT_EQ(v.dims(), (std::array<int64_t, 3>{nx, ny, nz}));
   EXPECT_EQ(v.type(), VoxelType::f32);
   EXPECT_DOUBLE_EQ(v.spacing()[2], 2.0);  // along the normal
+  // The user is told: atan(3.75 / 6) = 32.005 degrees.
+  EXPECT_EQ(v.notes(), std::vector<std::string>{
+                           "its 4 slices were resampled in their plane to undo a gantry tilt of "
+                           "32.01 degrees (the last lies 3.75 mm off the first one's line along "
+                           "the normal)"});
+  EXPECT_EQ(simdvol::reorient(v, "RAS", "test").notes(), v.notes());
   for (int k = 0; k < nz; ++k)
     for (int j = 0; j < ny; ++j)
       for (int i = 0; i < nx; ++i) {

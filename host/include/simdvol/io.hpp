@@ -77,7 +77,8 @@ Volume load_nifti(const std::filesystem::path& path,
 /// lie evenly spaced in one plane orientation, of one size, Pixel Spacing
 /// and pixel format (slices whose origins lie off the line along the normal,
 /// as a CT gantry tilt leaves them, are resampled in their plane, bilinearly,
-/// so that the grid is orthogonal; f32 then); grey scale only (any transfer syntax GDCM decodes:
+/// so that the grid is orthogonal; f32 then, with a Volume::notes entry
+/// saying so); grey scale only (any transfer syntax GDCM decodes:
 /// JPEG, JPEG 2000, JPEG-LS, RLE). Rescale Slope and Intercept are applied
 /// per slice or frame (Hounsfield units for CT), the type following the
 /// pixels as for NIfTI (f32 where any is scaled). The spacing: Pixel

@@ -66,12 +66,19 @@ class Volume {
   /// Throws ArgumentError unless `code` is empty or valid_orientation.
   void set_orientation(std::string code);
 
+  /// What the loader did to the voxels beyond reading them, one sentence
+  /// each, for the user to be told (a DICOM series' slices resampled for
+  /// a gantry tilt); empty for most files.
+  const std::vector<std::string>& notes() const { return notes_; }
+  void add_note(std::string note) { notes_.push_back(std::move(note)); }
+
  private:
   std::array<int64_t, 3> dims_{0, 0, 0};
   std::array<double, 3> spacing_{1.0, 1.0, 1.0};
   VoxelType type_ = VoxelType::f32;
   std::vector<float> data_;
   std::string orientation_;
+  std::vector<std::string> notes_;
 };
 
 /// Whether `code` names each of the axes R/L, A/P, S/I once, in upper case
