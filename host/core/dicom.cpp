@@ -298,6 +298,13 @@ class DicomWalker {
       if (syntax == "1.2.840.10008.1.2.1.99") return true;  // deflated: GDCM's to check
       explicit_ = syntax != "1.2.840.10008.1.2";
       big_ = syntax == "1.2.840.10008.1.2.2";
+      // Some writers put an implicit-VR data set under an explicit transfer
+      // syntax (highdicom 0.1.0 did); GDCM and pydicom read such a file by
+      // what its first element looks like, and so does this walk.
+      unsigned char h[8];
+      if (explicit_ && at + 8 <= size_ && read(at, h, 8) &&
+          !(std::isupper(h[4]) && std::isupper(h[5])))
+        explicit_ = false;
     } else {
       // No preamble (old ACR-NEMA style): explicit VR if a VR's letters stand
       // where they would, else implicit; little-endian.

@@ -1617,6 +1617,28 @@ TEST_F(IoTest, DicomSeriesMalformed) {
   expect_file_error([&] { simdvol::load_volume(mosaic); }, mosaic,
                     {"is a Siemens mosaic (ImageType MOSAIC) whose number of images or their size "
                      "GDCM cannot find (no Number Of Images In Mosaic in its CSA header?) (i0)"});
+  // An implicit-VR data set under an explicit transfer syntax (as
+  // highdicom 0.1.0 wrote one): GDCM reads it by its first element, and so
+  // does the loader's length walk (it took the file for something else).
+  {
+    const fs::path one = series("mislabelled", {0});
+    Bytes b = read_file(one / "i0");
+    const std::string implicit("1.2.840.10008.1.2\0", 18), label("\x10\x00UI", 4);
+    auto at = std::search(b.begin(), b.end(), implicit.begin(), implicit.end());
+    ASSERT_NE(at, b.end()) << "GDCM wrote another transfer syntax";
+    ASSERT_TRUE(std::equal(label.begin(), label.end(), at - 6));  // (0002,0010) UI, length 18
+    const std::size_t value = static_cast<std::size_t>(at - b.begin());
+    b[value - 2] = 20;
+    const std::string exp("1.2.840.10008.1.2.1\0", 20);
+    b.erase(b.begin() + static_cast<std::ptrdiff_t>(value),
+            b.begin() + static_cast<std::ptrdiff_t>(value + 18));
+    b.insert(b.begin() + static_cast<std::ptrdiff_t>(value), exp.begin(), exp.end());
+    b[140] = static_cast<unsigned char>(b[140] + 2);  // (0002,0000)'s value, at 132 + 8
+    write_file(one / "i0", b);
+    const Volume v = simdvol::load_volume(one);
+    EXPECT_EQ(v.dims(), (std::array<int64_t, 3>{nx, ny, 1}));
+    EXPECT_EQ(v.at(1, 1, 0), 7.0f);
+  }
   const fs::path rgb = file("rgb");
   fs::create_directories(rgb);
   DicomSlice c;
