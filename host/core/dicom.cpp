@@ -75,8 +75,7 @@ struct Slice {
   unsigned frames = 1;
   unsigned nx = 0, ny = 0;  ///< a frame's size (a mosaic's tile)
   unsigned tiles = 0;       ///< a Siemens mosaic: tiles per row of its image; 0: none
-  double mosaic_position[3] = {0, 0, 0},
-         mosaic_normal[3] = {0, 0, 0};  ///< its tile 0, its CSA normal
+  double mosaic_sign = 1;   ///< -1: its tiles run against the planes' normal
 };
 
 /// One 2-D image of the volume: a slice of a series, or a frame of a
@@ -689,9 +688,11 @@ bool is_mosaic(const gdcm::DataSet& ds) {
 }
 
 /// A slice's frame size, and for a Siemens mosaic its tiles: how many
-/// images it holds, their size (the Acquisition Matrix), and where its
-/// first tile lies and which way the tiles run (the CSA header's slice
-/// array, through GDCM's SplitMosaicFilter).
+/// images it holds and their size (Number Of Images In Mosaic in the CSA
+/// header, else the Acquisition Matrix), and whether the tiles run along
+/// the planes' normal (rows x columns) or against it (the CSA header's
+/// Slice Normal Vector; along it where there is none), through GDCM's
+/// SplitMosaicFilter.
 void find_tiles(const fs::path& path, Slice& s) {
   const gdcm::Image& im = s.reader->GetImage();
   s.nx = im.GetDimension(0);
@@ -703,18 +704,10 @@ void find_tiles(const fs::path& path, Slice& s) {
   filter.SetImage(im);
   filter.SetFile(s.reader->GetFile());
   unsigned dims[3] = {0, 0, 0};
-  double normal[3] = {0, 0, 0}, position[3] = {0, 0, 0};
-  bool inverted = false;
   if (!filter.ComputeMOSAICDimensions(dims) || dims[0] == 0 || dims[1] == 0 || dims[2] == 0)
     throw FileError(path,
                     "is a Siemens mosaic (ImageType MOSAIC) whose number of images or their "
                     "size GDCM cannot find (no Number Of Images In Mosaic in its CSA header?)" +
-                        which);
-  if (!filter.ComputeMOSAICSliceNormal(normal, inverted) ||
-      !filter.ComputeMOSAICSlicePosition(position, false))
-    throw FileError(path,
-                    "is a Siemens mosaic (ImageType MOSAIC) whose slices' positions GDCM cannot "
-                    "find (no slice array in its CSA header?)" +
                         which);
   const auto tiles = static_cast<unsigned>(std::ceil(std::sqrt(static_cast<double>(dims[2]))));
   if (uint64_t{tiles} * dims[0] > s.nx || uint64_t{tiles} * dims[1] > s.ny)
@@ -722,33 +715,46 @@ void find_tiles(const fs::path& path, Slice& s) {
                               std::to_string(dims[0]) + " x " + std::to_string(dims[1]) +
                               ", which do not fit in its " + std::to_string(s.nx) + " x " +
                               std::to_string(s.ny) + " pixels" + which);
+  double normal[3] = {0, 0, 0};
+  bool inverted = false;
+  s.mosaic_sign = filter.ComputeMOSAICSliceNormal(normal, inverted) && inverted ? -1.0 : 1.0;
   s.frames = dims[2];
   s.nx = dims[0];
   s.ny = dims[1];
   s.tiles = tiles;
-  std::copy(position, position + 3, s.mosaic_position);
-  std::copy(normal, normal + 3, s.mosaic_normal);
 }
 
-/// The slices of a Siemens mosaic (slice `i` of its series): tile t lies at
-/// the first tile's position plus t times the slices' spacing (Spacing
-/// Between Slices, else Slice Thickness) along the CSA header's normal;
-/// plane, scale and acquisition order are the file's.
+/// The slices of a Siemens mosaic (slice `i` of its series), placed as
+/// nibabel and SPM place them: tile t at the file's Image Position
+/// (Patient) plus t times the slices' spacing (Spacing Between Slices,
+/// else Slice Thickness) along the way the tiles run. (The position is the
+/// whole mosaic's corner, not the tile's: a shift in the plane, the same
+/// for every tile and every file of a series, which the order along the
+/// normal does not see.) Plane, scale and acquisition order are the file's.
 std::vector<Frame> mosaic_frames(const fs::path& path, const Slice& s, std::size_t i) {
   const Frame base = single_frame(path, s, i, false);
   const gdcm::DataSet& ds = s.reader->GetFile().GetDataSet();
+  const std::string which = " (" + s.file.filename().string() + ")";
+  if (!base.origin)
+    throw FileError(path,
+                    "is a Siemens mosaic without Image Position (Patient), so its slices "
+                    "cannot be placed" +
+                        which);
   std::vector<double> dz = numbers(ds, kSpacingBetweenSlices);
   if (dz.size() != 1 || !(dz[0] > 0)) dz = numbers(ds, kSliceThickness);
   if (dz.size() != 1 || !(dz[0] > 0))
     throw FileError(path,
                     "is a Siemens mosaic without Spacing Between Slices or Slice Thickness, so "
-                    "its slices cannot be placed (" +
-                        s.file.filename().string() + ")");
+                    "its slices cannot be placed" +
+                        which);
+  const std::array<double, 6>& c = base.cosines;
+  const std::array<double, 3> normal{c[1] * c[5] - c[2] * c[4], c[2] * c[3] - c[0] * c[5],
+                                     c[0] * c[4] - c[1] * c[3]};
   std::vector<Frame> frames(s.frames, base);
   for (unsigned t = 0; t < s.frames; ++t) {
     frames[t].frame = t;
     std::array<double, 3> o;
-    for (int a = 0; a < 3; ++a) o[a] = s.mosaic_position[a] + t * dz[0] * s.mosaic_normal[a];
+    for (int a = 0; a < 3; ++a) o[a] = (*base.origin)[a] + s.mosaic_sign * t * dz[0] * normal[a];
     frames[t].origin = o;
   }
   return frames;

@@ -2050,14 +2050,34 @@ TEST(IoReal, DicomEnhancedAndMosaicFiles) {
   fs::create_directories(dir / "pattern");
   w.SetFileName((dir / "pattern/b1000.dcm").c_str());
   ASSERT_TRUE(w.Write());
+  // Tile t at slice z = t; and with the columns' direction turned in its
+  // Image Orientation (Patient), the planes' normal points down (I) while
+  // the CSA header's Slice Normal Vector still points up: the tiles run
+  // against the normal, so slice z (from the bottom) is tile 47 - z, LAI.
+  auto wrong_voxels = [](const Volume& v, bool reversed) {
+    int64_t wrong = 0;
+    for (int64_t z = 0; z < 48; ++z)
+      for (int64_t y = 0; y < 128; ++y)
+        for (int64_t x = 0; x < 128; ++x)
+          wrong += v.at(x, y, z) !=
+                   static_cast<float>(64 * (reversed ? 47 - z : z) + (3 * x + 5 * y) % 64);
+    return wrong;
+  };
   const Volume p = simdvol::load_volume(dir / "pattern/b1000.dcm");
   ASSERT_EQ(p.dims(), (std::array<int64_t, 3>{128, 128, 48}));
-  int64_t wrong = 0;
-  for (int64_t z = 0; z < 48; ++z)
-    for (int64_t y = 0; y < 128; ++y)
-      for (int64_t x = 0; x < 128; ++x)
-        wrong += p.at(x, y, z) != static_cast<float>(64 * z + (3 * x + 5 * y) % 64);
-  EXPECT_EQ(wrong, 0);
+  EXPECT_EQ(p.orientation(), "LPS");
+  EXPECT_EQ(wrong_voxels(p, false), 0);
+  gdcm::Attribute<0x0020, 0x0037> iop;
+  iop.SetFromDataSet(r.GetFile().GetDataSet());
+  for (unsigned k = 3; k < 6; ++k) iop.SetValue(-iop.GetValue(k), k);
+  r.GetFile().GetDataSet().Replace(iop.GetAsDataElement());
+  fs::create_directories(dir / "turned");
+  w.SetFileName((dir / "turned/b1000.dcm").c_str());
+  ASSERT_TRUE(w.Write());
+  const Volume q = simdvol::load_volume(dir / "turned/b1000.dcm");
+  ASSERT_EQ(q.dims(), (std::array<int64_t, 3>{128, 128, 48}));
+  EXPECT_EQ(q.orientation(), "LAI");
+  EXPECT_EQ(wrong_voxels(q, true), 0);
   fs::remove_all(dir);
 }
 

@@ -72,7 +72,9 @@ Volume load_nifti(const std::filesystem::path& path,
 /// scale), an RT dose grid by its Grid Frame Offset Vector; other
 /// multi-frame files keep their frames as stored. A Siemens mosaic (Image
 /// Type MOSAIC) is unpacked: its tiles, left to right and top to bottom,
-/// are slices placed by its CSA header (GDCM's SplitMosaicFilter). Slices and placed frames
+/// are slices (their count and size from its CSA header, through GDCM's
+/// SplitMosaicFilter) placed from its Image Position (Patient) along the
+/// normal, as nibabel and SPM place them. Slices and placed frames
 /// are sorted by their position along the normal of their plane and must
 /// lie evenly spaced in one plane orientation, of one size, Pixel Spacing
 /// and pixel format (slices whose origins lie off the line along the normal,
