@@ -95,6 +95,16 @@ struct Frame {
   std::array<double, 4> order{0, 0, 0, 0};
 };
 
+/// The normal of the plane of Image Orientation (Patient) `c`: rows x
+/// columns.
+std::array<double, 3> plane_normal(const std::array<double, 6>& c) {
+  return {c[1] * c[5] - c[2] * c[4], c[2] * c[3] - c[0] * c[5], c[0] * c[4] - c[1] * c[3]};
+}
+
+double dot(const std::array<double, 3>& a, const std::array<double, 3>& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
 /// The numbers of a DS or IS element of `ds` (split at backslashes);
 /// empty where it is missing or any part is not a number.
 std::vector<double> numbers(const gdcm::DataSet& ds, const gdcm::Tag& tag) {
@@ -295,20 +305,16 @@ class DicomWalker {
         at += header + len;
       }
       if (syntax == "1.2.840.10008.1.2.1.99") return true;  // deflated: GDCM's to check
-      explicit_ = syntax != "1.2.840.10008.1.2";
-      big_ = syntax == "1.2.840.10008.1.2.2";
       // Some writers put an implicit-VR data set under an explicit transfer
       // syntax (highdicom 0.1.0 did); GDCM and pydicom read such a file by
       // what its first element looks like, and so does this walk.
-      unsigned char h[8];
-      if (explicit_ && at + 8 <= size_ && read(at, h, 8) &&
-          !(std::isupper(h[4]) && std::isupper(h[5])))
-        explicit_ = false;
+      explicit_ = syntax != "1.2.840.10008.1.2" && vr_letters_at(at);
+      big_ = syntax == "1.2.840.10008.1.2.2";
     } else {
-      // No preamble (old ACR-NEMA style): explicit VR if a VR's letters stand
-      // where they would, else implicit; little-endian.
+      // No preamble (old ACR-NEMA style): little-endian, explicit VR where
+      // the first element looks so.
       if (size_ < 8 || !read(0, b, 8)) return false;
-      explicit_ = std::isupper(b[4]) && std::isupper(b[5]);
+      explicit_ = vr_letters_at(0);
     }
     return walk(at, size_, false, 0) != kNotDicom;
   }
@@ -322,6 +328,12 @@ class DicomWalker {
     in_.seekg(static_cast<std::streamoff>(at));
     in_.read(static_cast<char*>(buf), static_cast<std::streamsize>(n));
     return static_cast<uint64_t>(in_.gcount()) == n;
+  }
+  /// Whether the element at `at` has a VR's two letters where explicit VR
+  /// puts them.
+  bool vr_letters_at(uint64_t at) {
+    unsigned char h[8];
+    return at + 8 <= size_ && read(at, h, 8) && std::isupper(h[4]) && std::isupper(h[5]);
   }
   static uint16_t le16(const unsigned char* p) { return static_cast<uint16_t>(p[0] | p[1] << 8); }
   uint16_t u16(const unsigned char* p) const {
@@ -586,12 +598,8 @@ std::vector<Frame> multi_frame(const fs::path& path, const Slice& s) {
   const gdcm::Image& im = s.reader->GetImage();
   const gdcm::DataSet& ds = s.reader->GetFile().GetDataSet();
   const unsigned n = s.frames;
-  Frame base;
-  std::copy(im.GetDirectionCosines(), im.GetDirectionCosines() + 6, base.cosines.begin());
-  base.oriented = ds.FindDataElement(kOrientation);
-  base.spacing = {im.GetSpacing(0), im.GetSpacing(1)};
-  base.slope = im.GetSlope();
-  base.intercept = im.GetIntercept();
+  Frame base = single_frame(path, s, 0, false);  // the file's plane, spacing and scale
+  base.origin.reset();                           // (the first frame's, not every frame's)
   std::vector<Frame> frames(n, base);
   for (unsigned k = 0; k < n; ++k) frames[k].frame = k, frames[k].order = {0, 0, 0, double(k)};
 
@@ -642,9 +650,7 @@ std::vector<Frame> multi_frame(const fs::path& path, const Slice& s) {
   if (offsets.size() == n && ds.FindDataElement(kPosition)) {
     // Offsets along the normal from the first frame (relative where the
     // first is 0; absolute, as older files write them, otherwise).
-    const std::array<double, 6>& c = base.cosines;
-    const std::array<double, 3> normal{c[1] * c[5] - c[2] * c[4], c[2] * c[3] - c[0] * c[5],
-                                       c[0] * c[4] - c[1] * c[3]};
+    const std::array<double, 3> normal = plane_normal(base.cosines);
     for (unsigned k = 0; k < n; ++k) {
       std::array<double, 3> o;
       for (int a = 0; a < 3; ++a) o[a] = im.GetOrigin()[a] + (offsets[k] - offsets[0]) * normal[a];
@@ -747,9 +753,7 @@ std::vector<Frame> mosaic_frames(const fs::path& path, const Slice& s, std::size
                     "is a Siemens mosaic without Spacing Between Slices or Slice Thickness, so "
                     "its slices cannot be placed" +
                         which);
-  const std::array<double, 6>& c = base.cosines;
-  const std::array<double, 3> normal{c[1] * c[5] - c[2] * c[4], c[2] * c[3] - c[0] * c[5],
-                                     c[0] * c[4] - c[1] * c[3]};
+  const std::array<double, 3> normal = plane_normal(base.cosines);
   std::vector<Frame> frames(s.frames, base);
   for (unsigned t = 0; t < s.frames; ++t) {
     frames[t].frame = t;
@@ -878,9 +882,7 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
                                   " x " + format_mm(f.spacing[1]) + " mm" + frame_name(slices, f) +
                                   ": not one volume");
   const std::array<double, 3> row{cos[0], cos[1], cos[2]}, col{cos[3], cos[4], cos[5]};
-  const std::array<double, 3> normal{row[1] * col[2] - row[2] * col[1],
-                                     row[2] * col[0] - row[0] * col[2],
-                                     row[0] * col[1] - row[1] * col[0]};
+  const std::array<double, 3> normal = plane_normal(cos);
   const bool placed = std::all_of(frames.begin(), frames.end(),
                                   [](const Frame& f) { return f.origin.has_value(); });
   for (Frame& f : frames) {
@@ -888,9 +890,7 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
                       std::isfinite((*f.origin)[2])))
       throw FileError(
           path, "the Image Position (Patient) of " + frame_label(slices, f) + " is not a number");
-    if (f.origin)
-      f.position =
-          (*f.origin)[0] * normal[0] + (*f.origin)[1] * normal[1] + (*f.origin)[2] * normal[2];
+    if (f.origin) f.position = dot(*f.origin, normal);
   }
 
   // The frames of the volume asked for, in order along the normal: where
@@ -980,11 +980,8 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
     const std::array<double, 3>& o0 = *chosen.front()->origin;
     for (std::size_t k = 0; k < chosen.size(); ++k) {
       const std::array<double, 3>& o = *chosen[k]->origin;
-      double u = 0, v = 0;
-      for (int a = 0; a < 3; ++a) {
-        u += (o[a] - o0[a]) * row[a];
-        v += (o[a] - o0[a]) * col[a];
-      }
+      const std::array<double, 3> d{o[0] - o0[0], o[1] - o0[1], o[2] - o0[2]};
+      const double u = dot(d, row), v = dot(d, col);
       shift[k] = {u / spacing[0], v / spacing[1]};
       if (!(std::fabs(shift[k][0]) < nx && std::fabs(shift[k][1]) < ny))
         throw FileError(path, "its slices lie beside each other, not one behind another: " +
