@@ -8,7 +8,8 @@
 #   share/simdvol/kernels/*.cl, simdvol_shared.h  (the kernel sources, as
 #                                                 embedded in the library)
 #   lib/cmake/simdvol/simdvolConfig.cmake, ...ConfigVersion.cmake,
-#     simdvolTargets.cmake, FindNiftiIO.cmake, FindTeemNrrd.cmake, FindGdcmLibs.cmake
+#     simdvolTargets.cmake, FindNiftiIO.cmake, FindTeemNrrd.cmake, FindGdcmLibs.cmake,
+#     FindMetaIO.cmake
 #   bin/simdvol                                   (the command-line program)
 #   lib/simdvol/libsimdvol_oiio.so                (OpenImageIO, loaded by
 #                                                 simdvol_core on first use)
@@ -63,5 +64,6 @@ install(FILES
   ${PROJECT_BINARY_DIR}/simdvolConfigVersion.cmake
   ${PROJECT_SOURCE_DIR}/cmake/FindNiftiIO.cmake
   ${PROJECT_SOURCE_DIR}/cmake/FindGdcmLibs.cmake
+  ${PROJECT_SOURCE_DIR}/cmake/FindMetaIO.cmake
   ${PROJECT_SOURCE_DIR}/cmake/FindTeemNrrd.cmake
   DESTINATION ${SIMDVOL_INSTALL_CMAKEDIR})

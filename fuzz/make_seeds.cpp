@@ -2,8 +2,10 @@
 // (data/brainsmall.den, data/ch2.nii.gz; a synthetic volume stands in for a
 // missing one): small crops written with save_nrrd, teem and niftilib, and
 // truncated and malformed variants, each framed as its fuzz target expects.
-//   make_seeds <data dir> <corpus root>   -> <root>/{raw,den,nrrd,nifti}/
+//   make_seeds <data dir> <corpus root>   -> <root>/{raw,den,nrrd,nifti,dicom,metaimage}/
 // Nothing it writes is committed: scripts/fuzz regenerates the corpora.
+#include <zlib.h>
+
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
@@ -212,7 +214,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path data(argv[1]), root(argv[2]);
-  for (const char* t : {"raw", "den", "nrrd", "nifti", "dicom"}) fs::create_directories(root / t);
+  for (const char* t : {"raw", "den", "nrrd", "nifti", "dicom", "metaimage"})
+    fs::create_directories(root / t);
   const fs::path tmpdir = root / "tmp";
   fs::create_directories(tmpdir);
   nifti_set_debug_level(0);
@@ -333,6 +336,66 @@ int main(int argc, char** argv) {
   simdvol::testing::write_enhanced_dicom(tmpdir / "enhanced.dcm", 4, 3, frames, {1, 0, 0, 0, 1, 0},
                                          {0.5, 0.7}, std::array<double, 2>{1.0, -1024.0});
   write_seed(root / "dicom", "enhanced.dcm", read_bytes(tmpdir / "enhanced.dcm"));
+  // MetaImage: byte 0 even = the voxels after the header (.mha), odd = a
+  // header apart (.mhd, blank line, data.raw); (byte 0 / 2) % 4 = 1 asks
+  // for volume 0 of a 4-D file.
+  const fs::path mha = root / "metaimage";
+  auto mha_seed = [&](const std::string& name, uint8_t form, const std::string& header,
+                      const Bytes& d) {
+    Bytes b(header.begin(), header.end());
+    b.insert(b.end(), d.begin(), d.end());
+    write_seed(mha, name, framed(form, b));
+  };
+  const std::string mha_u8 =
+      "ObjectType = Image\nNDims = 3\nDimSize = 16 16 8\nElementType = MET_UCHAR\n";
+  mha_seed("local_u8", 0, mha_u8 + "ElementDataFile = LOCAL\n", voxel_bytes_of(b8));
+  mha_seed("local_i16_be", 0,
+           "ObjectType = Image\nNDims = 3\nBinaryDataByteOrderMSB = True\n"
+           "TransformMatrix = 0 1 0 -1 0 0 0 0 1\nElementSpacing = 1 1 2\nDimSize = 16 16 8\n"
+           "ElementType = MET_SHORT\nElementDataFile = LOCAL\n",
+           voxel_bytes_of(c16, true));
+  {
+    const Bytes f = voxel_bytes_of(cf);
+    uLongf len = compressBound(static_cast<uLong>(f.size()));
+    Bytes z(len);
+    if (compress2(z.data(), &len, f.data(), static_cast<uLong>(f.size()), 6) == Z_OK) {
+      z.resize(len);
+      mha_seed("local_f32_zlib", 0,
+               "ObjectType = Image\nNDims = 3\nCompressedData = True\nCompressedDataSize = " +
+                   std::to_string(len) +
+                   "\nDimSize = 16 16 8\nElementType = MET_FLOAT\nElementDataFile = LOCAL\n",
+               z);
+      mha_seed("apart_f32_zlib", 1,
+               "ObjectType = Image\nNDims = 3\nCompressedData = True\nDimSize = 16 16 8\n"
+               "ElementType = MET_FLOAT\nElementDataFile = data.raw\n\n",
+               z);
+    }
+  }
+  mha_seed("apart_u8", 1, mha_u8 + "ElementDataFile = data.raw\n\n", voxel_bytes_of(b8));
+  mha_seed("four_d", 0 + 2,
+           "ObjectType = Image\nNDims = 4\nDimSize = 16 16 4 2\nElementSpacing = 1 1 1 1\n"
+           "ElementType = MET_UCHAR\nElementDataFile = LOCAL\n",
+           voxel_bytes_of(b8));
+  mha_seed("ascii", 0,
+           "ObjectType = Image\nNDims = 3\nBinaryData = False\nDimSize = 3 2 2\n"
+           "ElementType = MET_FLOAT\nElementDataFile = LOCAL\n",
+           [&] {
+             std::string t;
+             for (float x : tiny.data()) t += std::to_string(x) + " ";
+             return Bytes(t.begin(), t.end());
+           }());
+  mha_seed("list_2d", 1,
+           "ObjectType = Image\nNDims = 3\nDimSize = 4 4 2\nElementType = MET_UCHAR\n"
+           "ElementDataFile = LIST 2D\ndata.raw\ndata.raw\n\n",
+           Bytes(16, 5));
+  if (fs::exists(data / "metaimage" / "BrainProtonDensity3Slices.mha")) {
+    Bytes h = read_bytes(data / "metaimage" / "BrainProtonDensity3Slices.mha");
+    std::string t(h.begin(), h.end());
+    const std::size_t at = t.find("BrainProtonDensity3Slices.raw");
+    if (at != std::string::npos) t.replace(at, 29, "data.raw");
+    mha_seed("real_itk_example", 1, t + "\n",
+             read_bytes(data / "metaimage" / "BrainProtonDensity3Slices.raw", 16384));
+  }
   fs::remove_all(tmpdir);
   std::cout << "make_seeds: corpora written under " << root.string() << "\n";
   return 0;

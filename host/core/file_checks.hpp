@@ -2,9 +2,12 @@
 // installed).
 #pragma once
 
+#include <array>
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <initializer_list>
+#include <string>
 #include <string_view>
 
 namespace simdvol {
@@ -33,5 +36,17 @@ bool read_fully(int fd, void* p, std::size_t n);
 /// Whether `name` (already lower case) ends in one of `suffixes` and has
 /// something before it.
 bool has_suffix(std::string_view name, std::initializer_list<std::string_view> suffixes);
+
+/// The size of the regular file a loader was given: FileError "file not
+/// found", "is a directory", "is not a regular file", "file is empty".
+uint64_t require_regular_file(const std::filesystem::path& path);
+/// checked_voxel_count (for the float copy and for `bytes_per_voxel` each),
+/// but malformed dims are a FileError of `path`.
+std::size_t checked_count(const std::filesystem::path& path, const std::array<int64_t, 3>& dims,
+                          std::size_t bytes_per_voxel);
+/// "181 x 217 x 3".
+std::string dims_text(const std::array<int64_t, 3>& d);
+/// Each spacing made positive; 0, NaN and infinities become 1.
+std::array<double, 3> sane_spacing(std::array<double, 3> s);
 
 }  // namespace simdvol

@@ -56,7 +56,9 @@ void refuse_directory(const fs::path& path) {
   if (fs::is_directory(path, ec)) throw FileError(path, "is a directory, not a volume file");
 }
 
-/// Checks that `path` names a readable, non-empty regular file; returns its size.
+}  // namespace
+
+// (declared in file_checks.hpp, shared with the other loaders)
 uint64_t require_regular_file(const fs::path& path) {
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
@@ -72,7 +74,6 @@ uint64_t require_regular_file(const fs::path& path) {
   return static_cast<uint64_t>(size);
 }
 
-/// checked_voxel_count, but malformed dims are a FileError of `path`.
 std::size_t checked_count(const fs::path& path, const std::array<int64_t, 3>& dims,
                           std::size_t bytes_per_voxel) {
   try {
@@ -97,6 +98,8 @@ std::array<double, 3> sane_spacing(std::array<double, 3> s) {
   }
   return s;
 }
+
+namespace {
 
 template <typename T>
 T load_scalar(const unsigned char* p, bool swap) {
@@ -1278,6 +1281,7 @@ VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
   if (has_suffix(name, {".nii", ".nii.gz", ".hdr", ".hdr.gz", ".img", ".img.gz"}))
     return VolumeFileKind::nifti;
   if (has_suffix(name, {".nrrd", ".nhdr"})) return VolumeFileKind::nrrd;
+  if (has_suffix(name, {".mha", ".mhd"})) return VolumeFileKind::metaimage;
   if (has_suffix(name, {".den"})) return VolumeFileKind::den;
   if (has_suffix(name, {".raw"})) return VolumeFileKind::raw;
   if (has_suffix(name, {".dcm", ".dicom", ".ima"}) || name == "dicomdir")
@@ -1301,8 +1305,10 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
   if (kind == VolumeFileKind::nifti) return load_nifti(path, volume_index, volumes);
   if (kind == VolumeFileKind::nrrd) return load_nrrd(path, volume_index, volumes);
   if (kind == VolumeFileKind::dicom) return load_dicom(path, volume_index, volumes);
+  if (kind == VolumeFileKind::metaimage) return load_metaimage(path, volume_index, volumes);
   if (volume_index)
-    throw FileError(path, std::string("a volume index applies only to NIfTI, NRRD and DICOM (") +
+    throw FileError(path, std::string("a volume index applies only to NIfTI, NRRD, MetaImage and "
+                                      "DICOM (") +
                               std::string(kSeriesFileNames) + ")");
   if (kind == VolumeFileKind::den) return load_den(path);
   if (kind == VolumeFileKind::raw) {

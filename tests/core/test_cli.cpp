@@ -317,7 +317,7 @@ TEST_F(Cli, OrientTurnsTheAxesAsTheHeaderSays) {
            {"render " + path("flipped.nrrd") + " --orient RAS -o " + path("x.png"),
             "the file does not say where its axes point"},
            {"render --orient RAS -o " + path("x.png"),
-            "--orient: applies only to NIfTI, NRRD and DICOM volumes"}}) {
+            "--orient: applies only to NIfTI, NRRD, MetaImage and DICOM volumes"}}) {
     const Result r = run(args);
     EXPECT_EQ(r.code, 1) << args << "\n" << r.output;  // simdvol's errors
     EXPECT_NE(r.output.find(needle), std::string::npos) << args << "\n" << r.output;
@@ -411,6 +411,66 @@ TEST_F(Cli, RendersADicomSeries) {
 // A turntable writes each frame while the next renders: a frame that cannot
 // be written (its name taken by a directory) stops the run with an error
 // naming it, after the frames before it; no temporary file is left.
+TEST_F(Cli, RendersAMetaImage) {
+  // The phantom in Hounsfield units as MET_SHORT, written by hand: a 4-D
+  // .mha whose volume 0 is air (raw and compressed), and a .mhd whose
+  // voxels lie in a .raw beside it. Each renders as the NRRD of the same
+  // values.
+  const simdvol::Volume ph = simdvol::shepp_logan(24, 2);
+  simdvol::Volume hu(ph.dims(), simdvol::VoxelType::f32, {0.5, 0.7, 1.25});
+  std::string air, body;
+  for (std::size_t i = 0; i < ph.voxel_count(); ++i) {
+    const auto v = static_cast<int16_t>(std::lround(ph.data()[i]));
+    hu.data()[i] = static_cast<float>(v);
+    const int16_t a = -1000;
+    air.append(reinterpret_cast<const char*>(&a), 2);  // (little-endian, as the header says)
+    body.append(reinterpret_cast<const char*>(&v), 2);
+  }
+  const std::string fields =
+      "BinaryDataByteOrderMSB = False\nElementSpacing = 0.5 0.7 1.25\nElementType = MET_SHORT\n";
+  std::ofstream(path("four.mha"), std::ios::binary)
+      << "ObjectType = Image\nNDims = 4\nDimSize = 24 24 24 2\nElementSpacing = 0.5 0.7 1.25 1\n"
+      << "ElementType = MET_SHORT\nElementDataFile = LOCAL\n"
+      << air << body;
+  std::ofstream(path("body.mhd")) << "ObjectType = Image\nNDims = 3\nDimSize = 24 24 24\n"
+                                  << fields << "ElementDataFile = body.raw\n";
+  std::ofstream(path("body.raw"), std::ios::binary) << body;
+  simdvol::save_nrrd(hu, path("hu.nrrd"));
+  const std::string common = " --size 32x32 --view 20,35,10 -o ";
+  ASSERT_EQ(run("render " + path("hu.nrrd") + common + path("c.tif")).code, 0);
+  ASSERT_EQ(run("render " + path("four.mha") + " --volume-index 1" + common + path("a.tif")).code,
+            0);
+  ASSERT_EQ(run("render " + path("body.mhd") + common + path("b.tif")).code, 0);
+  const simdvol::Image c = simdvol::read_image(path("c.tif"));
+  expect_same_pixels(simdvol::read_image(path("a.tif")), c);
+  expect_same_pixels(simdvol::read_image(path("b.tif")), c);
+  EXPECT_GT(alpha_sum(c), 1.0);
+  const Result four = run("render " + path("four.mha") + common + path("e.tif"));
+  EXPECT_EQ(four.code, 1);
+  EXPECT_NE(four.output.find("holds 2 3-D volumes (a 4-D image): give the index of one, 0..1"),
+            std::string::npos)
+      << four.output;
+  EXPECT_FALSE(fs::exists(path("e.tif")));
+  const Result info = run("info " + path("body.mhd") + " --orient RAS");
+  ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("axes:     RAS"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("spacing:  0.5 x 0.7 x 1.25"), std::string::npos) << info.output;
+  // A data file cut short: one line, simdvol's, quoting MetaIO (which would
+  // otherwise have written to stderr and read on), and no image.
+  std::ofstream(path("body.raw"), std::ios::binary | std::ios::trunc) << body.substr(0, 100);
+  std::ofstream(path("cut.mha"), std::ios::binary)
+      << "ObjectType = Image\nNDims = 3\nDimSize = 24 24 24\n"
+      << fields << "ElementDataFile = LOCAL\n"
+      << body.substr(0, 1000);
+  for (const char* name : {"body.mhd", "cut.mha"}) {
+    const Result cut = run("render " + path(name) + common + path("f.tif"));
+    EXPECT_EQ(cut.code, 1) << cut.output;
+    EXPECT_EQ(std::count(cut.output.begin(), cut.output.end(), '\n'), 1) << cut.output;
+    EXPECT_EQ(cut.output.rfind("simdvol: error: " + path(name) + ": ", 0), 0u) << cut.output;
+    EXPECT_FALSE(fs::exists(path("f.tif")));
+  }
+}
+
 TEST_F(Cli, TurntableStopsAtAFrameItCannotWrite) {
   fs::create_directories(dir_ / "t_0002.png");
   const Result r =
@@ -863,11 +923,11 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --raw-dims 2,2,2 -o " + path("x.png"),
        "--raw-dims: applies only to .raw volumes (no volume given)"},
       {"render --volume-index 1 -o " + path("x.png"),
-       "--volume-index: applies only to NIfTI, NRRD and DICOM volumes (.nii, .nii.gz, .hdr/.img, "
-       ".nrrd, .nhdr, DICOM) (no volume given)"},
+       "--volume-index: applies only to NIfTI, NRRD, MetaImage and DICOM volumes (.nii, .nii.gz, "
+       ".hdr/.img, .nrrd, .nhdr, .mha, .mhd, DICOM) (no volume given)"},
       {"info " + path("vol.raw") + " --raw-dims 2,2,2 --volume-index 0",
-       "--volume-index: applies only to NIfTI, NRRD and DICOM volumes (.nii, .nii.gz, .hdr/.img, "
-       ".nrrd, .nhdr, DICOM) (" +
+       "--volume-index: applies only to NIfTI, NRRD, MetaImage and DICOM volumes (.nii, .nii.gz, "
+       ".hdr/.img, .nrrd, .nhdr, .mha, .mhd, DICOM) (" +
            path("vol.raw") + " is not one)"},
       {"render --no-shade --light 1,0,0 -o " + path("x.png"),
        "--light: applies only to lit renders (not with --no-shade)"},

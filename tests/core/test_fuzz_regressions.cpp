@@ -244,3 +244,46 @@ TEST_F(FuzzRegressions, NrrdDataFileBeforeDimension) {
                                                {})),
                     "'data file' before 'dimension'");
 }
+
+// Fuzzer finding (metaimage, crash-12d8e2…): an ElementDataFile of binary
+// junk holding a '%' made MetaIO read it as a printf pattern of slice files
+// with a step of 0, and divide by it (SIGFPE in MetaImage::ReadStream).
+// Patterns and LISTs are now refused before MetaIO reads any voxel.
+TEST_F(FuzzRegressions, MetaImagePatternWithAStepOfZero) {
+  // (the finding's name held control characters, now refused earlier; this
+  // one is printable, with the step of 0 written out)
+  const std::string header =
+      "ObjectType = Image\nNDims = 3\nDimSize = 16 16 8\nElementType = MET_UCHAR\n"
+      "ElementDataFile = data%d.raw 0 0 0\n";
+  const fs::path p = write("input.mhd", concat(header, {}));
+  write("data.raw", std::vector<uint8_t>(2048, 9));
+  try {
+    load_metaimage(p);
+    ADD_FAILURE() << p << " loaded";
+  } catch (const FileError& e) {
+    EXPECT_EQ(e.path(), p);
+    EXPECT_NE(e.problem().find("a pattern of slice files, which simdvol does not read"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+// Fuzzer finding (metaimage, crash-411bda…): a header field name of several
+// hundred bytes made MetaIO's parser strcpy it into its 255-byte name buffer
+// (glibc's fortify stopped the process: "buffer overflow detected"). The
+// header's lines are now checked before MetaIO reads them.
+TEST_F(FuzzRegressions, MetaImageFieldNameLongerThanMetaIOsBuffer) {
+  const std::string header = "ObjectType = Image\nNDims = 3\nCompressedData = True\n" +
+                             std::string(400, 'D') + " = 16 16 8\nElementType = MET_UCHAR\n" +
+                             "ElementDataFile = LOCAL\n";
+  const fs::path p = write("input.mha", concat(header, std::vector<uint8_t>(2048, 1)));
+  try {
+    load_metaimage(p);
+    ADD_FAILURE() << p << " loaded";
+  } catch (const FileError& e) {
+    EXPECT_EQ(e.path(), p);
+    EXPECT_NE(e.problem().find("header line 4 ('DDDD"), std::string::npos) << e.what();
+    EXPECT_NE(e.problem().find("has a name longer than 200 characters"), std::string::npos)
+        << e.what();
+  }
+}

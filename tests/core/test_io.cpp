@@ -1122,12 +1122,12 @@ TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
   EXPECT_EQ(volumes, 1);
   expect_file_error([&] { simdvol::load_nifti(file("3d.nii"), 1); }, file("3d.nii"),
                     {"outside 0..0", "holds 1 volume"});
-  // Neither NIfTI, NRRD nor DICOM.
+  // Neither NIfTI, NRRD, MetaImage nor DICOM.
   write_file(file("v.raw"), encode(VoxelType::u8, first, false));
   simdvol::RawLayout raw;
   raw.dims = kDims;
   expect_file_error([&] { simdvol::load_volume(file("v.raw"), raw, 0); }, file("v.raw"),
-                    {"applies only to NIfTI, NRRD and DICOM"});
+                    {"applies only to NIfTI, NRRD, MetaImage and DICOM"});
 }
 
 // ----------------------------------------- NIfTI-2, .hdr/.img pairs, Analyze
@@ -2179,6 +2179,348 @@ TEST(IoReal, Colin27NiftiGz) {
   EXPECT_EQ(simdvol::load_volume(p).data(), v.data());
 }
 
+// ------------------------------------------------------------- MetaImage
+
+/// zlib-compresses `in` (RFC 1950), as MetaIO's writer stores voxels.
+Bytes zlib_compress(const Bytes& in) {
+  uLongf n = compressBound(static_cast<uLong>(in.size()));
+  Bytes out(n);
+  EXPECT_EQ(compress2(out.data(), &n, in.data(), static_cast<uLong>(in.size()), 6), Z_OK);
+  out.resize(n);
+  return out;
+}
+
+/// A MetaImage header written by hand, its fields in the order ITK writes
+/// them: `fields` (whole lines) before DimSize, ElementDataFile last.
+std::string mha_header(int ndims, const std::string& sizes, const std::string& type,
+                       const std::string& fields, const std::string& data_file) {
+  std::string h = "ObjectType = Image\nNDims = ";
+  h += std::to_string(ndims);
+  h += "\n";
+  h += fields;
+  h += "DimSize = " + sizes + "\nElementType = " + type + "\nElementDataFile = ";
+  h += data_file;
+  h += "\n";
+  return h;
+}
+
+/// `values` stored as T in the given byte order, and what each reads as.
+template <typename T>
+std::pair<Bytes, std::vector<float>> stored_as(const std::vector<T>& values, bool big) {
+  Bytes b;
+  std::vector<float> f;
+  for (T v : values) {
+    put<T>(b, v, big);
+    f.push_back(static_cast<float>(v));
+  }
+  return {b, f};
+}
+
+/// One MetaIO element type: its name, the VoxelType it loads as, and
+/// kN values of it in a byte order.
+struct MetCase {
+  const char* name;
+  VoxelType kept;
+  std::function<std::pair<Bytes, std::vector<float>>(bool)> make;
+};
+
+std::vector<MetCase> met_cases() {
+  const auto ints = [](auto zero, int64_t a, int64_t b) {
+    std::vector<decltype(zero)> v;
+    for (std::size_t i = 0; i < kN; ++i)
+      v.push_back(static_cast<decltype(zero)>(a * static_cast<int64_t>(i) + b));
+    return v;
+  };
+  const auto of_type = [](VoxelType t) {
+    return [t](bool big) {
+      const std::vector<float> v = test_values(t, kN);
+      return std::make_pair(encode(t, v, big), v);
+    };
+  };
+  return {
+      {"MET_UCHAR", VoxelType::u8, of_type(VoxelType::u8)},
+      {"MET_USHORT", VoxelType::u16, of_type(VoxelType::u16)},
+      {"MET_SHORT", VoxelType::i16, of_type(VoxelType::i16)},
+      {"MET_FLOAT", VoxelType::f32, of_type(VoxelType::f32)},
+      {"MET_CHAR", VoxelType::i16,
+       [&](bool big) { return stored_as(ints(int8_t{}, 4, -128), big); }},
+      {"MET_INT", VoxelType::f32,
+       [&](bool big) { return stored_as(ints(int32_t{}, 100003, -3000000), big); }},
+      {"MET_UINT", VoxelType::f32,
+       [&](bool big) { return stored_as(ints(uint32_t{}, 65536 * 997, 3), big); }},
+      {"MET_LONG", VoxelType::f32,
+       [&](bool big) { return stored_as(ints(int32_t{}, -7919, 11), big); }},
+      {"MET_ULONG", VoxelType::f32,
+       [&](bool big) { return stored_as(ints(uint32_t{}, 7919, 4000000000), big); }},
+      {"MET_LONG_LONG", VoxelType::f32,
+       [&](bool big) { return stored_as(ints(int64_t{}, -1000000007, 5), big); }},
+      {"MET_ULONG_LONG", VoxelType::f32,
+       [&](bool big) { return stored_as(ints(uint64_t{}, 1000000007, 9), big); }},
+      {"MET_DOUBLE", VoxelType::f32,
+       [](bool big) {
+         std::vector<double> v;
+         for (std::size_t i = 0; i < kN; ++i) v.push_back(0.1 * static_cast<double>(i) - 2.5);
+         return stored_as(v, big);
+       }},
+  };
+}
+
+TEST_F(IoTest, MetaImageEveryTypeAndStorage) {
+  for (const MetCase& c : met_cases())
+    for (bool big : {false, true}) {
+      const auto [data, want] = c.make(big);
+      const std::string order = std::string("BinaryDataByteOrderMSB = ") +
+                                (big ? "True" : "False") + "\nElementSpacing = 0.5 1 2\n";
+      const Bytes packed = zlib_compress(data);
+      std::string packed_fields = order + "CompressedData = True\nCompressedDataSize = ";
+      packed_fields += std::to_string(packed.size());
+      packed_fields += "\n";
+      const std::string type = c.name;
+      // The voxels after the header (.mha), raw and compressed; in a file of
+      // their own (.mhd), raw and compressed without CompressedDataSize.
+      write_file(file("local.mha"), concat(mha_header(3, "5 4 3", type, order, "LOCAL"), data));
+      write_file(file("packed.mha"),
+                 concat(mha_header(3, "5 4 3", type, packed_fields, "LOCAL"), packed));
+      write_file(file("apart.mhd"), mha_header(3, "5 4 3", type, order, "apart.raw"));
+      write_file(file("apart.raw"), data);
+      write_file(file("zapart.mhd"),
+                 mha_header(3, "5 4 3", type, order + "CompressedData = True\n", "zapart.zraw"));
+      write_file(file("zapart.zraw"), packed);
+      for (const char* name : {"local.mha", "packed.mha", "apart.mhd", "zapart.mhd"}) {
+        SCOPED_TRACE(type + (big ? " big-endian " : " little-endian ") + name);
+        const Volume v = simdvol::load_metaimage(file(name));
+        expect_volume(v, kDims, c.kept, want, {0.5, 1.0, 2.0});
+        EXPECT_EQ(v.orientation(), "LPS");  // MetaImage's space, no TransformMatrix
+        EXPECT_EQ(simdvol::load_volume(file(name)).data(), want);
+      }
+    }
+}
+
+TEST_F(IoTest, MetaImageOrientationFromTransformMatrix) {
+  const auto values = test_values(VoxelType::u8, kN);
+  const Bytes vox = encode(VoxelType::u8, values, false);
+  // Row i of TransformMatrix is index axis i's direction in LPS, as ITK's
+  // MetaImageIO reads it.
+  const double c = std::cos(0.35), s = std::sin(0.35);  // 20 degrees about z
+  std::string oblique = "TransformMatrix = " + std::to_string(c) + " ";
+  oblique += std::to_string(s) + " 0 " + std::to_string(-s) + " " + std::to_string(c);
+  oblique += " 0 0 0 1\n";
+  for (const auto& [fields, want] : std::vector<std::pair<std::string, std::string>>{
+           {"", "LPS"},
+           {"TransformMatrix = 1 0 0 0 1 0 0 0 1\n", "LPS"},
+           {"TransformMatrix = 0 1 0 -1 0 0 0 0 1\n", "PRS"},
+           {"TransformMatrix = -1 0 0 0 0 -1 0 1 0\n", "RIP"},
+           {oblique, "LPS"},
+           // As ITK writes a matrix, 17 digits a number (a 4 x 4 one takes
+           // about 400 characters): within what the header check allows.
+           {"TransformMatrix = -1.2246467991473532e-16 0.99999999999999989 "
+            "1.2246467991473532e-16 -0.99999999999999989 -1.2246467991473532e-16 "
+            "-1.2246467991473532e-16 -1.2246467991473532e-16 1.2246467991473532e-16 "
+            "-0.99999999999999989\n",
+            "PRI"},
+           {"TransformMatrix = 0 0 0 0 0 0 0 0 0\n", ""}}) {
+    SCOPED_TRACE(fields);
+    write_file(file("o.mha"), concat(mha_header(3, "5 4 3", "MET_UCHAR", fields, "LOCAL"), vox));
+    const Volume v = simdvol::load_metaimage(file("o.mha"));
+    EXPECT_EQ(v.orientation(), want);
+    EXPECT_EQ(v.data(), values);  // the file's order, whatever the axes
+  }
+  // A 4-D file's matrix is 4 x 4; its top-left 3 x 3 places the volumes.
+  Bytes two = vox;
+  two.insert(two.end(), vox.begin(), vox.end());
+  write_file(file("o4.mha"),
+             concat(mha_header(4, "5 4 3 2", "MET_UCHAR",
+                               "TransformMatrix = 0 0 1 0 1 0 0 0 0 1 0 0 0 0 0 1\n", "LOCAL"),
+                    two));
+  const Volume v = simdvol::load_metaimage(file("o4.mha"), 1);
+  EXPECT_EQ(v.orientation(), "SLP");
+  const Volume ras = simdvol::reorient(v, "RAS");
+  EXPECT_EQ(ras.dims(), (std::array<int64_t, 3>{4, 3, 5}));  // L -> x, P -> y, S -> z
+  EXPECT_EQ(ras.at(0, 0, 0), v.at(0, 3, 2));                 // R end of L, A end of P, bottom of S
+}
+
+TEST_F(IoTest, MetaImageVolumeOfAFourDFile) {
+  constexpr int kVols = 3;
+  std::vector<float> all;
+  for (int v = 0; v < kVols; ++v)
+    for (std::size_t i = 0; i < kN; ++i) all.push_back(static_cast<float>(1000 * v + i) - 700.0f);
+  std::vector<int16_t> ints(all.begin(), all.end());
+  const Bytes data = stored_as(ints, false).first;
+  const Bytes packed = zlib_compress(data);
+  const std::string sizes = "5 4 3 " + std::to_string(kVols);
+  std::string packed_fields = "CompressedData = True\nCompressedDataSize = ";
+  packed_fields += std::to_string(packed.size());
+  packed_fields += "\n";
+  std::string ascii;
+  for (int16_t x : ints) ascii += std::to_string(x) + "\n";
+  write_file(file("raw.mha"), concat(mha_header(4, sizes, "MET_SHORT", "", "LOCAL"), data));
+  write_file(file("packed.mha"),
+             concat(mha_header(4, sizes, "MET_SHORT", packed_fields, "LOCAL"), packed));
+  write_file(file("zapart.mhd"),
+             mha_header(4, sizes, "MET_SHORT", "CompressedData = True\n", "zapart.zraw"));
+  write_file(file("zapart.zraw"), packed);
+  write_file(file("ascii.mha"),
+             mha_header(4, sizes, "MET_SHORT", "BinaryData = False\n", "LOCAL") + ascii);
+  for (const char* name : {"raw.mha", "packed.mha", "zapart.mhd", "ascii.mha"}) {
+    for (int v = 0; v < kVols; ++v) {
+      SCOPED_TRACE(std::string(name) + " volume " + std::to_string(v));
+      int64_t volumes = 0;
+      const Volume vol = simdvol::load_volume(file(name), std::nullopt, v, &volumes);
+      EXPECT_EQ(volumes, kVols);
+      EXPECT_EQ(vol.dims(), kDims);
+      EXPECT_EQ(vol.type(), VoxelType::i16);
+      EXPECT_EQ(vol.data(),
+                std::vector<float>(all.begin() + static_cast<std::ptrdiff_t>(v * kN),
+                                   all.begin() + static_cast<std::ptrdiff_t>((v + 1) * kN)));
+    }
+    int64_t volumes = 0;
+    expect_file_error([&] { simdvol::load_metaimage(file(name), std::nullopt, &volumes); },
+                      file(name),
+                      {"holds 3 3-D volumes (a 4-D image): give the index of one, 0..2"});
+    EXPECT_EQ(volumes, kVols);  // said before the refusal, as for NIfTI
+    expect_file_error([&] { simdvol::load_metaimage(file(name), 3); }, file(name),
+                      {"volume index 3 is outside 0..2"});
+  }
+  // A 3-D file: index 0 is the volume, 1 is outside.
+  write_file(file("3d.mha"), concat(mha_header(3, "5 4 3", "MET_SHORT", "", "LOCAL"),
+                                    Bytes(data.begin(), data.begin() + kN * 2)));
+  int64_t volumes = 0;
+  EXPECT_EQ(simdvol::load_metaimage(file("3d.mha"), 0, &volumes).data(),
+            std::vector<float>(all.begin(), all.begin() + kN));
+  EXPECT_EQ(volumes, 1);
+  expect_file_error([&] { simdvol::load_metaimage(file("3d.mha"), 1); }, file("3d.mha"),
+                    {"outside 0..0"});
+}
+
+TEST_F(IoTest, MetaImageMalformed) {
+  const Bytes vox(kN, 7);
+  const std::string ok = mha_header(3, "5 4 3", "MET_UCHAR", "", "LOCAL");
+  const Bytes packed = zlib_compress(vox);
+  Bytes corrupt = packed;
+  corrupt[corrupt.size() / 2] ^= 0xff;
+  corrupt[2] ^= 0x55;
+  std::string corrupt_fields = "CompressedData = True\nCompressedDataSize = ";
+  corrupt_fields += std::to_string(corrupt.size());
+  corrupt_fields += "\n";
+  fs::create_directories(file("adir.raw"));
+  struct Case {
+    std::string name;
+    Bytes bytes;
+    std::string word;
+  };
+  const std::vector<Case> cases = {
+      {"empty.mha", {}, "empty"},
+      {"text.mha", Bytes{'h', 'e', 'l', 'l', 'o'},
+       "not a MetaImage header: header line 1 ('hello') is not 'Field = value'"},
+      {"nofile.mha", concat("NDims = 3\nDimSize = 5 4 3\nElementType = MET_UCHAR\n", vox),
+       "not a MetaImage header"},
+      {"longname.mha", concat(std::string(300, 'A') + " = 1\n" + ok, vox),
+       "has a name longer than 200 characters"},
+      {"longcomment.mha", concat("Comment = " + std::string(300, 'c') + "\n" + ok, vox),
+       "has a value longer than 200 characters"},
+      {"longvalue.mha", concat("Other = " + std::string(500, 'c') + "\n" + ok, vox),
+       "has a value longer than 450 characters"},
+      {"control.mha", concat("Name = a\x01b\n" + ok, vox), "holds control characters"},
+      {"ndims20.mha",
+       concat(mha_header(20, "5 4 3 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1", "MET_UCHAR", "", "LOCAL"),
+              vox),
+       "NDims = 20: a 3-D volume (or a 4-D series of them) is expected"},
+      {"ndimsword.mha", concat("NDims = three\n" + ok, vox), "NDims = three is not a whole number"},
+      {"notype.mha", concat("NDims = 3\nDimSize = 5 4 3\nElementDataFile = LOCAL\n", vox),
+       "not a MetaImage header"},
+      {"flat.mha", concat(mha_header(2, "5 12", "MET_UCHAR", "", "LOCAL"), vox),
+       "2-D image (NDims = 2), not a volume"},
+      {"five.mha", concat(mha_header(5, "5 4 3 1 1", "MET_UCHAR", "", "LOCAL"), vox),
+       "NDims = 5: a 3-D volume (or a 4-D series of them) is expected"},
+      {"rgb.mha",
+       concat(mha_header(3, "5 4 1", "MET_UCHAR", "ElementNumberOfChannels = 3\n", "LOCAL"), vox),
+       "ElementNumberOfChannels = 3: a colour or vector image"},
+      {"array.mha", concat(mha_header(3, "5 4 3", "MET_UCHAR_ARRAY", "", "LOCAL"), vox),
+       "ElementType MET_UCHAR_ARRAY is not a scalar type"},
+      {"zero.mha", concat(mha_header(3, "5 0 3", "MET_UCHAR", "", "LOCAL"), vox),
+       "DimSize 1 is 0 (must be positive)"},
+      {"negative.mha", concat(mha_header(3, "5 4 -3", "MET_UCHAR", "", "LOCAL"), vox),
+       "DimSize 2 is -3"},
+      {"huge.mha",
+       concat(mha_header(3, "2000000000 2000000000 2000000000", "MET_UCHAR", "", "LOCAL"), vox),
+       "overflow"},
+      {"short.mha", concat(ok, Bytes(vox.begin(), vox.end() - 30)), "could not be read"},
+      {"bigsize.mha",
+       concat(mha_header(3, "5 4 3", "MET_UCHAR",
+                         "CompressedData = True\nCompressedDataSize = 100000000000\n", "LOCAL"),
+              packed),
+       "CompressedDataSize 100000000000 is more than"},
+      {"corrupt.mha", concat(mha_header(3, "5 4 3", "MET_UCHAR", corrupt_fields, "LOCAL"), corrupt),
+       "its voxel data could not be read (MetaIO:"},
+      {"inflate.mha",
+       concat(mha_header(3, "5000 4000 3000", "MET_UCHAR", "CompressedData = True\n", "LOCAL"),
+              packed),
+       "cannot hold the 60000000000"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    write_file(file(c.name), c.bytes);
+    expect_file_error([&] { simdvol::load_metaimage(file(c.name)); }, file(c.name), {c.word});
+  }
+  write_file(file("missing.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "nowhere.raw"));
+  expect_file_error([&] { simdvol::load_metaimage(file("missing.mhd")); }, file("missing.mhd"),
+                    {"nowhere.raw (ElementDataFile) is missing"});
+  write_file(file("cut.raw"), Bytes(vox.begin(), vox.end() - 1));
+  write_file(file("cut.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "cut.raw"));
+  expect_file_error([&] { simdvol::load_metaimage(file("cut.mhd")); }, file("cut.mhd"),
+                    {"holds 59 of the 60 bytes of voxel data the header promises (truncated?)"});
+  write_file(file("dir.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "adir.raw"));
+  expect_file_error([&] { simdvol::load_metaimage(file("dir.mhd")); }, file("dir.mhd"),
+                    {"is a directory"});
+  std::string few = mha_header(3, "5 4 3", "MET_UCHAR", "BinaryData = False\n", "LOCAL");
+  for (int i = 0; i < 50; ++i) few += "7 ";
+  write_file(file("fewascii.mha"), few);
+  expect_file_error([&] { simdvol::load_metaimage(file("fewascii.mha")); }, file("fewascii.mha"),
+                    {"its voxel data could not be read (MetaIO:"});
+  // Slice files, in a LIST or by a printf pattern, are refused before MetaIO
+  // reads them (its pattern is a format string, a step of 0 divides by
+  // zero, and an empty line in a LIST writes out of bounds).
+  write_file(file("z0.raw"), Bytes(20, 1));
+  for (const auto& [name, where] :
+       std::vector<std::pair<std::string, std::string>>{{"list.mhd", "LIST 2D\nz0.raw\nz0.raw\n\n"},
+                                                        {"pattern.mhd", "z%d.raw 0 0 0"},
+                                                        {"format.mhd", "z%s%s%s%n.raw"}}) {
+    SCOPED_TRACE(name);
+    write_file(file(name), mha_header(3, "5 4 3", "MET_UCHAR", "", where));
+    expect_file_error([&] { simdvol::load_metaimage(file(name)); }, file(name),
+                      {"slice files, which simdvol does not read"});
+  }
+  // A data file named without its .gz, as MetaIO finds it.
+  write_file(file("g.raw.gz"), gzip(vox));
+  write_file(file("g.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "g.raw"));
+  EXPECT_EQ(simdvol::load_metaimage(file("g.mhd")).data(), std::vector<float>(kN, 7.0f));
+  expect_file_error([&] { simdvol::load_metaimage(file("absent.mha")); }, file("absent.mha"),
+                    {"not found"});
+  // After all that, a good file still loads.
+  write_file(file("good.mha"), concat(ok, vox));
+  EXPECT_EQ(simdvol::load_metaimage(file("good.mha")).data(), std::vector<float>(kN, 7.0f));
+}
+
+TEST(IoReal, MetaImageItkExample) {
+  // ITK's example MRI (insighttoolkit5-examples), its header apart from
+  // its voxels: they must be the .raw file's bytes as they stand.
+  const fs::path p = simdvol::testing::data_dir() / "metaimage" / "BrainProtonDensity3Slices.mha";
+  SIMDVOL_REQUIRE_FILE(p);
+  const Bytes raw = read_file(p.parent_path() / "BrainProtonDensity3Slices.raw");
+  ASSERT_EQ(raw.size(), 181u * 217u * 3u);
+  const Volume v = simdvol::load_metaimage(p);
+  EXPECT_EQ(v.dims(), (std::array<int64_t, 3>{181, 217, 3}));
+  EXPECT_EQ(v.type(), VoxelType::u8);
+  EXPECT_EQ(v.spacing(), (std::array<double, 3>{1.0, 1.0, 1.0}));
+  EXPECT_EQ(v.orientation(), "LPS");
+  const auto [sum, hash] = u8_checksums(v);
+  uint64_t raw_sum = 0;
+  for (unsigned char b : raw) raw_sum += b;
+  EXPECT_EQ(sum, raw_sum);
+  EXPECT_EQ(hash, fnv1a(raw.data(), raw.size()));
+  EXPECT_EQ(simdvol::load_volume(p).data(), v.data());
+}
+
 // ------------------------------------------------------------- dispatch
 
 TEST_F(IoTest, LoadVolumeDispatchesByExtension) {
@@ -2189,9 +2531,11 @@ TEST_F(IoTest, LoadVolumeDispatchesByExtension) {
   write_file(file("a.raw"), vox);
   write_nifti(file("a.nii"), DT_UINT8, {5, 4, 3, 1}, as<uint8_t>(values));
   write_nifti(file("a.nii.gz"), DT_UINT8, {5, 4, 3, 1}, as<uint8_t>(values));
+  write_file(file("a.MHA"), concat(mha_header(3, "5 4 3", "MET_UCHAR", "", "LOCAL"), vox));
+  write_file(file("a.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "a.raw"));
   RawLayout l;
   l.dims = kDims;
-  for (const char* name : {"a.den", "a.NRRD", "a.raw", "a.nii", "a.nii.gz"}) {
+  for (const char* name : {"a.den", "a.NRRD", "a.raw", "a.nii", "a.nii.gz", "a.MHA", "a.mhd"}) {
     SCOPED_TRACE(name);
     expect_volume(simdvol::load_volume(file(name), l), kDims, VoxelType::u8, values);
   }

@@ -96,22 +96,42 @@ Volume load_nifti(const std::filesystem::path& path,
 Volume load_dicom(const std::filesystem::path& path,
                   std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
+/// MetaImage through MetaIO (ITK's copy): a header with the voxels after
+/// it (.mha, ElementDataFile = LOCAL) or in another file (.mhd; raw or
+/// zlib-compressed; also a LIST of slice files or a printf pattern), binary
+/// or ASCII, either byte order. NDims 3, or 4 (a series: `volume_index`
+/// picks one volume, as for load_nifti, and only its voxels are read);
+/// one channel of a scalar ElementType (u8, u16 and i16 kept, int8 as i16,
+/// wider types as f32). ElementSpacing (else 1). The orientation: the
+/// closest axes of TransformMatrix (its row i the direction of axis i, as
+/// ITK reads it) in MetaImage's LPS space; a header without one is LPS.
+/// ElementToIntensityFunctionSlope and Offset are not applied (ITK, Slicer
+/// and elastix do not apply them either). MetaIO's messages on std::cerr
+/// are caught while a file is read (one load at a time), so that they can
+/// be quoted in the FileError: another thread's writes to std::cerr in
+/// that time land there too.
+Volume load_metaimage(const std::filesystem::path& path,
+                      std::optional<int64_t> volume_index = std::nullopt,
+                      int64_t* volumes = nullptr);
+
 /// The kinds of volume file load_volume reads, told by the name's ending
 /// (whatever its case; a DICOMDIR is DICOM), else by being a directory
 /// (DICOM) or by "DICM" at byte 128 (a DICOM file of any name).
-enum class VolumeFileKind { unknown, den, nrrd, nifti, raw, dicom };
+enum class VolumeFileKind { unknown, den, nrrd, nifti, raw, dicom, metaimage };
 VolumeFileKind volume_file_kind(const std::filesystem::path& path);
 /// The endings volume_file_kind knows, for messages.
 inline constexpr std::string_view kVolumeFileNames =
     ".den, .nrrd, .nhdr, .nii, .nii.gz, .hdr/.img (NIfTI or Analyze pairs, plain or .gz), "
+    ".mha, .mhd (MetaImage), "
     "DICOM (.dcm, a file of any name, or a directory of one series) or .raw";
-/// The files that may hold several 3-D volumes (NIfTI, NRRD, DICOM).
+/// The files that may hold several 3-D volumes (NIfTI, NRRD, MetaImage,
+/// DICOM).
 inline constexpr std::string_view kSeriesFileNames =
-    ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, DICOM";
+    ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, DICOM";
 
 /// Chooses the loader by volume_file_kind (.raw needs `raw`). Throws
 /// FileError for an unknown extension, and for a `volume_index` given with
-/// a file other than NIfTI, NRRD or DICOM.
+/// a file other than NIfTI, NRRD, MetaImage or DICOM.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);

@@ -1,0 +1,36 @@
+// libFuzzer target for load_metaimage. Byte 0 chooses the form:
+//   even: the voxels after the header; the rest is written as input.mha
+//   odd:  a header apart; the rest is split after its first blank line
+//         ("\n\n"): the part up to it is input.mhd, the remainder is written
+//         as data.raw beside it (seeds name it in "ElementDataFile =
+//         data.raw"; the fuzzer may name anything else).
+// and (byte 0 / 2) mod 4 the volume index: 0 none, k the index k - 1 (so
+// that 4-D headers reach the reading of one volume).
+// Files the previous input left behind are removed first.
+#include <optional>
+#include <string_view>
+
+#include "fuzz_common.hpp"
+#include "simdvol/io.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
+  if (size < 1) return 0;
+  simdvol_fuzz::clear_scratch();
+  const uint8_t* body = data + 1;
+  const std::size_t n = size - 1;
+  std::filesystem::path path;
+  if ((data[0] & 1) == 0) {
+    path = simdvol_fuzz::write_input("input.mha", body, n);
+  } else {
+    const std::string_view s(reinterpret_cast<const char*>(body), n);
+    const std::size_t cut = s.find("\n\n");
+    const std::size_t hlen = cut == std::string_view::npos ? n : cut + 2;
+    path = simdvol_fuzz::write_input("input.mhd", body, hlen);
+    simdvol_fuzz::write_input("data.raw", body + hlen, n - hlen);
+  }
+  const int k = (data[0] / 2) % 4;
+  const std::optional<int64_t> index =
+      k == 0 ? std::nullopt : std::optional<int64_t>(static_cast<int64_t>(k - 1));
+  simdvol_fuzz::run_loader([&] { return simdvol::load_metaimage(path, index); });
+  return 0;
+}
