@@ -8,9 +8,11 @@
 // while it reads, and any message it writes while reading the voxels
 // makes the file an error that quotes it.
 #include <metaImage.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -170,8 +172,10 @@ bool local_data(const std::string& name) {
 /// "Field = value" (or "Field: value", as MetaIO also takes), the name
 /// under 200 characters, those five values under 200 and any other under
 /// 450 (a 4 x 4 TransformMatrix at ITK's 17 digits takes about 400),
-/// without control characters, NDims a whole number.
-void check_header_lines(const fs::path& path) {
+/// without control characters, NDims a whole number. Returns where the
+/// line after ElementDataFile starts (where voxels after the header begin,
+/// as MetaIO reads them).
+uint64_t check_header_lines(const fs::path& path) {
   constexpr std::size_t kMost = 1 << 20, kName = 200, kValue = 450;
   std::ifstream in(path, std::ios::binary);
   std::string text(kMost, '\0');
@@ -220,10 +224,72 @@ void check_header_lines(const fs::path& path) {
         throw FileError(
             path, "NDims = " + value + ": a 3-D volume (or a 4-D series of them) is expected");
     }
-    if (key == "ElementDataFile") return;
+    if (key == "ElementDataFile") return std::min<uint64_t>(at, text.size());
   }
   throw FileError(path, std::string("not a MetaImage header: no ElementDataFile line") +
                             (text.size() == kMost ? " in its first MiB" : ""));
+}
+
+/// Inflates `length` bytes of zlib or gzip data (as MetaIO takes either)
+/// that start `start` bytes into `file`, drops the first `skip` bytes of
+/// what comes out and keeps the next out.size(). MetaIO's own inflation
+/// loops for ever on some corrupt streams (found by scripts/fuzz: a
+/// timeout in MET_PerformUncompression), so compressed voxels are read
+/// here; only what is needed is kept, a 4-D file's earlier volumes
+/// streamed past.
+void inflate_part(const fs::path& path, const fs::path& file, uint64_t start, uint64_t length,
+                  uint64_t skip, std::vector<unsigned char>& out) {
+  std::ifstream in(file, std::ios::binary);
+  in.seekg(static_cast<std::streamoff>(start));
+  if (!in)
+    throw FileError(path, "cannot read " + file.string() + " at byte " + std::to_string(start));
+  z_stream z{};
+  if (inflateInit2(&z, 15 + 32) != Z_OK) throw std::bad_alloc();
+  struct End {
+    z_stream* z;
+    ~End() { inflateEnd(z); }
+  } end{&z};
+  std::vector<unsigned char> chunk(1 << 20), dropped(1 << 16);
+  uint64_t left = length, kept = 0;
+  int err = Z_OK;
+  while (kept < out.size()) {
+    if (z.avail_in == 0) {
+      if (left == 0) break;
+      in.read(reinterpret_cast<char*>(chunk.data()),
+              static_cast<std::streamsize>(std::min<uint64_t>(left, chunk.size())));
+      const auto got = static_cast<uint64_t>(in.gcount());
+      if (got == 0) break;
+      left -= got;
+      z.next_in = chunk.data();
+      z.avail_in = static_cast<uInt>(got);
+    }
+    const bool dropping = skip > 0;
+    unsigned char* to = dropping ? dropped.data() : out.data() + kept;
+    const uint64_t room = dropping ? std::min<uint64_t>(skip, dropped.size()) : out.size() - kept;
+    z.next_out = to;
+    z.avail_out = static_cast<uInt>(std::min<uint64_t>(room, 1u << 30));
+    const uInt before = z.avail_out;
+    err = inflate(&z, Z_NO_FLUSH);
+    const uint64_t made = before - z.avail_out;
+    if (dropping)
+      skip -= made;
+    else
+      kept += made;
+    if (err == Z_STREAM_END) break;
+    if (err == Z_MEM_ERROR) throw std::bad_alloc();
+    if (err != Z_OK && err != Z_BUF_ERROR)
+      throw FileError(path,
+                      "its compressed voxels in " + file.string() + " are corrupt (zlib: " +
+                          (err == Z_NEED_DICT ? std::string("a stream that needs a dictionary")
+                           : z.msg            ? std::string(z.msg)
+                                              : "error " + std::to_string(err)) +
+                          ")");
+    if (err == Z_BUF_ERROR && z.avail_in == 0 && left == 0) break;
+  }
+  if (kept < out.size())
+    throw FileError(path, "its compressed voxels in " + file.string() + " inflate to " +
+                              std::to_string(kept) + " of the " + std::to_string(out.size()) +
+                              " bytes the header promises (truncated?)");
 }
 
 /// MetaIO's MetaImage, with the one field it keeps to itself.
@@ -239,7 +305,7 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
                       int64_t* volumes) {
   if (volumes) *volumes = 1;
   const uint64_t header_file_bytes = require_regular_file(path);
-  check_header_lines(path);
+  const uint64_t header_end = check_header_lines(path);
   MetaIOMessages said;
   Meta meta;
   try {
@@ -372,39 +438,50 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
                               " voxels the header promises (truncated?)");
   }
 
-  // The voxels: the one volume asked for by MetaIO's ReadROI (a seek, or
-  // a walk through the compressed data) where that works; else the whole
-  // file (ReadROI fails on ASCII voxels, and fills zeros without a word
-  // from compressed voxels of no CompressedDataSize).
-  const bool roi = count > 1 && meta.BinaryData() && (!compressed || meta.compressed_bytes() > 0);
-  std::vector<unsigned char> stored(roi || count == 1 ? bytes
-                                                      : static_cast<std::size_t>(all_bytes));
-  bool ok = false;
-  try {
-    MetaImage reader;
-    if (roi) {
-      int lo[4] = {0, 0, 0, static_cast<int>(index)};
-      int hi[4] = {static_cast<int>(dims[0] - 1), static_cast<int>(dims[1] - 1),
-                   static_cast<int>(dims[2] - 1), static_cast<int>(index)};
-      ok = reader.ReadROI(lo, hi, path.c_str(), true, stored.data(), 1);
-      if (ok) reader.ElementByteOrderFix(static_cast<std::streamoff>(n));
-    } else {
-      ok = reader.Read(path.c_str(), true, stored.data());
+  // The voxels. Compressed ones are inflated here (above); raw binary ones
+  // of a 4-D file read by MetaIO's ReadROI, only the volume asked for;
+  // others (one volume, or ASCII, on which ReadROI fails) by MetaIO whole.
+  const bool local = local_data(data_name);
+  const bool roi = count > 1 && meta.BinaryData() && !compressed;
+  const bool whole = !compressed && !roi;
+  std::vector<unsigned char> stored(whole ? static_cast<std::size_t>(all_bytes) : bytes);
+  if (compressed) {
+    const uint64_t start = local ? header_end : skip;
+    const uint64_t length = meta.compressed_bytes() > 0
+                                ? static_cast<uint64_t>(meta.compressed_bytes())
+                                : (data_file_bytes > start ? data_file_bytes - start : 0);
+    inflate_part(path, data_path, start, length, static_cast<uint64_t>(index) * bytes, stored);
+    if (meta.BinaryDataByteOrderMSB() != (std::endian::native == std::endian::big) && ebytes > 1)
+      for (std::size_t i = 0; i < stored.size(); i += ebytes)
+        std::reverse(stored.begin() + static_cast<std::ptrdiff_t>(i),
+                     stored.begin() + static_cast<std::ptrdiff_t>(i + ebytes));
+  } else {
+    bool ok = false;
+    try {
+      MetaImage reader;
+      if (roi) {
+        int lo[4] = {0, 0, 0, static_cast<int>(index)};
+        int hi[4] = {static_cast<int>(dims[0] - 1), static_cast<int>(dims[1] - 1),
+                     static_cast<int>(dims[2] - 1), static_cast<int>(index)};
+        ok = reader.ReadROI(lo, hi, path.c_str(), true, stored.data(), 1);
+      } else {
+        ok = reader.Read(path.c_str(), true, stored.data());
+      }
       if (ok) reader.ElementByteOrderFix(static_cast<std::streamoff>(stored.size() / ebytes));
+    } catch (const std::bad_alloc&) {
+      throw FileError(path, "MetaIO ran out of memory reading its voxels (corrupt header?)");
     }
-  } catch (const std::bad_alloc&) {
-    throw FileError(path, "MetaIO ran out of memory reading its voxels (corrupt header?)");
+    const std::string why = said.take();
+    if (!ok || !why.empty())
+      throw FileError(
+          path, "its voxel data could not be read" +
+                    (why.empty() ? std::string(" (MetaIO gave up)") : " (MetaIO: " + why + ")"));
   }
-  const std::string why = said.take();
-  if (!ok || !why.empty())
-    throw FileError(
-        path, "its voxel data could not be read" +
-                  (why.empty() ? std::string(" (MetaIO gave up)") : " (MetaIO: " + why + ")"));
 
   const std::array<double, 3> spacing =
       sane_spacing({meta.ElementSpacing()[0], meta.ElementSpacing()[1], meta.ElementSpacing()[2]});
   Volume vol(dims, kept_type(etype), spacing);
-  const std::size_t first = roi ? 0 : static_cast<std::size_t>(index) * bytes;
+  const std::size_t first = whole ? static_cast<std::size_t>(index) * bytes : 0;
   convert(etype, stored.data() + first, n, vol.data().data());
   // MetaImage's space is ITK's, LPS; row i of TransformMatrix is the
   // direction of index axis i (as ITK's MetaImageIO reads it).

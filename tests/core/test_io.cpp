@@ -2452,7 +2452,11 @@ TEST_F(IoTest, MetaImageMalformed) {
               packed),
        "CompressedDataSize 100000000000 is more than"},
       {"corrupt.mha", concat(mha_header(3, "5 4 3", "MET_UCHAR", corrupt_fields, "LOCAL"), corrupt),
-       "its voxel data could not be read (MetaIO:"},
+       "are corrupt (zlib: "},
+      {"shortzlib.mha",
+       concat(mha_header(3, "5 4 3", "MET_UCHAR", "CompressedData = True\n", "LOCAL"),
+              Bytes(packed.begin(), packed.end() - 8)),
+       "inflate to "},
       {"inflate.mha",
        concat(mha_header(3, "5000 4000 3000", "MET_UCHAR", "CompressedData = True\n", "LOCAL"),
               packed),
@@ -2491,6 +2495,13 @@ TEST_F(IoTest, MetaImageMalformed) {
     expect_file_error([&] { simdvol::load_metaimage(file(name)); }, file(name),
                       {"slice files, which simdvol does not read"});
   }
+  // Compressed voxels after the header without a CompressedDataSize: MetaIO
+  // inflates them from the file's start, header and all, and fails; they
+  // are inflated here from the header's end.
+  write_file(
+      file("nosize.mha"),
+      concat(mha_header(3, "5 4 3", "MET_UCHAR", "CompressedData = True\n", "LOCAL"), packed));
+  EXPECT_EQ(simdvol::load_metaimage(file("nosize.mha")).data(), std::vector<float>(kN, 7.0f));
   // A data file named without its .gz, as MetaIO finds it.
   write_file(file("g.raw.gz"), gzip(vox));
   write_file(file("g.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "g.raw"));

@@ -98,18 +98,20 @@ Volume load_dicom(const std::filesystem::path& path,
 
 /// MetaImage through MetaIO (ITK's copy): a header with the voxels after
 /// it (.mha, ElementDataFile = LOCAL) or in another file (.mhd; raw or
-/// zlib-compressed; also a LIST of slice files or a printf pattern), binary
-/// or ASCII, either byte order. NDims 3, or 4 (a series: `volume_index`
-/// picks one volume, as for load_nifti, and only its voxels are read);
-/// one channel of a scalar ElementType (u8, u16 and i16 kept, int8 as i16,
-/// wider types as f32). ElementSpacing (else 1). The orientation: the
-/// closest axes of TransformMatrix (its row i the direction of axis i, as
-/// ITK reads it) in MetaImage's LPS space; a header without one is LPS.
-/// ElementToIntensityFunctionSlope and Offset are not applied (ITK, Slicer
-/// and elastix do not apply them either). MetaIO's messages on std::cerr
-/// are caught while a file is read (one load at a time), so that they can
-/// be quoted in the FileError: another thread's writes to std::cerr in
-/// that time land there too.
+/// zlib/gzip-compressed, inflated by simdvol with zlib), binary or ASCII,
+/// either byte order; a LIST of slice files or a printf pattern of them is
+/// refused. NDims 3, or 4 (a series: `volume_index` picks one volume, as
+/// for load_nifti; only it is kept). One channel of a scalar ElementType
+/// (u8, u16 and i16 kept, int8 as i16, wider types as f32). ElementSpacing
+/// (else 1). The orientation: the closest axes of TransformMatrix (its row
+/// i the direction of axis i, as ITK reads it) in MetaImage's LPS space; a
+/// header without one is LPS. ElementToIntensityFunctionSlope and Offset
+/// are not applied (ITK, Slicer and elastix do not apply them either). The
+/// header's lines are checked before MetaIO parses them (its parser
+/// overflows its buffers on long names and values). MetaIO's messages on
+/// std::cerr and std::cout are caught while it reads (one load at a time),
+/// so that they can be quoted in the FileError: another thread's writes to
+/// them in that time land there too.
 Volume load_metaimage(const std::filesystem::path& path,
                       std::optional<int64_t> volume_index = std::nullopt,
                       int64_t* volumes = nullptr);
