@@ -268,7 +268,7 @@ void inflate_part(const fs::path& path, const fs::path& file, uint64_t start, ui
     const uint64_t room = dropping ? std::min<uint64_t>(skip, dropped.size()) : out.size() - kept;
     z.next_out = to;
     z.avail_out = static_cast<uInt>(std::min<uint64_t>(room, 1u << 30));
-    const uInt before = z.avail_out;
+    const uInt before = z.avail_out, fed = z.avail_in;
     err = inflate(&z, Z_NO_FLUSH);
     const uint64_t made = before - z.avail_out;
     if (dropping)
@@ -284,6 +284,7 @@ void inflate_part(const fs::path& path, const fs::path& file, uint64_t start, ui
                            : z.msg            ? std::string(z.msg)
                                               : "error " + std::to_string(err)) +
                           ")");
+    if (made == 0 && fed > 0 && z.avail_in == fed) break;  // (no progress: zlib says it cannot be)
     if (err == Z_BUF_ERROR && z.avail_in == 0 && left == 0) break;
   }
   if (kept < out.size())
