@@ -934,18 +934,11 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
                             format_mm(fewer.front()->position) + " mm (" + names(fewer) +
                             "): a slice missing, or slices of several acquisitions in one series?");
       }
-    if (nvol > 1 && !index)
-      throw FileError(path, "holds " + std::to_string(nvol) + " 3-D volumes (" +
-                                std::to_string(nvol) + " slices at each of " +
-                                std::to_string(at.size()) +
-                                " positions: time points, echoes or acquisitions): give the "
-                                "index of one, 0.." +
-                                std::to_string(nvol - 1) + " (simdvol: --volume-index)");
-    const int64_t v = index ? *index : 0;
-    if (v < 0 || v >= nvol)
-      throw FileError(path, "volume index " + std::to_string(v) + " is outside 0.." +
-                                std::to_string(nvol - 1) + " (the series holds " +
-                                std::to_string(nvol) + (nvol == 1 ? " volume)" : " volumes)"));
+    const int64_t v =
+        pick_volume(path, nvol, index,
+                    "(" + std::to_string(nvol) + " slices at each of " + std::to_string(at.size()) +
+                        " positions: time points, echoes or acquisitions)",
+                    "series");
     for (const auto& here : at) chosen.push_back(here[static_cast<std::size_t>(v)]);
     if (chosen.size() > 1) {
       const double mean = (chosen.back()->position - chosen.front()->position) /

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <initializer_list>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -46,6 +47,13 @@ std::size_t checked_count(const std::filesystem::path& path, const std::array<in
                           std::size_t bytes_per_voxel);
 /// "181 x 217 x 3".
 std::string dims_text(const std::array<int64_t, 3>& d);
+/// The volume `index` picks of the `count` 3-D volumes a file holds (0
+/// where none is given). FileError "holds 5 3-D volumes <what>: give the
+/// index of one, 0..4 (simdvol: --volume-index)" where count > 1 and none is
+/// given (`what`: "(a 4-D image)", say), and "volume index 7 is outside
+/// 0..4 (the <holder> holds 5 volumes)" for one outside.
+int64_t pick_volume(const std::filesystem::path& path, int64_t count, std::optional<int64_t> index,
+                    const std::string& what, const char* holder = "file");
 /// Each spacing made positive; 0, NaN and infinities become 1.
 std::array<double, 3> sane_spacing(std::array<double, 3> s);
 

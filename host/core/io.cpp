@@ -91,6 +91,19 @@ std::string dims_text(const std::array<int64_t, 3>& d) {
   return std::to_string(d[0]) + " x " + std::to_string(d[1]) + " x " + std::to_string(d[2]);
 }
 
+int64_t pick_volume(const fs::path& path, int64_t count, std::optional<int64_t> index,
+                    const std::string& what, const char* holder) {
+  if (count > 1 && !index)
+    throw FileError(path, "holds " + std::to_string(count) + " 3-D volumes " + what +
+                              ": give the index of one, 0.." + std::to_string(count - 1) +
+                              " (simdvol: --volume-index)");
+  if (index && (*index < 0 || *index >= count))
+    throw FileError(path, "volume index " + std::to_string(*index) + " is outside 0.." +
+                              std::to_string(count - 1) + " (the " + holder + " holds " +
+                              std::to_string(count) + (count == 1 ? " volume)" : " volumes)"));
+  return index ? *index : 0;
+}
+
 std::array<double, 3> sane_spacing(std::array<double, 3> s) {
   for (double& v : s) {
     v = std::fabs(v);
@@ -282,17 +295,8 @@ NrrdShape nrrd_shape(const fs::path& path, const Nrrd* n, std::optional<int64_t>
     s.spacing[i] = nrrd_axis_spacing(n, s.axes[i]);
   }
   s.spacing = sane_spacing(s.spacing);
-  if (s.volumes > 1 && !index)
-    throw FileError(path, "holds " + std::to_string(s.volumes) + " 3-D volumes along axis " +
-                              std::to_string(s.volume_axis) + " (a 4-D image): give the index " +
-                              "of one, 0.." + std::to_string(s.volumes - 1) +
-                              " (simdvol: --volume-index)");
-  if (index && (*index < 0 || *index >= s.volumes))
-    throw FileError(path, "volume index " + std::to_string(*index) + " is outside 0.." +
-                              std::to_string(s.volumes - 1) + " (the file holds " +
-                              std::to_string(s.volumes) +
-                              (s.volumes == 1 ? " volume)" : " volumes)"));
-  s.index = index ? *index : 0;
+  s.index = pick_volume(path, s.volumes, index,
+                        "along axis " + std::to_string(s.volume_axis) + " (a 4-D image)");
   return s;
 }
 
@@ -745,14 +749,7 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, const fs::path& header,
       throw FileError(path, "dims overflow" + in + ": dim[4..7] multiply past 2^63");
     nvol *= d[i];
   }
-  if (nvol > 1 && !index)
-    throw FileError(path, "holds " + std::to_string(nvol) +
-                              " 3-D volumes (a 4-D image): give the index of one, 0.." +
-                              std::to_string(nvol - 1) + " (simdvol: --volume-index)");
-  if (index && (*index < 0 || *index >= nvol))
-    throw FileError(path, "volume index " + std::to_string(*index) + " is outside 0.." +
-                              std::to_string(nvol - 1) + " (the file holds " +
-                              std::to_string(nvol) + (nvol == 1 ? " volume)" : " volumes)"));
+  pick_volume(path, nvol, index, "(a 4-D image)");
 
   info.volumes = nvol;
   info.dims = {d[1], ndim >= 2 ? d[2] : 1, ndim >= 3 ? d[3] : 1};

@@ -368,15 +368,7 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
                               "voxels must follow the header or lie in one file)");
   if (data_name.empty()) throw FileError(path, "its ElementDataFile is empty");
   if (volumes) *volumes = count;
-  if (count > 1 && !volume_index)
-    throw FileError(path, "holds " + std::to_string(count) +
-                              " 3-D volumes (a 4-D image): give the index of one, 0.." +
-                              std::to_string(count - 1) + " (simdvol: --volume-index)");
-  const int64_t index = volume_index ? *volume_index : 0;
-  if (index < 0 || index >= count)
-    throw FileError(path, "volume index " + std::to_string(index) + " is outside 0.." +
-                              std::to_string(count - 1) + " (the file holds " +
-                              std::to_string(count) + (count == 1 ? " volume)" : " volumes)"));
+  const int64_t index = pick_volume(path, count, volume_index, "(a 4-D image)");
 
   // The data file's size bounds what may be read from it (MetaIO would
   // allocate a compressed size or read past a short file without a word).
