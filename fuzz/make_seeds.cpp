@@ -2,7 +2,7 @@
 // (data/brainsmall.den, data/ch2.nii.gz; a synthetic volume stands in for a
 // missing one): small crops written with save_nrrd, teem and niftilib, and
 // truncated and malformed variants, each framed as its fuzz target expects.
-//   make_seeds <data dir> <corpus root>   -> <root>/{raw,den,nrrd,nifti,dicom,metaimage}/
+//   make_seeds <data dir> <corpus root>   -> <root>/{raw,den,nrrd,nifti,dicom,metaimage,mgh}/
 // Nothing it writes is committed: scripts/fuzz regenerates the corpora.
 #include <zlib.h>
 
@@ -214,7 +214,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path data(argv[1]), root(argv[2]);
-  for (const char* t : {"raw", "den", "nrrd", "nifti", "dicom", "metaimage"})
+  for (const char* t : {"raw", "den", "nrrd", "nifti", "dicom", "metaimage", "mgh"})
     fs::create_directories(root / t);
   const fs::path tmpdir = root / "tmp";
   fs::create_directories(tmpdir);
@@ -396,6 +396,48 @@ int main(int argc, char** argv) {
     mha_seed("real_itk_example", 1, t + "\n",
              read_bytes(data / "metaimage" / "BrainProtonDensity3Slices.raw", 16384));
   }
+  // MGH: byte 0 % 3: 0 plain .mgh, 1 gzipped by the target, 2 .mgz as is;
+  // (byte 0 / 3) % 4 = 2 asks for frame 1.
+  auto mgh_file = [](const Volume& v, int32_t type, int32_t frames) {
+    Bytes b;
+    auto be32 = [&b](uint32_t x) {
+      for (int s = 24; s >= 0; s -= 8) b.push_back(static_cast<uint8_t>(x >> s));
+    };
+    be32(1);
+    for (int i = 0; i < 3; ++i) be32(static_cast<uint32_t>(v.dims()[i]));
+    be32(static_cast<uint32_t>(frames));
+    be32(static_cast<uint32_t>(type));
+    be32(0);
+    b.push_back(0);
+    b.push_back(1);                                                // goodRASFlag
+    const float cos[12] = {1, 1, 2, -1, 0, 0, 0, 0, -1, 0, 1, 0};  // sizes, then LIA
+    for (float c : cos) {
+      uint32_t u;
+      std::memcpy(&u, &c, 4);
+      be32(u);
+    }
+    b.resize(284, 0);
+    for (int f = 0; f < frames; ++f)
+      for (float x : v.data()) {
+        if (type == 0) {
+          b.push_back(static_cast<uint8_t>(x));
+        } else if (type == 4) {
+          const auto s = static_cast<uint16_t>(static_cast<int16_t>(x));
+          b.push_back(static_cast<uint8_t>(s >> 8));
+          b.push_back(static_cast<uint8_t>(s));
+        } else {
+          uint32_t u;
+          std::memcpy(&u, &x, 4);
+          be32(u);
+        }
+      }
+    return b;
+  };
+  write_seed(root / "mgh", "u8", framed(0, mgh_file(b8, 0, 1)));
+  write_seed(root / "mgh", "i16_gz", framed(1, mgh_file(c16, 4, 1)));
+  write_seed(root / "mgh", "f32_frames", framed(0 + 2 * 3, mgh_file(tiny, 3, 2)));
+  if (fs::exists(data / "mgh" / "test.mgz"))
+    write_seed(root / "mgh", "real_test_mgz", framed(2, read_bytes(data / "mgh" / "test.mgz")));
   fs::remove_all(tmpdir);
   std::cout << "make_seeds: corpora written under " << root.string() << "\n";
   return 0;

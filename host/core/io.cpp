@@ -1279,6 +1279,7 @@ VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
     return VolumeFileKind::nifti;
   if (has_suffix(name, {".nrrd", ".nhdr"})) return VolumeFileKind::nrrd;
   if (has_suffix(name, {".mha", ".mhd"})) return VolumeFileKind::metaimage;
+  if (has_suffix(name, {".mgh", ".mgz", ".mgh.gz"})) return VolumeFileKind::mgh;
   if (has_suffix(name, {".den"})) return VolumeFileKind::den;
   if (has_suffix(name, {".raw"})) return VolumeFileKind::raw;
   if (has_suffix(name, {".dcm", ".dicom", ".ima"}) || name == "dicomdir")
@@ -1303,9 +1304,10 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
   if (kind == VolumeFileKind::nrrd) return load_nrrd(path, volume_index, volumes);
   if (kind == VolumeFileKind::dicom) return load_dicom(path, volume_index, volumes);
   if (kind == VolumeFileKind::metaimage) return load_metaimage(path, volume_index, volumes);
+  if (kind == VolumeFileKind::mgh) return load_mgh(path, volume_index, volumes);
   if (volume_index)
-    throw FileError(path, std::string("a volume index applies only to NIfTI, NRRD, MetaImage and "
-                                      "DICOM (") +
+    throw FileError(path, std::string("a volume index applies only to NIfTI, NRRD, MetaImage, MGH "
+                                      "and DICOM (") +
                               std::string(kSeriesFileNames) + ")");
   if (kind == VolumeFileKind::den) return load_den(path);
   if (kind == VolumeFileKind::raw) {

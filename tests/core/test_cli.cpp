@@ -317,7 +317,7 @@ TEST_F(Cli, OrientTurnsTheAxesAsTheHeaderSays) {
            {"render " + path("flipped.nrrd") + " --orient RAS -o " + path("x.png"),
             "the file does not say where its axes point"},
            {"render --orient RAS -o " + path("x.png"),
-            "--orient: applies only to NIfTI, NRRD, MetaImage and DICOM volumes"}}) {
+            "--orient: applies only to NIfTI, NRRD, MetaImage, MGH and DICOM volumes"}}) {
     const Result r = run(args);
     EXPECT_EQ(r.code, 1) << args << "\n" << r.output;  // simdvol's errors
     EXPECT_NE(r.output.find(needle), std::string::npos) << args << "\n" << r.output;
@@ -469,6 +469,47 @@ TEST_F(Cli, RendersAMetaImage) {
     EXPECT_EQ(cut.output.rfind("simdvol: error: " + path(name) + ": ", 0), 0u) << cut.output;
     EXPECT_FALSE(fs::exists(path("f.tif")));
   }
+}
+
+TEST_F(Cli, RendersAnMghFrame) {
+  // Frame 1 of a FreeSurfer .mgh written by hand (big-endian, conformed LIA
+  // axes; frame 0 is air) renders as the NRRD of the same values.
+  const simdvol::Volume ph = simdvol::shepp_logan(24, 2);
+  simdvol::Volume hu(ph.dims(), simdvol::VoxelType::f32, {1.0, 1.0, 1.0});
+  std::string header(284, '\0'), air, body;
+  const auto big32 = [&](std::size_t at, uint32_t v) {
+    for (int b = 0; b < 4; ++b) header[at + b] = static_cast<char>(v >> (24 - 8 * b));
+  };
+  big32(0, 1);  // version
+  for (int i = 0; i < 3; ++i) big32(4 + 4 * i, 24);
+  big32(16, 2);    // frames
+  big32(20, 4);    // MRI_SHORT
+  header[29] = 1;  // goodRASFlag
+  const float one = 1.0f, minus = -1.0f;
+  uint32_t b1, bm;
+  std::memcpy(&b1, &one, 4);
+  std::memcpy(&bm, &minus, 4);
+  for (int i = 0; i < 3; ++i) big32(30 + 4 * i, b1);  // 1 mm voxels
+  big32(42, bm);                                      // x to the left
+  big32(42 + 20, bm);                                 // y down
+  big32(42 + 28, b1);                                 // z to the front
+  for (std::size_t i = 0; i < ph.voxel_count(); ++i) {
+    const auto v = static_cast<int16_t>(std::lround(ph.data()[i]));
+    hu.data()[i] = static_cast<float>(v);
+    air += std::string("\xfc\x18", 2);  // -1000, big-endian
+    body += static_cast<char>(static_cast<uint16_t>(v) >> 8);
+    body += static_cast<char>(static_cast<uint16_t>(v) & 0xff);
+  }
+  std::ofstream(path("t1.mgh"), std::ios::binary) << header << air << body;
+  simdvol::save_nrrd(hu, path("hu.nrrd"));
+  const std::string common = " --size 32x32 --view 20,35,10 -o ";
+  ASSERT_EQ(run("render " + path("hu.nrrd") + common + path("c.tif")).code, 0);
+  ASSERT_EQ(run("render " + path("t1.mgh") + " --volume-index 1" + common + path("a.tif")).code, 0);
+  expect_same_pixels(simdvol::read_image(path("a.tif")), simdvol::read_image(path("c.tif")));
+  const Result info = run("info " + path("t1.mgh") + " --orient RAS");
+  ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("axes:     RAS"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("volumes:  2 in the file (4-D)"), std::string::npos) << info.output;
 }
 
 TEST_F(Cli, TurntableStopsAtAFrameItCannotWrite) {
@@ -923,11 +964,11 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --raw-dims 2,2,2 -o " + path("x.png"),
        "--raw-dims: applies only to .raw volumes (no volume given)"},
       {"render --volume-index 1 -o " + path("x.png"),
-       "--volume-index: applies only to NIfTI, NRRD, MetaImage and DICOM volumes (.nii, .nii.gz, "
-       ".hdr/.img, .nrrd, .nhdr, .mha, .mhd, DICOM) (no volume given)"},
+       "--volume-index: applies only to NIfTI, NRRD, MetaImage, MGH and DICOM volumes (.nii, "
+       ".nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, DICOM) (no volume given)"},
       {"info " + path("vol.raw") + " --raw-dims 2,2,2 --volume-index 0",
-       "--volume-index: applies only to NIfTI, NRRD, MetaImage and DICOM volumes (.nii, .nii.gz, "
-       ".hdr/.img, .nrrd, .nhdr, .mha, .mhd, DICOM) (" +
+       "--volume-index: applies only to NIfTI, NRRD, MetaImage, MGH and DICOM volumes (.nii, "
+       ".nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, DICOM) (" +
            path("vol.raw") + " is not one)"},
       {"render --no-shade --light 1,0,0 -o " + path("x.png"),
        "--light: applies only to lit renders (not with --no-shade)"},

@@ -1128,7 +1128,7 @@ TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
   simdvol::RawLayout raw;
   raw.dims = kDims;
   expect_file_error([&] { simdvol::load_volume(file("v.raw"), raw, 0); }, file("v.raw"),
-                    {"applies only to NIfTI, NRRD, MetaImage and DICOM"});
+                    {"applies only to NIfTI, NRRD, MetaImage, MGH and DICOM"});
 }
 
 // ----------------------------------------- NIfTI-2, .hdr/.img pairs, Analyze
@@ -2579,6 +2579,160 @@ TEST(IoReal, MetaImageItkExample) {
   EXPECT_EQ(simdvol::load_volume(p).data(), v.data());
 }
 
+// ------------------------------------------------------------- MGH
+
+/// An MGH header as FreeSurfer lays it out (big-endian, 284 bytes): dims,
+/// frames, type, goodRASFlag, voxel sizes, direction cosines (row i axis
+/// i's direction in RAS), centre.
+Bytes mgh_header(std::array<int32_t, 3> dims, int32_t frames, int32_t type, int16_t good_ras,
+                 std::array<float, 3> sizes, std::array<std::array<float, 3>, 3> dirs,
+                 int32_t version = 1) {
+  Bytes b;
+  put<int32_t>(b, version, true);
+  for (int32_t d : dims) put<int32_t>(b, d, true);
+  put<int32_t>(b, frames, true);
+  put<int32_t>(b, type, true);
+  put<int32_t>(b, 0, true);  // dof
+  put<int16_t>(b, good_ras, true);
+  for (float s : sizes) put<float>(b, s, true);
+  for (const auto& row : dirs)
+    for (float c : row) put<float>(b, c, true);
+  for (int i = 0; i < 3; ++i) put<float>(b, 10.0f * static_cast<float>(i), true);  // centre
+  b.resize(284, 0);
+  return b;
+}
+
+// FreeSurfer's conformed space: x to the left, y down, z to the front.
+constexpr std::array<std::array<float, 3>, 3> kLia{{{-1, 0, 0}, {0, 0, -1}, {0, 1, 0}}};
+
+TEST_F(IoTest, MghEveryTypeAndFrame) {
+  constexpr int kFrames = 3;
+  struct Type {
+    int32_t code;
+    VoxelType kept;
+  };
+  for (const Type t : {Type{0, VoxelType::u8}, Type{4, VoxelType::i16}, Type{1, VoxelType::f32},
+                       Type{3, VoxelType::f32}}) {
+    std::vector<float> all;
+    Bytes data;
+    for (std::size_t i = 0; i < kN * kFrames; ++i) {
+      const auto k = static_cast<int64_t>(i);
+      switch (t.code) {
+        case 0:
+          all.push_back(static_cast<float>((k * 37 + 11) % 256));
+          data.push_back(static_cast<unsigned char>(all.back()));
+          break;
+        case 4:
+          all.push_back(static_cast<float>(k * 1031 % 60001 - 30000));
+          put<int16_t>(data, static_cast<int16_t>(k * 1031 % 60001 - 30000), true);
+          break;
+        case 1:
+          all.push_back(static_cast<float>(k * 100003 - 7000000));
+          put<int32_t>(data, static_cast<int32_t>(k * 100003 - 7000000), true);
+          break;
+        default:
+          all.push_back(0.375f * static_cast<float>(k) - 17.125f);
+          put<float>(data, all.back(), true);
+      }
+    }
+    Bytes tags(40, 0x5a);  // (TR, flip angle, ... after the voxels: not read)
+    const Bytes file_bytes = concat(
+        concat(mgh_header({5, 4, 3}, kFrames, t.code, 1, {0.5f, 1.0f, 2.0f}, kLia), data), tags);
+    write_file(file("v.mgh"), file_bytes);
+    write_file(file("v.mgz"), gzip(file_bytes));
+    write_file(file("v.mgh.gz"), gzip(file_bytes));
+    for (const char* name : {"v.mgh", "v.mgz", "v.mgh.gz"})
+      for (int f = 0; f < kFrames; ++f) {
+        SCOPED_TRACE(std::string(name) + " type " + std::to_string(t.code) + " frame " +
+                     std::to_string(f));
+        int64_t volumes = 0;
+        const Volume v = simdvol::load_volume(file(name), std::nullopt, f, &volumes);
+        EXPECT_EQ(volumes, kFrames);
+        expect_volume(v, kDims, t.kept,
+                      std::vector<float>(all.begin() + static_cast<std::ptrdiff_t>(f * kN),
+                                         all.begin() + static_cast<std::ptrdiff_t>((f + 1) * kN)),
+                      {0.5, 1.0, 2.0});
+        EXPECT_EQ(v.orientation(), "LIA");
+      }
+  }
+  // Without goodRASFlag the cosines are not to be trusted: no orientation.
+  write_file(file("noras.mgh"),
+             concat(mgh_header({5, 4, 3}, 1, 0, 0, {1, 1, 1}, kLia), Bytes(kN, 9)));
+  const Volume v = simdvol::load_mgh(file("noras.mgh"));
+  EXPECT_EQ(v.orientation(), "");
+  EXPECT_EQ(v.data(), std::vector<float>(kN, 9.0f));
+}
+
+TEST_F(IoTest, MghMalformed) {
+  Bytes vox(kN * 2);  // two frames of u8, that do not pack small
+  uint32_t r = 12345;
+  for (auto& b : vox) b = static_cast<unsigned char>((r = r * 1103515245u + 12345u) >> 24);
+  const Bytes good = concat(mgh_header({5, 4, 3}, 2, 0, 1, {1, 1, 1}, kLia), vox);
+  const Bytes gz = gzip(good);
+  Bytes corrupt = gz;  // (the header's deflate blocks left whole)
+  for (std::size_t i = corrupt.size() * 2 / 3; i < corrupt.size() - 10; i += 5) corrupt[i] ^= 0xa5;
+  struct Case {
+    std::string name;
+    Bytes bytes;
+    std::optional<int64_t> index;
+    std::string word;
+  };
+  const std::vector<Case> cases = {
+      {"empty.mgh", {}, 0, "empty"},
+      {"short.mgh", Bytes(good.begin(), good.begin() + 100), 0, "holds 100 of the 284 bytes"},
+      {"version.mgh", concat(mgh_header({5, 4, 3}, 2, 0, 1, {1, 1, 1}, kLia, 2), vox), 0,
+       "version 2, not 1"},
+      {"zero.mgh", concat(mgh_header({5, 0, 3}, 2, 0, 1, {1, 1, 1}, kLia), vox), 0,
+       "its y size is 0 (must be positive)"},
+      {"frames.mgh", concat(mgh_header({5, 4, 3}, -1, 0, 1, {1, 1, 1}, kLia), vox), 0,
+       "its frame count is -1"},
+      {"type.mgh", concat(mgh_header({5, 4, 3}, 2, 2, 1, {1, 1, 1}, kLia), vox), 0,
+       "type 2 is not one MGH defines"},
+      {"huge.mgh",
+       concat(mgh_header({2000000000, 2000000000, 2000000000}, 1, 3, 1, {1, 1, 1}, kLia), vox), 0,
+       "overflow"},
+      {"noindex.mgh", good, std::nullopt,
+       "holds 2 3-D volumes (frames: a 4-D image): give the index of one, 0..1"},
+      {"outside.mgh", good, 2, "volume index 2 is outside 0..1"},
+      {"cut.mgh", Bytes(good.begin(), good.end() - 1), 1,
+       "holds 403 bytes, not the 404 its header and frame 1 take (truncated?)"},
+      {"cut.mgz", Bytes(gz.begin(), gz.end() - 60), 1, "(truncated?)"},
+      {"corrupt.mgz", corrupt, 1, "could not be read (zlib:"},
+      {"inflate.mgz", gzip(concat(mgh_header({5000, 4000, 3000}, 1, 0, 1, {1, 1, 1}, kLia), vox)),
+       0, "compressed bytes cannot hold the 60000000284"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    write_file(file(c.name), c.bytes);
+    expect_file_error([&] { simdvol::load_mgh(file(c.name), c.index); }, file(c.name), {c.word});
+  }
+  // A cut file still gives the frames before the cut.
+  EXPECT_EQ(simdvol::load_mgh(file("cut.mgh"), 0).data(),
+            std::vector<float>(vox.begin(), vox.begin() + kN));
+}
+
+TEST(IoReal, MghNibabelTestFile) {
+  // nibabel's test.mgz (python3-nibabel): made by FreeSurfer's
+  // `mri_volsynth --dim 3 4 5 2 --cdircos 1 2 3 --rdircos 2 3 1 --sdircos 3 1
+  // 2`; nibabel's test_read_mgh asserts its shape, zooms, vox2ras and two
+  // voxels, which are checked here as it states them.
+  const fs::path p = simdvol::testing::data_dir() / "mgh" / "test.mgz";
+  SIMDVOL_REQUIRE_FILE(p);
+  int64_t volumes = 0;
+  const Volume v0 = simdvol::load_mgh(p, 0, &volumes);
+  const Volume v1 = simdvol::load_mgh(p, 1);
+  EXPECT_EQ(volumes, 2);
+  EXPECT_EQ(v0.dims(), (std::array<int64_t, 3>{3, 4, 5}));
+  EXPECT_EQ(v0.type(), VoxelType::f32);
+  EXPECT_EQ(v0.spacing(), (std::array<double, 3>{1.0, 1.0, 1.0}));
+  EXPECT_NEAR(v0.at(1, 2, 3), -0.3047, 5e-5);  // nibabel: v[1, 2, 3, 0] = -0.3047 (4 places)
+  EXPECT_NEAR(v1.at(1, 2, 3), 0.0018, 5e-5);   // v[1, 2, 3, 1] = 0.0018
+  // vox2ras's columns (1, 2, 3), (2, 3, 1), (3, 1, 2): each axis lies
+  // closest to S, A and R in turn.
+  EXPECT_EQ(v0.orientation(), "SAR");
+  EXPECT_EQ(simdvol::load_volume(p, std::nullopt, 1).data(), v1.data());
+}
+
 // ------------------------------------------------------------- dispatch
 
 TEST_F(IoTest, LoadVolumeDispatchesByExtension) {
@@ -2591,9 +2745,11 @@ TEST_F(IoTest, LoadVolumeDispatchesByExtension) {
   write_nifti(file("a.nii.gz"), DT_UINT8, {5, 4, 3, 1}, as<uint8_t>(values));
   write_file(file("a.MHA"), concat(mha_header(3, "5 4 3", "MET_UCHAR", "", "LOCAL"), vox));
   write_file(file("a.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "a.raw"));
+  write_file(file("a.MGZ"), gzip(concat(mgh_header({5, 4, 3}, 1, 0, 1, {1, 1, 1}, kLia), vox)));
   RawLayout l;
   l.dims = kDims;
-  for (const char* name : {"a.den", "a.NRRD", "a.raw", "a.nii", "a.nii.gz", "a.MHA", "a.mhd"}) {
+  for (const char* name :
+       {"a.den", "a.NRRD", "a.raw", "a.nii", "a.nii.gz", "a.MHA", "a.mhd", "a.MGZ"}) {
     SCOPED_TRACE(name);
     expect_volume(simdvol::load_volume(file(name), l), kDims, VoxelType::u8, values);
   }

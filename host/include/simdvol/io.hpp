@@ -116,24 +116,34 @@ Volume load_metaimage(const std::filesystem::path& path,
                       std::optional<int64_t> volume_index = std::nullopt,
                       int64_t* volumes = nullptr);
 
+/// FreeSurfer's MGH: .mgh, or .mgz (.mgh.gz) gzipped, read by simdvol from
+/// its fixed big-endian header (no library for it is packaged): uchar,
+/// short, int and float voxels (u8 and i16 kept, the others as f32), the
+/// voxel sizes, and where goodRASFlag says they are valid the direction
+/// cosines (the closest axes, in RAS; none otherwise). A file of several
+/// frames is a 4-D series: `volume_index` picks one, and only the bytes up
+/// to it are read. The tags after the voxels (TR, flip angle) are not.
+Volume load_mgh(const std::filesystem::path& path,
+                std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
+
 /// The kinds of volume file load_volume reads, told by the name's ending
 /// (whatever its case; a DICOMDIR is DICOM), else by being a directory
 /// (DICOM) or by "DICM" at byte 128 (a DICOM file of any name).
-enum class VolumeFileKind { unknown, den, nrrd, nifti, raw, dicom, metaimage };
+enum class VolumeFileKind { unknown, den, nrrd, nifti, raw, dicom, metaimage, mgh };
 VolumeFileKind volume_file_kind(const std::filesystem::path& path);
 /// The endings volume_file_kind knows, for messages.
 inline constexpr std::string_view kVolumeFileNames =
     ".den, .nrrd, .nhdr, .nii, .nii.gz, .hdr/.img (NIfTI or Analyze pairs, plain or .gz), "
-    ".mha, .mhd (MetaImage), "
+    ".mha, .mhd (MetaImage), .mgh, .mgz (FreeSurfer), "
     "DICOM (.dcm, a file of any name, or a directory of one series) or .raw";
 /// The files that may hold several 3-D volumes (NIfTI, NRRD, MetaImage,
-/// DICOM).
+/// MGH, DICOM).
 inline constexpr std::string_view kSeriesFileNames =
-    ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, DICOM";
+    ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, DICOM";
 
 /// Chooses the loader by volume_file_kind (.raw needs `raw`). Throws
 /// FileError for an unknown extension, and for a `volume_index` given with
-/// a file other than NIfTI, NRRD, MetaImage or DICOM.
+/// a file other than NIfTI, NRRD, MetaImage, MGH or DICOM.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
