@@ -6,14 +6,18 @@
 #pragma once
 
 #include <unistd.h>
+#include <zlib.h>
 
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <system_error>
+#include <vector>
 
 #include "simdvol/error.hpp"
 #include "simdvol/volume.hpp"
@@ -62,6 +66,46 @@ inline void clear_scratch() {
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(scratch_dir(), ec))
     std::filesystem::remove_all(e.path(), ec);
+}
+
+/// Writes `size` bytes gzip-compressed (zlib, level 1) to scratch_dir()/name,
+/// so that mutations reach a loader's header and data through the
+/// compression layer; an empty path where zlib refuses (never, in practice).
+inline std::filesystem::path write_gzipped(const std::string& name, const uint8_t* data,
+                                           std::size_t size) {
+  z_stream z{};
+  if (deflateInit2(&z, 1, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK) return {};
+  std::vector<uint8_t> out(deflateBound(&z, static_cast<uLong>(size)) + 64);
+  z.next_in = const_cast<Bytef*>(data);
+  z.avail_in = static_cast<uInt>(size);
+  z.next_out = out.data();
+  z.avail_out = static_cast<uInt>(out.size());
+  const int r = deflate(&z, Z_FINISH);
+  const std::size_t len = out.size() - z.avail_out;
+  deflateEnd(&z);
+  if (r != Z_STREAM_END) return {};
+  return write_input(name, out.data(), len);
+}
+
+/// A header and its data file from one input: the part up to its first
+/// blank line ("\n\n", kept) is written as `header`, the rest as `data`
+/// beside it; the header's path.
+inline std::filesystem::path write_header_and_data(const std::string& header,
+                                                   const std::string& data, const uint8_t* body,
+                                                   std::size_t n) {
+  const std::string_view s(reinterpret_cast<const char*>(body), n);
+  const std::size_t cut = s.find("\n\n");
+  const std::size_t hlen = cut == std::string_view::npos ? n : cut + 2;
+  write_input(data, body + hlen, n - hlen);
+  return write_input(header, body, hlen);
+}
+
+/// The volume index a control byte asks for: (byte / divisor) mod 4, 0 for
+/// none and k for the index k - 1 (so that 4-D headers reach the reading
+/// of one volume).
+inline std::optional<int64_t> volume_index(uint8_t byte, int divisor) {
+  const int k = (byte / divisor) % 4;
+  return k == 0 ? std::nullopt : std::optional<int64_t>(static_cast<int64_t>(k - 1));
 }
 
 /// Runs `load` and checks what it returns: a loaded volume must be

@@ -8,7 +8,6 @@
 // that 4-D headers reach the reading of one volume).
 // Files the previous input left behind are removed first.
 #include <optional>
-#include <string_view>
 
 #include "fuzz_common.hpp"
 #include "simdvol/io.hpp"
@@ -22,15 +21,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
   if ((data[0] & 1) == 0) {
     path = simdvol_fuzz::write_input("input.mha", body, n);
   } else {
-    const std::string_view s(reinterpret_cast<const char*>(body), n);
-    const std::size_t cut = s.find("\n\n");
-    const std::size_t hlen = cut == std::string_view::npos ? n : cut + 2;
-    path = simdvol_fuzz::write_input("input.mhd", body, hlen);
-    simdvol_fuzz::write_input("data.raw", body + hlen, n - hlen);
+    path = simdvol_fuzz::write_header_and_data("input.mhd", "data.raw", body, n);
   }
-  const int k = (data[0] / 2) % 4;
-  const std::optional<int64_t> index =
-      k == 0 ? std::nullopt : std::optional<int64_t>(static_cast<int64_t>(k - 1));
+  const std::optional<int64_t> index = simdvol_fuzz::volume_index(data[0], 2);
   simdvol_fuzz::run_loader([&] { return simdvol::load_metaimage(path, index); });
   return 0;
 }

@@ -7,10 +7,7 @@
 //      gzip streams, or plain bytes under a .mgz name)
 // and (byte 0 / 3) mod 4 the volume index: 0 none, k the index k - 1.
 // Files the previous input left behind are removed first.
-#include <zlib.h>
-
 #include <optional>
-#include <vector>
 
 #include "fuzz_common.hpp"
 #include "simdvol/io.hpp"
@@ -25,28 +22,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
     case 0:
       path = simdvol_fuzz::write_input("input.mgh", body, n);
       break;
-    case 1: {
-      z_stream z{};
-      if (deflateInit2(&z, 1, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK) return 0;
-      std::vector<uint8_t> out(deflateBound(&z, static_cast<uLong>(n)) + 64);
-      z.next_in = const_cast<Bytef*>(body);
-      z.avail_in = static_cast<uInt>(n);
-      z.next_out = out.data();
-      z.avail_out = static_cast<uInt>(out.size());
-      const int r = deflate(&z, Z_FINISH);
-      const std::size_t len = out.size() - z.avail_out;
-      deflateEnd(&z);
-      if (r != Z_STREAM_END) return 0;
-      path = simdvol_fuzz::write_input("input.mgz", out.data(), len);
+    case 1:
+      path = simdvol_fuzz::write_gzipped("input.mgz", body, n);
+      if (path.empty()) return 0;
       break;
-    }
     default:
       path = simdvol_fuzz::write_input("input.mgz", body, n);
       break;
   }
-  const int k = (data[0] / 3) % 4;
-  const std::optional<int64_t> index =
-      k == 0 ? std::nullopt : std::optional<int64_t>(static_cast<int64_t>(k - 1));
+  const std::optional<int64_t> index = simdvol_fuzz::volume_index(data[0], 3);
   simdvol_fuzz::run_loader([&] { return simdvol::load_mgh(path, index); });
   return 0;
 }
