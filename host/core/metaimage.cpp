@@ -372,7 +372,8 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
 
   // The data file's size bounds what may be read from it (MetaIO would
   // allocate a compressed size or read past a short file without a word).
-  bool compressed = meta.CompressedData();
+  // (MetaIO inflates only binary voxels: compressed ASCII is read as ASCII)
+  bool compressed = meta.CompressedData() && meta.BinaryData();
   fs::path data_path = path;
   if (!local_data(data_name)) {
     const fs::path named_path = fs::path(data_name).is_absolute()

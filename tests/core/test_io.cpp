@@ -2362,7 +2362,12 @@ TEST_F(IoTest, MetaImageVolumeOfAFourDFile) {
   write_file(file("zapart.zraw"), packed);
   write_file(file("ascii.mha"),
              mha_header(4, sizes, "MET_SHORT", "BinaryData = False\n", "LOCAL") + ascii);
-  for (const char* name : {"raw.mha", "packed.mha", "zapart.mhd", "ascii.mha"}) {
+  // (CompressedData applies to binary voxels only: MetaIO reads these as ASCII)
+  write_file(
+      file("asciiz.mha"),
+      mha_header(4, sizes, "MET_SHORT", "BinaryData = False\nCompressedData = True\n", "LOCAL") +
+          ascii);
+  for (const char* name : {"raw.mha", "packed.mha", "zapart.mhd", "ascii.mha", "asciiz.mha"}) {
     for (int v = 0; v < kVols; ++v) {
       SCOPED_TRACE(std::string(name) + " volume " + std::to_string(v));
       int64_t volumes = 0;
