@@ -2507,6 +2507,17 @@ TEST_F(IoTest, MetaImageMalformed) {
       file("nosize.mha"),
       concat(mha_header(3, "5 4 3", "MET_UCHAR", "CompressedData = True\n", "LOCAL"), packed));
   EXPECT_EQ(simdvol::load_metaimage(file("nosize.mha")).data(), std::vector<float>(kN, 7.0f));
+  // HeaderSize: bytes to skip in the data file, or -1 for the voxels at its
+  // end (a file with a header of another program's).
+  write_file(file("skip.raw"), concat(Bytes(16, 0xee), vox));
+  write_file(file("skip.mhd"),
+             mha_header(3, "5 4 3", "MET_UCHAR", "HeaderSize = 16\n", "skip.raw"));
+  write_file(file("end.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "HeaderSize = -1\n", "skip.raw"));
+  for (const char* name : {"skip.mhd", "end.mhd"})
+    EXPECT_EQ(simdvol::load_metaimage(file(name)).data(), std::vector<float>(kN, 7.0f)) << name;
+  write_file(file("far.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "HeaderSize = 17\n", "skip.raw"));
+  expect_file_error([&] { simdvol::load_metaimage(file("far.mhd")); }, file("far.mhd"),
+                    {"holds 59 of the 60 bytes"});
   // A data file named without its .gz, as MetaIO finds it.
   write_file(file("g.raw.gz"), gzip(vox));
   write_file(file("g.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "g.raw"));
