@@ -10,10 +10,6 @@
 #include <gdcmTag.h>
 #include <gdcmTrace.h>
 
-#include <fcntl.h>
-#include <sys/mman.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -35,6 +31,7 @@
 #include <system_error>
 #include <vector>
 
+#include "child_read.hpp"
 #include "file_checks.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
@@ -1071,147 +1068,21 @@ Volume load_dicom_here(const fs::path& path, std::optional<int64_t> index, int64
   }
 }
 
-/// What the reading process sends back before the voxels.
-struct DicomReply {
-  int32_t status = 0;  ///< 0 a volume follows, 1 a FileError, 2 out of memory
-  int32_t type = 0;
-  int64_t dims[3] = {0, 0, 0};
-  double spacing[3] = {1, 1, 1};
-  char orientation[4] = {0, 0, 0, 0};
-  int64_t volumes = 1;      ///< 3-D volumes in the series (status 0 and 1)
-  uint32_t text_bytes = 0;  ///< status 1: the error's path, a NUL, its problem
-  uint32_t note_bytes = 0;  ///< status 0: the notes after the voxels, each ending in a NUL
-};
-
-/// The reading process: loads, sends the volume or the error down `fd`.
-[[noreturn]] void dicom_child(const fs::path& path, std::optional<int64_t> index, int fd) {
-  DicomReply reply;
-  try {
-    const Volume v = load_dicom_here(path, index, &reply.volumes);
-    reply.type = static_cast<int32_t>(v.type());
-    for (int a = 0; a < 3; ++a) {
-      reply.dims[a] = v.dims()[a];
-      reply.spacing[a] = v.spacing()[a];
-    }
-    std::memcpy(reply.orientation, v.orientation().data(),
-                std::min<std::size_t>(3, v.orientation().size()));
-    std::string notes;
-    for (const std::string& n : v.notes()) notes += n + '\0';
-    reply.note_bytes = static_cast<uint32_t>(notes.size());
-    const bool ok = write_fully(fd, &reply, sizeof reply) &&
-                    write_fully(fd, v.data().data(), v.data().size() * sizeof(float)) &&
-                    write_fully(fd, notes.data(), notes.size());
-    ::_exit(ok ? 0 : 3);
-  } catch (const FileError& e) {
-    reply.status = 1;
-    std::string text = e.path().string();
-    text += '\0';
-    text += e.problem();
-    reply.text_bytes = static_cast<uint32_t>(text.size());
-    const bool ok =
-        write_fully(fd, &reply, sizeof reply) && write_fully(fd, text.data(), text.size());
-    ::_exit(ok ? 0 : 3);
-  } catch (const std::bad_alloc&) {
-    reply.status = 2;
-    ::_exit(write_fully(fd, &reply, sizeof reply) ? 0 : 3);
-  } catch (...) {
-    ::_exit(4);
-  }
-}
-
-/// The last line a crashed reader wrote (GDCM's assertion, say), trimmed.
-std::string last_line(int fd) {
-  std::string all;
-  ::lseek(fd, 0, SEEK_SET);
-  char b[4096];
-  for (ssize_t r; (r = ::read(fd, b, sizeof b)) > 0;) all.append(b, static_cast<std::size_t>(r));
-  while (!all.empty() && (all.back() == '\n' || all.back() == ' ')) all.pop_back();
-  const std::size_t nl = all.rfind('\n');
-  std::string line = nl == std::string::npos ? all : all.substr(nl + 1);
-  if (line.size() > 300) line = line.substr(0, 300) + "...";
-  return line;
-}
-
 }  // namespace
 
 Volume load_dicom(const std::filesystem::path& path, std::optional<int64_t> volume_index,
                   int64_t* volumes) {
-  if (volumes) *volumes = 1;
   // GDCM (and the codecs under it) stop the process with assert() or worse
   // on some files, valid ones among them (Debian's GDCM 3.0.21 aborts in
   // GetSpacingValue on an RT dose grid of one frame): the files are read in
-  // a child process, which sends the volume back in a memory file, so that
-  // such a file is an error, not the end of the program. The child's
-  // messages go to a temporary file, quoted in that error.
-  // SIMDVOL_DICOM_IN_PROCESS=1 reads in this process (the fuzz target).
+  // a child process (read_in_child), so that such a file is an error, not
+  // the end of the program. SIMDVOL_DICOM_IN_PROCESS=1 reads in this
+  // process (the fuzz target).
   if (const char* e = std::getenv("SIMDVOL_DICOM_IN_PROCESS"); e && std::string(e) == "1")
     return load_dicom_here(path, volume_index, volumes);
-  // The child writes its reply and the voxels into a memory file that this
-  // process reads once the child has ended (through a pipe, the two
-  // processes took turns over each MiB: 0.4 s more for a 300-slice CT).
-  struct Files {
-    int mem = -1;
-    std::FILE* log = nullptr;
-    ~Files() {
-      if (mem >= 0) ::close(mem);
-      if (log) std::fclose(log);
-    }
-  } f;
-  f.mem = ::memfd_create("simdvol-dicom", MFD_CLOEXEC);
-  if (f.mem < 0)
-    throw FileError(
-        path, std::string("cannot make a memory file to read it into: ") + std::strerror(errno));
-  f.log = std::tmpfile();
-  std::fflush(stdout);
-  std::fflush(stderr);
-  const pid_t pid = ::fork();
-  if (pid < 0)
-    throw FileError(path,
-                    std::string("cannot start a process to read it: ") + std::strerror(errno));
-  if (pid == 0) {
-    if (f.log) ::dup2(::fileno(f.log), 2);
-    dicom_child(path, volume_index, f.mem);
-  }
-  int status = 0;
-  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
-  DicomReply reply;
-  const bool got = WIFEXITED(status) && WEXITSTATUS(status) == 0 &&
-                   ::lseek(f.mem, 0, SEEK_SET) == 0 && read_fully(f.mem, &reply, sizeof reply);
-  if (got && volumes && reply.volumes >= 1) *volumes = reply.volumes;
-  if (got && reply.status == 0) {
-    const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
-    Volume vol(dims, static_cast<VoxelType>(reply.type),
-               {reply.spacing[0], reply.spacing[1], reply.spacing[2]});
-    std::string notes(reply.note_bytes < (1u << 20) ? reply.note_bytes : 0, '\0');
-    if (reply.note_bytes < (1u << 20) &&
-        read_fully(f.mem, vol.data().data(), vol.data().size() * sizeof(float)) &&
-        read_fully(f.mem, notes.data(), notes.size())) {
-      vol.set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
-      for (std::size_t at = 0; at < notes.size();) {
-        const std::size_t end = notes.find('\0', at);
-        vol.add_note(notes.substr(at, end - at));
-        at = end == std::string::npos ? notes.size() : end + 1;
-      }
-      return vol;
-    }
-  } else if (got && reply.status == 1 && reply.text_bytes < (1u << 20)) {
-    std::string text(reply.text_bytes, '\0');
-    if (read_fully(f.mem, text.data(), text.size())) {
-      const std::size_t nul = text.find('\0');
-      throw FileError(fs::path(text.substr(0, nul)), text.substr(nul + 1));
-    }
-  } else if (got && reply.status == 2) {
-    throw std::bad_alloc();
-  }
-  const std::string said = f.log ? last_line(::fileno(f.log)) : std::string();
-  if (WIFSIGNALED(status))
-    throw FileError(path, "GDCM stopped on it (signal " + std::to_string(WTERMSIG(status)) +
-                              (said.empty() ? std::string() : ": " + said) +
-                              "): a file GDCM cannot read");
-  throw FileError(path, "the process reading it failed (exit status " +
-                            std::to_string(WEXITSTATUS(status)) + ")" +
-                            (said.empty() ? std::string() : ": " + said));
+  return read_in_child(
+      path, "GDCM", [&](int64_t* count) { return load_dicom_here(path, volume_index, count); },
+      volumes);
 }
 
 }  // namespace simdvol
