@@ -25,10 +25,9 @@
 // phantomN (the N^3 Shepp-Logan CT phantom, shepp_logan(N, 4), preset ct),
 // brainsmall (data/brainsmall.den, preset volpack: VolPack's example
 // classification), ch2 (data/ch2.nii.gz, preset mri), or a volume file of
-// the user's (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .mha, .mhd, .mgh, .mgz, .den, DICOM:
-// named by its file name in the cases, preset ct for Hounsfield data, mri
-// otherwise, as `simdvol
-// render --classify auto`). Compositing: direct,
+// the user's (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .mha, .mhd, .mgh, .mgz, .mnc, .den,
+// DICOM: named by its file name in the cases, preset ct for Hounsfield data,
+// mri otherwise, as `simdvol render --classify auto`). Compositing: direct,
 // adaptive (threshold 0.95), mcN (Monte Carlo, N walks per whole ray) or
 // mcNsub (per sub-ray, ch. 7.4). Per case a fresh RenderEngine renders one
 // warm-up frame (timed as "first": page faults of fresh buffers, program
@@ -233,7 +232,7 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data,
   throw ArgumentError("--volumes", "'" + s +
                                        "' is not phantomN, brainsmall, ch2 or a volume file "
                                        "(.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .mha, .mhd, .mgh, "
-                                       ".mgz, .den, "
+                                       ".mgz, .mnc, .den, "
                                        "DICOM)");
 }
 

@@ -9,7 +9,7 @@
 #                                                 embedded in the library)
 #   lib/cmake/simdvol/simdvolConfig.cmake, ...ConfigVersion.cmake,
 #     simdvolTargets.cmake, FindNiftiIO.cmake, FindTeemNrrd.cmake, FindGdcmLibs.cmake,
-#     FindMetaIO.cmake
+#     FindMetaIO.cmake, FindMinc.cmake
 #   bin/simdvol                                   (the command-line program)
 #   lib/simdvol/libsimdvol_oiio.so                (OpenImageIO, loaded by
 #                                                 simdvol_core on first use)
@@ -65,5 +65,6 @@ install(FILES
   ${PROJECT_SOURCE_DIR}/cmake/FindNiftiIO.cmake
   ${PROJECT_SOURCE_DIR}/cmake/FindGdcmLibs.cmake
   ${PROJECT_SOURCE_DIR}/cmake/FindMetaIO.cmake
+  ${PROJECT_SOURCE_DIR}/cmake/FindMinc.cmake
   ${PROJECT_SOURCE_DIR}/cmake/FindTeemNrrd.cmake
   DESTINATION ${SIMDVOL_INSTALL_CMAKEDIR})

@@ -2,7 +2,7 @@
 // (data/brainsmall.den, data/ch2.nii.gz; a synthetic volume stands in for a
 // missing one): small crops written with save_nrrd, teem and niftilib, and
 // truncated and malformed variants, each framed as its fuzz target expects.
-//   make_seeds <data dir> <corpus root>   -> <root>/{raw,den,nrrd,nifti,dicom,metaimage,mgh}/
+//   make_seeds <data dir> <corpus root>   -> <root>/{raw,den,nrrd,nifti,dicom,metaimage,mgh,minc}/
 // Nothing it writes is committed: scripts/fuzz regenerates the corpora.
 #include <zlib.h>
 
@@ -214,7 +214,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path data(argv[1]), root(argv[2]);
-  for (const char* t : {"raw", "den", "nrrd", "nifti", "dicom", "metaimage", "mgh"})
+  for (const char* t : {"raw", "den", "nrrd", "nifti", "dicom", "metaimage", "mgh", "minc"})
     fs::create_directories(root / t);
   const fs::path tmpdir = root / "tmp";
   fs::create_directories(tmpdir);
@@ -438,6 +438,10 @@ int main(int argc, char** argv) {
   write_seed(root / "mgh", "f32_frames", framed(0 + 2 * 3, mgh_file(tiny, 3, 2)));
   if (fs::exists(data / "mgh" / "test.mgz"))
     write_seed(root / "mgh", "real_test_mgz", framed(2, read_bytes(data / "mgh" / "test.mgz")));
+  // MINC: nibabel's files (MINC1 and MINC2), byte 0 = 1 asks for volume 0.
+  for (fs::directory_iterator it(data / "minc", ec), end; !ec && it != end; it.increment(ec))
+    if (it->is_regular_file() && it->file_size() < (1u << 20))
+      write_seed(root / "minc", it->path().filename().string(), framed(1, read_bytes(it->path())));
   fs::remove_all(tmpdir);
   std::cout << "make_seeds: corpora written under " << root.string() << "\n";
   return 0;

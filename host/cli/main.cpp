@@ -137,11 +137,13 @@ struct VolumeArgs {
     return path.empty() ? VolumeFileKind::unknown : volume_file_kind(path);
   }
 
-  // A NIfTI, NRRD, MetaImage, MGH or DICOM file: the formats that may hold
-  // several 3-D volumes, and whose headers say where their axes point.
+  // A NIfTI, NRRD, MetaImage, MGH, MINC or DICOM file: the formats that
+  // may hold several 3-D volumes, and whose headers say where their axes
+  // point.
   static bool series(VolumeFileKind k) {
     return k == VolumeFileKind::nifti || k == VolumeFileKind::nrrd ||
-           k == VolumeFileKind::metaimage || k == VolumeFileKind::mgh || k == VolumeFileKind::dicom;
+           k == VolumeFileKind::metaimage || k == VolumeFileKind::mgh ||
+           k == VolumeFileKind::minc || k == VolumeFileKind::dicom;
   }
 
   // The raw layout options, and --volume-index, do nothing for another kind
@@ -156,13 +158,14 @@ struct VolumeArgs {
         throw ArgumentError(name, "applies only to .raw volumes" + which);
     if (!series(k) && app && app->count("--volume-index") > 0)
       throw ArgumentError("--volume-index",
-                          "applies only to NIfTI, NRRD, MetaImage, MGH and DICOM volumes (" +
+                          "applies only to NIfTI, NRRD, MetaImage, MGH, MINC and DICOM volumes (" +
                               std::string(kSeriesFileNames) + ")" + which);
     if (volume_index < 0)
       throw ArgumentError("--volume-index", std::to_string(volume_index) + " is negative");
     if (app && app->count("--orient") > 0 && !series(k))
       throw ArgumentError("--orient",
-                          "applies only to NIfTI, NRRD, MetaImage, MGH and DICOM volumes, whose "
+                          "applies only to NIfTI, NRRD, MetaImage, MGH, MINC and DICOM volumes, "
+                          "whose "
                           "headers say "
                           "where their axes point (" +
                               std::string(kSeriesFileNames) + ")" + which);
@@ -172,9 +175,9 @@ struct VolumeArgs {
                                           "S/I (such as RAS or LPS)");
   }
 
-  // `first_of_series`: a 4-D file (NIfTI, NRRD, MetaImage, MGH, DICOM) without
-  // --volume-index loads its
-  // volume 0 (`info`), instead of the error that says how many it holds;
+  // `first_of_series`: a 4-D file (NIfTI, NRRD, MetaImage, MGH, MINC, DICOM)
+  // without --volume-index loads its volume 0 (`info`), instead of the
+  // error that says how many it holds;
   // `volumes` receives how many (1 for a 3-D file).
   Volume load(bool first_of_series = false, int64_t* volumes = nullptr) const {
     check_format_options();
@@ -212,7 +215,8 @@ struct VolumeArgs {
                                             "space and directions, no DICOM Image Orientation "
                                             "(Patient) or frame positions, a MetaImage "
                                             "TransformMatrix of zeros, no MGH direction cosines "
-                                            "flagged valid), so they cannot be turned");
+                                            "flagged valid, no MINC spatial dimensions), so they "
+                                            "cannot be turned");
       vol = reorient(vol, upper(orient), "--orient");
     }
     return vol;

@@ -10,7 +10,6 @@
 #include <gdcmTag.h>
 #include <gdcmTrace.h>
 
-
 #include <algorithm>
 #include <array>
 #include <cctype>

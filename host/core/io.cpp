@@ -1280,6 +1280,7 @@ VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
   if (has_suffix(name, {".nrrd", ".nhdr"})) return VolumeFileKind::nrrd;
   if (has_suffix(name, {".mha", ".mhd"})) return VolumeFileKind::metaimage;
   if (has_suffix(name, {".mgh", ".mgz", ".mgh.gz"})) return VolumeFileKind::mgh;
+  if (has_suffix(name, {".mnc"})) return VolumeFileKind::minc;
   if (has_suffix(name, {".den"})) return VolumeFileKind::den;
   if (has_suffix(name, {".raw"})) return VolumeFileKind::raw;
   if (has_suffix(name, {".dcm", ".dicom", ".ima"}) || name == "dicomdir")
@@ -1305,9 +1306,10 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
   if (kind == VolumeFileKind::dicom) return load_dicom(path, volume_index, volumes);
   if (kind == VolumeFileKind::metaimage) return load_metaimage(path, volume_index, volumes);
   if (kind == VolumeFileKind::mgh) return load_mgh(path, volume_index, volumes);
+  if (kind == VolumeFileKind::minc) return load_minc(path, volume_index, volumes);
   if (volume_index)
-    throw FileError(path, std::string("a volume index applies only to NIfTI, NRRD, MetaImage, MGH "
-                                      "and DICOM (") +
+    throw FileError(path, std::string("a volume index applies only to NIfTI, NRRD, MetaImage, MGH, "
+                                      "MINC and DICOM (") +
                               std::string(kSeriesFileNames) + ")");
   if (kind == VolumeFileKind::den) return load_den(path);
   if (kind == VolumeFileKind::raw) {

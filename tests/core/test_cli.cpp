@@ -317,7 +317,7 @@ TEST_F(Cli, OrientTurnsTheAxesAsTheHeaderSays) {
            {"render " + path("flipped.nrrd") + " --orient RAS -o " + path("x.png"),
             "the file does not say where its axes point"},
            {"render --orient RAS -o " + path("x.png"),
-            "--orient: applies only to NIfTI, NRRD, MetaImage, MGH and DICOM volumes"}}) {
+            "--orient: applies only to NIfTI, NRRD, MetaImage, MGH, MINC and DICOM volumes"}}) {
     const Result r = run(args);
     EXPECT_EQ(r.code, 1) << args << "\n" << r.output;  // simdvol's errors
     EXPECT_NE(r.output.find(needle), std::string::npos) << args << "\n" << r.output;
@@ -510,6 +510,28 @@ TEST_F(Cli, RendersAnMghFrame) {
   ASSERT_EQ(info.code, 0) << info.output;
   EXPECT_NE(info.output.find("axes:     RAS"), std::string::npos) << info.output;
   EXPECT_NE(info.output.find("volumes:  2 in the file (4-D)"), std::string::npos) << info.output;
+}
+
+TEST_F(Cli, ReadsMincFiles) {
+  // nibabel's MINC files (scripts/fetch-data): info describes a 4-D MINC1
+  // file's volume 0 and says how many; a MINC2 file renders, turned.
+  const fs::path dir = simdvol::testing::data_dir() / "minc";
+  SIMDVOL_REQUIRE_FILE(dir / "minc1_4d.mnc");
+  SIMDVOL_REQUIRE_FILE(dir / "minc2_4d.mnc");
+  const Result info = run("info " + (dir / "minc1_4d.mnc").string());
+  ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("dims:     20 x 20 x 10"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("axes:     RAS"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("volumes:  2 in the file (4-D)"), std::string::npos) << info.output;
+  const Result r = run("render " + (dir / "minc2_4d.mnc").string() +
+                       " --volume-index 1 --orient LIP --size 32x32 -o " + path("m.tif"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_GT(alpha_sum(simdvol::read_image(path("m.tif"))), 1.0);
+  const Result none = run("render " + (dir / "minc2_4d.mnc").string() + " -o " + path("n.tif"));
+  EXPECT_EQ(none.code, 1);
+  EXPECT_NE(none.output.find("holds 2 3-D volumes (time points: a 4-D image)"), std::string::npos)
+      << none.output;
+  EXPECT_FALSE(fs::exists(path("n.tif")));
 }
 
 TEST_F(Cli, TurntableStopsAtAFrameItCannotWrite) {
@@ -964,11 +986,12 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --raw-dims 2,2,2 -o " + path("x.png"),
        "--raw-dims: applies only to .raw volumes (no volume given)"},
       {"render --volume-index 1 -o " + path("x.png"),
-       "--volume-index: applies only to NIfTI, NRRD, MetaImage, MGH and DICOM volumes (.nii, "
-       ".nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, DICOM) (no volume given)"},
+       "--volume-index: applies only to NIfTI, NRRD, MetaImage, MGH, MINC and DICOM volumes "
+       "(.nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, .mnc, DICOM) (no volume "
+       "given)"},
       {"info " + path("vol.raw") + " --raw-dims 2,2,2 --volume-index 0",
-       "--volume-index: applies only to NIfTI, NRRD, MetaImage, MGH and DICOM volumes (.nii, "
-       ".nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, DICOM) (" +
+       "--volume-index: applies only to NIfTI, NRRD, MetaImage, MGH, MINC and DICOM volumes "
+       "(.nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, .mnc, DICOM) (" +
            path("vol.raw") + " is not one)"},
       {"render --no-shade --light 1,0,0 -o " + path("x.png"),
        "--light: applies only to lit renders (not with --no-shade)"},

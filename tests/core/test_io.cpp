@@ -1128,7 +1128,7 @@ TEST_F(IoTest, NiftiVolumeOfAFourDFile) {
   simdvol::RawLayout raw;
   raw.dims = kDims;
   expect_file_error([&] { simdvol::load_volume(file("v.raw"), raw, 0); }, file("v.raw"),
-                    {"applies only to NIfTI, NRRD, MetaImage, MGH and DICOM"});
+                    {"applies only to NIfTI, NRRD, MetaImage, MGH, MINC and DICOM"});
 }
 
 // ----------------------------------------- NIfTI-2, .hdr/.img pairs, Analyze
@@ -2747,6 +2747,125 @@ TEST(IoReal, MghNibabelTestFile) {
   // closest to S, A and R in turn.
   EXPECT_EQ(v0.orientation(), "SAR");
   EXPECT_EQ(simdvol::load_volume(p, std::nullopt, 1).data(), v1.data());
+}
+
+// ------------------------------------------------------------- MINC
+
+TEST(IoReal, MincNibabelFiles) {
+  // nibabel's MINC test files (python3-nibabel): MINC1 (netCDF) and MINC2
+  // (HDF5), 3-D and 4-D. Expected: the shapes, zooms and value statistics
+  // (from mincstats) that nibabel's test_minc1.py and test_minc2.py assert,
+  // its shapes and zooms reversed (nibabel keeps the slowest axis first;
+  // simdvol's x is the file's fastest), the statistics over every frame;
+  // the axes of the affines they assert: columns (0, 0, z), (0, y, 0),
+  // (x, 0, 0), the slowest axis to the top, RAS for simdvol's x, y, z; for
+  // minc2-4d-d the identity, the slowest axis to the right: SAR.
+  struct Expected {
+    const char* name;
+    int64_t frames;
+    std::array<int64_t, 3> dims;
+    std::array<double, 3> spacing;
+    double min, max, mean;
+    const char* axes = "RAS";
+  };
+  const std::vector<Expected> files = {
+      {"tiny.mnc", 1, {20, 20, 10}, {2, 2, 2}, 0.20784314, 0.74901961, 0.60602819},
+      {"minc1_1_scale.mnc", 1, {20, 20, 10}, {2, 2, 2}, 0.2082842439, 0.2094327615, 0.2091292083},
+      {"minc1-no-att.mnc", 1, {20, 20, 10}, {1, 1, 1}, 0.20784314, 0.74901961, 0.6061103},
+      {"minc1_4d.mnc", 2, {20, 20, 10}, {2, 2, 2}, 0.2078431373, 1.498039216, 0.9090422837},
+      {"minc2_4d.mnc", 2, {20, 20, 10}, {2, 2, 2}, 0.2078431373, 1.498039216, 0.9090422837},
+      {"small.mnc", 1, {29, 28, 18}, {7, 8, 9}, 0.1185331417, 92.87690699, 31.2127952},
+      {"minc2-4d-d.mnc", 5, {16, 16, 16}, {1, 1, 1}, 0.0, 5.0, 2.00078125, "SAR"},
+  };
+  for (const Expected& e : files) {
+    SCOPED_TRACE(e.name);
+    const fs::path p = simdvol::testing::data_dir() / "minc" / e.name;
+    SIMDVOL_REQUIRE_FILE(p);
+    double lo = 1e300, hi = -1e300, sum = 0;
+    std::size_t count = 0;
+    for (int64_t f = 0; f < e.frames; ++f) {
+      int64_t volumes = 0;
+      const Volume v = simdvol::load_volume(
+          p, std::nullopt, e.frames > 1 ? std::optional<int64_t>(f) : std::nullopt, &volumes);
+      EXPECT_EQ(volumes, e.frames);
+      EXPECT_EQ(v.dims(), e.dims);
+      EXPECT_EQ(v.type(), VoxelType::f32);
+      for (int a = 0; a < 3; ++a) EXPECT_DOUBLE_EQ(v.spacing()[a], e.spacing[a]) << "axis " << a;
+      EXPECT_EQ(v.orientation(), e.axes);
+      for (float x : v.data()) {
+        lo = std::min(lo, static_cast<double>(x));
+        hi = std::max(hi, static_cast<double>(x));
+        sum += x;
+        ++count;
+      }
+    }
+    // (float voxels: 1e-6 relative, as the statistics are printed)
+    const double tol = 1e-6 * std::max(1.0, std::fabs(e.max));
+    EXPECT_NEAR(lo, e.min, tol);
+    EXPECT_NEAR(hi, e.max, tol);
+    EXPECT_NEAR(sum / static_cast<double>(count), e.mean, 1e-6 * std::max(1.0, e.mean));
+  }
+}
+
+TEST_F(IoTest, MincMalformed) {
+  // Files that are not MINC, and copies of a real one broken on purpose:
+  // each a FileError naming it, never the end of the process (libminc,
+  // HDF5 and netCDF read in a child process).
+  write_file(file("text.mnc"), std::string("hello, not a volume"));
+  expect_file_error([&] { simdvol::load_minc(file("text.mnc")); }, file("text.mnc"),
+                    {"not a MINC file (it starts as neither netCDF"});
+  write_file(file("empty.mnc"), Bytes{});
+  expect_file_error([&] { simdvol::load_minc(file("empty.mnc")); }, file("empty.mnc"), {"empty"});
+  expect_file_error([&] { simdvol::load_minc(file("absent.mnc")); }, file("absent.mnc"),
+                    {"not found"});
+  const fs::path dir = simdvol::testing::data_dir() / "minc";
+  SIMDVOL_REQUIRE_FILE(dir / "minc2_4d.mnc");
+  SIMDVOL_REQUIRE_FILE(dir / "minc1_4d.mnc");
+  for (const char* name : {"minc1_4d.mnc", "minc2_4d.mnc"}) {
+    SCOPED_TRACE(name);
+    const Bytes whole = read_file(dir / name);
+    fs::copy_file(dir / name, file(name));
+    expect_file_error([&] { simdvol::load_minc(file(name)); }, file(name),
+                      {"holds 2 3-D volumes (time points: a 4-D image): give the index of one, "
+                       "0..1"});
+    expect_file_error([&] { simdvol::load_minc(file(name), 2); }, file(name),
+                      {"volume index 2 is outside 0..1"});
+    // Cut at a third, and every 97th byte of the second half turned.
+    const std::string cut = std::string("cut_") + name, bent = std::string("bent_") + name;
+    write_file(file(cut),
+               Bytes(whole.begin(), whole.begin() + static_cast<std::ptrdiff_t>(whole.size() / 3)));
+    expect_file_error([&] { simdvol::load_minc(file(cut), 1); }, file(cut),
+                      {"(truncated?)", "libminc could not read it"});
+    if (whole.size() > 0 && name[4] == '1') {  // MINC1: netCDF reads past the end as zeros
+      write_file(file(cut), Bytes(whole.begin(), whole.end() - 1));
+      expect_file_error([&] { simdvol::load_minc(file(cut), 1); }, file(cut),
+                        {"holds 11803 bytes, but its variables reach 11804 (truncated?)"});
+    }
+    if (name[4] == '1') {
+      // (scripts/fuzz: a dimension id past the dimensions made netCDF
+      // allocate 2 GB before it gave up; the header walk refuses it first)
+      const unsigned char image_var[] = {0, 0, 0, 5, 'i', 'm', 'a', 'g', 'e', 0, 0, 0,
+                                         0, 0, 0, 4, 0,   0,   0,   0,   0,   0, 0, 1};
+      const auto at =
+          std::search(whole.begin(), whole.end(), std::begin(image_var), std::end(image_var));
+      ASSERT_NE(at, whole.end());
+      Bytes odd = whole;
+      odd[static_cast<std::size_t>(at - whole.begin()) + 23] = 246;
+      const std::string oddname = std::string("dimid_") + name;
+      write_file(file(oddname), odd);
+      expect_file_error([&] { simdvol::load_minc(file(oddname), 1); }, file(oddname),
+                        {"its netCDF header is corrupt"});
+    }
+    Bytes turned = whole;
+    for (std::size_t i = whole.size() / 2; i < whole.size(); i += 97) turned[i] ^= 0x5a;
+    write_file(file(bent), turned);
+    try {
+      const Volume v = simdvol::load_minc(file(bent), 1);  // (may load: a voxel changed)
+      EXPECT_EQ(v.dims(), (std::array<int64_t, 3>{20, 20, 10}));
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find(bent), std::string::npos) << e.what();
+    }
+  }
 }
 
 // ------------------------------------------------------------- dispatch

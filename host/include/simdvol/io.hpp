@@ -126,24 +126,36 @@ Volume load_metaimage(const std::filesystem::path& path,
 Volume load_mgh(const std::filesystem::path& path,
                 std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 
+/// MINC (.mnc: MINC1 on netCDF, MINC2 on HDF5) through libminc's C++
+/// reader, in a child process as load_dicom reads (HDF5 and netCDF are not
+/// safe on hostile files; SIMDVOL_MINC_IN_PROCESS=1 reads in this process).
+/// Real values (the slices' scaling applied), as f32, the file's order
+/// kept (its fastest dimension is x). 3 dimensions, or 4 with time the
+/// slowest (a series: `volume_index` picks one time point); a vector
+/// dimension (colour) is refused. Spacing: |step|. Orientation: the
+/// closest axes of the dimensions' direction cosines (else the world axis
+/// each dimension is named for) times the step's sign, in MINC's RAS world.
+Volume load_minc(const std::filesystem::path& path,
+                 std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
+
 /// The kinds of volume file load_volume reads, told by the name's ending
 /// (whatever its case; a DICOMDIR is DICOM), else by being a directory
 /// (DICOM) or by "DICM" at byte 128 (a DICOM file of any name).
-enum class VolumeFileKind { unknown, den, nrrd, nifti, raw, dicom, metaimage, mgh };
+enum class VolumeFileKind { unknown, den, nrrd, nifti, raw, dicom, metaimage, mgh, minc };
 VolumeFileKind volume_file_kind(const std::filesystem::path& path);
 /// The endings volume_file_kind knows, for messages.
 inline constexpr std::string_view kVolumeFileNames =
     ".den, .nrrd, .nhdr, .nii, .nii.gz, .hdr/.img (NIfTI or Analyze pairs, plain or .gz), "
-    ".mha, .mhd (MetaImage), .mgh, .mgz (FreeSurfer), "
+    ".mha, .mhd (MetaImage), .mgh, .mgz (FreeSurfer), .mnc (MINC), "
     "DICOM (.dcm, a file of any name, or a directory of one series) or .raw";
 /// The files that may hold several 3-D volumes (NIfTI, NRRD, MetaImage,
-/// MGH, DICOM).
+/// MGH, MINC, DICOM).
 inline constexpr std::string_view kSeriesFileNames =
-    ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, DICOM";
+    ".nii, .nii.gz, .hdr/.img, .nrrd, .nhdr, .mha, .mhd, .mgh, .mgz, .mnc, DICOM";
 
 /// Chooses the loader by volume_file_kind (.raw needs `raw`). Throws
 /// FileError for an unknown extension, and for a `volume_index` given with
-/// a file other than NIfTI, NRRD, MetaImage, MGH or DICOM.
+/// a file other than NIfTI, NRRD, MetaImage, MGH, MINC or DICOM.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
