@@ -2,9 +2,11 @@
 // installed).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <initializer_list>
 #include <optional>
@@ -54,6 +56,25 @@ std::string dims_text(const std::array<int64_t, 3>& d);
 /// 0..4 (the <holder> holds 5 volumes)" for one outside.
 int64_t pick_volume(const std::filesystem::path& path, int64_t count, std::optional<int64_t> index,
                     const std::string& what, const char* holder = "file");
+/// A value of T stored at `p`, its bytes reversed where `swap` (a file in
+/// the other byte order); `p` need not be aligned.
+template <typename T>
+T load_scalar(const unsigned char* p, bool swap) {
+  unsigned char b[sizeof(T)];
+  std::memcpy(b, p, sizeof(T));
+  if (swap) std::reverse(b, b + sizeof(T));
+  T v;
+  std::memcpy(&v, b, sizeof(T));
+  return v;
+}
+
+/// Whether `compressed` bytes of deflate data (zlib, gzip) could inflate
+/// to `need` bytes: deflate packs at most about 1032 bytes into one, so a
+/// header that claims more is refused before anything is allocated.
+inline bool deflate_could_hold(uint64_t compressed, uint64_t need) {
+  return need / 1032 <= compressed + 1024;
+}
+
 /// Each spacing made positive; 0, NaN and infinities become 1.
 std::array<double, 3> sane_spacing(std::array<double, 3> s);
 

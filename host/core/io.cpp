@@ -114,16 +114,6 @@ std::array<double, 3> sane_spacing(std::array<double, 3> s) {
 
 namespace {
 
-template <typename T>
-T load_scalar(const unsigned char* p, bool swap) {
-  unsigned char b[sizeof(T)];
-  std::memcpy(b, p, sizeof(T));
-  if (swap) std::reverse(b, b + sizeof(T));
-  T v;
-  std::memcpy(&v, b, sizeof(T));
-  return v;
-}
-
 /// Converts `n` voxels of `type` stored at `src` (byte order `swap`ped or not)
 /// to floats at `dst`.
 void convert_to_float(VoxelType type, const unsigned char* src, std::size_t n, bool swap,
@@ -622,8 +612,8 @@ void nifti_count_bytes(const fs::path& path, const fs::path& data, uint64_t need
                                 " bytes, " + what + " needs " + std::to_string(need));
     return;
   }
-  // deflate expands at most ~1032:1: reject absurd claims before decompressing.
-  if (need / 1032 > file_size + 1024)
+  // (reject absurd claims before decompressing)
+  if (!deflate_could_hold(file_size, need))
     throw FileError(path, "truncated data" + in + ": " + std::to_string(file_size) +
                               " compressed bytes cannot hold the " + std::to_string(need) +
                               " bytes the " + what + " needs");
@@ -1038,7 +1028,7 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
     if (ename == "raw")
       enough = need <= available;
     else if (ename == "gzip")
-      enough = need / 1032 <= available + 1024;
+      enough = deflate_could_hold(available, need);
     else if (ename == "ascii" || ename == "text" || ename == "txt")
       enough = n <= available / 2 + 1;
     else if (ename == "hex")

@@ -99,39 +99,37 @@ std::size_t scalar_bytes(MET_ValueEnumType t) {
 }
 
 template <typename T>
-void copy_as_float(const unsigned char* src, std::size_t n, float* out) {
-  for (std::size_t i = 0; i < n; ++i) {
-    T v;
-    std::memcpy(&v, src + i * sizeof(T), sizeof(T));
-    out[i] = static_cast<float>(v);
-  }
+void copy_as_float(const unsigned char* src, std::size_t n, bool swap, float* out) {
+  for (std::size_t i = 0; i < n; ++i)
+    out[i] = static_cast<float>(load_scalar<T>(src + i * sizeof(T), swap));
 }
 
-void convert(MET_ValueEnumType t, const unsigned char* src, std::size_t n, float* out) {
+/// `n` values of type `t` as stored (in the other byte order where `swap`).
+void convert(MET_ValueEnumType t, const unsigned char* src, std::size_t n, bool swap, float* out) {
   switch (t) {
     case MET_ASCII_CHAR:
     case MET_CHAR:
-      return copy_as_float<int8_t>(src, n, out);
+      return copy_as_float<int8_t>(src, n, swap, out);
     case MET_UCHAR:
-      return copy_as_float<uint8_t>(src, n, out);
+      return copy_as_float<uint8_t>(src, n, swap, out);
     case MET_SHORT:
-      return copy_as_float<int16_t>(src, n, out);
+      return copy_as_float<int16_t>(src, n, swap, out);
     case MET_USHORT:
-      return copy_as_float<uint16_t>(src, n, out);
+      return copy_as_float<uint16_t>(src, n, swap, out);
     case MET_INT:
     case MET_LONG:
-      return copy_as_float<int32_t>(src, n, out);
+      return copy_as_float<int32_t>(src, n, swap, out);
     case MET_UINT:
     case MET_ULONG:
-      return copy_as_float<uint32_t>(src, n, out);
+      return copy_as_float<uint32_t>(src, n, swap, out);
     case MET_LONG_LONG:
-      return copy_as_float<int64_t>(src, n, out);
+      return copy_as_float<int64_t>(src, n, swap, out);
     case MET_ULONG_LONG:
-      return copy_as_float<uint64_t>(src, n, out);
+      return copy_as_float<uint64_t>(src, n, swap, out);
     case MET_FLOAT:
-      return copy_as_float<float>(src, n, out);
+      return copy_as_float<float>(src, n, swap, out);
     case MET_DOUBLE:
-      return copy_as_float<double>(src, n, out);
+      return copy_as_float<double>(src, n, swap, out);
     default:
       return;
   }
@@ -412,11 +410,10 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
     throw FileError(path, "its CompressedDataSize " + std::to_string(meta.compressed_bytes()) +
                               " is more than the " + std::to_string(held) + " bytes of " +
                               data_path.string());
-  // zlib's deflate stores at most 1032 bytes in one, whatever the data;
-  // an ASCII voxel (BinaryData = False) takes a character at least.
-  const uint64_t most = compressed ? held * 1032 + 1024 : held;
+  // (compressed voxels: what deflate could pack them into; an ASCII voxel,
+  // BinaryData = False, takes a character at least)
   const uint64_t need = meta.BinaryData() || compressed ? all_bytes : all_bytes / ebytes;
-  if (need > most) {
+  if (compressed ? !deflate_could_hold(held, need) : need > held) {
     if (compressed)
       throw FileError(path, "its " + std::to_string(held) + " compressed bytes in " +
                                 data_path.string() + " cannot hold the " +
@@ -445,10 +442,6 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
                                 ? static_cast<uint64_t>(meta.compressed_bytes())
                                 : (data_file_bytes > start ? data_file_bytes - start : 0);
     inflate_part(path, data_path, start, length, static_cast<uint64_t>(index) * bytes, stored);
-    if (meta.BinaryDataByteOrderMSB() != (std::endian::native == std::endian::big) && ebytes > 1)
-      for (std::size_t i = 0; i < stored.size(); i += ebytes)
-        std::reverse(stored.begin() + static_cast<std::ptrdiff_t>(i),
-                     stored.begin() + static_cast<std::ptrdiff_t>(i + ebytes));
   } else {
     bool ok = false;
     try {
@@ -461,7 +454,6 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
       } else {
         ok = reader.Read(path.c_str(), true, stored.data());
       }
-      if (ok) reader.ElementByteOrderFix(static_cast<std::streamoff>(stored.size() / ebytes));
     } catch (const std::bad_alloc&) {
       throw FileError(path, "MetaIO ran out of memory reading its voxels (corrupt header?)");
     }
@@ -476,7 +468,9 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
       sane_spacing({meta.ElementSpacing()[0], meta.ElementSpacing()[1], meta.ElementSpacing()[2]});
   Volume vol(dims, kept_type(etype), spacing);
   const std::size_t first = whole ? static_cast<std::size_t>(index) * bytes : 0;
-  convert(etype, stored.data() + first, n, vol.data().data());
+  // (in the file's byte order, as MetaIO's ElementByteOrderFix would turn it)
+  const bool swap = meta.BinaryDataByteOrderMSB() != (std::endian::native == std::endian::big);
+  convert(etype, stored.data() + first, n, swap, vol.data().data());
   // MetaImage's space is ITK's, LPS; row i of TransformMatrix is the
   // direction of index axis i (as ITK's MetaImageIO reads it).
   const double* m = meta.TransformMatrix();

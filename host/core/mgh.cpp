@@ -33,14 +33,10 @@ namespace fs = std::filesystem;
 
 constexpr std::size_t kHeaderBytes = 284;
 
+/// A big-endian value (MGH's byte order).
 template <typename T>
 T big_endian(const unsigned char* p) {
-  unsigned char b[sizeof(T)];
-  std::memcpy(b, p, sizeof(T));
-  if (std::endian::native == std::endian::little) std::reverse(b, b + sizeof(T));
-  T v;
-  std::memcpy(&v, b, sizeof(T));
-  return v;
+  return load_scalar<T>(p, std::endian::native == std::endian::little);
 }
 
 /// A gzFile that closes itself.
@@ -116,14 +112,13 @@ Volume load_mgh(const std::filesystem::path& path, std::optional<int64_t> volume
   if (volumes) *volumes = frames;
   const int64_t index = pick_volume(path, frames, volume_index, "(frames: a 4-D image)");
   // What must be there to read that frame: a plain file must hold it; a
-  // gzipped one must be able to (deflate packs at most 1032 bytes in one),
-  // before the buffer is allocated.
+  // gzipped one must be able to, before the buffer is allocated.
   const uint64_t need = kHeaderBytes + static_cast<uint64_t>(index + 1) * bytes;
   if (gzdirect(gz.f) && file_bytes < need)
     throw FileError(path, "holds " + std::to_string(file_bytes) + " bytes, not the " +
                               std::to_string(need) + " its header and frame " +
                               std::to_string(index) + " take (truncated?)");
-  if (!gzdirect(gz.f) && need > file_bytes * 1032 + 1024)
+  if (!gzdirect(gz.f) && !deflate_could_hold(file_bytes, need))
     throw FileError(path, "its " + std::to_string(file_bytes) +
                               " compressed bytes cannot hold the " + std::to_string(need) +
                               " its header promises (corrupt header?)");

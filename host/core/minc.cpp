@@ -201,10 +201,10 @@ Volume load_minc_here(const fs::path& path, uint64_t file_bytes, std::optional<i
     const std::size_t n = checked_count(path, dims, sizeof(float));
     // What the file can hold, before the volume is allocated: a MINC1
     // voxel takes a byte at least, a MINC2 one (HDF5, perhaps deflated)
-    // at least 1/1032 of one.
+    // what deflate could pack it into.
     const uint64_t all = static_cast<uint64_t>(frames) * n;
-    const uint64_t room = r.is_minc2() ? file_bytes * 1032 + (1u << 20) : file_bytes;
-    if (all / static_cast<uint64_t>(frames) != n || all > room)
+    if (all / static_cast<uint64_t>(frames) != n ||
+        (r.is_minc2() ? !deflate_could_hold(file_bytes, all) : all > file_bytes))
       throw FileError(path, "its dimensions (" + std::to_string(frames) + " x " + dims_text(dims) +
                                 " voxels) cannot fit in its " + std::to_string(file_bytes) +
                                 " bytes (corrupt header?)");
