@@ -135,9 +135,12 @@ Volume load_mgh(const std::filesystem::path& path, std::optional<int64_t> volume
 
   const VoxelType vtype = type == 0 ? VoxelType::u8 : type == 4 ? VoxelType::i16 : VoxelType::f32;
   const bool ras = big_endian<int16_t>(h + 28) > 0;
-  std::array<double, 3> spacing{};
+  // The voxel sizes and cosines count only where goodRASFlag is set: without
+  // it FreeSurfer's readers (mriio's mghRead, load_mgh.m) skip those bytes
+  // and take 1 mm voxels, as nibabel does, whatever the bytes hold.
+  std::array<double, 3> spacing{1.0, 1.0, 1.0};
   std::array<std::array<double, 3>, 3> dirs{};
-  for (int i = 0; i < 3; ++i) {
+  for (int i = 0; ras && i < 3; ++i) {
     spacing[i] = big_endian<float>(h + 30 + 4 * i);
     for (int j = 0; j < 3; ++j) dirs[i][j] = big_endian<float>(h + 42 + 12 * i + 4 * j);
   }
