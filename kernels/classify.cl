@@ -106,9 +106,14 @@ SV_FN float sv_ramp_eval(__constant const sv_ramp* r, const int n, float v) {
 }
 
 /* Material mixture of the (at most two) materials bracketing I; returns
- * alpha, (*cr, *cg, *cb) = premultiplied material colour. */
+ * alpha, (*cr, *cg, *cb) = premultiplied material colour, *trans = its
+ * transparency: where alpha >= 1/2, t = p_i (1 - a_i) + p_j (1 - a_j) and
+ * alpha = 1 - t (1 - alpha near 1 keeps only the first digits of t: an
+ * opaque material's t of 1e-6 rounded 6 % off, which the opacity step's
+ * power made differences of 1e-4 from the reference; classify.cpp), else
+ * 1 - alpha. */
 SV_FN float sv_mixture(__constant const sv_classify_params* cp, const int n, float v, float* cr,
-                       float* cg, float* cb) {
+                       float* cg, float* cb, float* trans) {
   __constant const sv_materials* m = &cp->materials;
   float I = v;
   if (cp->relative) I = cp->range_scale > 0.0f ? (v - cp->range_min) * cp->range_scale : 0.0f;
@@ -161,7 +166,10 @@ SV_FN float sv_mixture(__constant const sv_classify_params* cp, const int n, flo
   *cr = wi * ri + wj * rj;
   *cg = wi * gi + wj * gj;
   *cb = wi * bi + wj * bj;
-  return wi + wj;
+  const float t = pi * (1.0f - ai) + pj * (1.0f - aj);
+  const float a = wi + wj >= 0.5f ? 1.0f - t : wi + wj;
+  *trans = a >= 0.5f ? t : 1.0f - a;
+  return a;
 }
 
 /* Transfer function: alpha = density(v) * gradient(|g|), colour alpha * c(v). */
@@ -175,15 +183,15 @@ SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float 
   return a;
 }
 
-/* The opacity for a sampling step s: a' = 1 - (1 - a)^s. Below 2^-8 the
- * binomial series s a (1 - (s - 1) a / 2 (1 - (s - 2) a / 3)) (truncation
- * below (s - 1)(s - 2)(s - 3) a^3 / 24 relative): 1 - a would round to 1
- * below 2^-24 and give a' = 0 where the reference's
- * -expm1(s log1p(-a)) has a' > 0. Above, 1 - exp(s ln(1 - a)), with
- * (1 - a) 0 or >= 2^-24. */
-SV_FN float sv_step_alpha(float a, float s) {
-  const float om = 1.0f - a;
-  const float big = om < FLT_MIN ? 1.0f : 1.0f - sv_exp(s * sv_log(om));
+/* The opacity for a sampling step s: a' = 1 - t^s, t = the transparency
+ * (1 - a, or the mixture's own t where a >= 1/2: sv_mixture). Below 2^-8
+ * the binomial series s a (1 - (s - 1) a / 2 (1 - (s - 2) a / 3))
+ * (truncation below (s - 1)(s - 2)(s - 3) a^3 / 24 relative): 1 - a would
+ * round to 1 below 2^-24 and give a' = 0 where the reference's
+ * -expm1(s log1p(-a)) has a' > 0. Above, 1 - exp(s ln t), with t 0 or
+ * normal. */
+SV_FN float sv_step_alpha(float a, float t, float s) {
+  const float big = t < FLT_MIN ? 1.0f : 1.0f - sv_exp(s * sv_log(t));
   const float small =
       s * a * (1.0f - 0.5f * (s - 1.0f) * a * (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a));
   return a < 0.00390625f ? small : big;
@@ -192,14 +200,18 @@ SV_FN float sv_step_alpha(float a, float s) {
 /* One voxel: (Id, Is, |g|, v) -> premultiplied RGBA in r, g, b, a. */
 SV_FN void sv_classify_voxel(__constant const sv_classify_params* cp, float id, float is,
                              float gmag, float v, float* r, float* g, float* b, float* alpha) {
-  float cr, cg, cb;
-  const float a = SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER
-                      ? sv_transfer(cp, v, gmag, &cr, &cg, &cb)
-                      : sv_mixture(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+  float cr, cg, cb, t = 1.0f;
+  float a;
+  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
+    a = sv_transfer(cp, v, gmag, &cr, &cg, &cb);
+    t = 1.0f - a;
+  } else {
+    a = sv_mixture(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb, &t);
+  }
 #ifdef SV_STEP_ONE
   const float a1 = a;
 #else
-  const float a1 = cp->step_is_one ? a : sv_step_alpha(a, cp->opacity_step);
+  const float a1 = cp->step_is_one ? a : sv_step_alpha(a, t, cp->opacity_step);
 #endif
   /* Else transparent (0, 0, 0, 0); so is a subnormal alpha (classify.cpp). */
   const int ok = a >= FLT_MIN && !isnan(v);
@@ -276,7 +288,7 @@ SV_FN int16 sv_mixture_zero16(__constant const sv_classify_params* cp, float16 v
 }
 
 SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n, float16 v,
-                           float16* cr, float16* cg, float16* cb) {
+                           float16* cr, float16* cg, float16* cb, float16* trans) {
   __constant const sv_materials* m = &cp->materials;
   const float16 I = sv_mixture_index16(cp, v);
 #ifdef SV_MIX_PERMUTE
@@ -340,7 +352,11 @@ SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n,
   *cr = wi * ri + wj * rj;
   *cg = wi * gi + wj * gj;
   *cb = wi * bi + wj * bj;
-  return wi + wj;
+  /* the transparency, as sv_mixture */
+  const float16 t = pi * (1.0f - ai) + pj * (1.0f - aj);
+  const float16 a = select(wi + wj, 1.0f - t, wi + wj >= 0.5f);
+  *trans = select(1.0f - a, t, a >= 0.5f);
+  return a;
 }
 
 /* sv_transfer16 given d = density(v) (the fused kernel has it already). */
@@ -360,26 +376,25 @@ SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, 
 }
 
 /* sv_step_alpha on 16 voxels (the same operations lane by lane). */
-SV_FN float16 sv_step_alpha16(float16 a, float s) {
-  const float16 om = 1.0f - a;
-  const float16 big = select(1.0f - sv_exp16(s * sv_log16(om)), (float16)(1.0f), om < FLT_MIN);
+SV_FN float16 sv_step_alpha16(float16 a, float16 t, float s) {
+  const float16 big = select(1.0f - sv_exp16(s * sv_log16(t)), (float16)(1.0f), t < FLT_MIN);
   const float16 small =
       s * a * (1.0f - 0.5f * (s - 1.0f) * a * (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a));
   return select(big, small, a < 0.00390625f);
 }
 
 /* The lit premultiplied RGBA of 16 voxels from the alpha `a` before the
- * opacity step, where `ok` (else 0), and each colour over that alpha (q =
- * c * (1 / a)): the second half of sv_classify16_lit, and what the fused
- * kernel's kept classification is lit by (kc_mode 2), so both give the same
- * bits. */
-SV_FN void sv_lit16(__constant const sv_classify_params* cp, float16 a, int16 ok, float16 qr,
-                    float16 qg, float16 qb, float16 id, float16 is, float16* r, float16* g,
-                    float16* b, float16* alpha) {
+ * opacity step and its transparency `t` (sv_mixture), where `ok` (else 0),
+ * and each colour over that alpha (q = c * (1 / a)): the second half of
+ * sv_classify16_lit, and what the fused kernel's kept classification is lit
+ * by (kc_mode 2), so both give the same bits. */
+SV_FN void sv_lit16(__constant const sv_classify_params* cp, float16 a, float16 t, int16 ok,
+                    float16 qr, float16 qg, float16 qb, float16 id, float16 is, float16* r,
+                    float16* g, float16* b, float16* alpha) {
 #ifdef SV_STEP_ONE
   const float16 a1 = a;
 #else
-  const float16 a1 = cp->step_is_one ? a : sv_step_alpha16(a, cp->opacity_step);
+  const float16 a1 = cp->step_is_one ? a : sv_step_alpha16(a, t, cp->opacity_step);
 #endif
   const float16 z = 0.0f;
   *r = select(z, a1 * fmin(1.0f, qr * id + is), ok);
@@ -388,26 +403,28 @@ SV_FN void sv_lit16(__constant const sv_classify_params* cp, float16 a, int16 ok
   *alpha = select(z, a1, ok);
 }
 
-/* The lit premultiplied RGBA of 16 voxels from the classifier's alpha `a`
- * and premultiplied material colour (cr, cg, cb) (sv_classify16's second
- * half). */
-SV_FN void sv_classify16_lit(__constant const sv_classify_params* cp, float16 a, float16 cr,
-                             float16 cg, float16 cb, float16 id, float16 is, float16 v, float16* r,
-                             float16* g, float16* b, float16* alpha) {
+/* The lit premultiplied RGBA of 16 voxels from the classifier's alpha `a`,
+ * its transparency `t` and premultiplied material colour (cr, cg, cb)
+ * (sv_classify16's second half). */
+SV_FN void sv_classify16_lit(__constant const sv_classify_params* cp, float16 a, float16 t,
+                             float16 cr, float16 cg, float16 cb, float16 id, float16 is, float16 v,
+                             float16* r, float16* g, float16* b, float16* alpha) {
   const int16 ok = (a >= FLT_MIN) & ~isnan(v); /* else transparent, as sv_classify_voxel */
   const float16 inv = 1.0f / a;
-  sv_lit16(cp, a, ok, cr * inv, cg * inv, cb * inv, id, is, r, g, b, alpha);
+  sv_lit16(cp, a, t, ok, cr * inv, cg * inv, cb * inv, id, is, r, g, b, alpha);
 }
 
 SV_FN void sv_classify16(__constant const sv_classify_params* cp, float16 id, float16 is,
                          float16 gmag, float16 v, float16* r, float16* g, float16* b,
                          float16* alpha) {
-  float16 cr, cg, cb, a;
-  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER)
+  float16 cr, cg, cb, a, t;
+  if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
     a = sv_transfer16(cp, v, gmag, &cr, &cg, &cb);
-  else
-    a = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
-  sv_classify16_lit(cp, a, cr, cg, cb, id, is, v, r, g, b, alpha);
+    t = 1.0f - a;
+  } else {
+    a = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb, &t);
+  }
+  sv_classify16_lit(cp, a, t, cr, cg, cb, id, is, v, r, g, b, alpha);
 }
 
 /* One chunk of 16 positions of PE p's planes from `shading` to `out`. The
@@ -691,16 +708,18 @@ SV_FN_INLINE void sv_store16_rgba(__global float* blk, int vstride, int e0, floa
 #define SV_KEPT_PF_PE 1
 #endif
 
-/* The kept classification of a chunk (kc_mode 1): a0 where lit, else 0,
- * and each colour times 1 / a0 (sv_classify16_lit's cr * inv). */
-#define SV_KEEP_CLASS(a0, cr, cg, cb)                          \
-  if (kc_op == 1) {                                            \
-    const int16 lit_ = ((a0) >= FLT_MIN) & ~isnan(v) & in;     \
-    const float16 inv_ = 1.0f / (a0);                          \
-    SV_VSTORE16(select(z, (a0), lit_), kq);                    \
-    SV_VSTORE16(select(z, (cr)*inv_, lit_), kq + vstride);     \
-    SV_VSTORE16(select(z, (cg)*inv_, lit_), kq + 2 * vstride); \
-    SV_VSTORE16(select(z, (cb)*inv_, lit_), kq + 3 * vstride); \
+/* The kept classification of a chunk (kc_mode 1): where lit, a0 below 1/2
+ * and -t0 (its transparency, sv_mixture; -0 for t0 = 0) from 1/2 on, so
+ * that both come back (sv_kept_alpha16), else +0; and each colour times 1 /
+ * a0 (sv_classify16_lit's cr * inv). */
+#define SV_KEEP_CLASS(a0, t0, cr, cg, cb)                                \
+  if (kc_op == 1) {                                                      \
+    const int16 lit_ = ((a0) >= FLT_MIN) & ~isnan(v) & in;               \
+    const float16 inv_ = 1.0f / (a0);                                    \
+    SV_VSTORE16(select(z, select((a0), -(t0), (a0) >= 0.5f), lit_), kq); \
+    SV_VSTORE16(select(z, (cr)*inv_, lit_), kq + vstride);               \
+    SV_VSTORE16(select(z, (cg)*inv_, lit_), kq + 2 * vstride);           \
+    SV_VSTORE16(select(z, (cb)*inv_, lit_), kq + 3 * vstride);           \
   }
 /* ... and its gradient (kc_mode | 4): gx, gy, gz (g2 and |g| are taken
  * from them again, sv_grad_len16). */
@@ -794,7 +813,7 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
     }
 #endif
     const float16 k0 = SV_VLOAD16(kq);
-    if (!any(k0 > 0.0f)) {
+    if (!any(as_int16(k0) != 0)) { /* (a0 >= 1/2 is kept as -t0: sign bit) */
       SV_ZERO_CHUNK();
       return;
     }
@@ -809,8 +828,13 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
     } else {
       sv_shade_rows(sp, c, block, rb, fx, fy, fz, &id, &is, &mag);
     }
-    sv_lit16(cp, k0, k0 > 0.0f, SV_VLOAD16(kq + vstride), SV_VLOAD16(kq + 2 * vstride),
-             SV_VLOAD16(kq + 3 * vstride), id, is, &r, &g, &b, &a);
+    /* a0 and t0 back from SV_KEEP_CLASS's plane: -t0 (its sign bit set,
+     * -0 included) from a0 = 1/2 on, where a0 = 1 - t0 (sv_mixture's
+     * expression); +0 where unlit */
+    const int16 neg = as_int16(k0) < 0;
+    const float16 t0 = select(1.0f - k0, -k0, neg);
+    sv_lit16(cp, select(k0, 1.0f - t0, neg), t0, as_int16(k0) != 0, SV_VLOAD16(kq + vstride),
+             SV_VLOAD16(kq + 2 * vstride), SV_VLOAD16(kq + 3 * vstride), id, is, &r, &g, &b, &a);
   } else {
     const float16 v = SV_LD16(c, rb, 0);
     /* Empty space: a voxel is (0, 0, 0, 0) unless its alpha before lighting is
@@ -841,29 +865,30 @@ SV_FN void sv_shade_classify16(__global const float* restrict cells, __global fl
         return;
       }
 #endif
-      SV_KEEP_CLASS(a0, cr, cg, cb)
+      const float16 t0 = 1.0f - a0;
+      SV_KEEP_CLASS(a0, t0, cr, cg, cb)
       SV_KEEP_GRAD(gx, gy, gz)
       sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
-      sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
+      sv_classify16_lit(cp, a0, t0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
     } else {
       /* A chunk whose alpha is 0 without the mixture (sv_mixture_zero16). */
       if (!any(in & ~sv_mixture_zero16(cp, v))) {
         SV_ZERO_CHUNK();
         return;
       }
-      float16 cr, cg, cb;
-      const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+      float16 cr, cg, cb, t0;
+      const float16 a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb, &t0);
       if (!any((a0 > 0.0f) & ~isnan(v) & in)) {
         SV_ZERO_CHUNK();
         return;
       }
-      SV_KEEP_CLASS(a0, cr, cg, cb)
+      SV_KEEP_CLASS(a0, t0, cr, cg, cb)
       /* (sv_shade_rows, its gradient kept on the way) */
       float16 gx, gy, gz, g2;
       sv_grad_rows(sp, c, block, rb, &gx, &gy, &gz, &g2, &mag);
       SV_KEEP_GRAD(gx, gy, gz)
       sv_light_rows(sp, fx, fy, fz, gx, gy, gz, g2, mag, &id, &is);
-      sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
+      sv_classify16_lit(cp, a0, t0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
     }
   }
   sv_store16_rgba(dst, vstride, e0, select(z, r, in), select(z, g, in), select(z, b, in),
@@ -980,7 +1005,7 @@ __kernel void simdvol_shade_classify_flat16(__global const float* restrict volum
   float16 id, is, mag, r, g, b, a;
   /* Empty chunks as in simdvol_shade_classify16 (the same tests, so that
    * the PE-major / flat comparison compares layouts, not skips). */
-  float16 cr, cg, cb, a0;
+  float16 cr, cg, cb, a0, t0;
   bool empty;
   if (SV_KIND_OF(cp) == SV_CLASSIFY_TRANSFER) {
     const float16 d = sv_ramp_eval16(&cp->density, SV_NK_DENSITY_OF(cp), v);
@@ -989,6 +1014,7 @@ __kernel void simdvol_shade_classify_flat16(__global const float* restrict volum
       float16 gx, gy, gz, g2;
       sv_grad16(sp, xm, xp, ym, yp, zm, zp, &gx, &gy, &gz, &g2, &mag);
       a0 = sv_transfer16_d(cp, d, v, mag, &cr, &cg, &cb);
+      t0 = 1.0f - a0;
 #ifndef SV_NO_EARLY_ALPHA
       empty = !any((a0 >= FLT_MIN) & ~isnan(v));
 #endif
@@ -999,7 +1025,7 @@ __kernel void simdvol_shade_classify_flat16(__global const float* restrict volum
   } else {
     empty = all(sv_mixture_zero16(cp, v));
     if (!empty) {
-      a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb);
+      a0 = sv_mixture16(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb, &t0);
       empty = !any((a0 > 0.0f) & ~isnan(v));
       if (!empty)
         sv_shade16(sp, xm, xp, ym, yp, zm, zp, (float)x0 + iota, (float16)((float)y),
@@ -1013,7 +1039,7 @@ __kernel void simdvol_shade_classify_flat16(__global const float* restrict volum
     SV_VSTORE16(zero, out + 3 * n + i);
     return;
   }
-  sv_classify16_lit(cp, a0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
+  sv_classify16_lit(cp, a0, t0, cr, cg, cb, id, is, v, &r, &g, &b, &a);
   SV_VSTORE16(r, out + i); /* 64-byte aligned when nx is a multiple of 16 */
   SV_VSTORE16(g, out + n + i);
   SV_VSTORE16(b, out + 2 * n + i);

@@ -27,6 +27,13 @@
 //      (= P_i / (P_i + P_j) for Gaussian P, without overflow or 0/0).
 //      alpha     = p_i a_i + p_j a_j
 //      colour[c] = p_i a_i col_i[c] + p_j a_j col_j[c]     (premultiplied)
+//      Where alpha >= 1/2 it is taken as 1 - t, t = p_i (1 - a_i) + p_j
+//      (1 - a_j) (the transparency, = 1 - alpha as p_i + p_j = 1), and t
+//      is what the opacity step below raises to its power: alpha rounds
+//      to float in steps of 2^-24, so 1 - alpha near 1 kept only the
+//      first digits of t (an opaque material's t of 1e-6, 6 % off), and
+//      (1 - a)^0.4 turned rounding into differences of 1e-4 and more
+//      between the kernels' float and this double (fig. in HARDENING.md).
 //
 //  Transfer function (VolPack's example):
 //      alpha     = density(v) * gradient(|g|)
@@ -35,9 +42,10 @@
 //  A NaN voxel value classifies as transparent (alpha 0, colour 0).
 //
 //  The classify stage, per voxel, with (Id, Is, |g|) from the shade stage:
-//      a  = classify_voxel(v, |g|)
+//      a  = classify_voxel(v, |g|), t its transparency (the mixture's t
+//           where a >= 1/2, else 1 - a)
 //      a' = a                          if opacity_step == 1 exactly
-//           1 - (1 - a)^opacity_step   otherwise (opacity of a sample
+//           1 - t^opacity_step         otherwise (opacity of a sample
 //                                      opacity_step voxels long)
 //      a <= 0:  output (0, 0, 0, 0)
 //      else:    C_c = min(1, (colour_c / a) * Id + Is)
@@ -121,7 +129,7 @@ double log_likelihood(const Material& m, double I) {
 }
 
 float classify_mixture(const MaterialMixture& mix, const ValueRange& range, float value,
-                       float colour[3]) {
+                       float colour[3], double& transparency) {
   const double I = mixture_index(mix, range, value);
   const auto& m = mix.materials;
   std::size_t i = 0, j = 0;   // the bracketing pair
@@ -152,27 +160,36 @@ float classify_mixture(const MaterialMixture& mix, const ValueRange& range, floa
   colour[0] = static_cast<float>(ai * m[i].r + aj * m[j].r);
   colour[1] = static_cast<float>(ai * m[i].g + aj * m[j].g);
   colour[2] = static_cast<float>(ai * m[i].b + aj * m[j].b);
-  return static_cast<float>(ai + aj);
+  // Near-opaque voxels by their transparency (the conventions above).
+  const double t = pi * (1.0 - static_cast<double>(m[i].opacity)) +
+                   pj * (1.0 - static_cast<double>(m[j].opacity));
+  const float a = static_cast<float>(ai + aj >= 0.5 ? 1.0 - t : ai + aj);
+  transparency = a >= 0.5f ? t : 1.0 - static_cast<double>(a);
+  return a;
 }
 
-float classify_transfer(const TransferFunction& t, float value, float grad_mag, float colour[3]) {
+float classify_transfer(const TransferFunction& t, float value, float grad_mag, float colour[3],
+                        double& transparency) {
   const float alpha = t.density(value) * t.gradient(grad_mag);
   colour[0] = alpha * t.red(value);
   colour[1] = alpha * t.green(value);
   colour[2] = alpha * t.blue(value);
+  transparency = 1.0 - static_cast<double>(alpha);  // exact
   return alpha;
 }
 
-// classify_voxel without the validation (done once per volume by classify()).
+// classify_voxel without the validation (done once per volume by
+// classify()); `transparency` is the t of the conventions above.
 float classify_unchecked(const Classifier& c, const ValueRange& range, float value, float grad_mag,
-                         float colour[3]) {
+                         float colour[3], double& transparency) {
   if (std::isnan(value)) {
     colour[0] = colour[1] = colour[2] = 0.0f;
+    transparency = 1.0;
     return 0.0f;
   }
   if (c.kind == Classifier::Kind::transfer)
-    return classify_transfer(c.transfer, value, grad_mag, colour);
-  return classify_mixture(c.mixture, range, value, colour);
+    return classify_transfer(c.transfer, value, grad_mag, colour, transparency);
+  return classify_mixture(c.mixture, range, value, colour, transparency);
 }
 
 void sort_materials(std::vector<Material>& m) {
@@ -228,7 +245,8 @@ float mixture_index(const MaterialMixture& mix, const ValueRange& range, float v
 float classify_voxel(const Classifier& c, const ValueRange& range, float value, float grad_mag,
                      float colour[3]) {
   validate(c);
-  return classify_unchecked(c, range, value, grad_mag, colour);
+  double t = 1.0;
+  return classify_unchecked(c, range, value, grad_mag, colour, t);
 }
 
 std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& shading,
@@ -248,15 +266,17 @@ std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& sh
   const auto& data = vol.data();
   for (std::size_t n = 0; n < data.size(); ++n) {
     float col[3];
-    const float a = classify_unchecked(c, range, data[n], shading[n].gradient, col);
+    double t = 1.0;
+    const float a = classify_unchecked(c, range, data[n], shading[n].gradient, col, t);
     // out[n] stays (0, 0, 0, 0), also for a subnormal alpha: the device's
     // float exp stops at 2^-126, so it has none, and a voxel the reference
     // keeps while the device drops it would key Monte Carlo's draws apart.
     if (!(a >= std::numeric_limits<float>::min())) continue;
-    // 1 - (1 - a)^step without the cancellation of 1 - a for small a.
-    const double a1 = opacity_step == 1.0
-                          ? static_cast<double>(a)
-                          : -std::expm1(opacity_step * std::log1p(-static_cast<double>(a)));
+    // 1 - t^step, t = 1 - a without the cancellation of 1 - a for small a,
+    // and the mixture's own t for a near-opaque voxel (log(0) = -inf: 1).
+    const double a1 = opacity_step == 1.0 ? static_cast<double>(a)
+                      : a >= 0.5f         ? -std::expm1(opacity_step * std::log(t))
+                                  : -std::expm1(opacity_step * std::log1p(-static_cast<double>(a)));
     double C[3];
     for (int k = 0; k < 3; ++k)
       C[k] =

@@ -509,7 +509,7 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
     const sv_shade_params sb = shade_params(make_shade_frame(*v, vb, {}), {});
     PeArray array(dev, pe_grid(64));
     CellBuffer cells = array.layout(*v, 1);
-    for (const char* name : {"ct", "knots"})
+    for (const char* name : {"ct", "ct-bone", "knots"})
       for (bool il : {true, false})
         for (bool grad : {false, true}) {
           SCOPED_TRACE(std::string(name) + (il ? " interleaved" : " planar") +
@@ -533,21 +533,30 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
           const std::vector<Rgba> got1 = filling.read<Rgba>(dev);
           EXPECT_EQ(std::memcmp(got1.data(), want1.data(), got1.size() * sizeof(Rgba)), 0)
               << "the filling call";
-          // The alpha plane: the output's alpha (step 1) bit for bit.
+          // The alpha plane: the output's alpha (step 1) bit for bit, below
+          // 1/2 as it is, from 1/2 on as -t (the transparency: sign bit set,
+          // alpha = 1 - t), unlit +0.
           std::vector<float> planes(bytes / F4);
           cl_check(dev.queue().enqueueReadBuffer(kept.planes, CL_TRUE, 0, bytes, planes.data()),
                    "read");
           const int64_t S = L.stride;
-          int64_t lit = 0, alpha_bad = 0;
+          int64_t lit = 0, opaque = 0, alpha_bad = 0;
           for (int64_t p = 0; p < L.pes(); ++p)
             for (int64_t e = 0; e < S; ++e) {
               const float k = planes[static_cast<std::size_t>(p * (grad ? 7 : 4) * S + e)];
               const Rgba& w = want1[static_cast<std::size_t>(p * S + e)];
-              alpha_bad += std::memcmp(&k, &w.a, sizeof k) != 0;
-              lit += k > 0;
+              const bool neg = std::signbit(k);
+              const float a = neg ? 1.0f + k : k;
+              alpha_bad += std::memcmp(&a, &w.a, sizeof a) != 0 || (neg != (w.a >= 0.5f)) ||
+                           (neg && !(-k <= 0.5f));
+              lit += k > 0 || neg;
+              opaque += neg;
             }
           EXPECT_EQ(alpha_bad, 0);
           EXPECT_GT(lit, 0);
+          if (std::string(name) == "ct-bone") {
+            EXPECT_GT(opaque, 0);  // (bone's opacity is 1)
+          }
           // Read back under another lighting and opacity step, marking.
           VoxelBuffer fresh7(dev, L);
           DeviceOccupancy m_fresh = make_occupancy(dev, L, 1), m_kept = make_occupancy(dev, L, 1);

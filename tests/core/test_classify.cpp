@@ -343,6 +343,41 @@ TEST(Classify, OpacityStepCorrection) {
   EXPECT_FLOAT_EQ(half[0].a, static_cast<float>(1.0 - std::sqrt(0.5)));
 }
 
+// Near an opaque material the opacity step takes the mixture's own
+// transparency t = p_i (1 - a_i) + p_j (1 - a_j), not 1 - alpha: alpha
+// rounds to float in steps of 6e-8, so where t is 1e-6 its 1 - alpha was up
+// to 6 % off, and a sample 0.4 voxels long (1 - t^0.4) off by 1e-4, enough
+// for the device's float and this double to differ so (the ct-bone preset
+// with --sampling pixel: adaptive and Monte Carlo images 0.05 apart).
+TEST(Classify, OpacityStepOfANearlyOpaqueVoxelFromItsTransparency) {
+  // ct-bone's soft tissue (mean 40, sigma 60, opacity 0) and bone (1000,
+  // 250, opacity 1): between them alpha = p_bone, t = p_soft = e / (1 + e),
+  // e = exp(-|dl|), computed here in long double from the definitions.
+  const Classifier c = classifier_preset("ct-bone");
+  auto log_n = [](long double I, long double mean, long double sigma) {
+    return -(I - mean) * (I - mean) / (2 * sigma * sigma) - std::log(sigma);
+  };
+  int checked = 0;
+  for (float I = 250.0f; I <= 420.0f; I += 0.73f) {
+    const long double dl = log_n(I, 1000, 250) - log_n(I, 40, 60);
+    const long double t = 1.0L / (1.0L + std::exp(dl));  // p_soft
+    if (t > 1e-3L || t < 1e-9L) continue;
+    Volume vol({1, 1, 1}, VoxelType::f32);
+    vol.data()[0] = I;
+    const std::vector<ShadeSample> sh{{1.0f, 0.0f, 0, 0}};
+    for (double step : {0.4, 0.7, 2.5}) {
+      const long double want = 1.0L - std::pow(t, static_cast<long double>(step));
+      const auto out = classify(vol, sh, c, step);
+      SCOPED_TRACE("I = " + std::to_string(I) + ", t = " + std::to_string(static_cast<double>(t)) +
+                   ", step " + std::to_string(step));
+      // float rounding of a' near 1 (6e-8) and nothing more
+      EXPECT_NEAR(out[0].a, static_cast<double>(want), 1.2e-7);
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 100);
+}
+
 TEST(Classify, PremultipliedColourNeverExceedsAlpha) {
   std::mt19937 rng(1234);
   std::uniform_real_distribution<float> val(-10.0f, 30.0f), id(0.0f, 3.0f), is(0.0f, 1.5f);
