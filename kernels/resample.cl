@@ -88,6 +88,20 @@ SV_FN_INLINE void sv_neville(float* q, const int R, const float* d, const int lo
   }
 }
 
+/* A sample as compositing takes it (resample.hpp: clamp_sample): at
+ * orders >= 2 (Lagrange weights below 0 and above 1) alpha clamped to [0,
+ * 1] and each premultiplied colour to [0, alpha], a NaN to 0; over() with
+ * alpha outside [0, 1] amplifies instead of attenuating. Orders 0 and 1 are
+ * left as they are (no instruction). */
+#if ORDER >= 2
+SV_FN_INLINE float4 sv_clamp_sample(const float4 s) {
+  const float a = fmin(fmax(s.w, 0.0f), 1.0f);
+  return fmin(fmax(s, (float4)(0.0f)), (float4)(a));
+}
+#else
+#define sv_clamp_sample(s) (s)
+#endif
+
 /* The sample at fixed-point position (X0, X1, X2) (inside the volume). */
 SV_FN float4 sv_sample(long X0, long X1, long X2, int4 dims, __global const int* table,
                        __global const float* vox, int cs) {
@@ -129,7 +143,7 @@ SV_FN float4 sv_sample(long X0, long X1, long X2, int4 dims, __global const int*
 #pragma unroll
     for (int c = 0; c < SV_M; ++c) u[c * 4 + ch] = w[ch * SV_M + c];
   sv_neville(u, 4, dz, lz);
-  return (float4)(u[0], u[1], u[2], u[3]);
+  return sv_clamp_sample((float4)(u[0], u[1], u[2], u[3]));
 }
 
 /* Position of sample k of ray (i, j), per axis. */
@@ -290,8 +304,16 @@ SV_FN_INLINE void sv_sample8(const int8* F, const uint8* L, int nx, int ny, int 
     for (int ch = 0; ch < 4; ++ch) qz[c * 4 + ch] = qy[ch];
   }
   sv_neville8(qz, 4, dz, lz);
+#if ORDER >= 2
+  { /* sv_clamp_sample on the 8 lanes */
+    const float8 a = fmin(fmax(qz[3], 0.0f), 1.0f);
+#pragma unroll
+    for (int ch = 0; ch < 4; ++ch) u[ch] = fmin(fmax(qz[ch], 0.0f), a);
+  }
+#else
 #pragma unroll
   for (int ch = 0; ch < 4; ++ch) u[ch] = qz[ch];
+#endif
 }
 
 /* ---- interleaved voxel cells: sv_sample8_il (simdvol_resample_v8_il and
@@ -617,6 +639,16 @@ SV_FN_INLINE void sv_sample8_il(const int8* F, const uint8* L, int nx, int ny, i
     }
     sv_neville16(qz, wz, mz);
     u[h] = qz[0];
+  }
+#endif
+#if ORDER >= 2
+  /* sv_clamp_sample on (lane, channel): each lane's alpha spread over its
+   * channels */
+  const uint16 ai = (uint16)(3, 3, 3, 3, 7, 7, 7, 7, 11, 11, 11, 11, 15, 15, 15, 15);
+#pragma unroll
+  for (int h = 0; h < 2; ++h) {
+    const float16 a = fmin(fmax(shuffle(u[h], ai), 0.0f), 1.0f);
+    u[h] = fmin(fmax(u[h], 0.0f), a);
   }
 #endif
 }

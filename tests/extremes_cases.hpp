@@ -86,4 +86,39 @@ inline std::string image_problem(const Image& img, float eps = 1e-5f) {
   return {};
 }
 
+/// A transparent layer between opaque slabs, where Aitken orders 2 and 3
+/// (weights below 0 and above 1) sample negative opacities: x in the middle
+/// half 1000, else 100 (37 x 14 x 14, spacing 0.5, 1, 0.7); every value
+/// fully dense, and the gradient ramp makes the slab's faces (|g| of 225
+/// to 900 per voxel) nearly transparent: alpha 1, 1, ~0, ~0, 1, 1 across
+/// each face. Seen at (45, 180, -178.095), pixel sampling, the whole volume
+/// in 137 x 133, rays graze those layers: before the samples were clamped
+/// to valid opacities (clamp_sample) the reference composited pixels of
+/// alpha -171.7 (found by a randomised sweep; docs/HARDENING.md).
+inline Volume thin_gap_volume() {
+  Volume vol({37, 14, 14}, VoxelType::f32, {0.5, 1.0, 0.7});
+  for (int64_t z = 0; z < 14; ++z)
+    for (int64_t y = 0; y < 14; ++y)
+      for (int64_t x = 0; x < 37; ++x)
+        vol.at(x, y, z) = std::fabs(static_cast<double>(x) - 18.5) < 9.25 ? 1000.0f : 100.0f;
+  return vol;
+}
+
+inline RenderOptions thin_gap_options() {
+  RenderOptions opt;
+  opt.classifier.kind = Classifier::Kind::transfer;
+  TransferFunction& t = opt.classifier.transfer;
+  t.density = {{1199, 1219, 1347}, {1, 0.4798f, 0}};
+  t.gradient = {{54, 345, 1554, 1739}, {1, 0.01734f, 0, 0}};
+  t.red = {{1199, 1219, 1347}, {0.137f, 0.917f, 0.543f}};
+  t.green = {{1199, 1219, 1347}, {0.471f, 0.949f, 0.005f}};
+  t.blue = {{1199, 1219, 1347}, {0.419f, 0.098f, 0.653f}};
+  opt.view = {45, 180, -178.095};
+  opt.width = 137;
+  opt.height = 133;
+  opt.sampling = Sampling::pixel;
+  opt.framing = Framing::diagonal;
+  return opt;
+}
+
 }  // namespace simdvol::extremes

@@ -64,7 +64,7 @@ std::vector<Rgba> resample_reference(const Matching& m, const std::vector<Rgba>&
   std::size_t n = 0;
   for (const sv_segment& s : m.segments)
     for (int64_t k = s.k0; k < s.k1; ++k)
-      out[n++] = resample_rgba(voxels, dims, position(view, s, k), order);
+      out[n++] = clamp_sample(resample_rgba(voxels, dims, position(view, s, k), order), order);
   return out;
 }
 
@@ -78,7 +78,8 @@ std::vector<Rgba> local_reference(const Matching& m, const std::vector<Rgba>& vo
     const sv_segment& s = m.segments[n];
     samples.clear();
     for (int64_t k = s.k0; k < s.k1; ++k)
-      samples.push_back(resample_rgba(voxels, dims, position(view, s, k), order));
+      samples.push_back(
+          clamp_sample(resample_rgba(voxels, dims, position(view, s, k), order), order));
     out[n] = composite_direct(RaySamples{samples, s.k0});
   }
   return out;

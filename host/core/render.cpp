@@ -80,7 +80,7 @@ Image render_classified(const std::vector<Rgba>& voxels, const Volume& vol,
       for (int64_t k = k0; k < k1; ++k) {
         const std::array<int64_t, 3> pos{view.fixed(0, i, j, k), view.fixed(1, i, j, k),
                                          view.fixed(2, i, j, k)};
-        const Rgba s = resample_rgba(voxels, vol.dims(), pos, opt.order);
+        const Rgba s = clamp_sample(resample_rgba(voxels, vol.dims(), pos, opt.order), opt.order);
         samples.push_back(s);
         if (adaptive) {
           acc += (1.0f - acc) * s.a;

@@ -155,6 +155,13 @@ int64_t to_fixed(double x, const char* name) {
 
 }  // namespace
 
+Rgba clamp_sample(const Rgba& s, int order) {
+  if (order < 2) return s;
+  const float a = std::fmin(std::fmax(s.a, 0.0f), 1.0f);
+  auto c = [a](float v) { return std::fmin(std::fmax(v, 0.0f), a); };
+  return Rgba{c(s.r), c(s.g), c(s.b), a};
+}
+
 std::array<int64_t, 4> aitken_stencil(int64_t floor_x, float frac, int order) {
   check_order(order);
   std::array<int64_t, 4> s{};

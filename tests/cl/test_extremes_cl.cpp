@@ -130,3 +130,27 @@ TEST(ExtremesOpenCl, NanVoxelsAgreeWithTheReference) {
                           {"sprinkled NaN, ct shaded", sprinkled, lit}};
   EXPECT_EQ(compare_all(dev, cases, {1, 64, 8192}, extreme_views()), 4 * 10 * 2 * 3);
 }
+
+// The thin transparent layer of extremes_cases.hpp at orders 2 and 3: the
+// kernels clamp their samples as the reference does (sv_clamp_sample), so
+// every pixel is a valid opacity and equals the reference's.
+TEST(ExtremesOpenCl, HigherOrdersKeepEveryPixelAValidOpacity) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = thin_gap_volume();
+  RenderOptions opt = thin_gap_options();
+  for (int order : {2, 3})
+    for (CompositeMode mode : {CompositeMode::direct, CompositeMode::adaptive, CompositeMode::mc}) {
+      opt.order = order;
+      opt.composite.mode = mode;
+      opt.composite.samples = 5;
+      const std::string what = "order " + std::to_string(order) +
+                               (mode == CompositeMode::direct     ? " direct"
+                                : mode == CompositeMode::adaptive ? " adaptive"
+                                                                  : " mc");
+      const Image ref = render_reference(vol, opt);
+      const Image img = render_opencl(dev, vol, opt, nullptr, 64, true);
+      EXPECT_EQ(image_problem(ref), "") << what;
+      EXPECT_EQ(image_problem(img), "") << what;
+      EXPECT_LE(max_abs_diff(ref, img), kTol) << what;
+    }
+}

@@ -195,3 +195,21 @@ TEST(Extremes, RangeSkipsNonFiniteValuesAnywhere) {
   EXPECT_EQ(none.range().min, 0.0f);  // no finite value: {0, 0}
   EXPECT_EQ(none.range().max, 0.0f);
 }
+
+// Aitken orders 2 and 3 weigh neighbours by factors below 0 and above 1, so
+// between opaque slabs a transparent layer two voxels thick samples to a
+// negative alpha, and over() with (1 - alpha) > 1 amplified the rays
+// grazing it: pixels of alpha -171.7. The samples are now clamped to valid
+// opacities before compositing (clamp_sample); orders 0 and 1 never needed
+// it.
+TEST(Extremes, HigherOrdersKeepEveryPixelAValidOpacity) {
+  const Volume vol = thin_gap_volume();
+  RenderOptions opt = thin_gap_options();
+  for (int order = 0; order <= 3; ++order)
+    for (CompositeMode mode : {CompositeMode::direct, CompositeMode::adaptive}) {
+      opt.order = order;
+      opt.composite.mode = mode;
+      EXPECT_EQ(image_problem(render_reference(vol, opt)), "")
+          << "order " << order << (mode == CompositeMode::direct ? " direct" : " adaptive");
+    }
+}

@@ -42,6 +42,17 @@ float resample_scalar(const Volume& vol, const std::array<int64_t, 3>& fixed_pos
 Rgba resample_rgba(const std::vector<Rgba>& voxels, const std::array<int64_t, 3>& dims,
                    const std::array<int64_t, 3>& fixed_pos, int order);
 
+/// A resampled sample as compositing takes it. Aitken orders 2 and 3 use
+/// weights below 0 and above 1 (Lagrange's), so near a sharp edge a sample's
+/// alpha leaves [0, 1]; over() then amplifies where it should attenuate
+/// ((1 - a) > 1 where a < 0), and a ray grazing a thin transparent gap
+/// composited to alpha -166 (docs/HARDENING.md). So at orders >= 2 alpha
+/// is clamped to [0, 1] and each premultiplied colour to [0, alpha] (a
+/// NaN to 0); orders 0 and 1 (weights in [0, 1]) are returned as they are.
+/// Every compositing path takes its samples through this (render_reference,
+/// resample_reference, local_reference; the kernels' sv_clamp_sample).
+Rgba clamp_sample(const Rgba& s, int order);
+
 /// Same, at a real-valued position (for tests against polynomials).
 float resample_scalar_at(const Volume& vol, double x, double y, double z, int order);
 
