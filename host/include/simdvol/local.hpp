@@ -5,8 +5,9 @@
 // Input: a Matching (match.hpp; after balancing, segments may be empty or
 // reach past their PE's cell) and the classified premultiplied voxels, flat
 // (x fastest). Every sample (i, j, k) of every segment is resampled exactly
-// as resample_rgba (resample.hpp) does at view.fixed(a, i, j, k): the result
-// does not depend on which PE resamples it. On the PE array, a stencil voxel
+// as resample_rgba (resample.hpp) does at view.fixed(a, i, j, k), then taken
+// through clamp_sample (orders 2 and 3 clamped to valid opacities): the
+// result does not depend on which PE resamples it. On the PE array, a stencil voxel
 // at global g (clamped into the volume) is read from the cell of the PE that
 // owns it; when that is not the resampling PE it is an X-Net read
 // (xnet_reads counts them).
@@ -35,7 +36,7 @@ namespace simdvol {
 std::vector<int64_t> sample_offsets(const Matching& m);
 
 /// Every sample of every segment in segment order (see the file comment),
-/// as resample_rgba of `voxels` (dims `dims`, x fastest). Throws
+/// as clamp_sample(resample_rgba(...)) of `voxels` (dims `dims`, x fastest). Throws
 /// ArgumentError for a bad order, a voxel count that does not match, or a
 /// segment outside the viewing grid.
 std::vector<Rgba> resample_reference(const Matching& m, const std::vector<Rgba>& voxels,
