@@ -87,6 +87,19 @@ inline std::filesystem::path write_gzipped(const std::string& name, const uint8_
   return write_input(name, out.data(), len);
 }
 
+/// The three forms of a format that is read plain or gzipped (NIfTI's
+/// .nii / .nii.gz, MGH's .mgh / .mgz): form 0 the bytes as `plain`, 1 the
+/// bytes gzip-compressed as `gz` (write_gzipped), 2 the bytes unchanged as
+/// `gz` (corrupt or truncated gzip streams, or plain bytes under a .gz
+/// name). The path; empty where zlib refused.
+inline std::filesystem::path write_plain_or_gzipped(int form, const std::string& plain,
+                                                    const std::string& gz, const uint8_t* data,
+                                                    std::size_t size) {
+  if (form == 0) return write_input(plain, data, size);
+  if (form == 1) return write_gzipped(gz, data, size);
+  return write_input(gz, data, size);
+}
+
 /// A header and its data file from one input: the part up to its first
 /// blank line ("\n\n", kept) is written as `header`, the rest as `data`
 /// beside it; the header's path.

@@ -17,19 +17,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
   simdvol_fuzz::clear_scratch();
   const uint8_t* body = data + 1;
   const std::size_t n = size - 1;
-  std::filesystem::path path;
-  switch (data[0] % 3) {
-    case 0:
-      path = simdvol_fuzz::write_input("input.mgh", body, n);
-      break;
-    case 1:
-      path = simdvol_fuzz::write_gzipped("input.mgz", body, n);
-      if (path.empty()) return 0;
-      break;
-    default:
-      path = simdvol_fuzz::write_input("input.mgz", body, n);
-      break;
-  }
+  const std::filesystem::path path =
+      simdvol_fuzz::write_plain_or_gzipped(data[0] % 3, "input.mgh", "input.mgz", body, n);
+  if (path.empty()) return 0;
   const std::optional<int64_t> index = simdvol_fuzz::volume_index(data[0], 3);
   simdvol_fuzz::run_loader([&] { return simdvol::load_mgh(path, index); });
   return 0;

@@ -24,27 +24,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
   const uint8_t* body = data + 1;
   const std::size_t n = size - 1;
   std::filesystem::path path;
-  switch (data[0] % 4) {
-    case 0:
-      path = simdvol_fuzz::write_input("input.nii", body, n);
-      break;
-    case 1:
-      path = simdvol_fuzz::write_gzipped("input.nii.gz", body, n);
-      if (path.empty()) return 0;
-      break;
-    case 2:
-      path = simdvol_fuzz::write_input("input.nii.gz", body, n);
-      break;
-    default: {
-      const bool v2 =
-          n >= 4 && ((body[0] == 0x1c && body[1] == 0x02 && body[2] == 0 && body[3] == 0) ||
-                     (body[0] == 0 && body[1] == 0 && body[2] == 0x02 && body[3] == 0x1c));
-      const std::size_t split = std::min<std::size_t>(n, v2 ? 540 : 348);
-      const auto hdr = simdvol_fuzz::write_input("input.hdr", body, split);
-      const auto img = simdvol_fuzz::write_input("input.img", body + split, n - split);
-      path = (data[0] & 16) ? img : hdr;
-      break;
-    }
+  if (data[0] % 4 < 3) {
+    path = simdvol_fuzz::write_plain_or_gzipped(data[0] % 4, "input.nii", "input.nii.gz", body, n);
+    if (path.empty()) return 0;
+  } else {
+    const bool v2 =
+        n >= 4 && ((body[0] == 0x1c && body[1] == 0x02 && body[2] == 0 && body[3] == 0) ||
+                   (body[0] == 0 && body[1] == 0 && body[2] == 0x02 && body[3] == 0x1c));
+    const std::size_t split = std::min<std::size_t>(n, v2 ? 540 : 348);
+    const auto hdr = simdvol_fuzz::write_input("input.hdr", body, split);
+    const auto img = simdvol_fuzz::write_input("input.img", body + split, n - split);
+    path = (data[0] & 16) ? img : hdr;
   }
   const std::optional<int64_t> index = simdvol_fuzz::volume_index(data[0], 4);
   simdvol_fuzz::run_loader([&] { return simdvol::load_nifti(path, index); });
