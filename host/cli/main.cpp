@@ -402,6 +402,18 @@ int main(int argc, char** argv) {
   std::string img_a, img_b;
   compare->add_option("a", img_a, "first image")->required();
   compare->add_option("b", img_b, "second image")->required();
+  float compare_tol = -1.0f;
+  compare
+      ->add_option("--tolerance", compare_tol,
+                   "also print how many pixels differ by more than T in some channel "
+                   "(pixels_over_tolerance), how many in alpha (alpha_pixels_over_tolerance) "
+                   "and where the largest difference is (worst_pixel X,Y)")
+      ->check(kNotNegative);
+  bool compare_rgba = false;
+  compare->add_flag("--check-rgba", compare_rgba,
+                    "also print how many pixels of each image are not premultiplied RGBA "
+                    "(invalid_rgba_a, invalid_rgba_b): alpha outside [0, 1] or a colour outside "
+                    "[0, alpha], beyond 1e-6, or NaN");
 
   // devices
   auto* devices = app.add_subcommand("devices", "list OpenCL platforms and devices");
@@ -654,6 +666,9 @@ int main(int argc, char** argv) {
       save_nrrd(vol, p);
       std::cout << "wrote " << fs::absolute(p).string() << "\n";
     } else if (*compare) {
+      if (compare->count("--tolerance") != 0 && !(compare_tol >= 0.0f))
+        throw ArgumentError(
+            "--tolerance", "must be a number, 0 or more (got " + std::to_string(compare_tol) + ")");
       const Image a = read_image(img_a), b = read_image(img_b);
       if (a.width() != b.width() || a.height() != b.height())
         throw ArgumentError(img_a + " and " + img_b,
@@ -663,7 +678,18 @@ int main(int argc, char** argv) {
       // Both figures before any output: an error prints nothing on stdout.
       const double db = psnr(a, b);
       const float diff = max_abs_diff(a, b);
-      std::cout << "psnr_db " << db << "\nmax_abs_diff " << diff << "\n";
+      std::string extra;
+      if (compare->count("--tolerance") != 0) {
+        const PixelsOver over = pixels_over(a, b, compare_tol);
+        extra += "pixels_over_tolerance " + std::to_string(over.count) +
+                 "\nalpha_pixels_over_tolerance " + std::to_string(over.alpha_count) +
+                 "\nworst_pixel " + std::to_string(over.worst_x) + "," +
+                 std::to_string(over.worst_y) + "\n";
+      }
+      if (compare_rgba)
+        extra += "invalid_rgba_a " + std::to_string(invalid_premultiplied(a)) +
+                 "\ninvalid_rgba_b " + std::to_string(invalid_premultiplied(b)) + "\n";
+      std::cout << "psnr_db " << db << "\nmax_abs_diff " << diff << "\n" << extra;
     } else if (*devices) {
       return print_devices(std::cout);
     } else if (*mm) {

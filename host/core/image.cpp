@@ -359,4 +359,42 @@ float max_abs_diff(const Image& a, const Image& b) {
   return m;
 }
 
+PixelsOver pixels_over(const Image& a, const Image& b, float tolerance) {
+  check_same_size(a, b, "pixels_over");
+  if (!(tolerance >= 0.0f))
+    throw ArgumentError("tolerance", "must be 0 or more, not " + std::to_string(tolerance));
+  const std::vector<Rgba>& pa = a.pixels();
+  const std::vector<Rgba>& pb = b.pixels();
+  PixelsOver out;
+  float worst = 0.0f;
+  std::size_t worst_i = 0;
+  for (std::size_t i = 0; i < pa.size(); ++i) {
+    float m = 0.0f;
+    for (float d : {pa[i].r - pb[i].r, pa[i].g - pb[i].g, pa[i].b - pb[i].b, pa[i].a - pb[i].a})
+      m = std::isnan(d) ? std::numeric_limits<float>::infinity() : std::max(m, std::fabs(d));
+    if (m > tolerance) ++out.count;
+    if (!(std::fabs(pa[i].a - pb[i].a) <= tolerance)) ++out.alpha_count;
+    if (m > worst) {
+      worst = m;
+      worst_i = i;
+    }
+  }
+  out.worst_x = static_cast<int>(worst_i % static_cast<std::size_t>(a.width()));
+  out.worst_y = static_cast<int>(worst_i / static_cast<std::size_t>(a.width()));
+  return out;
+}
+
+std::size_t invalid_premultiplied(const Image& img) {
+  const float s = kPremultipliedSlack;
+  std::size_t n = 0;
+  for (const Rgba& p : img.pixels()) {
+    // Written so that a NaN fails every comparison and so counts.
+    const bool alpha_ok = p.a >= -s && p.a <= 1.0f + s;
+    const bool colours_ok =
+        p.r >= -s && p.g >= -s && p.b >= -s && p.r <= p.a + s && p.g <= p.a + s && p.b <= p.a + s;
+    n += !(alpha_ok && colours_ok);
+  }
+  return n;
+}
+
 }  // namespace simdvol

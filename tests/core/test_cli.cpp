@@ -1099,6 +1099,42 @@ TEST_F(Cli, CompareNamesBothImagesOfOtherSizes) {
   EXPECT_NE(r.output.find("max_abs_diff 0"), std::string::npos) << r.output;
 }
 
+// compare --tolerance / --check-rgba: the counts for two renders that differ
+// (shading on and off), against a count made here from the images read
+// back; bad tolerances refused naming the option, before any output.
+TEST_F(Cli, CompareCountsPixelsOverATolerance) {
+  ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("a.png")).code, 0);
+  ASSERT_EQ(run("render --phantom-size 16 --size 16x16 --no-shade -o " + path("b.png")).code, 0);
+  Result r = run("compare " + path("a.png") + " " + path("a.png") + " --tolerance 0 --check-rgba");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("\npixels_over_tolerance 0\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\nalpha_pixels_over_tolerance 0\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\ninvalid_rgba_a 0\ninvalid_rgba_b 0\n"), std::string::npos) << r.output;
+  r = run("compare " + path("a.png") + " " + path("b.png") + " --tolerance 0.01");
+  EXPECT_EQ(r.code, 0) << r.output;
+  const simdvol::Image a = simdvol::read_image(path("a.png")),
+                       b = simdvol::read_image(path("b.png"));
+  std::size_t want = 0;
+  for (std::size_t i = 0; i < a.pixels().size(); ++i) {
+    const simdvol::Rgba p = a.pixels()[i], q = b.pixels()[i];
+    want += std::fabs(p.r - q.r) > 0.01f || std::fabs(p.g - q.g) > 0.01f ||
+            std::fabs(p.b - q.b) > 0.01f;
+  }
+  ASSERT_GT(want, 0u);
+  EXPECT_NE(r.output.find("\npixels_over_tolerance " + std::to_string(want) + "\n"),
+            std::string::npos)
+      << r.output << " want " << want;
+  EXPECT_NE(r.output.find("\nalpha_pixels_over_tolerance 0\n"), std::string::npos)
+      << r.output;  // PNG: alpha 1 in both
+  EXPECT_EQ(r.output.find("invalid_rgba"), std::string::npos) << r.output;
+  for (const char* bad : {"-1", "nan", "abc"}) {
+    r = run("compare " + path("a.png") + " " + path("b.png") + " --tolerance " + bad);
+    EXPECT_NE(r.code, 0) << bad;
+    EXPECT_NE(r.output.find("--tolerance"), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("psnr_db"), std::string::npos) << r.output;
+  }
+}
+
 TEST_F(Cli, FailedRenderLeavesExistingOutputUntouched) {
   ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("keep.png")).code, 0);
   std::ifstream in(path("keep.png"), std::ios::binary);

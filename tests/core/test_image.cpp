@@ -140,6 +140,52 @@ TEST(MaxAbsDiff, CoversAllFourChannels) {
   EXPECT_TRUE(std::isnan(max_abs_diff(a, b)));
 }
 
+TEST(PixelsOver, CountsPixelsNotChannelsAndFindsTheWorst) {
+  const Image a = constant(4, 3, {0.1f, 0.2f, 0.3f, 0.4f});
+  PixelsOver o = pixels_over(a, a, 0.0f);
+  EXPECT_EQ(o.count, 0u);
+  EXPECT_EQ(o.alpha_count, 0u);
+  EXPECT_EQ(o.worst_x, 0);
+  EXPECT_EQ(o.worst_y, 0);
+  Image b = a;
+  b.at(1, 0).r += 0.25f;  // colour only
+  b.at(1, 0).g += 0.25f;  // the same pixel: counted once
+  b.at(3, 2).a -= 0.5f;   // alpha, the largest
+  b.at(2, 1).b += 1e-6f;  // within the tolerance below
+  o = pixels_over(a, b, 1e-5f);
+  EXPECT_EQ(o.count, 2u);
+  EXPECT_EQ(o.alpha_count, 1u);
+  EXPECT_EQ(o.worst_x, 3);
+  EXPECT_EQ(o.worst_y, 2);
+  EXPECT_EQ(pixels_over(a, b, 0.0f).count, 3u);  // strictly more than the tolerance
+  EXPECT_EQ(pixels_over(a, b, 0.3f).count, 1u);
+  EXPECT_EQ(pixels_over(a, b, 0.5f).count, 0u);
+  b.at(0, 2).g = std::numeric_limits<float>::quiet_NaN();  // a NaN counts at any tolerance
+  o = pixels_over(a, b, 1e30f);
+  EXPECT_EQ(o.count, 1u);
+  EXPECT_EQ(o.worst_x, 0);
+  EXPECT_EQ(o.worst_y, 2);
+  EXPECT_THROW(pixels_over(a, b, -1.0f), ArgumentError);
+  EXPECT_THROW(pixels_over(a, b, std::numeric_limits<float>::quiet_NaN()), ArgumentError);
+  EXPECT_THROW(pixels_over(a, Image(4, 4), 0.0f), ArgumentError);
+}
+
+TEST(InvalidPremultiplied, AlphaInZeroOneAndColoursInZeroAlpha) {
+  Image img = constant(5, 2, {0.2f, 0.3f, 0.5f, 0.5f});
+  EXPECT_EQ(invalid_premultiplied(img), 0u);
+  img.at(0, 0) = {0.0f, 0.0f, 0.0f, 0.0f};            // transparent black: valid
+  img.at(1, 0) = {1.0f, 1.0f, 1.0f, 1.0f};            // opaque white: valid
+  img.at(2, 0) = {0.5f + 5e-7f, 0.0f, 0.0f, 0.5f};    // within the slack: valid
+  img.at(3, 0) = {0.0f, -5e-7f, 0.0f, 1.0f + 5e-7f};  // within the slack: valid
+  EXPECT_EQ(invalid_premultiplied(img), 0u);
+  img.at(4, 0) = {0.6f, 0.0f, 0.0f, 0.5f};                   // colour above alpha
+  img.at(0, 1) = {0.0f, 0.0f, 0.0f, -0.01f};                 // alpha below 0
+  img.at(1, 1) = {0.0f, 0.0f, -0.01f, 0.5f};                 // colour below 0
+  img.at(2, 1) = {0.0f, 0.0f, 0.0f, 1.01f};                  // alpha above 1
+  img.at(3, 1).a = std::numeric_limits<float>::quiet_NaN();  // NaN
+  EXPECT_EQ(invalid_premultiplied(img), 5u);
+}
+
 TEST_F(ImageFiles, PngRoundTripQuantisesOverBlack) {
   Image img = pattern(37, 23);
   img.at(0, 0) = {1.7f, -0.3f, 0.5f, 1.0f};  // clamped to [0, 1]

@@ -62,4 +62,21 @@ double psnr(const Image& a, const Image& b);
 /// Largest absolute difference over all four channels.
 float max_abs_diff(const Image& a, const Image& b);
 
+/// Where two images differ beyond a tolerance: `count` pixels have some
+/// channel (RGBA) that differs by more than it (a NaN in either counts),
+/// `alpha_count` of them in alpha, and (`worst_x`, `worst_y`) is the pixel of
+/// the largest difference (a NaN first; the first pixel if none differs).
+/// Throws ArgumentError on size mismatch or a negative or NaN tolerance.
+struct PixelsOver {
+  std::size_t count = 0, alpha_count = 0;
+  int worst_x = 0, worst_y = 0;
+};
+PixelsOver pixels_over(const Image& a, const Image& b, float tolerance);
+
+/// Pixels that are not premultiplied RGBA: alpha outside [0, 1] or a colour
+/// outside [0, alpha], beyond `kPremultipliedSlack` (float rounding of the
+/// compositing), or any NaN. A render's every pixel must pass.
+inline constexpr float kPremultipliedSlack = 1e-6f;
+std::size_t invalid_premultiplied(const Image& img);
+
 }  // namespace simdvol
