@@ -339,8 +339,9 @@ int main(int argc, char** argv) {
                    "walk m in the m-th n-th of the cumulative opacity)");
   render
       ->add_option("--mc-scope", mc_scope,
-                   "Monte Carlo: walks over whole rays (after the swap) or per sub-ray (in local "
-                   "compositing, then the swap; opencl engine)")
+                   "Monte Carlo: walks over whole rays (whole: after the swap) or per sub-ray "
+                   "(subray: in local compositing, then the swap; the reference engine cuts "
+                   "the rays at the same PE cells, so --pe and --balance-sweeps apply to both)")
       ->capture_default_str();
   render->add_flag("--allocate", allocate,
                    "Monte Carlo per sub-ray: the ray's --samples walks allocated to its sub-rays "
@@ -352,7 +353,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render
       ->add_option("--balance-sweeps", balance_sweeps,
-                   "opencl engine: load-balancing sweeps after the matching (ch. 5; 0: none). "
+                   "opencl engine (and the reference's --mc-scope subray): load-balancing "
+                   "sweeps after the matching (ch. 5; 0: none). "
                    "The thesis's SIMD PEs wait for the busiest; PoCL's work-items do not, so 0 "
                    "is faster on a CPU (the same image to float rounding)")
       ->capture_default_str();
@@ -360,7 +362,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   std::string pe_spec = "128x64";
   int device_index = -1;
-  render->add_option("--pe", pe_spec, "opencl engine: PE count N or grid WxH (a power of two)")
+  render
+      ->add_option("--pe", pe_spec,
+                   "opencl engine (and the reference's --mc-scope subray): PE count N or grid "
+                   "WxH (a power of two)")
       ->capture_default_str();
   auto* device_opt =
       render->add_option("--device", device_index,
@@ -518,9 +523,6 @@ int main(int argc, char** argv) {
       else
         throw ArgumentError("--mc-scope", "expected whole or subray, not '" + mc_scope + "'");
       eo.mc_allocate = allocate;
-      if (engine == "reference" && (eo.mc_scope != McScope::whole || allocate))
-        throw ArgumentError(eo.mc_scope != McScope::whole ? "--mc-scope" : "--allocate",
-                            "per sub-ray Monte Carlo needs --engine opencl");
       validate(eo, opt);
       // Options that do nothing with the chosen compositing or engine are
       // refused, not ignored (as --mc-stratified without --exact-opacity).
@@ -535,9 +537,14 @@ int main(int argc, char** argv) {
                     "--composite mc");
       refuse_unless(opt.composite.mode == CompositeMode::adaptive, {"--threshold"},
                     "--composite adaptive");
+      // The reference's per sub-ray Monte Carlo cuts the rays at the PE
+      // cells and balances as the engine does: --pe and --balance-sweeps
+      // decide its image too.
+      const bool subray_reference = engine == "reference" && eo.mc_scope == McScope::subray;
+      refuse_unless(engine == "opencl" || subray_reference, {"--pe", "--balance-sweeps"},
+                    "--engine opencl, and --engine reference with --mc-scope subray");
       refuse_unless(engine == "opencl",
-                    {"--pe", "--device", "--layout", "--balance-sweeps", "--no-skip-empty",
-                     "--no-skip-pes", "--trace"},
+                    {"--device", "--layout", "--no-skip-empty", "--no-skip-pes", "--trace"},
                     "--engine opencl");
       refuse_unless(!no_shade, {"--light", "--phong", "--depth-cue"},
                     "lit renders (not with --no-shade)");
@@ -622,7 +629,9 @@ int main(int argc, char** argv) {
           }
         } else {
           RenderTimes t;
-          img = render_reference(vol, opt, &t);
+          img = eo.mc_scope == McScope::subray
+                    ? render_subray_reference(vol, opt, eo.pes, eo.balance_sweeps, allocate, &t)
+                    : render_reference(vol, opt, &t);
           if (show_times)
             std::cerr << "frame " << f << " (reference): shade " << t.shade_ms << " ms, classify "
                       << t.classify_ms << " ms, resample+composite " << t.resample_composite_ms

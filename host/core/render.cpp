@@ -4,6 +4,10 @@
 #include <cmath>
 
 #include "simdvol/error.hpp"
+#include "simdvol/local.hpp"
+#include "simdvol/match.hpp"
+#include "simdvol/mc.hpp"
+#include "simdvol/pe_array.hpp"
 #include "simdvol/resample.hpp"
 
 namespace simdvol {
@@ -118,6 +122,42 @@ Image render_reference(const Volume& vol, const RenderOptions& opt, RenderTimes*
   const std::vector<Rgba> voxels = classify(vol, shading, opt.classifier, view.step);
   if (times) times->classify_ms = ms_since(t0);
   return render_classified(voxels, vol, view, opt, times, intermediate);
+}
+
+Image render_subray_reference(const Volume& vol, const RenderOptions& opt, int64_t pes,
+                              int balance_sweeps, bool allocate, RenderTimes* times) {
+  validate(opt);
+  if (opt.composite.mode != CompositeMode::mc)
+    throw ArgumentError("--mc-scope",
+                        "per sub-ray estimates are Monte Carlo: needs --composite mc");
+  if (balance_sweeps < 0 || balance_sweeps > kMaxBalanceSweeps)
+    throw ArgumentError("--balance-sweeps", std::to_string(balance_sweeps) + " is outside 0.." +
+                                                std::to_string(kMaxBalanceSweeps));
+  const ViewGeometry view =
+      make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
+  pe_grid(pes, "--pe");  // a power of two in 1..kMaxPes, or ArgumentError naming --pe
+  const KdSplit split = kd_split(vol.dims(), pes);
+  auto t0 = Clock::now();
+  const std::vector<ShadeSample> shading = shade(vol, view, opt.shade);
+  if (times) times->shade_ms = ms_since(t0);
+  t0 = Clock::now();
+  const std::vector<Rgba> voxels = classify(vol, shading, opt.classifier, view.step);
+  if (times) times->classify_ms = ms_since(t0);
+  t0 = Clock::now();
+  Matching m = match_reference(view, split);
+  if (balance_sweeps > 0) m = balance_reference(m, view, split, balance_sweeps);
+  const std::vector<Rgba> samples = resample_reference(m, voxels, vol.dims(), view, opt.order);
+  const RaySegments rays = ray_segments(m, view.width(), view.height());
+  std::vector<int32_t> walks;
+  if (allocate) walks = allocation_reference(m, samples, rays, opt.composite.samples);
+  Image im = composite_segments(m, mc_sub_reference(m, samples, rays, opt.composite, walks),
+                                view.width(), view.height());
+  if (times) times->resample_composite_ms = ms_since(t0);
+  if (view.sampling == Sampling::pixel) return im;
+  t0 = Clock::now();
+  Image out = warp_to_output(im, view);
+  if (times) times->warp_ms = ms_since(t0);
+  return out;
 }
 
 }  // namespace simdvol

@@ -2,10 +2,11 @@
 // (engine.hpp) against the references, and the RenderEngine workspace.
 //   adaptive, mc whole ray: render_reference (whole-ray composite_adaptive /
 //     composite_mc on the same seed), max abs difference <= 1e-5 per channel;
-//   mc per sub-ray (p.samples each, or allocated by opacity): mc.hpp's
-//     mc_sub_reference on the reference's matching and samples, composited
-//     with over (composite_segments) and warped: <= 1e-5 (the swap composites
-//     the same per-segment estimates in another association of over);
+//   mc per sub-ray (p.samples each, or allocated by opacity):
+//     render_subray_reference (mc_sub_reference on the reference's matching
+//     and samples, composited with over and warped): <= 1e-5 (the swap
+//     composites the same per-segment estimates in another association of
+//     over);
 //   a 3-frame turntable through one RenderEngine (buffers reused) equals 3
 //     one-shot render_opencl calls exactly.
 #include <gtest/gtest.h>
@@ -70,24 +71,6 @@ RenderOptions turntable_frame(double phi, int order) {
   return opt;
 }
 
-// The per-sub-ray reference: the serial pipeline up to the samples, then
-// mc_sub_reference, composite_segments and the warp.
-Image subray_reference(const Volume& vol, const RenderOptions& opt, int64_t pes, bool allocate) {
-  const ViewGeometry view =
-      make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
-  const std::vector<Rgba> voxels =
-      classify(vol, shade(vol, view, opt.shade), opt.classifier, view.step);
-  const KdSplit split = kd_split(vol.dims(), pes);
-  const Matching m = balance_reference(match_reference(view, split), view, split);
-  const std::vector<Rgba> smp = resample_reference(m, voxels, vol.dims(), view, opt.order);
-  const RaySegments rays = ray_segments(m, view.width(), view.height());
-  std::vector<int32_t> walks;
-  if (allocate) walks = allocation_reference(m, smp, rays, opt.composite.samples);
-  const Image inter = composite_segments(m, mc_sub_reference(m, smp, rays, opt.composite, walks),
-                                         view.width(), view.height());
-  return view.sampling == Sampling::pixel ? inter : warp_to_output(inter, view);
-}
-
 void check_modes(Device& dev, const Volume& vol, const Classifier& cls, int size, int64_t pes,
                  const ViewAngles& angles, int order, Sampling sampling = Sampling::voxel) {
   RenderOptions opt;
@@ -127,9 +110,9 @@ void check_modes(Device& dev, const Volume& vol, const Classifier& cls, int size
       eo.mc_scope = McScope::subray;
       for (bool alloc : {false, true}) {
         eo.mc_allocate = alloc;
-        EXPECT_LE(
-            max_diff(render_opencl(dev, vol, opt, eo), subray_reference(vol, opt, pes, alloc)),
-            1e-5f)
+        EXPECT_LE(max_diff(render_opencl(dev, vol, opt, eo),
+                           render_subray_reference(vol, opt, pes, kBalanceSweeps, alloc)),
+                  1e-5f)
             << (alloc ? "sub-ray, allocated" : "sub-ray");
       }
     }

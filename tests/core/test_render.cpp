@@ -2,9 +2,12 @@
 // compositing's quality and artefacts on a phantom.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numeric>
 
+#include "simdvol/error.hpp"
+#include "simdvol/match.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 
@@ -234,4 +237,91 @@ TEST_F(MonteCarloRender, SharedStreamShowsCorrelatedArtefactsPerRayDoesNot) {
   // Measured here: per-ray 0.01, shared 0.55 (48^3 phantom, 64^2, 8 walks).
   EXPECT_LT(std::fabs(per_ray), 0.1);
   EXPECT_GT(shared, 0.3);
+}
+
+// The per sub-ray reference (render_subray_reference) against what it must
+// equal without being the same code: on one PE every ray is one sub-ray,
+// so its estimate is the whole-ray estimator's (render_reference, mc), bit
+// for bit, for either stream and with exact opacity; with exact opacity
+// (eq 7.12) every sub-ray's alpha is exact, so the frame's alpha is direct
+// compositing's at any PE count and balancing; and the per sub-ray
+// estimator is unbiased: the mean over seeds approaches direct.
+TEST_F(MonteCarloRender, SubRayReferenceOnOnePeIsTheWholeRayEstimator) {
+  for (RandomStreams st : {RandomStreams::per_ray, RandomStreams::shared})
+    for (bool exact : {false, true}) {
+      RenderOptions o = *opt_;
+      o.composite.mode = CompositeMode::mc;
+      o.composite.samples = 6;
+      o.composite.seed = 5;
+      o.composite.streams = st;
+      o.composite.exact_opacity = exact;
+      const Image whole = render_reference(*vol_, o);
+      for (int sweeps : {0, 8})
+        EXPECT_EQ(max_abs_diff(render_subray_reference(*vol_, o, 1, sweeps, false), whole), 0.0f)
+            << (st == RandomStreams::shared ? "shared" : "per-ray") << (exact ? " exact" : "")
+            << " sweeps " << sweeps;
+    }
+}
+
+TEST_F(MonteCarloRender, SubRayReferenceKeepsDirectAlphaWithExactOpacity) {
+  RenderOptions o = *opt_;
+  o.composite.mode = CompositeMode::mc;
+  o.composite.samples = 4;
+  o.composite.exact_opacity = true;
+  for (int64_t pes : {8, 64, 512})
+    for (int sweeps : {0, 8})
+      for (bool allocate : {false, true}) {
+        const Image sub = render_subray_reference(*vol_, o, pes, sweeps, allocate);
+        float worst = 0.0f;
+        for (std::size_t i = 0; i < sub.pixels().size(); ++i)
+          worst = std::max(worst, std::fabs(sub.pixels()[i].a - direct_->pixels()[i].a));
+        EXPECT_LE(worst, 1e-5f) << pes << " PEs, " << sweeps << " sweeps"
+                                << (allocate ? ", allocated" : "");
+      }
+}
+
+TEST_F(MonteCarloRender, SubRayReferenceMeanOverSeedsApproachesDirect) {
+  RenderOptions o = *opt_;
+  o.composite.mode = CompositeMode::mc;
+  o.composite.samples = 4;
+  Image sum(direct_->width(), direct_->height());
+  const int K = 16;
+  for (int s = 0; s < K; ++s) {
+    o.composite.seed = 200 + s;
+    const Image m = render_subray_reference(*vol_, o, 64, 8, false);
+    for (std::size_t i = 0; i < sum.pixels().size(); ++i) {
+      sum.pixels()[i].r += m.pixels()[i].r / K;
+      sum.pixels()[i].g += m.pixels()[i].g / K;
+      sum.pixels()[i].b += m.pixels()[i].b / K;
+    }
+  }
+  o.composite.seed = 199;
+  const double single = psnr(render_subray_reference(*vol_, o, 64, 8, false), *direct_);
+  const double mean = psnr(sum, *direct_);
+  std::printf("per sub-ray, 64 PEs, 4 walks: one seed %.2f dB, mean of %d seeds %.2f dB\n", single,
+              K, mean);
+  EXPECT_GT(mean, single + 10.0);  // 16x the samples: +12 dB expected of an unbiased estimator
+}
+
+TEST(Render, SubRayReferenceRefusesBadOptions) {
+  const Volume vol = shepp_logan(8);
+  RenderOptions o;
+  o.width = o.height = 8;
+  o.classifier = classifier_preset("ct");
+  // The message of the ArgumentError thrown, or "" if none.
+  const auto error = [&](int64_t pes, int sweeps) -> std::string {
+    try {
+      render_subray_reference(vol, o, pes, sweeps, false);
+    } catch (const ArgumentError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_EQ(error(8, 0).rfind("--mc-scope: ", 0), 0u) << error(8, 0);  // direct compositing
+  o.composite.mode = CompositeMode::mc;
+  EXPECT_EQ(error(8, 0), "");
+  EXPECT_EQ(error(12, 0).rfind("--pe: ", 0), 0u) << error(12, 0);
+  EXPECT_EQ(error(0, 0).rfind("--pe: ", 0), 0u) << error(0, 0);
+  EXPECT_EQ(error(8, -1).rfind("--balance-sweeps: ", 0), 0u) << error(8, -1);
+  EXPECT_EQ(error(8, kMaxBalanceSweeps + 1).rfind("--balance-sweeps: ", 0), 0u);
 }

@@ -38,6 +38,21 @@ struct RenderTimes {
 Image render_reference(const Volume& vol, const RenderOptions& opt, RenderTimes* times = nullptr,
                        Image* intermediate = nullptr);
 
+/// Per sub-ray Monte Carlo (ch. 7.4, eq 7.15) with the serial references:
+/// the rays cut into sub-rays by the PE cells of kd_split(dims, pes), matched
+/// with every PE (match_reference) and balanced with `balance_sweeps` sweeps
+/// (balance_reference; 0: none) as the OpenCL engine's McScope::subray does,
+/// the samples of resample_reference, each sub-ray estimated on its own
+/// (mc_sub_reference: opt.composite.samples walks each, or with `allocate`
+/// the ray's budget allocated to its sub-rays by opacity, ch. 7.5 (b)), the
+/// sub-rays combined with over in depth order (composite_segments), then the
+/// warp of voxel sampling. Throws ArgumentError unless opt.composite.mode is
+/// CompositeMode::mc, `pes` a power of two from 1 to 2^20 and
+/// `balance_sweeps` in 0..kMaxBalanceSweeps. `times`: shade, classify,
+/// resample_composite (matching, balancing, resampling, walks) and warp.
+Image render_subray_reference(const Volume& vol, const RenderOptions& opt, int64_t pes,
+                              int balance_sweeps, bool allocate, RenderTimes* times = nullptr);
+
 /// The stages after classification (match, resample, composite, warp), from
 /// classified premultiplied RGBA voxels (x fastest, the volume's dims). The
 /// OpenCL engine uses this while its own later stages are being built.
