@@ -29,7 +29,8 @@
 // DICOM: named by its file name in the cases, preset ct for Hounsfield data,
 // mri otherwise, as `simdvol render --classify auto`). Compositing: direct,
 // adaptive (threshold 0.95), mcN (Monte Carlo, N walks per whole ray) or
-// mcNsub (per sub-ray, ch. 7.4). Per case a fresh RenderEngine renders one
+// mcNsub (per sub-ray, ch. 7.4; its reference is render_subray_reference
+// at the case's PE count and sweeps). Per case a fresh RenderEngine renders one
 // warm-up frame (timed as "first": page faults of fresh buffers, program
 // builds not yet cached) and R timed frames; the cases of one volume, size,
 // order and compositing (every P, sweeps and skip-pes; as many at once as
@@ -398,9 +399,12 @@ class RefCache {
  public:
   explicit RefCache(int runs) : runs_(runs) {}
   enum class Use { timed, image };
+  /// `subray_pes` > 0: the per sub-ray Monte Carlo reference at those PE
+  /// cells and `subray_sweeps` balance sweeps (render_subray_reference),
+  /// the estimator a case mcNsub runs; 0: render_reference.
   const RefResult& get(const std::string& volume, const Volume& vol, const RenderOptions& opt,
-                       Use use = Use::timed) {
-    char key[320];
+                       Use use = Use::timed, int64_t subray_pes = 0, int subray_sweeps = 0) {
+    char key[360];
     const CompositeParams& c = opt.composite;
     std::snprintf(
         key, sizeof key, "%s|%d|%d|%d|%.6f,%.6f,%.6f|%d|%d|%.4f|%llu|%d|%d%d%d%d|%.4f,%.4f",
@@ -408,12 +412,17 @@ class RefCache {
         opt.view.varphi, static_cast<int>(opt.sampling), static_cast<int>(c.mode), c.threshold,
         static_cast<unsigned long long>(c.seed), c.samples, static_cast<int>(c.streams),
         c.exact_opacity, c.stratified, c.drop_transparent, opt.shade.k1, opt.shade.k2);
-    RefResult& r = cache_[key];
+    const std::string k = std::string(key) + "|sub" + std::to_string(subray_pes) + "/" +
+                          std::to_string(subray_sweeps);
+    const auto render = [&] {
+      return subray_pes > 0 ? render_subray_reference(vol, opt, subray_pes, subray_sweeps, false)
+                            : render_reference(vol, opt);
+    };
+    RefResult& r = cache_[k];
     if (use == Use::timed && std::isnan(r.ms))
-      r.image = time_warm(
-          runs_, [&] { return render_reference(vol, opt); }, r.ms, &r.first_ms);
+      r.image = time_warm(runs_, render, r.ms, &r.first_ms);
     else if (r.image.width() == 0)
-      r.image = render_reference(vol, opt);
+      r.image = render();
     return r;
   }
 
@@ -473,6 +482,7 @@ struct Harness {
   struct Running {
     const Loaded* L = nullptr;
     int64_t pes = 0;
+    int subray_sweeps = -1;  // a per sub-ray case's sweeps (its reference's), else -1
     std::string id;
     RenderOptions opt;
     json j;
@@ -493,6 +503,7 @@ struct Harness {
     Running r;
     r.L = &L;
     r.pes = pes;
+    if (c.scope == McScope::subray) r.subray_sweeps = sweeps;
     r.id = case_id(L.spec.name, size, order, c.name, pes, sweeps, skip_pes);
     r.opt = render_options(L.spec, size, order, c, o.view);
     EngineOptions eo;
@@ -615,7 +626,10 @@ struct Harness {
       j["xnet"] = x;
       double ref_ms = NAN, q = NAN, diff = NAN;
       if (o.reference) {
-        const RefResult& ref = refs.get(L.spec.name, *L.vol, opt);
+        const RefResult& ref =
+            r.subray_sweeps >= 0
+                ? refs.get(L.spec.name, *L.vol, opt, RefCache::Use::timed, pes, r.subray_sweeps)
+                : refs.get(L.spec.name, *L.vol, opt);
         ref_ms = ref.ms;
         q = psnr(ref.image, img);
         diff = max_abs_diff(ref.image, img);
@@ -685,8 +699,10 @@ struct Harness {
         else
           wall.push_back(ms);
         if (o.reference && F >= 1 && (f % std::max(1, F / 4) == 0)) {
-          const double q =
-              psnr(refs.get(L.spec.name, *L.vol, opt, RefCache::Use::image).image, img);
+          const double q = psnr(refs.get(L.spec.name, *L.vol, opt, RefCache::Use::image,
+                                         c.scope == McScope::subray ? pes : 0, sweeps)
+                                    .image,
+                                img);
           psnrs.push_back(q);
           checked.push_back({{"frame", f}, {"psnr_db", psnr_json(q)}});
         }
@@ -1175,8 +1191,8 @@ int main(int argc, char** argv) {
         "(first: the warm-up frame, with fresh buffers and any program builds; util: mean / max "
         "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B (the JSON adds "
         "the halo exchange of the voxel cells); speedup: the "
-        "reference's ms / ours; mcNsub is compared with the reference's whole-ray Monte Carlo, "
-        "a different estimator)\n");
+        "reference's ms / ours; mcNsub is compared with the reference's per sub-ray Monte Carlo "
+        "at the same PE cells and balance sweeps)\n");
     root["cases"] = h.cases;
     if (o.turntable > 0 && !o.child) {
       std::printf("\n");
