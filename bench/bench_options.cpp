@@ -37,14 +37,16 @@ using simdvol::bench::summarize;
 
 const char kUsage[] =
     "usage: simdvol-bench-options [--volume FILE] [--classifier SPEC] [--view THETA,PHI,VARPHI]\n"
-    "                             [--size N] [--order 0..3] [--balance-sweeps N] [--frames N]\n"
+    "                             [--size N] [--order 0..3] [--sampling voxel|pixel]\n"
+    "                             [--balance-sweeps N] [--frames N]\n"
     "                             --variant OPTIONS [--variant OPTIONS ...]\n"
     "Renders one frame again and again through one RenderEngine, each --variant's OpenCL\n"
     "build options (SIMDVOL_CL_OPTIONS, e.g. \"-DSV_VOX_PF=0\"; \"\" for none) in turn, after a\n"
     "warm-up frame each, and prints per variant the median stage times (device profiling\n"
     "events, ms) over --frames frames (default 20) and the largest difference of its image\n"
     "from the first variant's. Defaults: the 256^3 CT phantom, classifier auto, view\n"
-    "20,35,10, 256x256, order 1, 8 balance sweeps, 8192 PEs, direct compositing.\n";
+    "20,35,10, 256x256, order 1, voxel sampling, 8 balance sweeps, 8192 PEs, direct\n"
+    "compositing.\n";
 
 struct Variant {
   std::string options;
@@ -59,6 +61,7 @@ int main(int argc, char** argv) {
   std::string volume, classifier = "auto";
   ViewAngles view{20, 35, 10};
   int size = 256, order = 1, sweeps = kBalanceSweeps, frames = 20;
+  Sampling sampling = Sampling::voxel;
   std::vector<Variant> variants;
   try {
     Args args(argc, argv);
@@ -76,6 +79,11 @@ int main(int argc, char** argv) {
         size = static_cast<int>(args.integer(2, 4096));
       } else if (args.is("--order")) {
         order = static_cast<int>(args.integer(0, kMaxOrder));
+      } else if (args.is("--sampling")) {
+        const std::string v = args.value();
+        if (v != "voxel" && v != "pixel")
+          throw ArgumentError("--sampling", "expected voxel or pixel, not '" + v + "'");
+        sampling = v == "voxel" ? Sampling::voxel : Sampling::pixel;
       } else if (args.is("--balance-sweeps")) {
         sweeps = static_cast<int>(args.integer(0, kMaxBalanceSweeps));
       } else if (args.is("--frames")) {
@@ -118,6 +126,7 @@ int main(int argc, char** argv) {
     opt.view = view;
     opt.width = opt.height = size;
     opt.order = order;
+    opt.sampling = sampling;
     EngineOptions eo;
     eo.fused = true;
     eo.reuse_layout = true;
@@ -128,10 +137,11 @@ int main(int argc, char** argv) {
     const std::string base = env ? env : "";
     std::printf(
         "device: %s (%u compute units); %s, classifier %s, view (%g, %g, %g), %dx%d, "
-        "order %d, %d sweeps; %d frames per variant after a warm-up, in turn\n",
+        "order %d, %s sampling, %d sweeps; %d frames per variant after a warm-up, in turn\n",
         dev.info().name.c_str(), dev.info().compute_units,
         volume.empty() ? "256^3 phantom" : volume.c_str(), classifier.c_str(), view.theta, view.phi,
-        view.varphi, size, size, order, sweeps, frames);
+        view.varphi, size, size, order, sampling == Sampling::voxel ? "voxel" : "pixel", sweeps,
+        frames);
     for (int f = -1; f < frames; ++f)
       for (Variant& v : variants) {
         const std::string o = base.empty() ? v.options : base + " " + v.options;

@@ -183,17 +183,55 @@ SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float 
   return a;
 }
 
-/* The opacity for a sampling step s: a' = 1 - t^s, t = the transparency
- * (1 - a, or the mixture's own t where a >= 1/2: sv_mixture). Below 2^-8
- * the binomial series s a (1 - (s - 1) a / 2 (1 - (s - 2) a / 3))
- * (truncation below (s - 1)(s - 2)(s - 3) a^3 / 24 relative): 1 - a would
- * round to 1 below 2^-24 and give a' = 0 where the reference's
- * -expm1(s log1p(-a)) has a' > 0. Above, 1 - exp(s ln t), with t 0 or
- * normal. */
+/* ln(1 - a) for 0 <= a <= 1/2, without forming 1 - a (whose rounding
+ * would cost up to 3e-8 absolute, hundreds of ulp of a small a's step):
+ * 2 atanh(u), u = -a / (2 - a), |u| <= 1/3, series to u^17 (truncation
+ * below 1e-10 relative). */
+SV_FN float sv_log1m(float a) {
+  const float u = -a / (2.0f - a);
+  const float u2 = u * u;
+  return u *
+         (2.0f +
+          u2 * (0.666666667f +
+                u2 * (0.4f + u2 * (0.285714286f +
+                                   u2 * (0.222222222f +
+                                         u2 * (0.181818182f +
+                                               u2 * (0.153846154f +
+                                                     u2 * (0.133333333f + u2 * 0.117647059f))))))));
+}
+/* 1 - e^x for x <= 0 (where the step's x lies): below |x| 1/2 the series
+ * -x (1 + x / 2 (1 + x / 3 (...))) to x^9 (truncation below 1e-9
+ * relative), without the cancellation of 1 - e^x; from 1/2 on
+ * 1 - sv_exp(x), which keeps at least 0.39. */
+SV_FN float sv_one_minus_exp(float x) {
+  const float p =
+      x *
+      (1.0f + x * (0.5f + x * (0.166666667f +
+                               x * (0.0416666667f +
+                                    x * (0.00833333333f +
+                                         x * (0.00138888889f +
+                                              x * (0.000198412698f +
+                                                   x * (2.48015873e-5f + x * 2.75573192e-6f))))))));
+  return fabs(x) < 0.5f ? -p : 1.0f - sv_exp(x);
+}
+
+/* The opacity for a sampling step s: a' = 1 - t^s = 1 - e^(s ln t), t the
+ * transparency. Below 2^-8 the binomial series s a (1 - (s - 1) a / 2 (1 -
+ * (s - 2) a / 3 (1 - (s - 3) a / 4))) (truncation below 1e-10 relative):
+ * 1 - a would round to 1 below 2^-24 and give a' = 0 where the reference's
+ * -expm1(s log1p(-a)) has a' > 0. From 2^-8 to 1/2, ln t = ln(1 - a) from a
+ * (sv_log1m); from 1/2 on, ln t from the mixture's own t (sv_mixture; 1 - a
+ * for a transfer function), 0 or normal. Then 1 - e^(s ln t) without
+ * cancellation (sv_one_minus_exp). Within 4 ulp of the reference's double
+ * (before 2026-12-06, with ln(1 - a) of the rounded 1 - a and 1 - e^x in
+ * two steps: up to 332 ulp). */
 SV_FN float sv_step_alpha(float a, float t, float s) {
-  const float big = t < FLT_MIN ? 1.0f : 1.0f - sv_exp(s * sv_log(t));
+  const float lt = a < 0.5f ? sv_log1m(a) : sv_log(t);
+  const float big = t < FLT_MIN ? 1.0f : sv_one_minus_exp(s * lt);
   const float small =
-      s * a * (1.0f - 0.5f * (s - 1.0f) * a * (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a));
+      s * a *
+      (1.0f - 0.5f * (s - 1.0f) * a *
+                  (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a * (1.0f - (s - 3.0f) * 0.25f * a)));
   return a < 0.00390625f ? small : big;
 }
 
@@ -375,11 +413,38 @@ SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, 
                          cb);
 }
 
-/* sv_step_alpha on 16 voxels (the same operations lane by lane). */
+/* sv_log1m, sv_one_minus_exp and sv_step_alpha on 16 voxels (the same
+ * operations lane by lane). */
+SV_FN float16 sv_log1m16(float16 a) {
+  const float16 u = -a / (2.0f - a);
+  const float16 u2 = u * u;
+  return u *
+         (2.0f +
+          u2 * (0.666666667f +
+                u2 * (0.4f + u2 * (0.285714286f +
+                                   u2 * (0.222222222f +
+                                         u2 * (0.181818182f +
+                                               u2 * (0.153846154f +
+                                                     u2 * (0.133333333f + u2 * 0.117647059f))))))));
+}
+SV_FN float16 sv_one_minus_exp16(float16 x) {
+  const float16 p =
+      x *
+      (1.0f + x * (0.5f + x * (0.166666667f +
+                               x * (0.0416666667f +
+                                    x * (0.00833333333f +
+                                         x * (0.00138888889f +
+                                              x * (0.000198412698f +
+                                                   x * (2.48015873e-5f + x * 2.75573192e-6f))))))));
+  return select(1.0f - sv_exp16(x), -p, fabs(x) < 0.5f);
+}
 SV_FN float16 sv_step_alpha16(float16 a, float16 t, float s) {
-  const float16 big = select(1.0f - sv_exp16(s * sv_log16(t)), (float16)(1.0f), t < FLT_MIN);
+  const float16 lt = select(sv_log16(t), sv_log1m16(a), a < 0.5f);
+  const float16 big = select(sv_one_minus_exp16(s * lt), (float16)(1.0f), t < FLT_MIN);
   const float16 small =
-      s * a * (1.0f - 0.5f * (s - 1.0f) * a * (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a));
+      s * a *
+      (1.0f - 0.5f * (s - 1.0f) * a *
+                  (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a * (1.0f - (s - 3.0f) * 0.25f * a)));
   return select(big, small, a < 0.00390625f);
 }
 

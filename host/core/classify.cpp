@@ -262,6 +262,7 @@ std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& sh
   const bool need_range = c.kind == Classifier::Kind::mixture && c.mixture.relative;
   const ValueRange range = need_range ? vol.range() : ValueRange{};
 
+  const double step = static_cast<float>(opacity_step);
   std::vector<Rgba> out(vol.voxel_count());
   const auto& data = vol.data();
   for (std::size_t n = 0; n < data.size(); ++n) {
@@ -273,10 +274,11 @@ std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& sh
     // keeps while the device drops it would key Monte Carlo's draws apart.
     if (!(a >= std::numeric_limits<float>::min())) continue;
     // 1 - t^step, t = 1 - a without the cancellation of 1 - a for small a,
-    // and the mixture's own t for a near-opaque voxel (log(0) = -inf: 1).
+    // and the mixture's own t for a near-opaque voxel (log(0) = -inf: 1);
+    // the step as the kernels take it, in float.
     const double a1 = opacity_step == 1.0 ? static_cast<double>(a)
-                      : a >= 0.5f         ? -std::expm1(opacity_step * std::log(t))
-                                  : -std::expm1(opacity_step * std::log1p(-static_cast<double>(a)));
+                      : a >= 0.5f         ? -std::expm1(step * std::log(t))
+                                          : -std::expm1(step * std::log1p(-static_cast<double>(a)));
     double C[3];
     for (int k = 0; k < 3; ++k)
       C[k] =
