@@ -17,6 +17,20 @@ using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
+
+// The classified, lit voxels of a frame (both references' first stages).
+std::vector<Rgba> shade_and_classify(const Volume& vol, const ViewGeometry& view,
+                                     const RenderOptions& opt, RenderTimes* times) {
+  auto t0 = Clock::now();
+  const std::vector<ShadeSample> shading = shade(vol, view, opt.shade);
+  if (times) times->shade_ms = ms_since(t0);
+  t0 = Clock::now();
+  // Opacities are defined per unit of the smallest voxel spacing; a different
+  // sampling step corrects them (alpha' = 1 - (1 - alpha)^step).
+  std::vector<Rgba> voxels = classify(vol, shading, opt.classifier, view.step);
+  if (times) times->classify_ms = ms_since(t0);
+  return voxels;
+}
 }  // namespace
 
 void validate(const RenderOptions& opt) {
@@ -113,15 +127,8 @@ Image render_reference(const Volume& vol, const RenderOptions& opt, RenderTimes*
   validate(opt);
   const ViewGeometry view =
       make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
-  auto t0 = Clock::now();
-  const std::vector<ShadeSample> shading = shade(vol, view, opt.shade);
-  if (times) times->shade_ms = ms_since(t0);
-  t0 = Clock::now();
-  // Opacities are defined per unit of the smallest voxel spacing; a different
-  // sampling step corrects them (alpha' = 1 - (1 - alpha)^step).
-  const std::vector<Rgba> voxels = classify(vol, shading, opt.classifier, view.step);
-  if (times) times->classify_ms = ms_since(t0);
-  return render_classified(voxels, vol, view, opt, times, intermediate);
+  return render_classified(shade_and_classify(vol, view, opt, times), vol, view, opt, times,
+                           intermediate);
 }
 
 Image render_subray_reference(const Volume& vol, const RenderOptions& opt, int64_t pes,
@@ -137,13 +144,8 @@ Image render_subray_reference(const Volume& vol, const RenderOptions& opt, int64
       make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
   pe_grid(pes, "--pe");  // a power of two in 1..kMaxPes, or ArgumentError naming --pe
   const KdSplit split = kd_split(vol.dims(), pes);
+  const std::vector<Rgba> voxels = shade_and_classify(vol, view, opt, times);
   auto t0 = Clock::now();
-  const std::vector<ShadeSample> shading = shade(vol, view, opt.shade);
-  if (times) times->shade_ms = ms_since(t0);
-  t0 = Clock::now();
-  const std::vector<Rgba> voxels = classify(vol, shading, opt.classifier, view.step);
-  if (times) times->classify_ms = ms_since(t0);
-  t0 = Clock::now();
   Matching m = match_reference(view, split);
   if (balance_sweeps > 0) m = balance_reference(m, view, split, balance_sweeps);
   const std::vector<Rgba> samples = resample_reference(m, voxels, vol.dims(), view, opt.order);
