@@ -289,6 +289,50 @@ int main(int argc, char** argv) {
            "space directions: none (1,0,0) (0,1,0) (0,0,1.5)\nencoding: raw\n"
            "byte skip: 0\ndata file: data.raw\n\n",
            voxel_bytes_of(b8));
+  // 4-D files whose one volume is read alone from the data stream
+  // (io.cpp, nrrd_read_volume): the volume axis first, big-endian, volume
+  // 1; gzip with the volume axis last; a detached file with a byte skip,
+  // volume 2.
+  Bytes series(2 * 3 * 6 * 5 * 4);
+  for (std::size_t i = 0; i < series.size(); ++i) series[i] = static_cast<unsigned char>(i * 7);
+  auto gzip_bytes = [](const Bytes& in) {
+    z_stream z{};
+    Bytes out(compressBound(static_cast<uLong>(in.size())) + 32);
+    if (deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK) return Bytes{};
+    z.next_in = const_cast<unsigned char*>(in.data());
+    z.avail_in = static_cast<uInt>(in.size());
+    z.next_out = out.data();
+    z.avail_out = static_cast<uInt>(out.size());
+    const int r = deflate(&z, Z_FINISH);
+    out.resize(out.size() - z.avail_out);
+    deflateEnd(&z);
+    return r == Z_STREAM_END ? out : Bytes{};
+  };
+  auto attached4 = [&](const std::string& name, uint8_t mode, const std::string& header,
+                       const Bytes& d) {
+    Bytes b(header.begin(), header.end());
+    b.insert(b.end(), d.begin(), d.end());
+    write_seed(nrrd, name, framed(mode, b));
+  };
+  attached4("attached_4d_list", 4,
+            "NRRD0004\ntype: short\ndimension: 4\nsizes: 3 6 5 4\n"
+            "kinds: list domain domain domain\nendian: big\nencoding: raw\n\n",
+            series);
+  attached4("attached_4d_gzip", 4,
+            "NRRD0004\ntype: short\ndimension: 4\nsizes: 6 5 4 3\n"
+            "kinds: domain domain domain list\nendian: little\nencoding: gzip\n\n",
+            gzip_bytes(series));
+  {
+    Bytes skipped(5, 0xAB);
+    skipped.insert(skipped.end(), series.begin(), series.end());
+    const std::string h =
+        "NRRD0004\ntype: short\ndimension: 4\nsizes: 6 5 4 3\n"
+        "kinds: domain domain domain list\nendian: little\nencoding: raw\nbyte skip: 5\n"
+        "data file: data.raw\n\n";
+    Bytes b(h.begin(), h.end());
+    b.insert(b.end(), skipped.begin(), skipped.end());
+    write_seed(nrrd, "detached_4d_skip", framed(7, b));
+  }
   detached("detached_format",
            "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 2\nencoding: raw\n"
            "data file: data%d.raw 1 2 1 2\n\n",

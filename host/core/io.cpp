@@ -549,6 +549,135 @@ void nrrd_gzip_precheck(const fs::path& path, const fs::path& data, uint64_t off
                               " bytes, but the header needs " + std::to_string(need));
 }
 
+/// One volume of a 4-D NRRD read from its data stream, the other volumes
+/// skipped, not held: where the data are one stream (attached after the
+/// header, or one detached file), raw or gzip, with no line skip (and no
+/// byte skip for gzip, which teem applies after decoding). teem's nrrdLoad
+/// reads every volume: a diffusion series of 786 MB for a 12 MB volume.
+struct NrrdVolumeStream {
+  fs::path data;                      ///< the file holding the data
+  uint64_t offset = 0;                ///< where they start in it (raw: byte skip included)
+  bool gzip = false;                  ///< gzip members, else raw bytes
+  bool swap = false;                  ///< elements stored in the other byte order
+  int type = 0;                       ///< nrrdType of the elements
+  std::size_t esize = 0;              ///< bytes per element
+  std::array<std::size_t, 4> size{};  ///< the 4 axes' sizes, axis 0 fastest
+};
+
+/// Reads the data stream of a NRRD sequentially: `read` fills bytes (all of
+/// them, or throws FileError naming `path`), `skip` passes over bytes.
+class NrrdDataReader {
+ public:
+  NrrdDataReader(const fs::path& path, const NrrdVolumeStream& st)
+      : path_(path), gzip_(st.gzip), in_(st.data, std::ios::binary) {
+    if (!in_) throw FileError(path_, "cannot open data file " + st.data.string());
+    in_.seekg(static_cast<std::streamoff>(st.offset));
+    if (!in_) throw FileError(path_, "cannot seek to the voxel data");
+    if (gzip_ && inflateInit2(&z_, 15 + 16) != Z_OK)
+      throw FileError(path_, "zlib: inflateInit2 failed");
+  }
+  ~NrrdDataReader() {
+    if (gzip_) inflateEnd(&z_);
+  }
+  NrrdDataReader(const NrrdDataReader&) = delete;
+  NrrdDataReader& operator=(const NrrdDataReader&) = delete;
+
+  void read(unsigned char* dst, uint64_t n) {
+    if (!gzip_) {
+      in_.read(reinterpret_cast<char*>(dst), static_cast<std::streamsize>(n));
+      if (static_cast<uint64_t>(in_.gcount()) != n) short_data();
+      done_ += n;
+      return;
+    }
+    inflate_into(dst, n);
+  }
+
+  void skip(uint64_t n) {
+    if (n == 0) return;
+    if (!gzip_) {
+      in_.seekg(static_cast<std::streamoff>(n), std::ios::cur);
+      if (!in_) short_data();
+      done_ += n;
+      return;
+    }
+    std::vector<unsigned char> scratch(static_cast<std::size_t>(std::min<uint64_t>(n, 1 << 16)));
+    while (n > 0) {
+      const uint64_t k = std::min<uint64_t>(n, scratch.size());
+      inflate_into(scratch.data(), k);
+      n -= k;
+    }
+  }
+
+ private:
+  [[noreturn]] void short_data() const {
+    throw FileError(path_, "truncated data: the voxel data end after " + std::to_string(done_) +
+                               " bytes, before the volume asked for");
+  }
+  void inflate_into(unsigned char* dst, uint64_t n) {
+    while (n > 0) {
+      if (z_.avail_in == 0) {
+        in_.read(reinterpret_cast<char*>(ibuf_.data()), static_cast<std::streamsize>(ibuf_.size()));
+        const auto got = static_cast<uInt>(in_.gcount());
+        if (got == 0) short_data();
+        z_.next_in = ibuf_.data();
+        z_.avail_in = got;
+      }
+      if (ended_) {  // another gzip member follows
+        if (inflateReset(&z_) != Z_OK) throw FileError(path_, "zlib: inflateReset failed");
+        ended_ = false;
+      }
+      const auto want = static_cast<uInt>(std::min<uint64_t>(n, 1u << 30));
+      z_.next_out = dst;
+      z_.avail_out = want;
+      const int r = inflate(&z_, Z_NO_FLUSH);
+      const uInt got = want - z_.avail_out;
+      dst += got;
+      n -= got;
+      done_ += got;
+      if (r == Z_STREAM_END)
+        ended_ = true;
+      else if (r != Z_OK && r != Z_BUF_ERROR)
+        throw FileError(path_, std::string("corrupt gzip data: ") +
+                                   (z_.msg ? z_.msg : "zlib error") + " after " +
+                                   std::to_string(done_) + " decoded bytes");
+    }
+  }
+
+  fs::path path_;
+  bool gzip_;
+  std::ifstream in_;
+  z_stream z_{};
+  bool ended_ = false;
+  uint64_t done_ = 0;  ///< bytes read or skipped (decoded bytes for gzip)
+  std::vector<unsigned char> ibuf_ = std::vector<unsigned char>(1 << 16);
+};
+
+/// The elements of volume `index` along axis `vaxis` of the stream `st`, in
+/// nrrd order with that axis left out (axis 0 fastest), in the host's byte
+/// order. Along the volume axis the data are runs of stride(vaxis) elements,
+/// one run per volume, repeated for every index of the axes above it.
+std::vector<unsigned char> nrrd_read_volume(const fs::path& path, const NrrdVolumeStream& st,
+                                            int vaxis, int64_t index) {
+  std::size_t run = st.esize;  // bytes of one volume's run
+  for (int a = 0; a < vaxis; ++a) run *= st.size[static_cast<std::size_t>(a)];
+  std::size_t outer = 1;
+  for (int a = vaxis + 1; a < 4; ++a) outer *= st.size[static_cast<std::size_t>(a)];
+  const auto vols = static_cast<uint64_t>(st.size[static_cast<std::size_t>(vaxis)]);
+  const auto k = static_cast<uint64_t>(index);
+  std::vector<unsigned char> out(run * outer);
+  NrrdDataReader reader(path, st);
+  for (std::size_t o = 0; o < outer; ++o) {
+    reader.skip(k * run);
+    reader.read(out.data() + o * run, run);
+    if (o + 1 < outer) reader.skip((vols - 1 - k) * run);
+  }
+  if (st.swap && st.esize > 1)
+    for (std::size_t i = 0; i < out.size(); i += st.esize)
+      std::reverse(out.begin() + static_cast<std::ptrdiff_t>(i),
+                   out.begin() + static_cast<std::ptrdiff_t>(i + st.esize));
+  return out;
+}
+
 // ---------------------------------------------------------------- NIfTI
 
 /// The three headers of the NIfTI family, as niftilib reads them.
@@ -990,6 +1119,7 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
   // before teem allocates anything.
   NrrdShape shape;
   VoxelType vtype;
+  std::optional<NrrdVolumeStream> stream;  // one volume of a 4-D file, read alone
   {
     NrrdPtr hdr(nrrdNew());
     NioPtr nio(nrrdIoStateNew());
@@ -1071,52 +1201,101 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
                                   airEnumStr(nrrdType, hdr->type) + " need " +
                                   std::to_string(need));
     }
+    // A volume of a 4-D file whose data are one raw or gzip stream: read
+    // alone (nrrd_read_volume), not all of them through teem.
+    const bool byte_order_known =
+        esize == 1 || nio->endian == airEndianLittle || nio->endian == airEndianBig;
+    if (shape.volumes > 1 && hdr->dim == 4 && files.size() <= 1 && nio->lineSkip == 0 &&
+        !nio->dataFSkip && byte_order_known &&
+        ((ename == "raw" && nio->byteSkip >= 0) || (ename == "gzip" && nio->byteSkip == 0))) {
+      const std::optional<uint64_t> start =
+          files.empty() ? nrrd_header_end(path) : std::optional<uint64_t>(0);
+      if (start) {
+        NrrdVolumeStream st;
+        st.data = files.empty() ? path : files[0];
+        st.gzip = ename == "gzip";
+        st.offset = *start + (st.gzip ? 0 : static_cast<uint64_t>(nio->byteSkip));
+        st.swap =
+            esize > 1 && (nio->endian == airEndianBig) != (std::endian::native == std::endian::big);
+        st.type = hdr->type;
+        st.esize = esize;
+        for (unsigned int a = 0; a < 4; ++a) st.size[a] = hdr->axis[a].size;
+        stream = st;
+      }
+    }
   }
 
-  // Pass 2: the data.
+  // Pass 2: the data (teem reads them all), or the header again and the
+  // one volume's data from the stream.
   NrrdPtr nrrd(nrrdNew());
   NioPtr nio(nrrdIoStateNew());
   if (!nrrd || !nio) throw FileError(path, "out of memory");
+  if (stream) nio->skipData = 1;
   if (nrrdLoad(nrrd.get(), name.c_str(), nio.get()))
     throw FileError(path, "cannot read NRRD data: " + biff_message(NRRD));
-  if (!nrrd->data) throw FileError(path, "NRRD has no data");
+  if (!stream && !nrrd->data) throw FileError(path, "NRRD has no data");
   const NrrdShape s = nrrd_shape(path, nrrd.get(), volume_index);
   if (s.dims != shape.dims || s.volumes != shape.volumes || s.volume_axis != shape.volume_axis)
     throw FileError(path, "NRRD changed while being read");
   if (volumes) *volumes = s.volumes;
 
+  // What nrrd_copy reads: the whole nrrd and its shape, or the one volume
+  // wrapped as a 3-D nrrd (its axes numbered without the volume axis).
+  const Nrrd* src = nrrd.get();
+  NrrdShape cs = s;
+  std::vector<unsigned char> one;
+  struct NixDeleter {
+    void operator()(Nrrd* n) const { nrrdNix(n); }  // the struct only: `one` holds the data
+  };
+  std::unique_ptr<Nrrd, NixDeleter> wrapped;
+  if (stream) {
+    one = nrrd_read_volume(path, *stream, s.volume_axis, s.index);
+    std::size_t sizes[3];
+    unsigned int j = 0;
+    for (unsigned int a = 0; a < 4; ++a)
+      if (static_cast<int>(a) != s.volume_axis) sizes[j++] = stream->size[a];
+    wrapped.reset(nrrdNew());
+    if (!wrapped || nrrdWrap_nva(wrapped.get(), one.data(), stream->type, 3, sizes))
+      throw FileError(path, "out of memory");
+    for (unsigned int& a : cs.axes)
+      if (static_cast<int>(a) > s.volume_axis) --a;
+    cs.volume_axis = -1;
+    cs.index = 0;
+    src = wrapped.get();
+  }
+
   Volume vol(s.dims, vtype, s.spacing);
   float* out = vol.data().data();
-  switch (nrrd->type) {
+  switch (src->type) {
     case nrrdTypeChar:
-      nrrd_copy<signed char>(nrrd.get(), s, out);
+      nrrd_copy<signed char>(src, cs, out);
       break;
     case nrrdTypeUChar:
-      nrrd_copy<unsigned char>(nrrd.get(), s, out);
+      nrrd_copy<unsigned char>(src, cs, out);
       break;
     case nrrdTypeShort:
-      nrrd_copy<int16_t>(nrrd.get(), s, out);
+      nrrd_copy<int16_t>(src, cs, out);
       break;
     case nrrdTypeUShort:
-      nrrd_copy<uint16_t>(nrrd.get(), s, out);
+      nrrd_copy<uint16_t>(src, cs, out);
       break;
     case nrrdTypeInt:
-      nrrd_copy<int32_t>(nrrd.get(), s, out);
+      nrrd_copy<int32_t>(src, cs, out);
       break;
     case nrrdTypeUInt:
-      nrrd_copy<uint32_t>(nrrd.get(), s, out);
+      nrrd_copy<uint32_t>(src, cs, out);
       break;
     case nrrdTypeLLong:
-      nrrd_copy<long long>(nrrd.get(), s, out);
+      nrrd_copy<long long>(src, cs, out);
       break;
     case nrrdTypeULLong:
-      nrrd_copy<unsigned long long>(nrrd.get(), s, out);
+      nrrd_copy<unsigned long long>(src, cs, out);
       break;
     case nrrdTypeFloat:
-      nrrd_copy<float>(nrrd.get(), s, out);
+      nrrd_copy<float>(src, cs, out);
       break;
     case nrrdTypeDouble:
-      nrrd_copy<double>(nrrd.get(), s, out);
+      nrrd_copy<double>(src, cs, out);
       break;
     default:
       throw FileError(path, "unsupported NRRD type");

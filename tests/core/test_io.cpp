@@ -2154,6 +2154,89 @@ TEST_F(IoTest, NrrdVolumeOfAFourDFile) {
   expect_file_error([&] { simdvol::load_nrrd(two, 0); }, two, {"2 axes of a non-spatial kind"});
 }
 
+// A volume of a 4-D NRRD whose data are one raw or gzip stream is read
+// alone from the stream (the other volumes skipped, not held; teem's
+// nrrdLoad would read them all): every voxel type in both byte orders,
+// attached and detached data, a raw byte skip, the volume axis first
+// (Slicer's diffusion series) and last, every volume index, against values
+// the test encodes by hand; a detached raw stream that ends inside the
+// volume asked for is a FileError naming the file.
+TEST_F(IoTest, NrrdOneVolumeReadAloneFromItsStream) {
+  constexpr int kVols = 3;
+  auto value = [](int64_t x, int64_t y, int64_t z, int64_t v) {
+    return static_cast<float>(60 * v + x + 5 * y + 20 * z);
+  };
+  struct Form {
+    const char* sizes;
+    const char* kinds;
+    int axis;
+  };
+  const Form forms[] = {{"3 5 4 3", "list domain domain domain", 0},
+                        {"5 4 3 3", "domain domain domain list", 3}};
+  for (VoxelType t : kTypes)
+    for (const Form& f : forms)
+      for (bool big : {false, true})
+        for (const std::string encoding : {"raw", "gzip"})
+          for (int where = 0; where < 3; ++where) {  // attached, detached, detached + byte skip
+            if (where == 2 && encoding == "gzip") continue;
+            SCOPED_TRACE(std::string(simdvol::to_string(t)) + " axis " + std::to_string(f.axis) +
+                         (big ? " big " : " little ") + encoding + " form " +
+                         std::to_string(where));
+            int64_t size[4], k = 0;
+            for (int a = 0; a < 4; ++a)
+              size[a] = a == f.axis ? kVols : kDims[static_cast<std::size_t>(k++)];
+            std::vector<float> data;
+            for (int64_t i3 = 0; i3 < size[3]; ++i3)
+              for (int64_t i2 = 0; i2 < size[2]; ++i2)
+                for (int64_t i1 = 0; i1 < size[1]; ++i1)
+                  for (int64_t i0 = 0; i0 < size[0]; ++i0) {
+                    const int64_t i[4] = {i0, i1, i2, i3};
+                    int64_t xyz[3], j = 0;
+                    for (int a = 0; a < 4; ++a)
+                      if (a != f.axis) xyz[j++] = i[a];
+                    data.push_back(value(xyz[0], xyz[1], xyz[2], i[f.axis]));
+                  }
+            Bytes body = encode(t, data, big);
+            if (encoding == "gzip") body = gzip(body);
+            std::string header = std::string("NRRD0004\ntype: ") + nrrd_type(t) +
+                                 "\ndimension: 4\nsizes: " + f.sizes + "\nkinds: " + f.kinds +
+                                 "\nendian: " + (big ? "big" : "little") +
+                                 "\nencoding: " + encoding + "\n";
+            const fs::path p = file(where == 0 ? "series.nrrd" : "series.nhdr");
+            if (where == 0) {
+              write_file(p, concat(header + "\n", body));
+            } else {
+              if (where == 2) {
+                body.insert(body.begin(), 7, static_cast<unsigned char>(0xAB));
+                header += "byte skip: 7\n";
+              }
+              write_file(file("series.data"), body);
+              write_file(p, concat(header + "data file: series.data\n", Bytes{}));
+            }
+            for (int v = 0; v < kVols; ++v) {
+              std::vector<float> want;
+              for (int64_t z = 0; z < 3; ++z)
+                for (int64_t y = 0; y < 4; ++y)
+                  for (int64_t x = 0; x < 5; ++x) want.push_back(value(x, y, z, v));
+              int64_t volumes = 0;
+              expect_volume(simdvol::load_volume(p, std::nullopt, v, &volumes), kDims, t, want);
+              EXPECT_EQ(volumes, kVols);
+            }
+          }
+  // Cut 5 bytes short of volume 2's end, after a byte skip of 7 (so the
+  // file still holds as many bytes as the header needs, and only the read
+  // finds it short): volumes 0 and 1 load, volume 2 is a FileError.
+  Bytes body(7 + 2 * 5 * 4 * 3 * 3 - 5, 0);
+  write_file(file("cut.data"), body);
+  const fs::path cut = file("cut.nhdr");
+  write_file(cut, concat(std::string("NRRD0004\ntype: short\ndimension: 4\nsizes: 5 4 3 3\n"
+                                     "kinds: domain domain domain list\nendian: little\n"
+                                     "encoding: raw\nbyte skip: 7\ndata file: cut.data\n"),
+                         Bytes{}));
+  EXPECT_NO_THROW(simdvol::load_nrrd(cut, 1));
+  expect_file_error([&] { simdvol::load_nrrd(cut, 2); }, cut, {"truncated data"});
+}
+
 // ch2.nii.gz from Debian's mricron-data (Colin27 T1 template), sha256
 // a009051127f64dc3dd554d5f5b589870ea72106d9642c21b4e7093e478cfc309.
 // Expected values computed independently of the loader, with python3's gzip
