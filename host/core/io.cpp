@@ -437,6 +437,18 @@ void nrrd_prescan_header(const fs::path& path) {
       if (line[i] != ' ' && line[i] != '\t')
         key += static_cast<char>(std::tolower(static_cast<unsigned char>(line[i])));
     if (key == "dimension") have_dimension = true;
+    // The per-axis fields need the dimension before them (the format says
+    // so, and teem refuses them otherwise), and teem 1.11 leaks what it
+    // parsed of a kinds or centers line when it refuses it (fuzzer finding):
+    // refused here, by name.
+    static const char* const kPerAxis[] = {"sizes",    "spacings", "thicknesses",    "axismins",
+                                           "axismaxs", "centers",  "centerings",     "labels",
+                                           "units",    "kinds",    "spacedirections"};
+    if (!have_dimension)
+      for (const char* field : kPerAxis)
+        if (key == field)
+          throw FileError(path, "malformed header: the per-axis field '" + line.substr(0, colon) +
+                                    "' before 'dimension'");
     if (key == "datafile") {
       // teem 1.11 leaks its file-name array when it parses a data file line
       // before knowing the dimension (fuzzer finding); the format wants the

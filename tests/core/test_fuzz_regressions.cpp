@@ -245,6 +245,28 @@ TEST_F(FuzzRegressions, NrrdDataFileBeforeDimension) {
                     "'data file' before 'dimension'");
 }
 
+// Fuzzer finding (nrrd, leak-882afd…, minimised to "NRRD0004\nkinds: \n"):
+// teem rejects a per-axis field before the dimension, but leaks what it
+// parsed of a kinds or centers line (440 bytes). Every per-axis field before
+// the dimension is now rejected first, by name (the sanitizer run of the
+// suite reports the leak if one reaches teem).
+TEST_F(FuzzRegressions, NrrdPerAxisFieldBeforeDimension) {
+  expect_file_error(write("kinds.nrrd", concat("NRRD0004\nkinds: \n", {})),
+                    "per-axis field 'kinds' before 'dimension'");
+  for (const std::string field : {"centers", "centerings", "sizes", "space directions"})
+    expect_file_error(
+        write("f.nrrd",
+              concat("NRRD0004\ntype: uchar\n" + field + ": cell cell cell\ndimension: 3\n\n", {})),
+        "per-axis field '" + field + "' before 'dimension'");
+  // After the dimension they load as before.
+  const fs::path ok =
+      write("ok.nrrd", concat("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\n"
+                              "kinds: domain domain domain\ncenters: cell cell cell\n"
+                              "encoding: raw\n\n",
+                              std::vector<uint8_t>(8, 5)));
+  EXPECT_EQ(simdvol::load_nrrd(ok).dims(), (std::array<int64_t, 3>{2, 2, 2}));
+}
+
 // Fuzzer finding (metaimage, crash-12d8e2…): an ElementDataFile of binary
 // junk holding a '%' made MetaIO read it as a printf pattern of slice files
 // with a step of 0, and divide by it (SIGFPE in MetaImage::ReadStream).
