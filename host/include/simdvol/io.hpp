@@ -41,7 +41,10 @@ Volume load_den(const std::filesystem::path& path);
 /// A 4-D nrrd of several 3-D volumes loads the one at `volume_index`, as
 /// load_nifti; its volume axis is its one axis of a non-spatial kind (a
 /// list or vector: a diffusion series), else an axis of size 1, else the
-/// last axis (a time series). teem reads every volume; one is kept.
+/// last axis (a time series). Where the data are one raw or gzip stream
+/// (attached, or one detached file) that volume is read alone from it, the
+/// others skipped; otherwise (ASCII or hex, several data files, a line
+/// skip) teem reads every volume and one is kept.
 Volume load_nrrd(const std::filesystem::path& path,
                  std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
 /// NIfTI through niftilib: NIfTI-1 and NIfTI-2, each as a single file
