@@ -2082,6 +2082,46 @@ TEST(IoReal, DicomEnhancedAndMosaicFiles) {
   fs::remove_all(dir);
 }
 
+/// A 4-D nrrd's layout in the tests below: its sizes, its kinds (as each test
+/// writes them) and its volume axis.
+struct FourDForm {
+  const char* sizes;
+  const char* kinds;
+  int axis;
+};
+
+/// Value of voxel (x, y, z) of volume v in the 4-D files below.
+using FourDValue = std::function<float(int64_t, int64_t, int64_t, int64_t)>;
+
+/// The voxels of a 4-D nrrd in file order (axis 0 fastest) whose volume
+/// axis is `axis`, of `vols` volumes, and whose other axes are x, y and z
+/// of kDims in turn.
+std::vector<float> four_d_data(int axis, int vols, const FourDValue& value) {
+  int64_t size[4], k = 0;
+  for (int a = 0; a < 4; ++a) size[a] = a == axis ? vols : kDims[static_cast<std::size_t>(k++)];
+  std::vector<float> data;
+  for (int64_t i3 = 0; i3 < size[3]; ++i3)
+    for (int64_t i2 = 0; i2 < size[2]; ++i2)
+      for (int64_t i1 = 0; i1 < size[1]; ++i1)
+        for (int64_t i0 = 0; i0 < size[0]; ++i0) {
+          const int64_t i[4] = {i0, i1, i2, i3};
+          int64_t xyz[3], j = 0;
+          for (int a = 0; a < 4; ++a)
+            if (a != axis) xyz[j++] = i[a];
+          data.push_back(value(xyz[0], xyz[1], xyz[2], i[axis]));
+        }
+  return data;
+}
+
+/// Volume v of those files, x fastest.
+std::vector<float> four_d_volume(int v, const FourDValue& value) {
+  std::vector<float> want;
+  for (int64_t z = 0; z < kDims[2]; ++z)
+    for (int64_t y = 0; y < kDims[1]; ++y)
+      for (int64_t x = 0; x < kDims[0]; ++x) want.push_back(value(x, y, z, v));
+  return want;
+}
+
 // A 4-D NRRD: the volume at an index along its volume axis, which is its
 // one axis of a non-spatial kind (a diffusion series' list, first and
 // fastest as Slicer writes it, or last; a vector), else the last axis (no
@@ -2094,51 +2134,28 @@ TEST_F(IoTest, NrrdVolumeOfAFourDFile) {
   auto value = [](int64_t x, int64_t y, int64_t z, int64_t v) {
     return static_cast<float>(100 * v + x + 5 * y + 20 * z);
   };
-  struct Form {
-    const char* sizes;
-    const char* kinds;
-    int axis;  // the volume axis
-  };
-  const Form forms[] = {
+  const FourDForm forms[] = {
       {"3 5 4 3", "kinds: list domain domain domain\n", 0},
       {"5 4 3 3", "kinds: domain domain domain list\n", 3},
       {"5 4 3 3", "", 3},
       {"5 4 3 3", "kinds: space space space time\n", 3},
       {"5 3 4 3", "kinds: domain vector domain domain\n", 1},
   };
-  for (const Form& f : forms)
+  for (const FourDForm& f : forms)
     for (const std::string encoding : {"raw", "gzip"}) {
       SCOPED_TRACE(std::string(f.sizes) + " " + f.kinds + encoding);
       // The file's voxels in nrrd order, axis 0 fastest: the volume axis
       // where the form puts it, x, y, z in the others.
-      int64_t size[4], k = 0;
-      for (int a = 0; a < 4; ++a)
-        size[a] = a == f.axis ? kVols : kDims[static_cast<std::size_t>(k++)];
-      std::vector<float> data;
-      for (int64_t i3 = 0; i3 < size[3]; ++i3)
-        for (int64_t i2 = 0; i2 < size[2]; ++i2)
-          for (int64_t i1 = 0; i1 < size[1]; ++i1)
-            for (int64_t i0 = 0; i0 < size[0]; ++i0) {
-              const int64_t i[4] = {i0, i1, i2, i3};
-              int64_t xyz[3], j = 0;
-              for (int a = 0; a < 4; ++a)
-                if (a != f.axis) xyz[j++] = i[a];
-              data.push_back(value(xyz[0], xyz[1], xyz[2], i[f.axis]));
-            }
-      Bytes body = encode(VoxelType::i16, data, false);
+      Bytes body = encode(VoxelType::i16, four_d_data(f.axis, kVols, value), false);
       if (encoding == "gzip") body = gzip(body);
       const fs::path p = file("series.nrrd");
       write_file(p, concat(std::string("NRRD0004\ntype: short\ndimension: 4\nsizes: ") + f.sizes +
                                "\n" + f.kinds + "endian: little\nencoding: " + encoding + "\n\n",
                            body));
       for (int v = 0; v < kVols; ++v) {
-        std::vector<float> want;
-        for (int64_t z = 0; z < 3; ++z)
-          for (int64_t y = 0; y < 4; ++y)
-            for (int64_t x = 0; x < 5; ++x) want.push_back(value(x, y, z, v));
         int64_t volumes = 0;
         expect_volume(simdvol::load_volume(p, std::nullopt, v, &volumes), kDims, VoxelType::i16,
-                      want);
+                      four_d_volume(v, value));
         EXPECT_EQ(volumes, kVols);
       }
       expect_file_error(
@@ -2166,15 +2183,10 @@ TEST_F(IoTest, NrrdOneVolumeReadAloneFromItsStream) {
   auto value = [](int64_t x, int64_t y, int64_t z, int64_t v) {
     return static_cast<float>(60 * v + x + 5 * y + 20 * z);
   };
-  struct Form {
-    const char* sizes;
-    const char* kinds;
-    int axis;
-  };
-  const Form forms[] = {{"3 5 4 3", "list domain domain domain", 0},
-                        {"5 4 3 3", "domain domain domain list", 3}};
+  const FourDForm forms[] = {{"3 5 4 3", "list domain domain domain", 0},
+                             {"5 4 3 3", "domain domain domain list", 3}};
   for (VoxelType t : kTypes)
-    for (const Form& f : forms)
+    for (const FourDForm& f : forms)
       for (bool big : {false, true})
         for (const std::string encoding : {"raw", "gzip"})
           for (int where = 0; where < 3; ++where) {  // attached, detached, detached + byte skip
@@ -2182,21 +2194,7 @@ TEST_F(IoTest, NrrdOneVolumeReadAloneFromItsStream) {
             SCOPED_TRACE(std::string(simdvol::to_string(t)) + " axis " + std::to_string(f.axis) +
                          (big ? " big " : " little ") + encoding + " form " +
                          std::to_string(where));
-            int64_t size[4], k = 0;
-            for (int a = 0; a < 4; ++a)
-              size[a] = a == f.axis ? kVols : kDims[static_cast<std::size_t>(k++)];
-            std::vector<float> data;
-            for (int64_t i3 = 0; i3 < size[3]; ++i3)
-              for (int64_t i2 = 0; i2 < size[2]; ++i2)
-                for (int64_t i1 = 0; i1 < size[1]; ++i1)
-                  for (int64_t i0 = 0; i0 < size[0]; ++i0) {
-                    const int64_t i[4] = {i0, i1, i2, i3};
-                    int64_t xyz[3], j = 0;
-                    for (int a = 0; a < 4; ++a)
-                      if (a != f.axis) xyz[j++] = i[a];
-                    data.push_back(value(xyz[0], xyz[1], xyz[2], i[f.axis]));
-                  }
-            Bytes body = encode(t, data, big);
+            Bytes body = encode(t, four_d_data(f.axis, kVols, value), big);
             if (encoding == "gzip") body = gzip(body);
             std::string header = std::string("NRRD0004\ntype: ") + nrrd_type(t) +
                                  "\ndimension: 4\nsizes: " + f.sizes + "\nkinds: " + f.kinds +
@@ -2214,12 +2212,9 @@ TEST_F(IoTest, NrrdOneVolumeReadAloneFromItsStream) {
               write_file(p, concat(header + "data file: series.data\n", Bytes{}));
             }
             for (int v = 0; v < kVols; ++v) {
-              std::vector<float> want;
-              for (int64_t z = 0; z < 3; ++z)
-                for (int64_t y = 0; y < 4; ++y)
-                  for (int64_t x = 0; x < 5; ++x) want.push_back(value(x, y, z, v));
               int64_t volumes = 0;
-              expect_volume(simdvol::load_volume(p, std::nullopt, v, &volumes), kDims, t, want);
+              expect_volume(simdvol::load_volume(p, std::nullopt, v, &volumes), kDims, t,
+                            four_d_volume(v, value));
               EXPECT_EQ(volumes, kVols);
             }
           }
