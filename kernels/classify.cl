@@ -183,6 +183,36 @@ SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float 
   return a;
 }
 
+/* The series of the opacity step, one expression for the scalar functions
+ * below and their 16-lane twins (sv_log1m16, ...), so that both compute
+ * the same operations in the same order: 2 atanh(u) from u and u^2; -(1 -
+ * e^x) for small |x|; the binomial a' for a small alpha a and step s. */
+#define SV_LOG1M_SERIES(u, u2)                                  \
+  ((u) *                                                        \
+   (2.0f +                                                      \
+    (u2) *                                                      \
+        (0.666666667f +                                         \
+         (u2) * (0.4f +                                         \
+                 (u2) * (0.285714286f +                         \
+                         (u2) * (0.222222222f +                 \
+                                 (u2) * (0.181818182f +         \
+                                         (u2) * (0.153846154f + \
+                                                 (u2) * (0.133333333f + (u2)*0.117647059f)))))))))
+#define SV_ONE_MINUS_EXP_SERIES(x)                              \
+  ((x) *                                                        \
+   (1.0f +                                                      \
+    (x) * (0.5f +                                               \
+           (x) * (0.166666667f +                                \
+                  (x) * (0.0416666667f +                        \
+                         (x) * (0.00833333333f +                \
+                                (x) * (0.00138888889f +         \
+                                       (x) * (0.000198412698f + \
+                                              (x) * (2.48015873e-5f + (x)*2.75573192e-6f)))))))))
+#define SV_STEP_SMALL_SERIES(a, s)   \
+  ((s) * (a) *                       \
+   (1.0f - 0.5f * ((s)-1.0f) * (a) * \
+               (1.0f - ((s)-2.0f) * (1.0f / 3.0f) * (a) * (1.0f - ((s)-3.0f) * 0.25f * (a)))))
+
 /* ln(1 - a) for 0 <= a <= 1/2, without forming 1 - a (whose rounding
  * would cost up to 3e-8 absolute, hundreds of ulp of a small a's step):
  * 2 atanh(u), u = -a / (2 - a), |u| <= 1/3, series to u^17 (truncation
@@ -190,28 +220,14 @@ SV_FN float sv_transfer(__constant const sv_classify_params* cp, float v, float 
 SV_FN float sv_log1m(float a) {
   const float u = -a / (2.0f - a);
   const float u2 = u * u;
-  return u *
-         (2.0f +
-          u2 * (0.666666667f +
-                u2 * (0.4f + u2 * (0.285714286f +
-                                   u2 * (0.222222222f +
-                                         u2 * (0.181818182f +
-                                               u2 * (0.153846154f +
-                                                     u2 * (0.133333333f + u2 * 0.117647059f))))))));
+  return SV_LOG1M_SERIES(u, u2);
 }
 /* 1 - e^x for x <= 0 (where the step's x lies): below |x| 1/2 the series
  * -x (1 + x / 2 (1 + x / 3 (...))) to x^9 (truncation below 1e-9
  * relative), without the cancellation of 1 - e^x; from 1/2 on
  * 1 - sv_exp(x), which keeps at least 0.39. */
 SV_FN float sv_one_minus_exp(float x) {
-  const float p =
-      x *
-      (1.0f + x * (0.5f + x * (0.166666667f +
-                               x * (0.0416666667f +
-                                    x * (0.00833333333f +
-                                         x * (0.00138888889f +
-                                              x * (0.000198412698f +
-                                                   x * (2.48015873e-5f + x * 2.75573192e-6f))))))));
+  const float p = SV_ONE_MINUS_EXP_SERIES(x);
   return fabs(x) < 0.5f ? -p : 1.0f - sv_exp(x);
 }
 
@@ -228,10 +244,7 @@ SV_FN float sv_one_minus_exp(float x) {
 SV_FN float sv_step_alpha(float a, float t, float s) {
   const float lt = a < 0.5f ? sv_log1m(a) : sv_log(t);
   const float big = t < FLT_MIN ? 1.0f : sv_one_minus_exp(s * lt);
-  const float small =
-      s * a *
-      (1.0f - 0.5f * (s - 1.0f) * a *
-                  (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a * (1.0f - (s - 3.0f) * 0.25f * a)));
+  const float small = SV_STEP_SMALL_SERIES(a, s);
   return a < 0.00390625f ? small : big;
 }
 
@@ -418,33 +431,16 @@ SV_FN float16 sv_transfer16(__constant const sv_classify_params* cp, float16 v, 
 SV_FN float16 sv_log1m16(float16 a) {
   const float16 u = -a / (2.0f - a);
   const float16 u2 = u * u;
-  return u *
-         (2.0f +
-          u2 * (0.666666667f +
-                u2 * (0.4f + u2 * (0.285714286f +
-                                   u2 * (0.222222222f +
-                                         u2 * (0.181818182f +
-                                               u2 * (0.153846154f +
-                                                     u2 * (0.133333333f + u2 * 0.117647059f))))))));
+  return SV_LOG1M_SERIES(u, u2);
 }
 SV_FN float16 sv_one_minus_exp16(float16 x) {
-  const float16 p =
-      x *
-      (1.0f + x * (0.5f + x * (0.166666667f +
-                               x * (0.0416666667f +
-                                    x * (0.00833333333f +
-                                         x * (0.00138888889f +
-                                              x * (0.000198412698f +
-                                                   x * (2.48015873e-5f + x * 2.75573192e-6f))))))));
+  const float16 p = SV_ONE_MINUS_EXP_SERIES(x);
   return select(1.0f - sv_exp16(x), -p, fabs(x) < 0.5f);
 }
 SV_FN float16 sv_step_alpha16(float16 a, float16 t, float s) {
   const float16 lt = select(sv_log16(t), sv_log1m16(a), a < 0.5f);
   const float16 big = select(sv_one_minus_exp16(s * lt), (float16)(1.0f), t < FLT_MIN);
-  const float16 small =
-      s * a *
-      (1.0f - 0.5f * (s - 1.0f) * a *
-                  (1.0f - (s - 2.0f) * (1.0f / 3.0f) * a * (1.0f - (s - 3.0f) * 0.25f * a)));
+  const float16 small = SV_STEP_SMALL_SERIES(a, s);
   return select(big, small, a < 0.00390625f);
 }
 
