@@ -169,11 +169,11 @@ std::string program_source(std::string_view stage, const Defines& defines = {});
 std::string program_source(std::string_view stage, const Defines& defines,
                            std::initializer_list<std::string_view> then);
 /// What Device::program builds for a stage: program_source(stage, defines),
-/// except that layout, match and swap are built together, one program of
-/// program_source("layout", defines) followed by match.cl and swap.cl (each
-/// with its #line directive): a program build costs PoCL about the same
-/// whatever its size, and a frame uses all three. Each file also builds on
-/// its own (program_source).
+/// except that layout, match, balance and swap are built together, one
+/// program of program_source("layout", defines) followed by match.cl,
+/// balance.cl and swap.cl (each with its #line directive): a program build
+/// costs PoCL about the same whatever its size, and a frame uses all four.
+/// Each file also builds on its own (program_source).
 std::string stage_program_source(std::string_view stage, const Defines& defines = {});
 /// A key for Device::build_keyed naming program_source(stage, defines, then)
 /// (`then` empty: program_source(stage, defines)) or, with a `kind` of
