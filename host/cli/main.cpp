@@ -4,12 +4,14 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <future>
 #include <initializer_list>
 #include <iostream>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -39,6 +41,30 @@ const CLI::Validator kNotNegative(
                                                            : std::string();
     },
     "", "not negative");
+
+// For the 64-bit integer options: CLI11 takes a whole number past the
+// type's range as its largest (--seed 18446744073709551616 as 2^64 - 1, a
+// seed other than the one given): refused instead. Other text is left to
+// CLI11's own conversion.
+template <class T>
+CLI::Validator in_range() {
+  return CLI::Validator(
+      [](std::string& v) {
+        std::string_view s = v;
+        while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+        while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+        if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+        const std::size_t digits =
+            s.find_first_not_of("0123456789", s.empty() || s[0] != '-' ? 0 : 1);
+        if (s.empty() || digits != std::string_view::npos) return std::string();
+        T x{};
+        if (std::from_chars(s.data(), s.data() + s.size(), x).ec == std::errc::result_out_of_range)
+          return v + " is outside " + std::to_string(std::numeric_limits<T>::min()) + " .. " +
+                 std::to_string(std::numeric_limits<T>::max());
+        return std::string();
+      },
+      "", "in range");
+}
 
 std::string upper(std::string s) {
   for (char& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
@@ -89,12 +115,14 @@ ViewAngles parse_view(const std::string& s) {
 
 std::array<int, 2> parse_size(const std::string& s) {
   const auto parts = split(s, 'x');
-  if (parts.size() == 1) {
+  // ("32x" splits as "32" alone.)
+  if (s.find('x') == std::string::npos) {
     const int64_t n = parse_int(parts[0], "--size");
     if (n <= 0 || n > 16384) throw ArgumentError("--size", s + " is outside 1 .. 16384");
     return {static_cast<int>(n), static_cast<int>(n)};
   }
-  if (parts.size() != 2) throw ArgumentError("--size", "expected WxH, e.g. 256x256");
+  if (parts.size() != 2)
+    throw ArgumentError("--size", "expected WxH, e.g. 256x256, not '" + s + "'");
   const int64_t w = parse_int(parts[0], "--size"), h = parse_int(parts[1], "--size");
   if (w <= 0 || h <= 0 || w > 16384 || h > 16384)
     throw ArgumentError("--size", s + " is outside 1x1 .. 16384x16384");
@@ -118,11 +146,13 @@ struct VolumeArgs {
         ->capture_default_str();
     app->add_option("--raw-spacing", raw_spacing, "raw volumes: SX,SY,SZ (default 1,1,1)");
     app->add_option("--raw-header", raw_header, "raw volumes: bytes to skip before the voxels")
-        ->check(kNotNegative);
+        ->check(kNotNegative)
+        ->check(in_range<uint64_t>());
     app->add_option("--volume-index", volume_index,
                     "4-D NIfTI and NRRD files (a time or diffusion series of 3-D volumes), and "
                     "DICOM series with several images at each position (time points, echoes): "
-                    "which volume, from 0");
+                    "which volume, from 0")
+        ->check(in_range<int64_t>());
     app->add_option(
         "--orient", orient,
         "turn the volume's axes to point this way in the patient, as its NIfTI, "
@@ -298,6 +328,7 @@ int main(int argc, char** argv) {
   render->add_option("--samples", samples, "Monte Carlo walks per ray")->capture_default_str();
   render->add_option("--seed", seed, "Monte Carlo seed")
       ->check(kNotNegative)
+      ->check(in_range<uint64_t>())
       ->capture_default_str();
   render->add_option("--streams", streams, "Monte Carlo random streams: per-ray or shared")
       ->capture_default_str();
@@ -548,8 +579,15 @@ int main(int argc, char** argv) {
                     "--engine opencl");
       refuse_unless(!no_shade, {"--light", "--phong", "--depth-cue"},
                     "lit renders (not with --no-shade)");
+      refuse_unless(frames > 1, {"--step"}, "turntables (--frames 2 or more)");
+      // An empty name (render "$VOL" with VOL unset) is not the phantom.
+      if (render->count("volume") > 0 && rv.path.empty())
+        throw ArgumentError("volume", "empty name (give no volume for the built-in phantom)");
       const fs::path outp = out;
-      check_output_path(outp, "-o");
+      // A turntable writes the numbered names, not -o's: each is checked
+      // before the first frame, so that none is replaced before one that
+      // cannot be written stops the run.
+      for (int f = 0; f < frames; ++f) check_output_path(numbered(outp, f, frames), "-o");
       check_image_extension(outp);
       const fs::path tracep = trace;
       if (render->count("--trace") > 0) {

@@ -534,16 +534,30 @@ TEST_F(Cli, ReadsMincFiles) {
   EXPECT_FALSE(fs::exists(path("n.tif")));
 }
 
+// Every frame's name is checked before the first frame renders: a frame
+// that cannot be written stops the turntable before any earlier frame
+// replaces a file (it wrote frames 0 and 1 over what was there, then
+// stopped), and -o's own name, which a turntable does not write, may be
+// anything.
 TEST_F(Cli, TurntableStopsAtAFrameItCannotWrite) {
   fs::create_directories(dir_ / "t_0002.png");
+  std::ofstream(dir_ / "t_0000.png") << "kept";
   const Result r =
       run("render --phantom-size 16 --size 16x16 --frames 5 --step 5 -o " + path("t.png"));
-  EXPECT_NE(r.code, 0) << r.output;
-  EXPECT_NE(r.output.find("t_0002.png"), std::string::npos) << r.output;
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("-o: " + path("t_0002.png") + " is a directory"), std::string::npos)
+      << r.output;
   std::set<std::string> names;
   for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
-  EXPECT_EQ(names, (std::set<std::string>{"t_0000.png", "t_0001.png", "t_0002.png"}));
+  EXPECT_EQ(names, (std::set<std::string>{"t_0000.png", "t_0002.png"}));
   EXPECT_TRUE(fs::is_directory(dir_ / "t_0002.png"));
+  std::ifstream in(dir_ / "t_0000.png");
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), {}), "kept");
+  // -o names a directory, its numbered frames are free: written.
+  fs::remove(dir_ / "t_0002.png");
+  fs::remove(dir_ / "t_0000.png");
+  fs::create_directories(dir_ / "t.png");
+  ASSERT_EQ(run("render --phantom-size 16 --size 16x16 --frames 2 -o " + path("t.png")).code, 0);
   EXPECT_EQ(simdvol::read_image(path("t_0001.png")).width(), 16);
 }
 
@@ -971,6 +985,20 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --size -5 -o " + path("x.png"), "--size: -5 is outside 1 .. 16384"},
       {"render --size 3000000000 -o " + path("x.png"), "3000000000 is outside"},
       {"render --device -1 -o " + path("x.png"), "--device: -1 is negative"},
+      // Whole numbers past a 64-bit option's range (taken as its largest).
+      {"render --composite mc --seed 18446744073709551616 -o " + path("x.png"),
+       "--seed: 18446744073709551616 is outside 0 .. 18446744073709551615"},
+      {"render --volume-index 99999999999999999999 " + path("vol.raw") + " -o " + path("x.png"),
+       "--volume-index: 99999999999999999999 is outside"},
+      {"render " + path("vol.raw") + " --raw-dims 2,2,2 --raw-header 18446744073709551616 -o " +
+           path("x.png"),
+       "--raw-header: 18446744073709551616 is outside"},
+      // "32x" was taken as 32x32.
+      {"render --size 32x -o " + path("x.png"), "--size: expected WxH, e.g. 256x256, not '32x'"},
+      // An empty name rendered the phantom (render "$VOL", VOL unset).
+      {"render '' -o " + path("x.png"), "volume: empty name"},
+      {"render --step 5 -o " + path("x.png"),
+       "--step: applies only to turntables (--frames 2 or more)"},
       // Checked before the first frame (it said --view after two frames).
       {"render --phantom-size 16 --frames 3 --step 1e308 -o " + path("t.png"), "--step"},
       {"render --phantom-size 16 --frames 2 -o " + path("noext"), "unknown image extension"},
