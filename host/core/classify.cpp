@@ -91,6 +91,32 @@ void validate_ramp(const Ramp& r, const std::string& what) {
   }
 }
 
+// 1 / (2 sigma^2) as the kernels keep it, in float.
+float half_inv_var(const Material& m) {
+  const double sigma = m.sigma;
+  return static_cast<float>(1.0 / (2.0 * sigma * sigma));
+}
+
+// The kernels take (I - mean)^2 / (2 sigma^2) in float (sv_mixture: (I -
+// mean) * (I - mean) * half_inv_var) for I between two adjacent means, the
+// reference in double: at the far mean of a pair it must stay finite in
+// float (means of -3e38 and 3e38 made NaN fractions on the device, and
+// the two engines' images 0.3 apart). Half of FLT_MAX leaves room for the
+// float roundings.
+bool pair_fits_float(const Material& a, const Material& b) {
+  const double d = static_cast<double>(b.mean) - static_cast<double>(a.mean);
+  const double h = std::max(half_inv_var(a), half_inv_var(b));
+  const double limit = 0.5 * std::numeric_limits<float>::max();
+  return d * d <= limit && d * d * h <= limit;
+}
+
+std::string too_far_apart(const Material& a, const Material& b) {
+  return "materials '" + a.name + "' (mean " + fmt(a.mean) + ", sigma " + fmt(a.sigma) + ") and '" +
+         b.name + "' (mean " + fmt(b.mean) + ", sigma " + fmt(b.sigma) +
+         ") are too far apart for their sigmas in float arithmetic ((difference of the means)^2 "
+         "/ (2 sigma^2) overflows)";
+}
+
 void validate(const Classifier& c) {
   if (c.kind == Classifier::Kind::transfer) {
     validate_ramp(c.transfer.density, "classifier.density");
@@ -108,6 +134,9 @@ void validate(const Classifier& c) {
     if (!std::isfinite(mat.mean)) throw ArgumentError(what, "mean is not finite");
     if (!(mat.sigma > 0.0f) || !std::isfinite(mat.sigma))
       throw ArgumentError(what, "sigma must be > 0 (got " + fmt(mat.sigma) + ")");
+    // (The reference's double would take it; the kernels' float cannot.)
+    if (!std::isfinite(half_inv_var(mat)))
+      throw ArgumentError(what, "sigma " + fmt(mat.sigma) + " is too small for float arithmetic");
     for (float v : {mat.r, mat.g, mat.b})
       if (!(v >= 0.0f && v <= 1.0f))
         throw ArgumentError(what, "colour component " + fmt(v) + " is outside [0, 1]");
@@ -117,6 +146,8 @@ void validate(const Classifier& c) {
       throw ArgumentError("classifier", "material means must be strictly ascending ('" +
                                             m[i - 1].name + "' " + fmt(m[i - 1].mean) + ", then '" +
                                             mat.name + "' " + fmt(mat.mean) + ")");
+    if (i > 0 && !pair_fits_float(m[i - 1], mat))
+      throw ArgumentError("classifier", too_far_apart(m[i - 1], mat));
   }
 }
 
@@ -484,11 +515,12 @@ Classifier load_classifier(const std::filesystem::path& path) {
   }
   c.kind = Classifier::Kind::mixture;
   c.mixture.relative = relative_line != 0;
-  // The kernels keep 1 / (2 sigma^2) in float (a relative sigma is scaled by
-  // the volume's range first, so only an absolute one is checked here).
-  for (std::size_t k = 0; k < c.mixture.materials.size() && !c.mixture.relative; ++k) {
-    const double sigma = c.mixture.materials[k].sigma;
-    if (!std::isfinite(static_cast<float>(1.0 / (2.0 * sigma * sigma)))) {
+  // The kernels keep 1 / (2 sigma^2) in float, a relative sigma as an
+  // absolute one (a relative mixture maps the intensity to [0, 1] and keeps
+  // its means and sigmas as they are): validate's checks, here with the
+  // line.
+  for (std::size_t k = 0; k < c.mixture.materials.size(); ++k) {
+    if (!std::isfinite(half_inv_var(c.mixture.materials[k]))) {
       ps.line = material_lines[k];
       ps.fail("sigma " + fmt(c.mixture.materials[k].sigma) + " of '" + c.mixture.materials[k].name +
               "' is too small for float arithmetic");
@@ -506,6 +538,10 @@ Classifier load_classifier(const std::filesystem::path& path) {
       ps.line = std::max(material_lines[order[k]], material_lines[order[k - 1]]);
       ps.fail("materials '" + mats[order[k - 1]].name + "' and '" + mats[order[k]].name +
               "' have the same mean " + fmt(mats[order[k]].mean));
+    }
+    if (k > 0 && !pair_fits_float(mats[order[k - 1]], mats[order[k]])) {
+      ps.line = std::max(material_lines[order[k]], material_lines[order[k - 1]]);
+      ps.fail(too_far_apart(mats[order[k - 1]], mats[order[k]]));
     }
     sorted.push_back(mats[order[k]]);
   }

@@ -232,6 +232,22 @@ TEST(Mixture, RejectsInvalidMixtures) {
   Classifier opaque = abc();
   opaque.mixture.materials[1].opacity = 1.5f;
   EXPECT_THROW(classify_voxel(opaque, {}, 0.0f, 0.0f, col), ArgumentError);
+  // What the kernels' float cannot hold (the reference's double could):
+  // 1 / (2 sigma^2), and (difference of the means)^2 / (2 sigma^2) of two
+  // neighbours (means of -3e38 and 3e38 made NaN fractions on the device).
+  Classifier tiny = abc();
+  tiny.mixture.materials[1].sigma = 1e-30f;
+  EXPECT_THROW(classify_voxel(tiny, {}, 0.0f, 0.0f, col), ArgumentError);
+  Classifier far;
+  far.mixture.materials = {{"lo", -3e38f, 1, 1, 1, 1, 0.5f}, {"hi", 3e38f, 1, 1, 1, 1, 0.5f}};
+  EXPECT_THROW(classify_voxel(far, {}, 0.0f, 0.0f, col), ArgumentError);
+  far.mixture.materials[1].mean = 2e19f;  // (2e19)^2 = 4e38: past FLT_MAX
+  far.mixture.materials[0].mean = 0.0f;
+  EXPECT_THROW(classify_voxel(far, {}, 0.0f, 0.0f, col), ArgumentError);
+  far.mixture.materials[1].mean = 1e18f;  // 5e35: held
+  EXPECT_NO_THROW(classify_voxel(far, {}, 0.0f, 0.0f, col));
+  far.mixture.materials[1].sigma = 1e-3f;  // (1e18)^2 x 5e5: not held
+  EXPECT_THROW(classify_voxel(far, {}, 0.0f, 0.0f, col), ArgumentError);
 }
 
 TEST(Mixture, NaNValueIsTransparent) {
@@ -523,6 +539,16 @@ TEST_F(ClassifierFile, RejectsEachMalformedCaseWithItsLine) {
   expect_error("material a 0 1 1 1 1 1\nmaterial b 0 2 1 1 1 1\n", {"line 2", "same mean"});
   expect_error("density 0 0 1 1\nmaterial a 0 1 1 1 1 1\n", {"line 2", "mixed"});
   expect_error("material a 0 1 1 1 1 1\ndensity 0 0 1 1\n", {"line 2", "mixed"});
+  expect_error("material a -3e38 1 1 0 0 0.5\nmaterial b 3e38 1 0 1 0 0.5\n",
+               {"line 2",
+                "materials 'a' (mean -3e+38, sigma 1) and 'b' (mean 3e+38, sigma 1) are "
+                "too far apart for their sigmas in float arithmetic"});
+  expect_error("material b 3e38 1 0 1 0 0.5\n\nmaterial a -3e38 1 1 0 0 0.5\n",
+               {"line 3", "too far apart"});
+  // A relative sigma is held in float as it is (the intensity is mapped
+  // to [0, 1], the means and sigmas are not scaled): checked as well.
+  expect_error("relative\nmaterial a 0 1e-30 1 1 1 0.5\nmaterial b 1 0.1 1 1 1 0.5\n",
+               {"line 2", "sigma 1e-30 of 'a' is too small for float arithmetic"});
   expect_error("relative 1\n", {"line 1", "no values"});
   expect_error("relative\ndensity 0 0 1 1\n", {"line 1", "relative"});
   expect_error("density 0 nan\n", {"line 1", "nan"});
