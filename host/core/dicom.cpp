@@ -289,8 +289,9 @@ class DicomWalker {
       for (;;) {
         unsigned char h[12];
         if (at + 8 > size_ || !read(at, h, 8) || le16(h) != 0x0002) break;
-        const uint64_t len = explicit_length(h, at);
         const uint64_t header = long_vr(h + 4) ? 12 : 8;
+        if (at + header > size_) return cut_header(at);
+        const uint64_t len = explicit_length(h, at);
         if (!fits(at, header, len, h)) return false;
         if (le16(h + 2) == 0x0010 && len < 256) {  // Transfer Syntax UID
           syntax.resize(len);
@@ -300,7 +301,13 @@ class DicomWalker {
         }
         at += header + len;
       }
-      if (syntax == "1.2.840.10008.1.2.1.99") return true;  // deflated: GDCM's to check
+      // A file cut at the end of its meta group, or at one of its elements'
+      // ends (GDCM's reader stops the process on it: an assert).
+      if (at >= size_) return cut_header(at);
+      if (syntax == "1.2.840.10008.1.2.1.99") {  // deflated: GDCM's to check
+        rows_ = pixels_ = true;
+        return true;
+      }
       // Some writers put an implicit-VR data set under an explicit transfer
       // syntax (highdicom 0.1.0 did); GDCM and pydicom read such a file by
       // what its first element looks like, and so does this walk.
@@ -312,12 +319,41 @@ class DicomWalker {
       if (size_ < 8 || !read(0, b, 8)) return false;
       explicit_ = vr_letters_at(0);
     }
-    return walk(at, size_, false, 0) != kNotDicom;
+    const uint64_t stop = walk(at, size_, false, 0);
+    if (stop == kNotDicom) return false;
+    // The file ends inside an element's header (GDCM's reader stops the
+    // process on one: an assert), unless what is left is zero padding.
+    return stop >= size_ || zeros_from(stop) || cut_header(stop);
   }
+
+  /// Whether the data set has Rows (0028,0010), an image's, and pixel data
+  /// (7fe0,0010, or the float forms 0008 and 0009), after check().
+  bool rows() const { return rows_; }
+  bool pixels() const { return pixels_; }
 
  private:
   static constexpr uint64_t kNotDicom = ~uint64_t{0};
   static constexpr uint32_t kUndefined = 0xffffffffu;
+
+  /// A file that ends inside an element's header at `at` (or with its meta
+  /// group): an error where the file is marked DICOM, else not DICOM
+  /// (false).
+  bool cut_header(uint64_t at) const {
+    if (!marked_) return false;
+    throw FileError(
+        path_, "truncated: the file ends inside the header of the element at byte " +
+                   std::to_string(at) +
+                   (file_ == path_ ? std::string() : " (in " + file_.filename().string() + ")"));
+  }
+  /// Whether the bytes from `at` to the end are all zero.
+  bool zeros_from(uint64_t at) {
+    unsigned char b[8];
+    const uint64_t n = size_ - at;
+    if (n > sizeof b || !read(at, b, n)) return false;
+    for (uint64_t k = 0; k < n; ++k)
+      if (b[k] != 0) return false;
+    return true;
+  }
 
   bool read(uint64_t at, void* buf, uint64_t n) {
     in_.clear();
@@ -393,11 +429,16 @@ class DicomWalker {
         }
         continue;
       }
+      if (depth == 0 && group == 0x0028 && element == 0x0010) rows_ = true;
+      if (depth == 0 && group == 0x7fe0 &&
+          (element == 0x0010 || element == 0x0008 || element == 0x0009))
+        pixels_ = true;
       uint64_t header = 8, len = 0;
       bool sequence = false;
       if (explicit_) {
         if (!std::isupper(h[4]) || !std::isupper(h[5])) return depth == 0 ? kNotDicom : at;
         header = long_vr(h + 4) ? 12 : 8;
+        if (at + header > size_) return cut_header(at) ? at : kNotDicom;
         len = explicit_length(h, at);
         sequence = h[4] == 'S' && h[5] == 'Q';
       } else {
@@ -449,16 +490,23 @@ class DicomWalker {
   bool explicit_ = true;
   bool big_ = false;
   bool marked_ = false;  ///< "DICM" at byte 128
+  bool rows_ = false, pixels_ = false;
 };
 
 /// DicomWalker::check on `file`: throws FileError for a claimed length
-/// past the file's end; false where the bytes are not DICOM.
-bool dicom_lengths_fit(const fs::path& path, const fs::path& file) {
+/// past the file's end, or for a file marked DICOM that ends inside an
+/// element's header or with its meta group; false where the bytes are not
+/// DICOM. `rows`, `pixels`: DicomWalker::rows() and pixels(), if given.
+bool dicom_lengths_fit(const fs::path& path, const fs::path& file, bool* rows = nullptr,
+                       bool* pixels = nullptr) {
   std::error_code ec;
   const uintmax_t size = fs::file_size(file, ec);
   if (ec) throw FileError(path, "cannot read the size of " + file.string() + ": " + ec.message());
   DicomWalker w(path, file, static_cast<uint64_t>(size));
-  return w.check();
+  const bool ok = w.check();
+  if (rows) *rows = w.rows();
+  if (pixels) *pixels = w.pixels();
+  return ok;
 }
 
 /// One series found in a directory: its images' files (in name order),
@@ -495,16 +543,22 @@ std::map<std::string, SeriesFiles> scan_series(const fs::path& path, const fs::p
       throw FileError(path, "holds more than " + std::to_string(kMaxFiles) +
                                 " files in the directories below it; give the directory of "
                                 "one series");
-    // A file that is not DICOM is skipped; one whose lengths run past its
-    // end is an error that names it where the directory was asked for, and
-    // skipped beside a file asked for (a slice of its series then shows as
-    // missing).
+    // A file that is not DICOM is skipped. One whose lengths run past its
+    // end, or that ends inside an element's header, is an error that names
+    // it where the directory was asked for, and skipped beside a file asked
+    // for (a slice of its series then shows as missing); so is one without
+    // Rows or pixel data (cut at an element's end, or not an image: a
+    // report), where the directory's series or GDCM's read of it names it.
+    // A sibling cut so had stopped the file asked for from loading (GDCM's
+    // reader stopped the process on some, an assert).
+    bool rows = false, pixels = false;
     try {
-      if (!dicom_lengths_fit(path, e.path())) return;
+      if (!dicom_lengths_fit(path, e.path(), &rows, &pixels)) return;
     } catch (const FileError&) {
       if (strict) throw;
       return;
     }
+    if (!strict && !(rows && pixels)) return;
     files.push_back(e.path());
   };
   if (recursive) {

@@ -1683,6 +1683,75 @@ TEST_F(IoTest, DicomSeriesMalformed) {
                     {"volume index 1 is outside 0..0 (the series holds 1 volume)"});
 }
 
+// Beside a file asked for, a copy of one of its slices cut at any byte is
+// skipped (a cut at an element's end, or inside an element's header, passed
+// the length walk; GDCM's reader then stopped the child process on the
+// sibling (an assert), or the slice without its pixels failed the load of
+// the file asked for), and so is a DICOM object that is not an image (no
+// Rows or pixels: a report), in the series or in a series of its own. The
+// directory asked for names the file, or skips a cut one where it is too
+// short to be marked DICOM.
+TEST_F(IoTest, DicomSiblingsCutAtAnyByteOrNotImages) {
+  constexpr int nx = 4, ny = 3;
+  const fs::path d = file("cuts");
+  fs::create_directories(d);
+  for (int k = 0; k < 3; ++k) {
+    DicomSlice s;
+    s.position = {0, 0, double(k)};
+    write_dicom_slice(d / ("i" + std::string(1, char('0' + k))), nx, ny,
+                      std::vector<int16_t>(nx * ny, int16_t(7 + k)), s);
+  }
+  const Bytes whole = read_file(d / "i0");
+  const std::array<int64_t, 3> dims{nx, ny, 3};
+  int named = 0;
+  for (std::size_t n = 0; n < whole.size(); ++n) {
+    SCOPED_TRACE("cut at " + std::to_string(n) + " of " + std::to_string(whole.size()));
+    write_file(d / "z_cut", Bytes(whole.begin(), whole.begin() + static_cast<std::ptrdiff_t>(n)));
+    const Volume v = simdvol::load_volume(d / "i1");
+    ASSERT_EQ(v.dims(), dims);
+    EXPECT_EQ(v.at(0, 0, 2), 9.0f);
+    try {
+      ASSERT_EQ(simdvol::load_volume(d).dims(), dims);
+      EXPECT_LT(n, 132u);  // (unmarked: not DICOM)
+    } catch (const FileError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("z_cut"), std::string::npos) << what;
+      EXPECT_EQ(what.find("stopped"), std::string::npos) << what;
+      ++named;
+    }
+  }
+  EXPECT_EQ(named, static_cast<int>(whole.size()) - 132);
+  fs::remove(d / "z_cut");
+  // Not an image: i0 without Rows, Columns and pixels, in its series and
+  // in one of its own.
+  for (const char* series : {"", "1.2.826.0.1.3680043.10.1.9"}) {
+    SCOPED_TRACE(std::string("series ") + series);
+    gdcm::Reader r;
+    r.SetFileName((d / "i0").c_str());
+    ASSERT_TRUE(r.Read());
+    gdcm::DataSet& ds = r.GetFile().GetDataSet();
+    for (const gdcm::Tag& t :
+         {gdcm::Tag(0x0028, 0x0010), gdcm::Tag(0x0028, 0x0011), gdcm::Tag(0x7fe0, 0x0010)})
+      ds.Remove(t);
+    if (*series) {
+      gdcm::Attribute<0x0020, 0x000e> uid;
+      uid.SetValue(series);
+      ds.Replace(uid.GetAsDataElement());
+    }
+    gdcm::Writer w;
+    w.SetFile(r.GetFile());
+    w.SetFileName((d / "report").c_str());
+    ASSERT_TRUE(w.Write());
+    EXPECT_EQ(simdvol::load_volume(d / "i2").dims(), dims);
+    try {
+      simdvol::load_volume(d);
+      ADD_FAILURE() << "the directory loaded";
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find("report"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // A CT series taken with the gantry tilted: each slice's origin lies 1.25
 // mm further along the columns per slice (a tilt of atan(1.25 / 2) = 32
 // degrees at 2 mm slices), so its pixels are sheared against the
