@@ -222,6 +222,17 @@ uint64_t check_header_lines(const fs::path& path) {
         throw FileError(
             path, "NDims = " + value + ": a 3-D volume (or a 4-D series of them) is expected");
     }
+    if (key == "HeaderSize") {
+      // MetaIO keeps it in an int and takes -1 for "the voxels at the end of
+      // the file": 2147483648 or more came back as -1 (the file's last
+      // bytes read as the voxels), -2 as well.
+      const bool digits = !value.empty() && value.size() <= 10 &&
+                          value.find_first_not_of("0123456789") == std::string::npos;
+      if (value != "-1" && (!digits || std::stoll(value) > 2147483647))
+        throw FileError(path, "HeaderSize = " + value.substr(0, 20) +
+                                  " is neither -1 (the voxels at the end of the file) nor a "
+                                  "number of bytes from 0 to 2147483647");
+    }
     if (key == "ElementDataFile") return std::min<uint64_t>(at, text.size());
   }
   throw FileError(path, std::string("not a MetaImage header: no ElementDataFile line") +

@@ -2665,6 +2665,19 @@ TEST_F(IoTest, MetaImageMalformed) {
   write_file(file("far.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "HeaderSize = 17\n", "skip.raw"));
   expect_file_error([&] { simdvol::load_metaimage(file("far.mhd")); }, file("far.mhd"),
                     {"holds 59 of the 60 bytes"});
+  // Past MetaIO's int, or below -1: MetaIO took them as -1, the voxels at
+  // the end (this file's, where they are: it loaded).
+  for (const char* size : {"2147483648", "99999999999", "-2", "16x"}) {
+    write_file(file("wide.mhd"),
+               mha_header(3, "5 4 3", "MET_UCHAR", "HeaderSize = " + std::string(size) + "\n",
+                          "skip.raw"));
+    expect_file_error([&] { simdvol::load_metaimage(file("wide.mhd")); }, file("wide.mhd"),
+                      {"HeaderSize = " + std::string(size) + " is neither -1"});
+  }
+  write_file(file("wide.mhd"),
+             mha_header(3, "5 4 3", "MET_UCHAR", "HeaderSize = 2147483647\n", "skip.raw"));
+  expect_file_error([&] { simdvol::load_metaimage(file("wide.mhd")); }, file("wide.mhd"),
+                    {"holds 0 of the 60 bytes"});
   // A data file named without its .gz, as MetaIO finds it.
   write_file(file("g.raw.gz"), gzip(vox));
   write_file(file("g.mhd"), mha_header(3, "5 4 3", "MET_UCHAR", "", "g.raw"));
