@@ -120,33 +120,32 @@ SV_FN float sv_mixture(__constant const sv_classify_params* cp, const int n, flo
   /* i = last material with mean_i <= I, j = i + 1 (for mean_0 < I < mean_last):
    * unrolled compares and selects (see sv_ramp_eval). */
   const int j0 = n > 1 ? 1 : 0;
-  float mi = m->mean[0], hi = m->half_inv_var[0], li = m->log_sigma[0];
   float ai = m->opacity[0], ri = m->r[0], gi = m->g[0], bi = m->b[0];
-  float mj = m->mean[j0], hj = m->half_inv_var[j0], lj = m->log_sigma[j0];
   float aj = m->opacity[j0], rj = m->r[j0], gj = m->g[j0], bj = m->b[j0];
+  float pc = m->pair_c[0], qa = m->pair_qa[0], qb = m->pair_qb[0], qc = m->pair_qc[0];
 #pragma unroll
   for (int k = 1; k < SV_MAX_MATERIALS - 1; ++k) {
     if (k < n - 1) {
       const int in = m->mean[k] <= I;
-      mi = in ? m->mean[k] : mi;
-      hi = in ? m->half_inv_var[k] : hi;
-      li = in ? m->log_sigma[k] : li;
       ai = in ? m->opacity[k] : ai;
       ri = in ? m->r[k] : ri;
       gi = in ? m->g[k] : gi;
       bi = in ? m->b[k] : bi;
-      mj = in ? m->mean[k + 1] : mj;
-      hj = in ? m->half_inv_var[k + 1] : hj;
-      lj = in ? m->log_sigma[k + 1] : lj;
       aj = in ? m->opacity[k + 1] : aj;
       rj = in ? m->r[k + 1] : rj;
       gj = in ? m->g[k + 1] : gj;
       bj = in ? m->b[k + 1] : bj;
+      pc = in ? m->pair_c[k] : pc;
+      qa = in ? m->pair_qa[k] : qa;
+      qb = in ? m->pair_qb[k] : qb;
+      qc = in ? m->pair_qc[k] : qc;
     }
   }
-  /* p_i = 1 / (1 + exp(L_j - L_i)), L_m = -(I - mean_m)^2 / (2 sigma_m^2) - ln sigma_m. */
-  const float di = I - mi, dj = I - mj;
-  const float dl = (di * di * hi + li) - (dj * dj * hj + lj);
+  /* p_i = 1 / (1 + exp(L_j - L_i)), L_m = -(I - mean_m)^2 / (2 sigma_m^2) -
+   * ln sigma_m; L_j - L_i as the pair's quadratic about its c (classify.hpp,
+   * mixture_pair: without the cancellation of the two L). */
+  const float x = I - pc;
+  const float dl = (qa * x + qb) * x + qc;
   /* The smaller fraction from e^-|dl|, not as 1 minus the larger: it keeps
    * its value far below 2^-24 (classify.cpp). */
   const float e = sv_exp(-fabs(dl));
@@ -350,44 +349,42 @@ SV_FN float16 sv_mixture16(__constant const sv_classify_params* cp, const int n,
 #pragma unroll
   for (int k = 1; k < SV_NMAT - 1; ++k) ix -= (int16)(m->mean[k] <= I); /* true is -1 */
   const int16 jx = ix + 1;
-  const float8 tm = vload8(0, m->mean), th = vload8(0, m->half_inv_var);
-  const float8 tl = vload8(0, m->log_sigma), ta = vload8(0, m->opacity);
+  const float8 ta = vload8(0, m->opacity);
   const float8 tr = vload8(0, m->r), tg = vload8(0, m->g), tb = vload8(0, m->b);
-  float16 mi = SV_PERM16(tm, ix), hi = SV_PERM16(th, ix), li = SV_PERM16(tl, ix);
+  const float8 tc = vload8(0, m->pair_c), tqa = vload8(0, m->pair_qa);
+  const float8 tqb = vload8(0, m->pair_qb), tqc = vload8(0, m->pair_qc);
   float16 ai = SV_PERM16(ta, ix), ri = SV_PERM16(tr, ix), gi = SV_PERM16(tg, ix);
   float16 bi = SV_PERM16(tb, ix);
-  const float16 mj = SV_PERM16(tm, jx), hj = SV_PERM16(th, jx), lj = SV_PERM16(tl, jx);
   const float16 aj = SV_PERM16(ta, jx), rj = SV_PERM16(tr, jx), gj = SV_PERM16(tg, jx);
   const float16 bj = SV_PERM16(tb, jx);
+  const float16 pc = SV_PERM16(tc, ix), qa = SV_PERM16(tqa, ix);
+  const float16 qb = SV_PERM16(tqb, ix), qc = SV_PERM16(tqc, ix);
 #else
   const int j0 = n > 1 ? 1 : 0;
-  float16 mi = m->mean[0], hi = m->half_inv_var[0], li = m->log_sigma[0];
   float16 ai = m->opacity[0], ri = m->r[0], gi = m->g[0], bi = m->b[0];
-  float16 mj = m->mean[j0], hj = m->half_inv_var[j0], lj = m->log_sigma[j0];
   float16 aj = m->opacity[j0], rj = m->r[j0], gj = m->g[j0], bj = m->b[j0];
+  float16 pc = m->pair_c[0], qa = m->pair_qa[0], qb = m->pair_qb[0], qc = m->pair_qc[0];
 #pragma unroll
   for (int k = 1; k < SV_MAX_MATERIALS - 1; ++k) {
     if (k < n - 1) {
       const int16 in = m->mean[k] <= I;
-      mi = select(mi, (float16)(m->mean[k]), in);
-      hi = select(hi, (float16)(m->half_inv_var[k]), in);
-      li = select(li, (float16)(m->log_sigma[k]), in);
       ai = select(ai, (float16)(m->opacity[k]), in);
       ri = select(ri, (float16)(m->r[k]), in);
       gi = select(gi, (float16)(m->g[k]), in);
       bi = select(bi, (float16)(m->b[k]), in);
-      mj = select(mj, (float16)(m->mean[k + 1]), in);
-      hj = select(hj, (float16)(m->half_inv_var[k + 1]), in);
-      lj = select(lj, (float16)(m->log_sigma[k + 1]), in);
       aj = select(aj, (float16)(m->opacity[k + 1]), in);
       rj = select(rj, (float16)(m->r[k + 1]), in);
       gj = select(gj, (float16)(m->g[k + 1]), in);
       bj = select(bj, (float16)(m->b[k + 1]), in);
+      pc = select(pc, (float16)(m->pair_c[k]), in);
+      qa = select(qa, (float16)(m->pair_qa[k]), in);
+      qb = select(qb, (float16)(m->pair_qb[k]), in);
+      qc = select(qc, (float16)(m->pair_qc[k]), in);
     }
   }
 #endif
-  const float16 di = I - mi, dj = I - mj;
-  const float16 dl = (di * di * hi + li) - (dj * dj * hj + lj);
+  const float16 x = I - pc;
+  const float16 dl = (qa * x + qb) * x + qc; /* as sv_mixture */
   const float16 e = sv_exp16(-fabs(dl));
   const float16 big = 1.0f / (1.0f + e), small = e * big;
   const int16 lo = dl <= 0.0f;

@@ -152,10 +152,12 @@ typedef struct sv_shade_params {
 typedef struct sv_materials {
   float mean[SV_MAX_MATERIALS];
   float sigma[SV_MAX_MATERIALS];
-  float half_inv_var[SV_MAX_MATERIALS]; /* 1 / (2 sigma^2) */
-  float log_sigma[SV_MAX_MATERIALS];    /* ln(sigma) */
   float r[SV_MAX_MATERIALS], g[SV_MAX_MATERIALS], b[SV_MAX_MATERIALS];
   float opacity[SV_MAX_MATERIALS];
+  /* Materials k and k + 1 (k < count - 1): L_{k+1} - L_k = (qa x + qb) x
+   * + qc at x = I - c (classify.hpp, mixture_pair). */
+  float pair_c[SV_MAX_MATERIALS], pair_qa[SV_MAX_MATERIALS];
+  float pair_qb[SV_MAX_MATERIALS], pair_qc[SV_MAX_MATERIALS];
 } sv_materials;
 
 /* Piecewise-linear ramp: count points (x ascending); count 0 is the constant 1. */

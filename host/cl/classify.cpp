@@ -10,7 +10,7 @@
 
 namespace simdvol {
 
-static_assert(sizeof(sv_materials) == 8 * SV_MAX_MATERIALS * 4, "sv_materials must be plain");
+static_assert(sizeof(sv_materials) == 10 * SV_MAX_MATERIALS * 4, "sv_materials must be plain");
 static_assert(sizeof(sv_ramp) == 4 * 4 + 2 * SV_MAX_KNOTS * 4, "sv_ramp must be plain");
 static_assert(sizeof(sv_classify_params) == 8 * 4 + sizeof(sv_materials) + 5 * sizeof(sv_ramp),
               "sv_classify_params must be plain floats/ints");
@@ -89,9 +89,13 @@ sv_classify_params classify_params(const Classifier& c, const ValueRange& range,
   for (std::size_t i = 0; i < m.size(); ++i) {
     s.mean[i] = m[i].mean;
     s.sigma[i] = m[i].sigma;
-    const double sigma = m[i].sigma;  // (validated above: 1 / (2 sigma^2) finite in float)
-    s.half_inv_var[i] = static_cast<float>(1.0 / (2.0 * sigma * sigma));
-    s.log_sigma[i] = static_cast<float>(std::log(sigma));
+    if (i + 1 < m.size()) {  // (validated above: finite in float)
+      const MixturePair q = mixture_pair(m[i], m[i + 1]);
+      s.pair_c[i] = static_cast<float>(q.c);
+      s.pair_qa[i] = static_cast<float>(q.qa);
+      s.pair_qb[i] = static_cast<float>(q.qb);
+      s.pair_qc[i] = static_cast<float>(q.qc);
+    }
     s.r[i] = m[i].r;
     s.g[i] = m[i].g;
     s.b[i] = m[i].b;

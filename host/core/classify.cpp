@@ -24,6 +24,7 @@
 //      otherwise, i = last material with mean_i <= I, j = i + 1:
 //          L_m = -(I - mean_m)^2 / (2 sigma_m^2) - ln(sigma_m)   (log N(mean, sigma))
 //          p_i = 1 / (1 + exp(L_j - L_i)),  p_j = 1 - p_i
+//          (L_j - L_i as mixture_pair's quadratic about the pair's c)
 //      (= P_i / (P_i + P_j) for Gaussian P, without overflow or 0/0).
 //      alpha     = p_i a_i + p_j a_j
 //      colour[c] = p_i a_i col_i[c] + p_j a_j col_j[c]     (premultiplied)
@@ -97,17 +98,18 @@ float half_inv_var(const Material& m) {
   return static_cast<float>(1.0 / (2.0 * sigma * sigma));
 }
 
-// The kernels take (I - mean)^2 / (2 sigma^2) in float (sv_mixture: (I -
-// mean) * (I - mean) * half_inv_var) for I between two adjacent means, the
-// reference in double: at the far mean of a pair it must stay finite in
-// float (means of -3e38 and 3e38 made NaN fractions on the device, and
-// the two engines' images 0.3 apart). Half of FLT_MAX leaves room for the
-// float roundings.
+// The kernels take a pair's L_j - L_i as (qa x + qb) x + qc in float
+// (mixture_pair; x = I - c, |x| at most the means' difference d for I
+// between them), the reference in double: it must stay finite in float at
+// the far mean (means of -3e38 and 3e38 made NaN fractions on the device,
+// and the two engines' images 0.3 apart). Half of FLT_MAX leaves room for
+// the float roundings.
 bool pair_fits_float(const Material& a, const Material& b) {
   const double d = static_cast<double>(b.mean) - static_cast<double>(a.mean);
-  const double h = std::max(half_inv_var(a), half_inv_var(b));
+  const MixturePair q = mixture_pair(a, b);
   const double limit = 0.5 * std::numeric_limits<float>::max();
-  return d * d <= limit && d * d * h <= limit;
+  return d <= limit && std::fabs(q.c) <= limit &&
+         std::fabs(q.qa) * d * d + std::fabs(q.qb) * d + std::fabs(q.qc) <= limit;
 }
 
 std::string too_far_apart(const Material& a, const Material& b) {
@@ -151,14 +153,6 @@ void validate(const Classifier& c) {
   }
 }
 
-// Log-likelihood of intensity I under N(mean, sigma), less the constant
-// -ln(sqrt(2 pi)) shared by every material.
-double log_likelihood(const Material& m, double I) {
-  const double d = I - static_cast<double>(m.mean);
-  const double s = static_cast<double>(m.sigma);
-  return -(d * d) / (2.0 * s * s) - std::log(s);
-}
-
 float classify_mixture(const MaterialMixture& mix, const ValueRange& range, float value,
                        float colour[3], double& transparency) {
   const double I = mixture_index(mix, range, value);
@@ -181,7 +175,9 @@ float classify_mixture(const MaterialMixture& mix, const ValueRange& range, floa
     // of the two is e^-|dl| / (1 + e^-|dl|), not 1 minus the larger, so a
     // fraction far below 1e-16 keeps its value (1 - p_i would round it to 0,
     // in float below 6e-8: the device's zero voxels would not be ours).
-    const double dl = log_likelihood(m[j], I) - log_likelihood(m[i], I);
+    const MixturePair q = mixture_pair(m[i], m[j]);
+    const double x = I - q.c;
+    const double dl = (q.qa * x + q.qb) * x + q.qc;
     const double e = std::exp(-std::fabs(dl));
     const double big = 1.0 / (1.0 + e), small = e * big;
     pi = dl <= 0.0 ? big : small;
@@ -258,6 +254,21 @@ float Ramp::operator()(float v) const {
       static_cast<std::size_t>(std::upper_bound(x.begin(), x.end(), v) - x.begin()) - 1;
   const float t = (v - x[k]) / (x[k + 1] - x[k]);
   return y[k] + t * (y[k + 1] - y[k]);
+}
+
+MixturePair mixture_pair(const Material& lo, const Material& hi) {
+  const double slo = lo.sigma, shi = hi.sigma;
+  const double hlo = 1.0 / (2.0 * slo * slo), hhi = 1.0 / (2.0 * shi * shi);
+  const double d = static_cast<double>(hi.mean) - static_cast<double>(lo.mean);
+  // c - mean_lo and mean_hi - c in the ratio of the sigmas (sqrt(h) is 1 /
+  // (sqrt(2) sigma))
+  const double ulo = d * slo / (slo + shi), uhi = d * shi / (slo + shi);
+  MixturePair q;
+  q.c = static_cast<double>(lo.mean) + ulo;
+  q.qa = hlo - hhi;
+  q.qb = 2.0 * (hlo * ulo + hhi * uhi);
+  q.qc = std::log(slo) - std::log(shi);
+  return q;
 }
 
 float mixture_range_scale(const ValueRange& range) {

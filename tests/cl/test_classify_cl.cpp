@@ -96,7 +96,20 @@ Classifier mixture_of(int n) {
   return c;
 }
 
+// Two materials far apart for their sigmas (red, then green; the point
+// between them where their fractions cross at 0, exactly for a power of 2
+// `scale`): means 4 x `scale` apart, sigmas 1 and 3.
+Classifier far_pair(float scale) {
+  Classifier c;
+  c.kind = Classifier::Kind::mixture;
+  c.mixture.materials = {{"lo", -scale, 1.0f, 1, 0, 0, 0.5f},
+                         {"hi", 3 * scale, 3.0f, 0, 1, 0, 0.8f}};
+  return c;
+}
+
 Classifier by_name(const std::string& name) {
+  if (name == "far9") return far_pair(0x1p30f);
+  if (name == "far18") return far_pair(0x1p60f);
   if (name.rfind("mix", 0) == 0) return mixture_of(std::stoi(name.substr(3)));
   return name == "knots" ? many_knots() : classifier_preset(name);
 }
@@ -436,6 +449,34 @@ TEST(ClassifyKernel, SmallFractionsAtAMaterialBoundary) {
       EXPECT_NEAR(got[n].a, ref[n].a, 1e-3 * ref[n].a) << "value " << vol.data()[n];
     }
   EXPECT_GT(small, 20);  // the range reaches fractions far below float's 1 - p
+}
+
+// Means far apart for their sigmas (4 x 2^30 and 4 x 2^60 units, sigmas 1
+// and 3),
+// over intensities within 16 of the point between them where the
+// fractions cross (0): the kernels take the log-likelihood difference
+// about that point (mixture_pair), as the reference does, and equal it.
+// As the difference of the two materials' terms (1e18 and more each) float
+// had lost the crossing by tens of units: the image of a phantom 0.04 from
+// the reference's at means 1e9 apart, 0.25 at 1e18.
+TEST(ClassifyKernel, FarMeansCrossWhereTheReferenceDoes) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Volume vol({32, 16, 8}, VoxelType::f32);
+  for (std::size_t n = 0; n < vol.data().size(); ++n)
+    vol.data()[n] = (static_cast<float>(n) - 2048.0f) / 128.0f;
+  for (float scale : {0x1p30f, 0x1p60f}) {
+    ASSERT_EQ(
+        mixture_pair(far_pair(scale).mixture.materials[0], far_pair(scale).mixture.materials[1]).c,
+        0.0);
+    float col[3];
+    // By hand: red below 0, green above, both halves at 0.
+    EXPECT_EQ(classify_voxel(far_pair(scale), {}, -1.0f / 128.0f, 0.0f, col), 0.5f);
+    EXPECT_EQ(col[0], 0.5f);
+    EXPECT_EQ(classify_voxel(far_pair(scale), {}, 1.0f / 128.0f, 0.0f, col), 0.8f);
+    EXPECT_EQ(col[1], 0.8f);
+  }
+  check_case({&vol, "far9", kViews[1], 8, 1.0});
+  check_case({&vol, "far18", kViews[1], 8, 0.6});
 }
 
 // The fused kernel's `live` (a kept volume's next frame): the PEs flagged

@@ -86,6 +86,26 @@ float mixture_range_scale(const ValueRange& range);
 /// 0.6: alpha 0.0192 against 0.0234).
 float mixture_index(const MaterialMixture& mix, const ValueRange& range, float value);
 
+/// The log-likelihood difference of two neighbouring materials (lo's mean
+/// below hi's), L_hi - L_lo, as a quadratic in x = I - c about the point c
+/// between their means where sqrt(h_lo) (c - mean_lo) = sqrt(h_hi) (mean_hi
+/// - c), h = 1 / (2 sigma^2):
+///     L_hi - L_lo = (qa x + qb) x + qc,
+///     qa = h_lo - h_hi, qb = 2 (h_lo (c - mean_lo) + h_hi (mean_hi - c)),
+///     qc = ln sigma_lo - ln sigma_hi
+/// (the constant h_lo (c - mean_lo)^2 - h_hi (mean_hi - c)^2 is 0). The
+/// same value as the Gaussians' L_m = -(I - mean_m)^2 h_m - ln sigma_m
+/// subtracted, without their cancellation: between means 2e9 apart (sigma
+/// 1) the terms are 1e18, so float lost the fraction's place by tens of
+/// intensity units and the device's image parted from the reference's
+/// (0.04 at 1e9, 0.25 at 1e18); about c only the float rounding of c and I
+/// is left. The reference takes it in double, the kernels in float
+/// (sv_materials' pair_c, pair_qa, pair_qb, pair_qc).
+struct MixturePair {
+  double c = 0, qa = 0, qb = 0, qc = 0;
+};
+MixturePair mixture_pair(const Material& lo, const Material& hi);
+
 /// Opacity of one voxel before lighting (mixture or transfer function).
 /// Also returns premultiplied material colour in colour[0..2].
 float classify_voxel(const Classifier& c, const ValueRange& range, float value, float grad_mag,
