@@ -303,7 +303,8 @@ class DicomWalker {
       }
       // A file cut at the end of its meta group, or at one of its elements'
       // ends (GDCM's reader stops the process on it: an assert).
-      if (at >= size_) return cut_header(at);
+      if (at >= size_)
+        return cut_header(at, "after its file meta information, before its data set");
       if (syntax == "1.2.840.10008.1.2.1.99") {  // deflated: GDCM's to check
         rows_ = pixels_ = true;
         return true;
@@ -338,11 +339,10 @@ class DicomWalker {
   /// A file that ends inside an element's header at `at` (or with its meta
   /// group): an error where the file is marked DICOM, else not DICOM
   /// (false).
-  bool cut_header(uint64_t at) const {
+  bool cut_header(uint64_t at, const char* where = "inside the header of the element") const {
     if (!marked_) return false;
     throw FileError(
-        path_, "truncated: the file ends inside the header of the element at byte " +
-                   std::to_string(at) +
+        path_, std::string("truncated: the file ends ") + where + " at byte " + std::to_string(at) +
                    (file_ == path_ ? std::string() : " (in " + file_.filename().string() + ")"));
   }
   /// Whether the bytes from `at` to the end are all zero.
