@@ -93,11 +93,35 @@ int64_t parse_pes(const std::string& s, const std::string& option) {
   return v;
 }
 
-void check_output_file(const std::filesystem::path& file, const std::string& option) {
-  const std::filesystem::path dir = file.has_parent_path() ? file.parent_path() : ".";
-  if (!std::filesystem::is_directory(dir))
+void check_output_file(const std::filesystem::path& file, const std::string& option,
+                       const std::vector<std::filesystem::path>& inputs) {
+  namespace fs = std::filesystem;
+  if (file.empty()) throw ArgumentError(option, "needs a name, not an empty one");
+  std::error_code ec;
+  if (fs::is_directory(file, ec))
+    throw ArgumentError(option, "'" + file.string() + "' is a directory");
+  const fs::path dir = file.has_parent_path() ? file.parent_path() : ".";
+  if (!fs::is_directory(dir, ec))
     throw ArgumentError(
         option, "directory '" + dir.string() + "' of '" + file.string() + "' does not exist");
+  for (const fs::path& in : inputs) {
+    std::vector<fs::path> read{in};
+    if (in.extension() == ".hdr") read.push_back(fs::path(in).replace_extension(".img"));
+    for (const fs::path& r : read)
+      if (fs::equivalent(file, r, ec))
+        throw ArgumentError(
+            option, "'" + file.string() + "' is " +
+                        (r == in ? "a volume" : "the voxels of volume '" + in.string() + "'") +
+                        " this run reads: give another name");
+  }
+}
+
+void check_output_dir(const std::filesystem::path& dir, const std::string& option) {
+  namespace fs = std::filesystem;
+  if (dir.empty()) throw ArgumentError(option, "needs a name, not an empty one");
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    throw ArgumentError(option, "'" + dir.string() + "' exists and is not a directory");
 }
 
 bool Args::next() {
@@ -109,6 +133,19 @@ bool Args::next() {
 std::string Args::value() {
   if (i_ + 1 >= argc_) throw ArgumentError(option_, "needs a value");
   return argv_[++i_];
+}
+
+std::string Args::name() {
+  std::string v = value();
+  if (v.empty()) throw ArgumentError(option_, "needs a name, not an empty one");
+  return v;
+}
+
+std::string Args::existing_file() {
+  std::string v = name();
+  std::error_code ec;
+  if (!std::filesystem::exists(v, ec)) throw ArgumentError(option_, "'" + v + "' does not exist");
+  return v;
 }
 
 int64_t Args::integer(int64_t lo, int64_t hi) {

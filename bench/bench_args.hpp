@@ -38,9 +38,16 @@ std::vector<double> parse_double_list(const std::string& s, const std::string& o
                                       double hi);
 /// A PE count: an integer that pe_grid accepts (a power of two in 1..kMaxPes).
 int64_t parse_pes(const std::string& s, const std::string& option);
-/// A file to be written later: its directory must exist now, not after
-/// minutes of frames (ArgumentError naming option and directory).
-void check_output_file(const std::filesystem::path& file, const std::string& option);
+/// A file to be written later, checked now, not after minutes of frames
+/// (ArgumentError naming the option): a name (not empty), not a directory,
+/// in a directory that exists; and none of `inputs` (the volumes the run
+/// reads: --json naming one replaced it with JSON), nor an Analyze .hdr's
+/// .img.
+void check_output_file(const std::filesystem::path& file, const std::string& option,
+                       const std::vector<std::filesystem::path>& inputs = {});
+/// A directory to be written into later (made if missing): a name, and
+/// not an existing file that is not a directory.
+void check_output_dir(const std::filesystem::path& dir, const std::string& option);
 
 /// Walks a tool's argv: next() moves to each argument in turn, option() is
 /// it, and the value readers take the argument after it (ArgumentError
@@ -58,6 +65,11 @@ class Args {
   bool help() const { return option_ == "--help" || option_ == "-h"; }
   /// The argument after the current one, taken.
   std::string value();
+  /// value(), a file or directory name: ArgumentError (option(), "needs a
+  /// name, not an empty one") for "" (--volume "" rendered the phantom).
+  std::string name();
+  /// name(), a file that must exist (--brain: a missing one was skipped).
+  std::string existing_file();
   int64_t integer(int64_t lo, int64_t hi);
   int64_t pes();
   uint64_t uint64();

@@ -117,7 +117,7 @@ Options parse_args(int argc, char** argv) {
       o.runs = static_cast<int>(args.integer(1, 1000));
     } else if (args.is("--brain")) {
       if (!o.whole) throw ArgumentError(args.option(), "only used with --whole");
-      o.brain = args.value();
+      o.brain = args.existing_file();
     } else if (args.is("--size") || args.is("--views") || args.is("--no-reference") ||
                args.is("--kernels")) {
       if (o.whole) throw ArgumentError(args.option(), "not used with --whole");

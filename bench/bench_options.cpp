@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
         std::fputs(kUsage, stdout);
         return 0;
       } else if (args.is("--volume")) {
-        volume = args.value();
+        volume = args.name();
       } else if (args.is("--classifier")) {
         classifier = args.value();
       } else if (args.is("--view")) {

@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
         size = static_cast<int>(args.integer(8, 1024));
         size_given = true;
       } else if (args.is("--volume")) {
-        volume_file = args.value();
+        volume_file = args.name();
       } else if (args.is("--pes")) {
         pes = args.pes();
       } else if (args.is("--runs")) {

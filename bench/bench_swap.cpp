@@ -206,7 +206,7 @@ int main(int argc, char** argv) {
       } else if (args.is("--layout")) {
         layout = parse_swap_layout(args.value(), args.option());
       } else if (args.is("--brain")) {
-        brain = args.value();
+        brain = args.existing_file();
       } else if (args.is("--no-reference")) {
         reference = false;
       } else if (args.is("--comm-only")) {

@@ -52,6 +52,7 @@
 using namespace simdvol;
 using simdvol::bench::Args;
 using simdvol::bench::argument_error;
+using simdvol::bench::check_output_dir;
 using simdvol::bench::check_output_file;
 namespace vp = simdvol::volpack;
 using simdvol::bench::Clock;
@@ -164,9 +165,10 @@ int main(int argc, char** argv) try {
         pixel_centre = args.number(0, 1);
       } else if (args.is("--json")) {
         json = args.value();
-        check_output_file(*json, args.option());
+        check_output_file(*json, args.option());  // (and against --data below)
       } else if (args.is("--write-images")) {
-        images = args.value();
+        images = args.name();
+        check_output_dir(*images, args.option());
       } else if (args.is("--quick")) {
         sizes = {256};
         runs = 2;
@@ -176,6 +178,7 @@ int main(int argc, char** argv) try {
         args.unknown();
       }
     }
+    if (json) check_output_file(*json, "--json", {data});
   } catch (const ArgumentError& e) {
     return argument_error("simdvol-bench-volpack", e, kUsage);
   }

@@ -61,6 +61,8 @@
 using namespace simdvol;
 using simdvol::bench::Args;
 using simdvol::bench::argument_error;
+using simdvol::bench::check_output_dir;
+using simdvol::bench::check_output_file;
 
 namespace {
 
@@ -192,9 +194,9 @@ int main(int argc, char** argv) try {
         std::fputs(kUsage, stdout);
         return 0;
       } else if (args.is("--out")) {
-        out = args.value();
+        out = args.name();
       } else if (args.is("--brain")) {
-        brain = args.value();
+        brain = args.existing_file();
       } else if (args.is("--pes")) {
         pes = args.pes();
       } else if (args.is("--size")) {
@@ -211,6 +213,11 @@ int main(int argc, char** argv) try {
     }
     if (out.empty())
       throw ArgumentError("--out", "the output directory (for fig7.csv and fig7.png) is required");
+    // Checked before any work: a fig7.png that could not be written had
+    // left a fresh fig7.csv over the old one.
+    check_output_dir(out, "--out");
+    if (std::filesystem::is_directory(out))
+      for (const char* f : {"fig7.csv", "fig7.png"}) check_output_file(out / f, "--out");
   } catch (const ArgumentError& e) {
     return argument_error("simdvol-repro-fig7", e, kUsage);
   }

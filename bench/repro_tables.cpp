@@ -141,7 +141,7 @@ int main(int argc, char** argv) try {
       } else if (args.is("--views")) {
         views = args.number_list(-360, 360);
       } else if (args.is("--markdown")) {
-        markdown = args.value();
+        markdown = args.name();
         check_output_file(markdown, args.option());
       } else {
         args.unknown();

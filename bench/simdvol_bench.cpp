@@ -307,11 +307,7 @@ Options parse_args(int argc, char** argv) {
       o.volume_index = parse_int(next(), a, 0, std::numeric_limits<int32_t>::max());
     } else if (a == "--json") {
       o.json = next();
-      // Checked now, not after minutes of frames.
-      const std::filesystem::path dir = o.json->has_parent_path() ? o.json->parent_path() : ".";
-      if (!std::filesystem::is_directory(dir))
-        throw ArgumentError(
-            a, "directory '" + dir.string() + "' of '" + o.json->string() + "' does not exist");
+      check_output_file(*o.json, a);  // now, not after minutes of frames
     } else if (a == "--quick") {
       quick = true;
     } else if (a == "--child") {
@@ -339,7 +335,13 @@ Options parse_args(int argc, char** argv) {
   if (repeat) o.repeat = *repeat;
   if (turntable) o.turntable = *turntable;
   bool given = false;
-  for (const auto& v : o.volumes) given = parse_volume(v, o.data, o.volume_index).given || given;
+  std::vector<std::filesystem::path> inputs;
+  for (const auto& v : o.volumes) {
+    const VolumeSpec spec = parse_volume(v, o.data, o.volume_index);
+    given = spec.given || given;
+    if (!spec.file.empty()) inputs.push_back(spec.file);
+  }
+  if (o.json) check_output_file(*o.json, "--json", inputs);
   if (o.volume_index && !given)
     throw ArgumentError("--volume-index",
                         "applies only to volume files given in --volumes (NIfTI, NRRD, DICOM), "
