@@ -87,6 +87,14 @@ expect_bad(BENCH --sizes --sizes 256,0)
 expect_bad(BENCH --volumes --volumes phantom64,head.txt)
 expect_bad(BENCH --volume-index --volume-index -1)
 expect_bad(BENCH --volume-index --volumes phantom64,brainsmall --volume-index 1)
+# A case twice (two cases of one id in the JSON), a view far outside a
+# turn, runs of what is not run.
+expect_bad(BENCH --sizes --sizes 256,256)
+expect_bad(BENCH --volumes --volumes phantom64,phantom64)
+expect_bad(BENCH --skip-pes --skip-pes on,on)
+expect_bad(BENCH --view --view 1e300,0,0)
+expect_bad(BENCH --reference-runs --no-reference --reference-runs 3)
+expect_bad(BENCH --volpack-runs --volpack-runs 2 --no-volpack)
 
 # Names, checked before any work (twenty-third session): an output naming a
 # volume the run reads (it was replaced by the JSON), an output that is a

@@ -243,6 +243,7 @@ Options parse_args(int argc, char** argv) {
   std::optional<std::vector<std::string>> vols, comps;
   std::optional<std::vector<int64_t>> sizes, orders;
   std::optional<int> repeat, turntable;
+  bool reference_runs_given = false, volpack_runs_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -267,6 +268,8 @@ Options parse_args(int argc, char** argv) {
       o.skip_pes.clear();
       for (const std::string& v : split_list(next(), a)) {
         if (v != "on" && v != "off") throw ArgumentError(a, "'" + v + "' is neither on nor off");
+        for (bool b : o.skip_pes)
+          if (b == (v == "on")) throw ArgumentError(a, "'" + v + "' is given twice");
         o.skip_pes.push_back(v == "on");
       }
     } else if (a == "--layout") {
@@ -278,7 +281,9 @@ Options parse_args(int argc, char** argv) {
       const std::string v = next();
       const auto parts = split_list(v, a);
       if (parts.size() != 3) throw ArgumentError(a, "'" + v + "' is not THETA,PHI,VARPHI");
-      o.view = {parse_double(parts[0], a), parse_double(parts[1], a), parse_double(parts[2], a)};
+      // (-360..360, as the other tools' --view: 1e300 was taken)
+      o.view = {parse_double(parts[0], a, -360, 360), parse_double(parts[1], a, -360, 360),
+                parse_double(parts[2], a, -360, 360)};
     } else if (a == "--sampling") {
       const std::string v = next();
       if (v == "voxel")
@@ -295,10 +300,12 @@ Options parse_args(int argc, char** argv) {
       o.reference = false;
     } else if (a == "--reference-runs") {
       o.reference_runs = static_cast<int>(parse_int(next(), a, 1, 100));
+      reference_runs_given = true;
     } else if (a == "--no-volpack") {
       o.volpack = false;
     } else if (a == "--volpack-runs") {
       o.volpack_runs = static_cast<int>(parse_int(next(), a, 1, 100));
+      volpack_runs_given = true;
     } else if (a == "--scaling") {
       o.scaling = parse_int_list(next(), a, 1, 256);
     } else if (a == "--data") {
@@ -329,6 +336,28 @@ Options parse_args(int argc, char** argv) {
     o.volpack_runs = 1;
   }
   if (vols) o.volumes = *vols, o.volumes_explicit = true;
+  // A case twice (--sizes 256,256) made two cases of one id in the JSON.
+  const auto once = [](const auto& list, const char* option) {
+    for (std::size_t i = 0; i < list.size(); ++i)
+      for (std::size_t j = 0; j < i; ++j)
+        if (list[i] == list[j]) {
+          std::ostringstream v;
+          v << list[i];
+          throw ArgumentError(option, "'" + v.str() + "' is given twice");
+        }
+  };
+  if (vols) once(*vols, "--volumes");
+  if (sizes) once(*sizes, "--sizes");
+  if (orders) once(*orders, "--orders");
+  if (comps) once(*comps, "--compositing");
+  once(o.pes, "--pes");
+  once(o.sweeps, "--balance-sweeps");
+  once(o.scaling, "--scaling");
+  // Options that would do nothing are refused, not ignored.
+  if (!o.reference && reference_runs_given)
+    throw ArgumentError("--reference-runs", "does nothing with --no-reference");
+  if (!o.volpack && volpack_runs_given)
+    throw ArgumentError("--volpack-runs", "does nothing with --no-volpack");
   if (sizes) o.sizes = *sizes;
   if (orders) o.orders = *orders;
   if (comps) o.compositing = *comps;
