@@ -45,6 +45,7 @@ constexpr const char* kUsage =
 int main(int argc, char** argv) {
   int64_t pes = 8192;
   int repeat = 5, sweeps = kBalanceSweeps, nrandom = 200;
+  bool random_given = false;
   bool table = true;
   try {
     Args args(argc, argv);
@@ -60,12 +61,15 @@ int main(int argc, char** argv) {
         sweeps = static_cast<int>(args.integer(0, kMaxBalanceSweeps));
       } else if (args.is("--random")) {
         nrandom = static_cast<int>(args.integer(0, 10000));
+        random_given = true;
       } else if (args.is("--no-table")) {
         table = false;
       } else {
         args.unknown();
       }
     }
+    if (random_given && !table)
+      throw ArgumentError("--random", "counts the table's views: it does nothing with --no-table");
   } catch (const ArgumentError& e) {
     return argument_error("simdvol-bench-match", e, kUsage);
   }

@@ -217,6 +217,9 @@ int main(int argc, char** argv) {
         args.unknown();
       }
     }
+    // (--comm-only stops before the kernels: --swap-only was ignored)
+    if (comm_only && swap_only)
+      throw ArgumentError("--swap-only", "and --comm-only: give one of them");
   } catch (const ArgumentError& e) {
     return argument_error("simdvol-bench-swap", e, kUsage);
   }
