@@ -2,7 +2,8 @@
 // (data/brainsmall.den, data/ch2.nii.gz; a synthetic volume stands in for a
 // missing one): small crops written with save_nrrd, teem and niftilib, and
 // truncated and malformed variants, each framed as its fuzz target expects.
-//   make_seeds <data dir> <corpus root>   -> <root>/{raw,den,nrrd,nifti,dicom,metaimage,mgh,minc}/
+//   make_seeds <data dir> <corpus root>
+//     -> <root>/{raw,den,nrrd,nifti,dicom,metaimage,mgh,minc,classifier}/
 // Nothing it writes is committed: scripts/fuzz regenerates the corpora.
 #include <zlib.h>
 
@@ -214,7 +215,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path data(argv[1]), root(argv[2]);
-  for (const char* t : {"raw", "den", "nrrd", "nifti", "dicom", "metaimage", "mgh", "minc"})
+  for (const char* t :
+       {"raw", "den", "nrrd", "nifti", "dicom", "metaimage", "mgh", "minc", "classifier"})
     fs::create_directories(root / t);
   const fs::path tmpdir = root / "tmp";
   fs::create_directories(tmpdir);
@@ -486,6 +488,20 @@ int main(int argc, char** argv) {
   for (fs::directory_iterator it(data / "minc", ec), end; !ec && it != end; it.increment(ec))
     if (it->is_regular_file() && it->file_size() < (1u << 20))
       write_seed(root / "minc", it->path().filename().string(), framed(1, read_bytes(it->path())));
+  // Classifier files: the README's two forms, a relative mixture, and the
+  // "ct" preset's materials written out, with comments and CRLF endings.
+  const auto text = [](const std::string& t) { return Bytes(t.begin(), t.end()); };
+  const fs::path tf = root / "classifier";
+  write_seed(tf, "volpack",
+             text("# VolPack's example\ndensity  0 0   24 1   255 1\ngradient 0 0   5 0   20 1   "
+                  "221 1\ncolor    0 1 1 1\n"));
+  write_seed(tf, "mixture",
+             text("material air   -1000 120  0 0 0        0\nmaterial soft     40  60  0.85 0.45 "
+                  "0.4 0.005\nmaterial bone   1000 250  1 0.97 0.9   0.12\n"));
+  write_seed(tf, "relative",
+             text("relative\r\nmaterial csf 0.1 0.05 0.3 0.3 1 0.01\r\nmaterial grey 0.45 0.1 "
+                  "0.9 0.6 0.5 0.05\r\nmaterial white 0.8 0.1 1 1 0.9 0.2\r\n"));
+  write_seed(tf, "far", text("material a -1e18 1 1 0 0 0.5\nmaterial b 3e18 3 0 1 0 0.8\n"));
   fs::remove_all(tmpdir);
   std::cout << "make_seeds: corpora written under " << root.string() << "\n";
   return 0;
