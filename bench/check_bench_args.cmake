@@ -95,6 +95,8 @@ expect_bad(BENCH --skip-pes --skip-pes on,on)
 expect_bad(BENCH --view --view 1e300,0,0)
 expect_bad(BENCH --reference-runs --no-reference --reference-runs 3)
 expect_bad(BENCH --volpack-runs --volpack-runs 2 --no-volpack)
+expect_bad(BENCH --volumes --volumes phantom)
+expect_bad(BENCH --data --volumes phantom16 --data ${CMAKE_CURRENT_BINARY_DIR})
 expect_bad(SWAP --swap-only --comm-only --swap-only)
 expect_bad(MATCH --random --random 5 --no-table)
 

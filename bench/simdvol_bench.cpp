@@ -215,6 +215,10 @@ struct VolumeSpec {
 VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data,
                         std::optional<int64_t> index = std::nullopt) {
   if (s.rfind("phantom", 0) == 0) {
+    // ("phantom" alone said only "'' is not an integer")
+    if (s.size() == 7 || s.find_first_not_of("0123456789", 7) != std::string::npos)
+      throw ArgumentError("--volumes",
+                          "'" + s + "': give the phantom's size, phantomN (N in 8..1024)");
     const int64_t n = parse_int(s.substr(7), "--volumes");
     if (n < 8 || n > 1024) throw ArgumentError("--volumes", "'" + s + "': N must lie in 8..1024");
     return {s, "ct", {}, static_cast<int>(n)};
@@ -243,7 +247,7 @@ Options parse_args(int argc, char** argv) {
   std::optional<std::vector<std::string>> vols, comps;
   std::optional<std::vector<int64_t>> sizes, orders;
   std::optional<int> repeat, turntable;
-  bool reference_runs_given = false, volpack_runs_given = false;
+  bool reference_runs_given = false, volpack_runs_given = false, data_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -310,6 +314,7 @@ Options parse_args(int argc, char** argv) {
       o.scaling = parse_int_list(next(), a, 1, 256);
     } else if (a == "--data") {
       o.data = next();
+      data_given = true;
     } else if (a == "--volume-index") {
       o.volume_index = parse_int(next(), a, 0, std::numeric_limits<int32_t>::max());
     } else if (a == "--json") {
@@ -358,6 +363,11 @@ Options parse_args(int argc, char** argv) {
     throw ArgumentError("--reference-runs", "does nothing with --no-reference");
   if (!o.volpack && volpack_runs_given)
     throw ArgumentError("--volpack-runs", "does nothing with --no-volpack");
+  if (data_given && std::none_of(o.volumes.begin(), o.volumes.end(), [](const std::string& v) {
+        return v == "brainsmall" || v == "ch2";
+      }))
+    throw ArgumentError("--data",
+                        "does nothing: it holds brainsmall and ch2, and --volumes names neither");
   if (sizes) o.sizes = *sizes;
   if (orders) o.orders = *orders;
   if (comps) o.compositing = *comps;
