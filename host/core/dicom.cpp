@@ -438,7 +438,10 @@ class DicomWalker {
       if (explicit_) {
         if (!std::isupper(h[4]) || !std::isupper(h[5])) return depth == 0 ? kNotDicom : at;
         header = long_vr(h + 4) ? 12 : 8;
-        if (at + header > size_) return cut_header(at) ? at : kNotDicom;
+        if (at + header > size_) {
+          cut_header(at);  // (throws where the file is marked DICOM)
+          return kNotDicom;
+        }
         len = explicit_length(h, at);
         sequence = h[4] == 'S' && h[5] == 'Q';
       } else {
