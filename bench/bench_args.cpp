@@ -124,6 +124,15 @@ void check_output_dir(const std::filesystem::path& dir, const std::string& optio
     throw ArgumentError(option, "'" + dir.string() + "' exists and is not a directory");
 }
 
+void make_output_dir(const std::filesystem::path& dir, const std::string& option) {
+  check_output_dir(dir, option);
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec)
+    throw ArgumentError(option,
+                        "cannot make the directory '" + dir.string() + "': " + ec.message());
+}
+
 bool Args::next() {
   if (++i_ >= argc_) return false;
   option_ = argv_[i_];

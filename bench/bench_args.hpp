@@ -48,6 +48,11 @@ void check_output_file(const std::filesystem::path& file, const std::string& opt
 /// A directory to be written into later (made if missing): a name, and
 /// not an existing file that is not a directory.
 void check_output_dir(const std::filesystem::path& dir, const std::string& option);
+/// check_output_dir, then the directory made (with its parents) if missing:
+/// ArgumentError naming the option and the system's reason where it cannot
+/// be (a file in the way of a parent, no permission), not a bare
+/// "filesystem error".
+void make_output_dir(const std::filesystem::path& dir, const std::string& option);
 
 /// Walks a tool's argv: next() moves to each argument in turn, option() is
 /// it, and the value readers take the argument after it (ArgumentError

@@ -54,6 +54,7 @@ using simdvol::bench::Args;
 using simdvol::bench::argument_error;
 using simdvol::bench::check_output_dir;
 using simdvol::bench::check_output_file;
+using simdvol::bench::make_output_dir;
 namespace vp = simdvol::volpack;
 using simdvol::bench::Clock;
 using simdvol::bench::ms_since;
@@ -179,10 +180,10 @@ int main(int argc, char** argv) try {
       }
     }
     if (json) check_output_file(*json, "--json", {data});
+    if (images) make_output_dir(*images, "--write-images");
   } catch (const ArgumentError& e) {
     return argument_error("simdvol-bench-volpack", e, kUsage);
   }
-  if (images) std::filesystem::create_directories(*images);
 
   const Volume vol = load_volume(data);
   std::printf("volume %s: %lldx%lldx%lld\n", data.filename().string().c_str(),

@@ -125,6 +125,10 @@ expect_bad(SWAP --brain --brain ${scratch}/missing.den)
 expect_bad(FIG7 --brain --out ${scratch}/out --brain ${scratch}/missing.den)
 expect_bad(FIG7 --out --out ${scratch}/afile)
 expect_bad(FIG7 --out --out ${scratch}/fig)
+# A directory that cannot be made (a file in the way of its parent) was a
+# bare "filesystem error" after the arguments were taken.
+expect_bad(FIG7 --out --out ${scratch}/afile/sub)
+expect_bad(VOLPACK --write-images --write-images ${scratch}/afile/sub)
 function(expect_empty_refused tool option)
   if(NOT DEFINED ${tool})
     return()

@@ -63,6 +63,7 @@ using simdvol::bench::Args;
 using simdvol::bench::argument_error;
 using simdvol::bench::check_output_dir;
 using simdvol::bench::check_output_file;
+using simdvol::bench::make_output_dir;
 
 namespace {
 
@@ -218,10 +219,10 @@ int main(int argc, char** argv) try {
     check_output_dir(out, "--out");
     if (std::filesystem::is_directory(out))
       for (const char* f : {"fig7.csv", "fig7.png"}) check_output_file(out / f, "--out");
+    make_output_dir(out, "--out");
   } catch (const ArgumentError& e) {
     return argument_error("simdvol-repro-fig7", e, kUsage);
   }
-  std::filesystem::create_directories(out);
 
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // progress lines when redirected
   Device device;
