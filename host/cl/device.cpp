@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cerrno>
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
@@ -241,8 +242,11 @@ int choose_device(const std::vector<DeviceInfo>& devices, std::optional<int> req
   if (requested) return check(*requested, "--device");
   if (const char* env = std::getenv("SIMDVOL_DEVICE"); env && *env) {
     char* end = nullptr;
+    errno = 0;
     long i = std::strtol(env, &end, 10);
-    if (end == env || *end != '\0')
+    // (Past long's range strtol gives LONG_MAX and ERANGE: "device
+    // 9223372036854775807" named a number nobody gave.)
+    if (end == env || *end != '\0' || errno == ERANGE)
       throw ArgumentError("SIMDVOL_DEVICE", std::string("\"") + env +
                                                 "\" is not a device index (see `simdvol devices`)");
     return check(i, "SIMDVOL_DEVICE");

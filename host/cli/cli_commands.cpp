@@ -8,25 +8,108 @@
 #include <sstream>
 #include <vector>
 
+#include "../core/file_checks.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/error.hpp"
+#include "simdvol/io.hpp"
 
 namespace fs = std::filesystem;
 
 namespace simdvol {
 
+CLI::Validator decimal_integer() {
+  return CLI::Validator(
+      [](std::string& v) {
+        std::string_view s = v;
+        while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+        while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+        if (!s.empty() && (s.front() == '+' || s.front() == '-')) s.remove_prefix(1);
+        if (s.empty() || s.find_first_not_of("0123456789") != std::string_view::npos)
+          return "expected a whole number in decimal, not '" + v + "'";
+        if (s.size() > 1 && s.front() == '0')
+          return "'" + v + "' has a leading zero (it would be read as octal): write it without";
+        return std::string();
+      },
+      "", "decimal");
+}
+
+double parse_number(const std::string& s, const std::string& arg) {
+  try {
+    std::size_t used = 0;
+    const double v = std::stod(s, &used);
+    if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument(s);
+    return v;
+  } catch (const std::exception&) {
+    throw ArgumentError(arg, "'" + s + "' is not a number");
+  }
+}
+
+std::vector<double> parse_numbers(const std::string& s, std::size_t n, const std::string& arg,
+                                  const std::string& form) {
+  std::vector<std::string> parts;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ',');) parts.push_back(item);
+  if (parts.size() != n || (!s.empty() && s.back() == ','))
+    throw ArgumentError(arg, "expected " + form + ", not '" + s + "'");
+  std::vector<double> v;
+  for (const auto& p : parts) v.push_back(parse_number(p, arg));
+  return v;
+}
+
+std::array<double, 3> parse_angles(const std::string& s, const std::string& arg) {
+  const auto a = parse_numbers(s, 3, arg, "THETA,PHI,VARPHI in degrees");
+  for (double x : a)
+    if (x < -360.0 || x > 360.0)
+      throw ArgumentError(arg, "'" + s + "': each angle must be in -360 .. 360 degrees");
+  return {a[0], a[1], a[2]};
+}
+
+void check_not_an_input(const fs::path& out, const std::vector<fs::path>& inputs,
+                        const fs::path& dicom_dir, const char* arg) {
+  // Through symbolic links: "-o out.png" with out.png a link to the volume
+  // wrote the image over the volume.
+  const fs::path target = write_target(out);
+  std::error_code ec;
+  if (!fs::exists(target, ec)) return;  // nothing there to replace
+  for (const fs::path& in : inputs)
+    if (!in.empty() && fs::equivalent(target, in, ec))
+      throw ArgumentError(arg, "writing " + out.string() + " would replace " + in.string() +
+                                   ", which this command reads");
+  // A DICOM slice is told by its contents, under any name (slice.tif), and
+  // the series is read from its whole directory.
+  if (dicom_dir.empty() || volume_file_kind(target) != VolumeFileKind::dicom) return;
+  for (fs::path d = fs::absolute(target, ec).parent_path(); !d.empty(); d = d.parent_path()) {
+    if (fs::equivalent(d, dicom_dir, ec))
+      throw ArgumentError(arg, "writing " + out.string() +
+                                   " would replace a DICOM file of the series being read (in " +
+                                   dicom_dir.string() + ")");
+    if (d == d.parent_path()) break;
+  }
+}
+
 void check_output_path(const fs::path& p, const char* arg) {
   if (p.empty()) throw ArgumentError(arg, "empty output path");
+  // Where the write goes: through symbolic links (a dangling link into a
+  // missing directory failed only after the render).
+  const fs::path t = write_target(p);
   // Error codes, not exceptions: a name too long for the file system (or
   // any other failure to look it up) is the argument's problem.
   std::error_code ec;
-  const fs::file_status st = fs::status(p, ec);
+  const fs::file_status st = fs::status(t, ec);
   if (ec && st.type() != fs::file_type::not_found)
     throw ArgumentError(arg, p.string() + ": " + ec.message());
   if (fs::is_directory(st)) throw ArgumentError(arg, p.string() + " is a directory");
-  const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
+  // A FIFO, socket or device was replaced by a regular file, not written.
+  if (fs::exists(st) && !fs::is_regular_file(st))
+    throw ArgumentError(arg, p.string() +
+                                 " is not a regular file (a FIFO, socket or device): the output "
+                                 "is written to a new file put in its place");
+  const fs::path dir = t.has_parent_path() ? t.parent_path() : fs::path(".");
   if (!fs::is_directory(dir, ec))
-    throw ArgumentError(arg, "directory " + dir.string() + " of " + p.string() + " does not exist");
+    throw ArgumentError(
+        arg, (fs::exists(dir, ec)
+                  ? dir.string() + ", the directory of " + p.string() + ", is not a directory"
+                  : "directory " + dir.string() + " of " + p.string() + " does not exist"));
 }
 
 namespace {
@@ -130,7 +213,15 @@ int print_devices(std::ostream& os) {
   // NoDeviceError (no platform: names the package to install) propagates to
   // main(), which prints it and exits non-zero.
   const std::vector<DeviceInfo> devices = list_devices();
-  os << describe_devices(devices, choose_device(devices));
+  // A bad SIMDVOL_DEVICE: the list all the same (the error points here for
+  // it), none marked, then the error and a non-zero exit.
+  try {
+    os << describe_devices(devices, choose_device(devices));
+  } catch (const ArgumentError& e) {
+    os << describe_devices(devices, -1);
+    std::cerr << "simdvol: error: " << e.what() << "\n";
+    return 1;
+  }
   return 0;
 }
 

@@ -1,6 +1,9 @@
 // Pieces of the CLI kept apart from main() so they stay small and testable.
 #pragma once
 
+#include <CLI/CLI.hpp>
+
+#include <array>
 #include <filesystem>
 #include <ostream>
 #include <string>
@@ -11,6 +14,33 @@
 #include "simdvol/volume.hpp"
 
 namespace simdvol {
+
+/// For every whole-number option: CLI11 2.1 converts whole numbers in base
+/// 0, so "010" was 8 and "0x10" 16, a number other than the one meant and
+/// no word said. Refuses any text but optional blanks and sign, then
+/// decimal digits without a leading zero ("0" itself is fine).
+CLI::Validator decimal_integer();
+
+/// A number for `arg` (finite, the whole text used); ArgumentError else.
+double parse_number(const std::string& s, const std::string& arg);
+
+/// N comma-separated numbers for `arg` ("expected FORM" where there are
+/// more or fewer, or a trailing comma).
+std::vector<double> parse_numbers(const std::string& s, std::size_t n, const std::string& arg,
+                                  const std::string& form);
+
+/// THETA,PHI,VARPHI in degrees for `arg`, each in -360 .. 360 (the bench
+/// tools' bounds: 1e300 degrees is no angle anyone means).
+std::array<double, 3> parse_angles(const std::string& s, const std::string& arg);
+
+/// Throws ArgumentError (naming `arg`) where writing the output `out` would
+/// replace a file the command reads: one of `inputs` (a volume, an Analyze
+/// .hdr's .img, a classifier file), followed through symbolic links; and,
+/// where `dicom_dir` is not empty (a DICOM volume: its series is every
+/// slice in that directory and below), an existing DICOM file there.
+void check_not_an_input(const std::filesystem::path& out,
+                        const std::vector<std::filesystem::path>& inputs,
+                        const std::filesystem::path& dicom_dir, const char* arg);
 
 /// Throws ArgumentError (naming `arg`) if the output's directory is missing,
 /// the path is a directory, or it cannot be looked up (e.g. a name too long

@@ -79,17 +79,6 @@ std::vector<std::string> split(const std::string& s, char sep) {
   return out;
 }
 
-double parse_number(const std::string& s, const std::string& arg) {
-  try {
-    std::size_t used = 0;
-    const double v = std::stod(s, &used);
-    if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument(s);
-    return v;
-  } catch (const std::exception&) {
-    throw ArgumentError(arg, "'" + s + "' is not a number");
-  }
-}
-
 int64_t parse_int(const std::string& s, const std::string& arg) {
   const double v = parse_number(s, arg);
   if (v != std::floor(v) || std::fabs(v) > 9.0e15)
@@ -97,19 +86,8 @@ int64_t parse_int(const std::string& s, const std::string& arg) {
   return static_cast<int64_t>(v);
 }
 
-// N comma-separated numbers for `arg` ("expected FORM").
-std::vector<double> parse_numbers(const std::string& s, std::size_t n, const std::string& arg,
-                                  const std::string& form) {
-  const auto parts = split(s, ',');
-  if (parts.size() != n || (!s.empty() && s.back() == ','))
-    throw ArgumentError(arg, "expected " + form + ", not '" + s + "'");
-  std::vector<double> v;
-  for (const auto& p : parts) v.push_back(parse_number(p, arg));
-  return v;
-}
-
 ViewAngles parse_view(const std::string& s) {
-  const auto a = parse_numbers(s, 3, "--view", "THETA,PHI,VARPHI in degrees");
+  const auto a = parse_angles(s, "--view");
   return {a[0], a[1], a[2]};
 }
 
@@ -146,12 +124,14 @@ struct VolumeArgs {
         ->capture_default_str();
     app->add_option("--raw-spacing", raw_spacing, "raw volumes: SX,SY,SZ (default 1,1,1)");
     app->add_option("--raw-header", raw_header, "raw volumes: bytes to skip before the voxels")
+        ->check(decimal_integer())
         ->check(kNotNegative)
         ->check(in_range<uint64_t>());
     app->add_option("--volume-index", volume_index,
                     "4-D NIfTI and NRRD files (a time or diffusion series of 3-D volumes), and "
                     "DICOM series with several images at each position (time points, echoes): "
                     "which volume, from 0")
+        ->check(decimal_integer())
         ->check(in_range<int64_t>());
     app->add_option(
         "--orient", orient,
@@ -215,7 +195,8 @@ struct VolumeArgs {
     if (!raw_dims.empty()) {
       RawLayout l;
       const auto d = split(raw_dims, ',');
-      if (d.size() != 3) throw ArgumentError("--raw-dims", "expected NX,NY,NZ");
+      if (d.size() != 3 || raw_dims.back() == ',')
+        throw ArgumentError("--raw-dims", "expected NX,NY,NZ, not '" + raw_dims + "'");
       for (int a = 0; a < 3; ++a) l.dims[a] = parse_int(d[a], "--raw-dims");
       l.type = parse_voxel_type(raw_type, "--raw-type");
       if (raw_endian == "little")
@@ -323,10 +304,15 @@ int main(int argc, char** argv) {
                    "an oblique view loses the corners); diagonal: its diagonal does (the whole "
                    "volume at every view)")
       ->capture_default_str();
-  render->add_option("--order", order, "interpolation order 0..3 (Aitken)")->capture_default_str();
+  render->add_option("--order", order, "interpolation order 0..3 (Aitken)")
+      ->check(decimal_integer())
+      ->capture_default_str();
   render->add_option("--composite", composite, "direct, adaptive or mc")->capture_default_str();
-  render->add_option("--samples", samples, "Monte Carlo walks per ray")->capture_default_str();
+  render->add_option("--samples", samples, "Monte Carlo walks per ray")
+      ->check(decimal_integer())
+      ->capture_default_str();
   render->add_option("--seed", seed, "Monte Carlo seed")
+      ->check(decimal_integer())
       ->check(kNotNegative)
       ->check(in_range<uint64_t>())
       ->capture_default_str();
@@ -388,6 +374,7 @@ int main(int argc, char** argv) {
                    "sweeps after the matching (ch. 5; 0: none). "
                    "The thesis's SIMD PEs wait for the busiest; PoCL's work-items do not, so 0 "
                    "is faster on a CPU (the same image to float rounding)")
+      ->check(decimal_integer())
       ->capture_default_str();
   render->add_option("--engine", engine, "reference (serial CPU) or opencl (the PE array)")
       ->capture_default_str();
@@ -399,12 +386,17 @@ int main(int argc, char** argv) {
                    "WxH (a power of two)")
       ->capture_default_str();
   auto* device_opt =
-      render->add_option("--device", device_index,
-                         "opencl engine: device index as `simdvol devices` lists (default: "
-                         "SIMDVOL_DEVICE, else the first CPU device)");
+      render
+          ->add_option("--device", device_index,
+                       "opencl engine: device index as `simdvol devices` lists (default: "
+                       "SIMDVOL_DEVICE, else the first CPU device)")
+          ->check(decimal_integer());
   render->add_option("--phantom-size", phantom_size, "size of the built-in CT phantom")
+      ->check(decimal_integer())
       ->capture_default_str();
-  render->add_option("--frames", frames, "turntable: number of frames")->capture_default_str();
+  render->add_option("--frames", frames, "turntable: number of frames")
+      ->check(decimal_integer())
+      ->capture_default_str();
   render->add_option("--step", step, "turntable: degrees of PHI per frame")->capture_default_str();
   render->add_flag("--times", show_times, "print per-stage times");
   std::string trace;
@@ -426,9 +418,12 @@ int main(int argc, char** argv) {
   phantom->add_option("kind", phantom_kind, "shepp-logan or marschner-lobb")
       ->required()
       ->check(CLI::IsMember({"shepp-logan", "marschner-lobb"}));
-  phantom->add_option("--size", phantom_n, "N (an N^3 grid)")->capture_default_str();
+  phantom->add_option("--size", phantom_n, "N (an N^3 grid)")
+      ->check(decimal_integer())
+      ->capture_default_str();
   phantom
       ->add_option("--supersample", phantom_ss, "shepp-logan partial-volume sub-samples per axis")
+      ->check(decimal_integer())
       ->check(CLI::Range(1, 8))
       ->capture_default_str();
   phantom->add_option("-o,--output", phantom_out, "output .nrrd")->required();
@@ -599,6 +594,25 @@ int main(int argc, char** argv) {
         if (tracep.lexically_normal() == outp.lexically_normal())
           throw ArgumentError("--trace", "names the same file as -o");
       }
+      // No output may replace what the render reads: the volume (a link
+      // named out.png pointing at it; a DICOM slice named slice.tif), an
+      // Analyze .hdr's .img, or the --classify file.
+      {
+        std::vector<fs::path> inputs;
+        fs::path dicom_dir;
+        if (!rv.path.empty()) {
+          const fs::path vp = rv.path;
+          inputs.push_back(vp);
+          if (upper(vp.extension().string()) == ".HDR")
+            inputs.push_back(fs::path(vp).replace_extension(".img"));
+          if (rv.kind() == VolumeFileKind::dicom)
+            dicom_dir = fs::is_directory(vp) ? vp : fs::absolute(vp).parent_path();
+        }
+        if (std::error_code ec; fs::is_regular_file(classify, ec)) inputs.push_back(classify);
+        for (int f = 0; f < frames; ++f)
+          check_not_an_input(numbered(outp, f, frames), inputs, dicom_dir, "-o");
+        if (render->count("--trace") > 0) check_not_an_input(tracep, inputs, dicom_dir, "--trace");
+      }
       std::vector<std::vector<KernelSpan>> traced;
 
       Volume vol;
@@ -688,9 +702,11 @@ int main(int argc, char** argv) {
       if (!trace.empty()) write_file_atomically(tracep, {kernel_trace_json(traced)});
       if (frames == 1) std::cout << "wrote " << fs::absolute(outp).string() << "\n";
       if (frames > 1)
-        std::cout << "wrote " << frames << " frames: " << fs::absolute(numbered(outp, 0, frames))
-                  << " .. " << numbered(outp, frames - 1, frames).filename().string() << "\n";
+        std::cout << "wrote " << frames
+                  << " frames: " << fs::absolute(numbered(outp, 0, frames)).string() << " .. "
+                  << numbered(outp, frames - 1, frames).filename().string() << "\n";
     } else if (*info) {
+      if (iv.path.empty()) throw ArgumentError("volume", "empty name");
       int64_t volumes = 1;
       print_info(std::cout, iv.path, iv.load(true, &volumes));
       if (volumes > 1)
@@ -702,12 +718,18 @@ int main(int argc, char** argv) {
     } else if (*phantom) {
       if (phantom_n < 2 || phantom_n > 1024)
         throw ArgumentError("--size", std::to_string(phantom_n) + " is outside 2..1024");
+      if (phantom_kind != "shepp-logan" && phantom->count("--supersample") > 0)
+        throw ArgumentError("--supersample",
+                            "applies only to shepp-logan (marschner-lobb is sampled at the grid "
+                            "points)");
       const fs::path p = phantom_out;
       check_output_path(p, "-o");
-      if (p.extension() != ".nrrd")
+      // Any case, as the loader reads it; ".nrrd" alone is a hidden file's
+      // name with no ending.
+      if (upper(p.extension().string()) != ".NRRD")
         throw ArgumentError("-o", p.string() +
                                       ": the phantom is written as an attached-header NRRD: give "
-                                      "a name ending in .nrrd");
+                                      "a name ending in .nrrd (such as phantom.nrrd)");
       const Volume vol = phantom_kind == "shepp-logan" ? shepp_logan(phantom_n, phantom_ss)
                                                        : marschner_lobb(phantom_n);
       save_nrrd(vol, p);

@@ -12,6 +12,9 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
+#include "../core/file_checks.hpp"
 #include "cli_commands.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/image.hpp"
@@ -34,27 +37,6 @@ struct Options {
 };
 Options g_opt;
 CLI::App* g_cmd = nullptr;
-
-double parse_num(const std::string& s, const std::string& arg) {
-  try {
-    std::size_t used = 0;
-    const double v = std::stod(s, &used);
-    if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument(s);
-    return v;
-  } catch (const std::exception&) {
-    throw ArgumentError(arg, "'" + s + "' is not a number");
-  }
-}
-
-ViewAngles parse_angles(const std::string& s) {
-  std::vector<std::string> parts;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, ',')) parts.push_back(item);
-  if (parts.size() != 3) throw ArgumentError("--view", "expected THETA,PHI,VARPHI in degrees");
-  return {parse_num(parts[0], "--view"), parse_num(parts[1], "--view"),
-          parse_num(parts[2], "--view")};
-}
 
 std::string fmt(const char* f, double v) {
   char buf[64];
@@ -226,8 +208,12 @@ CLI::App* add_mismatch_command(CLI::App& app) {
   g_cmd->add_option("--theta", g_opt.theta, "2-D rotation angle in degrees")->capture_default_str();
   g_cmd->add_option("--view", g_opt.view, "3-D rotation THETA,PHI,VARPHI in degrees (eq 5.2)")
       ->capture_default_str();
-  g_cmd->add_option("--size", g_opt.size, "2-D viewing grid N x N")->capture_default_str();
-  g_cmd->add_option("--size3", g_opt.size3, "3-D viewing grid N^3")->capture_default_str();
+  g_cmd->add_option("--size", g_opt.size, "2-D viewing grid N x N")
+      ->check(decimal_integer())
+      ->capture_default_str();
+  g_cmd->add_option("--size3", g_opt.size3, "3-D viewing grid N^3")
+      ->check(decimal_integer())
+      ->capture_default_str();
   g_cmd->add_option("--plot", g_opt.plot, "histogram bar chart (.png, .exr, .tif)");
   g_cmd->add_option("--csv", g_opt.csv, "histograms as CSV");
   return g_cmd;
@@ -235,12 +221,14 @@ CLI::App* add_mismatch_command(CLI::App& app) {
 
 int run_mismatch_command(std::ostream& os) {
   const Options& o = g_opt;
-  if (!std::isfinite(o.theta)) throw ArgumentError("--theta", "must be finite");
+  if (!(o.theta >= -360.0 && o.theta <= 360.0))
+    throw ArgumentError("--theta", "must be in -360 .. 360 degrees");
   if (o.size < 1 || o.size > 4096)
     throw ArgumentError("--size", std::to_string(o.size) + " is outside 1..4096");
   if (o.size3 < 1 || o.size3 > 256)
     throw ArgumentError("--size3", std::to_string(o.size3) + " is outside 1..256");
-  const ViewAngles view = parse_angles(o.view);
+  const auto angles = parse_angles(o.view, "--view");
+  const ViewAngles view{angles[0], angles[1], angles[2]};
   // Given but empty ('--csv ""') is a mistake, not "no CSV".
   if (g_cmd->count("--plot") > 0 && o.plot.empty())
     throw ArgumentError("--plot", "empty output path");
@@ -295,9 +283,41 @@ int run_mismatch_command(std::ostream& os) {
 )";
   print_ops(os, view);
 
+  // Both outputs or neither: the plot goes to a temporary name beside it
+  // and takes its own only after the CSV is written (a CSV that failed on
+  // a full disk had left a new plot over the old one).
+  int bins = 0;
+  fs::path plot_tmp;
   if (!o.plot.empty()) {
-    int bins = 0;
-    write_image(draw_plot(r2, r3, &bins), o.plot);
+    const fs::path target = write_target(o.plot);
+    // (Short: a plot's name near the file system's limit leaves no room.)
+    plot_tmp = target.parent_path() /
+               (".simdvol-plot-" + std::to_string(::getpid()) + target.extension().string());
+    try {
+      write_image(draw_plot(r2, r3, &bins), plot_tmp);
+    } catch (const FileError& e) {
+      throw FileError(o.plot, e.problem());  // the user's name, not the temporary one
+    }
+    if (!o.csv.empty()) {
+      try {
+        write_csv(o.csv, r2, r3);
+      } catch (...) {
+        std::error_code ec;
+        fs::remove(plot_tmp, ec);
+        throw;
+      }
+    }
+    std::error_code ec;
+    fs::rename(plot_tmp, target, ec);
+    if (ec) {
+      const std::string why = ec.message();
+      fs::remove(plot_tmp, ec);
+      throw FileError(o.plot, "cannot put the plot in place: " + why);
+    }
+  } else if (!o.csv.empty()) {
+    write_csv(o.csv, r2, r3);
+  }
+  if (!o.plot.empty()) {
     os << "\nwrote " << fs::absolute(o.plot).string()
        << ": top panel 2-D, bottom panel 3-D; x axis: Euclidean mismatch distance from 0 to "
        << fmt("%.2f", bins * r2.shear.bin_width)
@@ -305,10 +325,7 @@ int run_mismatch_command(std::ostream& os) {
           "samples in the bin, scaled to each panel's tallest bar; bars per bin: red = shear, "
           "blue = min-mismatch floor, green = min-mismatch nearest.\n";
   }
-  if (!o.csv.empty()) {
-    write_csv(o.csv, r2, r3);
-    os << "wrote " << fs::absolute(o.csv).string() << "\n";
-  }
+  if (!o.csv.empty()) os << "wrote " << fs::absolute(o.csv).string() << "\n";
   return 0;
 }
 

@@ -309,7 +309,10 @@ void write_image(const Image& img, const fs::path& path) {
 Image read_image(const fs::path& path) {
   std::error_code ec;
   refuse_non_regular_file(path, "an image file");
-  if (!fs::is_regular_file(path, ec)) throw FileError(path, "no such image file");
+  if (!fs::is_regular_file(path, ec))
+    throw FileError(path, ec && ec != std::errc::no_such_file_or_directory
+                              ? ec.message()  // a loop of symbolic links, no permission, ...
+                              : "no such image file");
   const OiioModule& m = oiio_module();
   if (!m.problem.empty()) throw FileError(path, m.problem);
   int w = 0, h = 0;

@@ -17,6 +17,8 @@ namespace {
 // itself cannot be allocated, this static one stands in (never freed).
 char kOutOfMemory[] = "out of memory in the OpenImageIO module";
 
+constexpr std::size_t kMaxReadPixels = std::size_t{1} << 28;
+
 char* message(const std::string& s) {
   char* m = static_cast<char*>(std::malloc(s.size() + 1));
   if (!m) return kOutOfMemory;
@@ -46,16 +48,36 @@ std::string read_image(const char* path, int* w_out, int* h_out, float** rgba_ou
     const std::string msg = OIIO::geterror();
     return msg.empty() ? "OpenImageIO cannot open it" : msg;
   }
+  // OpenImageIO's "null" reader makes a black 1024x1024 image of any file
+  // named *.null: that is no image to compare.
+  if (std::strcmp(in->format_name(), "null") == 0) return "not an image file";
   const OIIO::ImageSpec& spec = in->spec();
   const int w = spec.width, h = spec.height, nch = spec.nchannels;
   if (w <= 0 || h <= 0 || nch <= 0) return "image has no pixels";
   if (spec.depth > 1) return "3-D images are not supported";
+  // A header's size is checked before the pixels are allocated: a 100-byte
+  // PNG that claimed 20000x20000 took 4.8 GB and 15 s to fail.
   const std::size_t count = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
-  std::vector<float> buf(count * static_cast<std::size_t>(nch));
-  if (!in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, buf.data())) {
+  if (count > kMaxReadPixels || nch > 64)
+    return "its header says " + std::to_string(w) + "x" + std::to_string(h) + " pixels, " +
+           std::to_string(nch) + " channels: more than simdvol reads (2^28 pixels, 64 channels)";
+  // Several images in one file (TIFF pages, EXR parts): which one was
+  // meant is not known, and the first alone compared as the whole file.
+  if (in->seek_subimage(1, 0))
+    return "it holds several images (pages or parts); give a file of one image";
+  if (!in->seek_subimage(0, 0)) {
     const std::string msg = in->geterror();
-    return msg.empty() ? "OpenImageIO could not read the pixels" : msg;
+    return msg.empty() ? "OpenImageIO could not go back to its first image" : msg;
   }
+  (void)in->geterror();  // what the failed seek to a second image left there
+  std::vector<float> buf(count * static_cast<std::size_t>(nch));
+  // read_image can return true for a TIFF or JPEG cut short (its strips
+  // or scan lines left black) with the reader's complaint kept in
+  // geterror(): that is a damaged file, not an image.
+  const bool read = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, buf.data());
+  const std::string msg = in->geterror();
+  if (!read || !msg.empty())
+    return msg.empty() ? "OpenImageIO could not read the pixels" : "damaged: " + msg;
   in->close();
   const int alpha = nch == 2   ? 1
                     : nch >= 4 ? (spec.alpha_channel >= 0 ? spec.alpha_channel : 3)

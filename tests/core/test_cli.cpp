@@ -1026,6 +1026,45 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render " + path("v16.raw") +
            " --raw-dims 16,16,16 --raw-spacing 1e300,1,1e-300 --sampling pixel -o " + path("x.png"),
        "its largest over its smallest is too large"},
+      // Whole numbers in decimal only: CLI11 read "010" in base 0, as octal
+      // (8 frames, volume 8, a 52^3 phantom), and "0x10" as 16.
+      {"render --phantom-size 16 --frames 010 -o " + path("t.png"),
+       "--frames: '010' has a leading zero"},
+      {"render --order 01 -o " + path("x.png"), "--order: '01' has a leading zero"},
+      {"render --composite mc --seed 0x10 -o " + path("x.png"),
+       "--seed: expected a whole number in decimal, not '0x10'"},
+      {"render --composite mc --samples 032 -o " + path("x.png"), "--samples: '032'"},
+      {"render --balance-sweeps 08 -o " + path("x.png"), "--balance-sweeps: '08'"},
+      {"render --phantom-size 016 -o " + path("x.png"), "--phantom-size: '016'"},
+      {"render --device 00 -o " + path("x.png"), "--device: '00'"},
+      {"info " + path("vol.raw") + " --raw-dims 2,2,2 --raw-header 010", "--raw-header: '010'"},
+      {"info " + path("vol.raw") + " --volume-index 010", "--volume-index: '010'"},
+      {"phantom shepp-logan --size 064 -o " + path("c.nrrd"), "--size: '064' has a leading zero"},
+      {"phantom shepp-logan --size 8 --supersample 04 -o " + path("c.nrrd"), "--supersample: '04'"},
+      {"mismatch --size 010 --size3 4", "--size: '010'"},
+      // Angles in -360 .. 360 degrees, as the bench tools take them (1e300
+      // was taken); lists without a trailing comma, as render's others.
+      {"render --view 1e300,0,0 -o " + path("x.png"),
+       "--view: '1e300,0,0': each angle must be in -360 .. 360 degrees"},
+      {"mismatch --size 8 --size3 4 --view 30,20,10,",
+       "--view: expected THETA,PHI,VARPHI in degrees, not '30,20,10,'"},
+      {"mismatch --size 8 --size3 4 --view 400,0,0", "--view: '400,0,0': each angle must be in"},
+      {"mismatch --size 8 --size3 4 --theta 1e300", "--theta: must be in -360 .. 360 degrees"},
+      {"info " + path("vol.raw") + " --raw-dims 2,2,2,",
+       "--raw-dims: expected NX,NY,NZ, not '2,2,2,'"},
+      {"info ''", "volume: empty name"},
+      // It made the same file as without it.
+      {"phantom marschner-lobb --size 8 --supersample 2 -o " + path("c.nrrd"),
+       "--supersample: applies only to shepp-logan"},
+      {"phantom shepp-logan --size 8 -o " + path(".nrrd"), "give a name ending in .nrrd"},
+      // -o: a file where its directory should be (said "does not exist"), a
+      // FIFO (replaced by a file), a link into a missing directory (found
+      // only after the render).
+      {"render --phantom-size 16 -o " + path("afile/x.png"),
+       path("afile") + ", the directory of " + path("afile/x.png") + ", is not a directory"},
+      {"render --phantom-size 16 -o " + path("fifo.png"), "fifo.png is not a regular file"},
+      {"render --phantom-size 16 -o " + path("dangling.png"),
+       "directory " + path("nodir2") + " of " + path("dangling.png") + " does not exist"},
       {"mismatch --size 8 --size3 4 --csv ''", "--csv: empty output path"},
       {"mismatch --size 8 --size3 4 --plot ''", "--plot: empty output path"},
       // Options that do nothing in the chosen mode are refused, not ignored.
@@ -1074,6 +1113,9 @@ TEST_F(Cli, BadArgumentsFailClearly) {
   std::ofstream(dir_ / "sigma.tf") << "material b 100 10 1 1 1 0.5\nmaterial a 0 1e-39 1 1 1 0.5\n";
   std::ofstream(dir_ / "wide.tf") << "density -1e38 0 3e38 1\n";
   ASSERT_EQ(mkfifo(path("fifo.tf").c_str(), 0600), 0);
+  ASSERT_EQ(mkfifo(path("fifo.png").c_str(), 0600), 0);
+  std::ofstream(dir_ / "afile") << "keep";
+  fs::create_symlink("nodir2/x.png", dir_ / "dangling.png");
   fs::create_directories(dir_ / "adir");
   fs::create_directories(dir_ / "adir.nrrd");
   for (const Case& c : cases) {
@@ -1088,6 +1130,122 @@ TEST_F(Cli, BadArgumentsFailClearly) {
   EXPECT_FALSE(fs::exists(dir_ / "t_0000.png"));
   EXPECT_FALSE(fs::exists(dir_ / "noext_0000"));
   EXPECT_FALSE(fs::exists(dir_ / "m.png"));
+  EXPECT_FALSE(fs::exists(dir_ / "c.nrrd"));
+  EXPECT_TRUE(fs::is_fifo(dir_ / "fifo.png"));
+}
+
+// No output replaces a file the render reads (each was replaced before):
+// the volume through a symbolic link named as the image, a DICOM slice
+// named .tif (told by its contents), a DICOM slice beside the one asked
+// for or in the directory asked for, the --classify file, and the trace
+// through a link. A new name in the series' directory is fine.
+TEST_F(Cli, OutputNeverReplacesAnInput) {
+  ASSERT_EQ(run("phantom shepp-logan --size 8 -o " + path("v.nrrd")).code, 0);
+  const fs::path ser = dir_ / "ser";
+  fs::create_directories(ser);
+  for (int z = 0; z < 4; ++z) {
+    simdvol::testing::DicomSlice sl;
+    sl.position = {0, 0, 1.0 * z};
+    write_dicom_slice(ser / ("s" + std::to_string(z) + ".tif"), 8, 8,
+                      std::vector<int16_t>(64, static_cast<int16_t>(100 * z)), sl);
+  }
+  std::ofstream(dir_ / "c.tf") << "density 0 0 100 1\n";
+  fs::create_symlink("v.nrrd", dir_ / "link.png");
+  fs::create_symlink("v.nrrd", dir_ / "link.json");
+  fs::create_symlink("c.tf", dir_ / "tf.png");
+  const auto bytes = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), {});
+  };
+  std::vector<std::pair<fs::path, std::string>> kept;
+  for (const fs::path& p : {dir_ / "v.nrrd", dir_ / "c.tf", ser / "s0.tif", ser / "s1.tif"})
+    kept.emplace_back(p, bytes(p));
+  struct Case {
+    std::string args, needle;
+  };
+  const std::string vol = path("v.nrrd"), s0 = (ser / "s0.tif").string(),
+                    s1 = (ser / "s1.tif").string();
+  const Case cases[] = {
+      {"render " + vol + " --size 8 -o " + path("link.png"),
+       "-o: writing " + path("link.png") + " would replace " + vol + ", which this command reads"},
+      {"render " + s0 + " --size 8 -o " + s0,
+       "-o: writing " + s0 + " would replace " + s0 + ", which this command reads"},
+      {"render " + s0 + " --size 8 -o " + s1,
+       "-o: writing " + s1 + " would replace a DICOM file of the series being read"},
+      {"render " + ser.string() + " --size 8 -o " + s1,
+       "-o: writing " + s1 + " would replace a DICOM file of the series being read"},
+      {"render " + vol + " --size 8 --classify " + path("c.tf") + " -o " + path("tf.png"),
+       "would replace " + path("c.tf")},
+      {"render " + vol + " --size 8 --trace " + path("link.json") + " -o " + path("ok.png"),
+       "--trace: writing " + path("link.json") + " would replace " + vol},
+  };
+  for (const Case& c : cases) {
+    const Result r = run(c.args);
+    EXPECT_EQ(r.code, 1) << c.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.needle), std::string::npos) << c.args << "\n" << r.output;
+  }
+  for (const auto& [p, b] : kept) EXPECT_EQ(bytes(p), b) << p;
+  EXPECT_FALSE(fs::exists(dir_ / "ok.png"));
+  const Result r = run("render " + s0 + " --size 8 -o " + (ser / "new.png").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::is_regular_file(ser / "new.png"));
+}
+
+// `mismatch --plot P --csv C` writes both or neither: a CSV that failed on
+// a full disk (a file size limit here: the plot's 6 KB fit, the CSV's 11
+// KB do not) had left a new plot over the old. A plot that fails is named
+// as given, not by its temporary name.
+TEST_F(Cli, MismatchWritesBothOutputsOrNeither) {
+  std::ofstream(dir_ / "keep.png") << "old";
+  std::ofstream(dir_ / "keep.csv") << "old";
+  const Result r = run_once(
+      "mismatch --size 8 --size3 4 --plot " + path("keep.png") + " --csv " + path("keep.csv"), "",
+      "trap '' XFSZ; ulimit -f 16;");  // 8 KiB (sh counts 512 bytes)
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("keep.csv: write failed: File too large"), std::string::npos) << r.output;
+  for (const char* f : {"keep.png", "keep.csv"}) {
+    std::ifstream in(dir_ / f);
+    EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), {}), "old") << f;
+  }
+  int files = 0;
+  for (const auto& e : fs::directory_iterator(dir_)) files += e.is_regular_file();
+  EXPECT_EQ(files, 2);  // no temporary left
+  const Result small = run_once("mismatch --size 8 --size3 4 --plot " + path("keep.png"), "",
+                                "trap '' XFSZ; ulimit -f 2;");
+  EXPECT_EQ(small.code, 1) << small.output;
+  EXPECT_NE(small.output.find("simdvol: error: " + path("keep.png") + ": "), std::string::npos)
+      << small.output;
+  // Without the limit both are written.
+  ASSERT_EQ(
+      run("mismatch --size 8 --size3 4 --plot " + path("keep.png") + " --csv " + path("keep.csv"))
+          .code,
+      0);
+  EXPECT_GT(fs::file_size(dir_ / "keep.png"), 3u);
+  EXPECT_GT(fs::file_size(dir_ / "keep.csv"), 3u);
+}
+
+// `simdvol devices` is where a bad SIMDVOL_DEVICE's error points: it lists
+// the devices all the same (it failed with that error), then says what is
+// wrong, exit 1. A number past long's range is named as given (it was
+// "device 9223372036854775807").
+TEST_F(Cli, DevicesListedWhateverSimdvolDeviceSays) {
+  Result r = run("devices", "SIMDVOL_DEVICE=4096");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("  0: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.rfind("  0: ", 0), std::string::npos) << r.output;  // none chosen
+  EXPECT_EQ(r.output.find("\n* "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("SIMDVOL_DEVICE: no OpenCL device 4096"), std::string::npos) << r.output;
+  r = run("render --phantom-size 16 --size 8 -o " + path("x.png"),
+          "SIMDVOL_DEVICE=99999999999999999999");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("SIMDVOL_DEVICE: \"99999999999999999999\" is not a device index"),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "x.png"));
+  r = run("devices");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(r.output.rfind("* ", 0) == 0 || r.output.find("\n* ") != std::string::npos)
+      << r.output;
 }
 
 // Legal names up to the file system's 255 bytes: the temporary file beside
@@ -1161,6 +1319,89 @@ TEST_F(Cli, CompareNamesBothImagesOfOtherSizes) {
 // compare --tolerance / --check-rgba: the counts for two renders that differ
 // (shading on and off), against a count made here from the images read
 // back; bad tolerances refused naming the option, before any output.
+namespace {
+
+// A baseline TIFF of `pages` pages, each w x h pixels of 8-bit grey (the
+// pixel data: one byte per page, the header need not match it for the
+// size check), written by hand: no TIFF writer makes several pages here.
+std::string tiny_tiff(uint32_t w, uint32_t h, int pages) {
+  std::string t("II*\0", 4);
+  const auto put16 = [&t](uint32_t v) {
+    t += static_cast<char>(v & 0xff), t += static_cast<char>(v >> 8);
+  };
+  const auto put32 = [&](uint32_t v) { put16(v & 0xffff), put16(v >> 16); };
+  const uint32_t ifd_bytes = 2 + 8 * 12 + 4;
+  put32(8);
+  const uint32_t data = 8 + static_cast<uint32_t>(pages) * ifd_bytes;
+  for (int p = 0; p < pages; ++p) {
+    put16(8);
+    const auto entry = [&](uint32_t tag, uint32_t type, uint32_t value) {
+      put16(tag), put16(type), put32(1), put32(value);  // (a SHORT sits in the low half)
+    };
+    entry(256, 4, w);  // ImageWidth
+    entry(257, 4, h);  // ImageLength
+    entry(258, 3, 8);  // BitsPerSample
+    entry(259, 3, 1);  // Compression: none
+    entry(262, 3, 1);  // PhotometricInterpretation: black is zero
+    entry(273, 4, data + static_cast<uint32_t>(p) * w * h);  // StripOffsets
+    entry(278, 4, h);                                        // RowsPerStrip
+    entry(279, 4, w * h);                                    // StripByteCounts
+    put32(p + 1 < pages ? 8 + static_cast<uint32_t>(p + 1) * ifd_bytes : 0);
+  }
+  for (int p = 0; p < pages && uint64_t{w} * h <= 64; ++p)
+    t += std::string(w * h, static_cast<char>(40 * (p + 1)));
+  return t;
+}
+
+}  // namespace
+
+// `compare` takes one whole image from each file. Refused now, each was
+// compared before: a TIFF cut short (its missing strips read as black,
+// exit 0), a second page (the first alone compared), OpenImageIO's "null"
+// reader (any *.null file a black 1024 x 1024), a header claiming 20000 x
+// 20000 pixels (4.8 GB and 15 s before it failed).
+TEST_F(Cli, CompareTakesOneWholeImage) {
+  std::ofstream(dir_ / "one.tif", std::ios::binary) << tiny_tiff(2, 2, 1);
+  std::ofstream(dir_ / "two.tif", std::ios::binary) << tiny_tiff(2, 2, 2);
+  std::ofstream(dir_ / "big.tif", std::ios::binary) << tiny_tiff(20000, 20000, 1);
+  std::ofstream(dir_ / "z.null") << "";
+  std::ofstream(dir_ / "j.null") << "junk\n";
+  Result r = run("compare " + path("one.tif") + " " + path("one.tif"));
+  ASSERT_EQ(r.code, 0) << r.output;  // the hand-made file is a good TIFF
+  EXPECT_NE(r.output.find("psnr_db inf"), std::string::npos) << r.output;
+  simdvol::Image img(48, 40);
+  for (std::size_t i = 0; i < img.pixels().size(); ++i) {
+    const float v = static_cast<float>(i % 97) / 97.0f;
+    img.pixels()[i] = {v, v * 0.5f, 1.0f - v, 1.0f};
+  }
+  simdvol::write_image(img, path("r.tif"));
+  const std::uintmax_t size = fs::file_size(path("r.tif"));
+  std::ifstream in(path("r.tif"), std::ios::binary);
+  const std::string whole((std::istreambuf_iterator<char>(in)), {});
+  struct Case {
+    std::string b, needle;
+  };
+  std::vector<Case> cases = {
+      {path("two.tif"), "two.tif: it holds several images (pages or parts)"},
+      {path("big.tif"), "big.tif: its header says 20000x20000 pixels, 1 channels: more than"},
+      {path("j.null"), "j.null: not an image file"},
+  };
+  for (const std::uintmax_t cut : {size / 4, size / 2, size * 3 / 4, size - 1}) {
+    const std::string name = "cut" + std::to_string(cut) + ".tif";
+    std::ofstream(dir_ / name, std::ios::binary) << whole.substr(0, cut);
+    cases.push_back({path(name), name + ": "});
+  }
+  for (const Case& c : cases) {
+    r = run("compare " + path("r.tif") + " " + c.b);
+    EXPECT_EQ(r.code, 1) << c.b << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.needle), std::string::npos) << c.b << "\n" << r.output;
+    EXPECT_EQ(r.output.find("psnr_db"), std::string::npos) << c.b << "\n" << r.output;
+  }
+  r = run("compare " + path("z.null") + " " + path("j.null"));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("z.null: not an image file"), std::string::npos) << r.output;
+}
+
 TEST_F(Cli, CompareCountsPixelsOverATolerance) {
   ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("a.png")).code, 0);
   ASSERT_EQ(run("render --phantom-size 16 --size 16x16 --no-shade -o " + path("b.png")).code, 0);
