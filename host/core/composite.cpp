@@ -22,6 +22,9 @@ Rgba composite_direct(const RaySamples& ray) {
 }
 
 Rgba composite_adaptive(const RaySamples& ray, float threshold) {
+  // (NaN composited every sample, a negative one none.)
+  if (!(threshold > 0.0f && threshold <= 1.0f))
+    throw ArgumentError("threshold", std::to_string(threshold) + " is outside (0, 1]");
   Rgba acc{};
   for (const Rgba& s : ray.rgba) {
     if (acc.a >= threshold) break;  // Levoy's adaptive termination

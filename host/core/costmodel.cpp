@@ -327,7 +327,9 @@ StagePrediction halo_stage(const std::string& name, const HaloGeometry& h, int b
 
 FramePrediction predict_frame(const FrameConfig& c, const MachineModel& machine) {
   if (c.order != 0 && c.order != 1) resample_ops_per_sample_thesis(c.order);  // throws
-  if (c.sweeps < 0) throw ArgumentError("sweeps", "must be >= 0");
+  if (c.sweeps < 0 || c.sweeps > kMaxBalanceSweeps)  // (INT_MAX ran on for hours)
+    throw ArgumentError("sweeps", std::to_string(c.sweeps) + " is outside 0 .. " +
+                                      std::to_string(kMaxBalanceSweeps));
   if (c.mc_samples < 0) throw ArgumentError("mc_samples", "must be >= 0 (0: direct)");
   if (c.voxel_bits < 1 || c.voxel_bits > 64 || c.rgba_bits < 1 || c.rgba_bits > 128)
     throw ArgumentError("voxel_bits/rgba_bits", "out of range");

@@ -12,24 +12,11 @@ namespace simdvol {
 
 namespace {
 
-void check_matching(const Matching& m) {
-  const int64_t P = m.pes();
-  if (static_cast<int64_t>(m.seg_offset.size()) != P + 1 || m.seg_offset[0] != 0 ||
-      m.seg_offset[static_cast<std::size_t>(P)] != static_cast<int64_t>(m.segments.size()))
-    throw ArgumentError("matching", "segment offsets do not match the segments and PEs");
-  for (int64_t p = 0; p < P; ++p)
-    if (m.seg_offset[static_cast<std::size_t>(p + 1)] < m.seg_offset[static_cast<std::size_t>(p)])
-      throw ArgumentError("matching", "segment offsets decrease at PE " + std::to_string(p));
-}
-
-void check_segments(const Matching& m, const ViewGeometry& view) {
-  check_matching(m);
-  for (const sv_segment& s : m.segments)
-    if (s.i < 0 || s.j < 0 || s.i >= view.width() || s.j >= view.height() || s.k0 < 0 ||
-        s.k1 < s.k0 || s.k1 > view.depth())
-      throw ArgumentError("matching", "segment (" + std::to_string(s.i) + ", " +
-                                          std::to_string(s.j) + ", " + std::to_string(s.k0) + ".." +
-                                          std::to_string(s.k1) + ") lies outside the viewing grid");
+// (A view of another volume resampled its positions clamped.)
+void check_view(const ViewGeometry& view, const Dims3& dims) {
+  for (int a = 0; a < 3; ++a)
+    if (view.grid.dims[a] != dims[a])
+      throw ArgumentError("view", "was made for a volume of other dimensions");
 }
 
 void check_voxels(const std::vector<Rgba>& voxels, const Dims3& dims, int order) {
@@ -58,7 +45,8 @@ std::vector<int64_t> sample_offsets(const Matching& m) {
 std::vector<Rgba> resample_reference(const Matching& m, const std::vector<Rgba>& voxels,
                                      const Dims3& dims, const ViewGeometry& view, int order) {
   check_voxels(voxels, dims, order);
-  check_segments(m, view);
+  check_view(view, dims);
+  check_matching(m, view);
   const std::vector<int64_t> off = sample_offsets(m);
   std::vector<Rgba> out(static_cast<std::size_t>(off.back()));
   std::size_t n = 0;
@@ -71,7 +59,8 @@ std::vector<Rgba> resample_reference(const Matching& m, const std::vector<Rgba>&
 std::vector<Rgba> local_reference(const Matching& m, const std::vector<Rgba>& voxels,
                                   const Dims3& dims, const ViewGeometry& view, int order) {
   check_voxels(voxels, dims, order);
-  check_segments(m, view);
+  check_view(view, dims);
+  check_matching(m, view);
   std::vector<Rgba> out(m.segments.size());
   std::vector<Rgba> samples;
   for (std::size_t n = 0; n < m.segments.size(); ++n) {
@@ -213,7 +202,7 @@ int64_t XnetReads::max_voxels() const {
 }
 
 XnetReads xnet_reads(const Matching& m, const KdSplit& split, const ViewGeometry& view, int order) {
-  check_segments(m, view);
+  check_matching(m, view);
   if (order < 0 || order > kMaxOrder)
     throw ArgumentError("order", "interpolation order " + std::to_string(order) +
                                      " is outside 0.." + std::to_string(kMaxOrder));

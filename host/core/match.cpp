@@ -221,9 +221,31 @@ std::vector<uint8_t> match_active_reference(const KdSplit& split,
   return active;
 }
 
+void check_matching(const Matching& m) {
+  const int64_t P = m.pes();
+  if (P < 0 || static_cast<int64_t>(m.seg_offset.size()) != P + 1 || m.seg_offset[0] != 0 ||
+      m.seg_offset[static_cast<std::size_t>(P)] != static_cast<int64_t>(m.segments.size()))
+    throw ArgumentError("matching", "segment offsets do not match the segments and PEs");
+  for (int64_t p = 0; p < P; ++p)
+    if (m.seg_offset[static_cast<std::size_t>(p + 1)] < m.seg_offset[static_cast<std::size_t>(p)])
+      throw ArgumentError("matching", "segment offsets decrease at PE " + std::to_string(p));
+}
+
+void check_matching(const Matching& m, const ViewGeometry& view) {
+  check_matching(m);
+  for (const sv_segment& s : m.segments)
+    if (s.i < 0 || s.j < 0 || s.i >= view.width() || s.j >= view.height() || s.k0 < 0 ||
+        s.k1 < s.k0 || s.k1 > view.depth())
+      throw ArgumentError("matching", "segment (" + std::to_string(s.i) + ", " +
+                                          std::to_string(s.j) + ", " + std::to_string(s.k0) + ".." +
+                                          std::to_string(s.k1) + ") lies outside the viewing grid");
+}
+
 std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
                                    const KdSplit& split) {
   check_split(view, split);
+  // (An offset or a k1 far outside had balance_links read wild memory.)
+  check_matching(m, view);
   const int64_t pes = split.pes();
   if (m.pes() != pes || static_cast<int64_t>(m.seg_offset.size()) != pes + 1)
     throw ArgumentError("matching", "made for another PE count");
@@ -321,7 +343,9 @@ int64_t transfer(Matching& m, const std::vector<int32_t>& link, int64_t F, int a
 
 Matching balance_reference(const Matching& m0, const ViewGeometry& view, const KdSplit& split,
                            int sweeps) {
-  if (sweeps < 0) throw ArgumentError("sweeps", "must be >= 0");
+  if (sweeps < 0 || sweeps > kMaxBalanceSweeps)  // (INT_MAX ran on for hours)
+    throw ArgumentError(
+        "sweeps", std::to_string(sweeps) + " is outside 0 .. " + std::to_string(kMaxBalanceSweeps));
   const std::vector<int32_t> link = balance_links(m0, view, split);
   Matching m = m0;
   const int64_t pes = split.pes();

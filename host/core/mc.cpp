@@ -63,6 +63,13 @@ RaySegments ray_segments(const Matching& m, int width, int height) {
 
 std::vector<int32_t> allocate_walks(std::span<const float> alphas, int budget) {
   if (budget < 0) throw ArgumentError("budget", "must not be negative");
+  // Opacities (an infinite or huge one gave negative walk counts, a NaN an
+  // undefined conversion); a composited opacity may round a hair past 1,
+  // and one of 0 or below is transparent.
+  for (std::size_t s = 0; s < alphas.size(); ++s)
+    if (!(alphas[s] <= 1.0f + 1e-5f) || std::isnan(alphas[s]) || std::isinf(alphas[s]))
+      throw ArgumentError("alphas", "opacity " + std::to_string(alphas[s]) + " of sub-ray " +
+                                        std::to_string(s) + " is not a number of at most 1");
   const std::size_t S = alphas.size();
   std::vector<int32_t> n(S, 0);
   int c = 0;

@@ -18,8 +18,9 @@ bool is_pow2(int64_t n) {
 }
 
 int log2_exact(int64_t n) {
+  // (Up to 62: 1 << 63 overflows, and n past 2^62 looped for ever.)
   int b = 0;
-  while ((int64_t(1) << b) < n) ++b;
+  while (b < 63 && (int64_t(1) << b) < n) ++b;
   return b;
 }
 
@@ -31,7 +32,7 @@ void check_pes(int64_t pes, const std::string& argument) {
 }
 
 int64_t ceil_div(int64_t a, int64_t b) {
-  return (a + b - 1) / b;
+  return a <= 0 ? a / b : (a - 1) / b + 1;  // (a + b - 1 overflowed near INT64_MAX)
 }
 
 bool parse_int(std::string_view s, int64_t& out) {

@@ -83,6 +83,10 @@ Image render_classified(const std::vector<Rgba>& voxels, const Volume& vol,
   validate(opt);
   if (voxels.size() != vol.voxel_count())
     throw ArgumentError("voxels", "classified voxel count does not match the volume");
+  // (A view of another volume rendered, its positions clamped.)
+  for (int a = 0; a < 3; ++a)
+    if (view.grid.dims[a] != vol.dims()[a])
+      throw ArgumentError("view", "was made for a volume of other dimensions");
   auto t0 = Clock::now();
   Image im(view.width(), view.height());
   std::vector<Rgba> samples;

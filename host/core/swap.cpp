@@ -17,8 +17,9 @@ bool is_pow2(int64_t n) {
 }
 
 int exact_log2(int64_t n) {
+  // (Up to 62: 1 << 63 overflows, and n past 2^62 looped for ever.)
   int b = 0;
-  while ((int64_t(1) << b) < n) ++b;
+  while (b < 63 && (int64_t(1) << b) < n) ++b;
   return b;
 }
 
@@ -288,7 +289,29 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
   }
 }
 
+namespace {
+
+// What the references read of a plan (an empty SwapPlan{}, or one whose
+// rectangles plan_swap_into held out, was dereferenced as null).
+void check_plan(const SwapPlan& plan) {
+  const std::size_t N = plan.bits.size(),
+                    P = static_cast<std::size_t>(std::max<int64_t>(plan.pes, 0));
+  bool ok = plan.pes >= 1 && plan.front.size() == N && plan.offset.size() == N + 1 &&
+            plan.held.size() == N + 1 && plan.xpe.size() == static_cast<std::size_t>(plan.width) &&
+            plan.ype.size() == static_cast<std::size_t>(plan.height);
+  for (std::size_t L = 0; ok && L <= N; ++L)
+    ok = plan.offset[L].size() == P + 1 && plan.held[L].size() == P;
+  if (!ok)
+    throw ArgumentError("plan", plan.held.empty() && !plan.offset.empty()
+                                    ? "its rectangles were held out (plan_swap_into's held_out): "
+                                      "the references read them from the plan"
+                                    : "not a plan made by plan_swap (empty or inconsistent)");
+}
+
+}  // namespace
+
 std::vector<Rgba> swap_stage_reference(const SwapPlan& plan, int k, const std::vector<Rgba>& in) {
+  check_plan(plan);
   if (k < 0 || k >= plan.stages()) throw ArgumentError("stage", "outside 0 .. N-1");
   const auto& hin = plan.held[static_cast<std::size_t>(k)];
   const auto& oin = plan.offset[static_cast<std::size_t>(k)];
@@ -322,6 +345,7 @@ std::vector<Rgba> swap_stage_reference(const SwapPlan& plan, int k, const std::v
 }
 
 std::vector<Rgba> swap_reference(const SwapPlan& plan, const Footprints& f) {
+  check_plan(plan);
   if (f.rect_offset != plan.offset[0])
     throw ArgumentError("footprints", "do not match the plan's rectangles");
   std::vector<Rgba> buf = f.pixels;
@@ -330,6 +354,7 @@ std::vector<Rgba> swap_reference(const SwapPlan& plan, const Footprints& f) {
 }
 
 Image display_reference(const SwapPlan& plan, const std::vector<Rgba>& last) {
+  check_plan(plan);
   const int N = plan.stages();
   if (static_cast<int64_t>(last.size()) != plan.level_size(N))
     throw ArgumentError("swap output", "size differs from the plan's last level");
@@ -349,6 +374,7 @@ Image display_reference(const SwapPlan& plan, const std::vector<Rgba>& last) {
 
 SwapCost swap_cost(const SwapPlan& plan, const KdSplit& split, const ViewGeometry& view,
                    const PeGrid& grid) {
+  check_plan(plan);
   if (grid.count() != plan.pes || split.pes() != plan.pes)
     throw ArgumentError("grid", "PE count differs from the plan's");
   SwapCost c;

@@ -203,6 +203,21 @@ ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<doub
   // k + 1/2 - D/2); object index position X_a = (T^T p)_a * smin / s_a + n_a / 2.
   const Mat3 tt = transpose(g.rot);
   const Vec3 c0{0.5 - 0.5 * wi, 0.5 - 0.5 * hi, 0.5 - 0.5 * depth};
+  // Every position of the grid in 64-bit fixed point, with room to spare:
+  // pixel sampling of a volume far thinner along one axis than along
+  // another stepped 1e21 voxels a sample (llround out of range, then
+  // overflowing sums in ViewGeometry::fixed).
+  const double grid_n[3] = {static_cast<double>(wi), static_cast<double>(hi),
+                            static_cast<double>(depth)};
+  for (int a = 0; a < 3; ++a) {
+    const double f = g.step * smin / sp[a];
+    double reach = 0.5 * static_cast<double>(dims[a]);
+    for (int b = 0; b < 3; ++b) reach += std::fabs(tt[a][b] * f) * (std::fabs(c0[b]) + grid_n[b]);
+    if (!(std::ldexp(reach, SV_FRAC_BITS) < 0x1p61))
+      throw ArgumentError("volume", "voxel spacing " + spacing_text() +
+                                        ": its largest over its smallest is too large to render "
+                                        "at this image size");
+  }
   for (int a = 0; a < 3; ++a) {
     const double f = g.step * smin / sp[a];
     double o = 0.5 * static_cast<double>(dims[a]);

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "simdvol/composite.hpp"
+#include "simdvol/error.hpp"
 
 using namespace simdvol;
 
@@ -102,6 +103,9 @@ TEST(Composite, AdaptiveStopsAtThreshold) {
   EXPECT_FLOAT_EQ(c.a, 0.96875f);
   const Rgba full = composite_adaptive({ray, 0}, 1.0f);
   EXPECT_FLOAT_EQ(full.a, composite_direct({ray, 0}).a);
+  // NaN composited every sample, a negative threshold none.
+  for (const float bad : {NAN, -1.0f, 0.0f, 1.5f})
+    EXPECT_THROW(composite_adaptive({ray, 0}, bad), ArgumentError) << bad;
 }
 
 TEST(MonteCarlo, EstimatorMeanEqualsDirect) {

@@ -3,6 +3,8 @@
 // frame prediction on a case whose busiest-PE counts are derived by hand.
 #include <gtest/gtest.h>
 
+#include <climits>
+
 #include "simdvol/costmodel.hpp"
 #include "simdvol/error.hpp"
 
@@ -216,6 +218,8 @@ TEST(CostModel, BadConfig) {
   EXPECT_THROW(predict_frame(c), ArgumentError);
   c.order = 1;
   c.sweeps = -1;
+  EXPECT_THROW(predict_frame(c), ArgumentError);
+  c.sweeps = INT_MAX;  // (ran on for hours)
   EXPECT_THROW(predict_frame(c), ArgumentError);
   EXPECT_THROW(local_composite_ops(-1, 8, 0), ArgumentError);
 }

@@ -307,4 +307,10 @@ TEST(LocalReference, RejectsBadArguments) {
   EXPECT_THROW(local_reference(bad, voxels, dims, view, 1), ArgumentError);
   EXPECT_THROW(footprints_reference(m, {}), ArgumentError);
   EXPECT_THROW(xnet_reads(m, split_of(dims, 3), view, 1), ArgumentError);
+  // A view made for another volume resampled its positions clamped.
+  const ViewGeometry other =
+      make_view(Volume({8, 8, 16}, VoxelType::f32), {}, 8, 8, Sampling::voxel);
+  const Matching mo = brute_matching(other, split_of({8, 8, 16}, 2));
+  EXPECT_THROW(resample_reference(mo, voxels, dims, other, 1), ArgumentError);
+  EXPECT_THROW(local_reference(mo, voxels, dims, other, 1), ArgumentError);
 }

@@ -231,9 +231,10 @@ TEST(Balance, ShortRaysGiveWhatTheyHoldAndTheRestMakeUpTheShortfall) {
     const ViewGeometry v = geometry(dims, va, 16, 16);
     const KdSplit split = kd_split(dims, 8);
     const Matching m = match_reference(v, split);
-    const Matching b = balance_reference(m, v, split, 64);
-    const Matching c = balance_reference(m, v, split, 65);
-    EXPECT_EQ(c.loads, b.loads) << name(va, 8) << ": 64 sweeps did not settle";
+    // (kMaxBalanceSweeps = 64, the most balance_reference takes.)
+    const Matching b = balance_reference(m, v, split, 63);
+    const Matching c = balance_reference(m, v, split, 64);
+    EXPECT_EQ(c.loads, b.loads) << name(va, 8) << ": 63 sweeps did not settle";
     const std::vector<int32_t> link = balance_links(m, v, split);
     for (int64_t p = 0; p < 8; ++p)
       for (int a = 0; a < 3; ++a) {
@@ -269,6 +270,31 @@ TEST(Balance, ZeroSweepsIsIdentityAndRejectsNegative) {
   const Matching b = balance_reference(m, v, split, 0);
   EXPECT_EQ(b.loads, m.loads);
   EXPECT_THROW(balance_reference(m, v, split, -1), ArgumentError);
+  // INT_MAX sweeps ran on for hours: the engine's bound holds here too.
+  EXPECT_NO_THROW(balance_reference(m, v, split, kMaxBalanceSweeps));
+  EXPECT_THROW(balance_reference(m, v, split, kMaxBalanceSweeps + 1), ArgumentError);
+  EXPECT_THROW(balance_reference(m, v, split, INT_MAX), ArgumentError);
+}
+
+// A caller's matching that cannot be one is refused before balance_links
+// reads it (an offset or a k1 far outside read wild memory).
+TEST(Balance, RejectsAnInconsistentMatching) {
+  const Dims3 dims{20, 20, 20};
+  const ViewGeometry v = geometry(dims, {10, 20, 30}, 24, 24);
+  const KdSplit split = kd_split(dims, 32);
+  const Matching m = match_reference(v, split);
+  Matching bad = m;
+  bad.seg_offset.back() = int64_t{1} << 30;
+  EXPECT_THROW(balance_links(bad, v, split), ArgumentError);
+  EXPECT_THROW(balance_reference(bad, v, split), ArgumentError);
+  bad = m;
+  ASSERT_FALSE(bad.segments.empty());
+  bad.segments[0].k1 = 1 << 30;
+  EXPECT_THROW(balance_reference(bad, v, split), ArgumentError);
+  bad = m;
+  bad.seg_offset[1] = bad.seg_offset[2] + 1;
+  EXPECT_THROW(balance_reference(bad, v, split), ArgumentError);
+  EXPECT_NO_THROW(check_matching(m, v));
 }
 
 TEST(Match, ActiveFromReachByVoxels) {

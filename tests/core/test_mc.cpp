@@ -173,6 +173,12 @@ TEST(Allocation, KnownCases) {
   EXPECT_EQ(allocate_walks(std::vector<float>{0.0f, -0.01f}, 8), (std::vector<int32_t>{0, 0}));
   EXPECT_EQ(allocate_walks(std::vector<float>{}, 8), (std::vector<int32_t>{}));
   EXPECT_THROW(allocate_walks(std::vector<float>{0.5f}, -1), ArgumentError);
+  // Not opacities: an infinite or huge one gave negative counts
+  // (-2147483646), a NaN an undefined conversion.
+  for (const float bad : {INFINITY, -INFINITY, NAN, 3e38f, 1.01f})
+    EXPECT_THROW(allocate_walks(std::vector<float>{bad, 0.2f, 0.3f}, 10), ArgumentError) << bad;
+  // A composited opacity a hair past 1 is one.
+  EXPECT_EQ(allocate_walks(std::vector<float>{1.000001f, 0.0f}, 4), (std::vector<int32_t>{4, 0}));
 }
 
 TEST(Allocation, SumsToTheBudget) {

@@ -80,6 +80,19 @@ TEST(Render, TransparentVolumeIsBlack) {
   }
 }
 
+// A view made for another volume is refused (it rendered, its positions
+// clamped: an image of the wrong shape, alpha sum 247 here).
+TEST(Render, ClassifiedRejectsTheViewOfAnotherVolume) {
+  const Volume vol = shepp_logan(8);
+  RenderOptions o = unlit(0.5f, 1, 1, 1);
+  o.width = o.height = 16;
+  const std::vector<Rgba> voxels(vol.voxel_count(), Rgba{0.5f, 0.5f, 0.5f, 0.5f});
+  const ViewGeometry mine = make_view(vol, {}, 16, 16, Sampling::voxel);
+  EXPECT_NO_THROW(render_classified(voxels, vol, mine, o));
+  const ViewGeometry other = make_view(shepp_logan(32), {}, 16, 16, Sampling::voxel);
+  EXPECT_THROW(render_classified(voxels, vol, other, o), ArgumentError);
+}
+
 TEST(Render, OpaqueVolumeShowsItsOwnColour) {
   const Volume vol = constant_volume({20, 20, 20}, 1.0f);
   RenderOptions o = unlit(1.0f, 0.25f, 0.5f, 0.75f);

@@ -92,6 +92,22 @@ TEST(SwapSchedule, StridedRangeEqualsEnumeration) {
 // Stage bits: N of them, alternating axes, levels ascending (cut-and-stack)
 // or descending from B - 1 (hierarchical); every pixel lands on the PE the
 // layout's formula names.
+// ceil_log2 over its whole domain (past 2^62 it looped for ever, shifting
+// 1 by 64), and the k-d split of the largest dimensions (its ceil_div
+// overflowed to negative cells).
+TEST(SwapSchedule, CeilLog2WholeRange) {
+  EXPECT_EQ(ceil_log2(1), 0);
+  EXPECT_EQ(ceil_log2(2), 1);
+  EXPECT_EQ(ceil_log2(3), 2);
+  EXPECT_EQ(ceil_log2(int64_t{1} << 62), 62);
+  EXPECT_EQ(ceil_log2((int64_t{1} << 62) + 1), 63);
+  EXPECT_EQ(ceil_log2(INT64_MAX), 63);
+  EXPECT_THROW(ceil_log2(0), ArgumentError);
+  const KdSplit s = kd_split({INT64_MAX, INT64_MAX, INT64_MAX}, 1 << 20);
+  for (int a = 0; a < 3; ++a) EXPECT_GT(s.cell[a], 0) << a;
+  EXPECT_EQ(s.cell[0], (INT64_MAX - 1) / (int64_t{1} << s.axis_bits[0]) + 1);
+}
+
 TEST(SwapSchedule, PixelBitsAndFinalLayout) {
   const int sizes[][2] = {{1, 1}, {7, 5}, {40, 36}, {256, 256}, {257, 129}, {512, 300}, {3, 700}};
   for (const PeGrid& g : kGrids)
@@ -398,6 +414,17 @@ TEST(SwapReference, RejectsMismatchedInputs) {
                ArgumentError);
   EXPECT_TRUE(same_plan(kept, plan));
   EXPECT_THROW(swap_stage_reference(plan, 0, std::vector<Rgba>(3)), ArgumentError);
+  // An empty plan, or one whose rectangles were held out, was read through
+  // null vectors (SIGSEGV).
+  EXPECT_THROW(swap_reference(SwapPlan{}, Footprints{}), ArgumentError);
+  EXPECT_THROW(display_reference(SwapPlan{}, {}), ArgumentError);
+  EXPECT_THROW(swap_stage_reference(SwapPlan{}, 0, {}), ArgumentError);
+  EXPECT_THROW(swap_cost(SwapPlan{}, split, view, pe_grid(8)), ArgumentError);
+  SwapPlan held_out = plan;
+  held_out.held.clear();
+  EXPECT_THROW(display_reference(held_out, std::vector<Rgba>(plan.level_size(plan.stages()))),
+               ArgumentError);
+  EXPECT_THROW(swap_cost(held_out, split, view, pe_grid(8)), ArgumentError);
   EXPECT_THROW(swap_stage_reference(plan, 3, std::vector<Rgba>(plan.level_size(3))), ArgumentError);
   EXPECT_THROW(display_reference(plan, std::vector<Rgba>(1)), ArgumentError);
 }

@@ -173,6 +173,13 @@ TEST(ViewGeometry, RejectsBadSizes) {
   EXPECT_THROW(make_view(vol, {}, 0, 10, Sampling::voxel), ArgumentError);
   EXPECT_THROW(make_view(vol, {}, 10, -1, Sampling::pixel), ArgumentError);
   EXPECT_THROW(make_view(vol, {NAN, 0, 0}, 10, 10, Sampling::pixel), ArgumentError);
+  // Pixel sampling of spacings 1e-6 .. 1e6 stepped 1e21 voxels a sample:
+  // out of the fixed point's range (a step of -2^63, overflowing sums).
+  EXPECT_THROW(make_view({4, 4, 4}, {1e-6, 1, 1e6}, {0, 0, 0}, 16, 16, Sampling::pixel),
+               ArgumentError);
+  // A strongly anisotropic volume still fits at pixel sampling.
+  const ViewGeometry ok = make_view({4, 4, 4}, {1, 1, 1e4}, {0, 30, 0}, 16, 16, Sampling::pixel);
+  EXPECT_EQ(ok.width(), 16);
 }
 
 TEST(Philox, KnownAnswer) {

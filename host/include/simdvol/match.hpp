@@ -108,6 +108,14 @@ Matching match_reference(const ViewGeometry& view, const KdSplit& split,
 std::vector<uint8_t> match_active_reference(const KdSplit& split,
                                             const std::vector<uint8_t>& reach);
 
+/// Throws ArgumentError ("matching: ...") where `m` cannot be read as a
+/// matching: seg_offset not P + 1 non-decreasing offsets from 0 to the
+/// segment count, or (with `view`) a segment outside the viewing grid. The
+/// references that walk a caller's matching (balance, resample, local,
+/// Monte Carlo, footprints) check it first.
+void check_matching(const Matching& m);
+void check_matching(const Matching& m, const ViewGeometry& view);
+
 /// Default number of balancing sweeps.
 inline constexpr int kBalanceSweeps = 8;
 /// The largest number of balancing sweeps the engine and the bench tools
@@ -123,7 +131,8 @@ std::vector<int32_t> balance_links(const Matching& m, const ViewGeometry& view,
 
 /// Load balancing (see the file comment) of a matching made by
 /// match_reference(view, split): `sweeps` sweeps of 6 rounds. Throws
-/// ArgumentError for sweeps < 0 or a matching of another PE count.
+/// ArgumentError for sweeps outside 0 .. kMaxBalanceSweeps or a matching of
+/// another PE count.
 Matching balance_reference(const Matching& m, const ViewGeometry& view, const KdSplit& split,
                            int sweeps = kBalanceSweeps);
 
