@@ -172,7 +172,16 @@ RenderEngine::~RenderEngine() = default;
 RenderEngine::RenderEngine(RenderEngine&&) noexcept = default;
 RenderEngine& RenderEngine::operator=(RenderEngine&&) noexcept = default;
 
+namespace {
+// A moved-from engine holds no state: its members refuse.
+void check_not_moved(const void* state) {
+  if (!state)
+    throw ArgumentError("engine", "was moved from: render with the engine it was moved into");
+}
+}  // namespace
+
 const EngineOptions& RenderEngine::options() const {
+  check_not_moved(s_.get());
   return s_->eo;
 }
 
@@ -210,6 +219,7 @@ void summarise_kernels(EngineTimes& t) {
 
 Image RenderEngine::render(const Volume& vol, const RenderOptions& opt, EngineTimes* times,
                            EngineStats* stats) {
+  check_not_moved(s_.get());
   try {
     return render_frame(vol, opt, times, stats);
   } catch (const CLError& e) {
@@ -460,7 +470,7 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   enqueue_balance(device, dm, view, split, eo.balance_sweeps, BalanceBounds::automatic,
                   mode == CompositeMode::direct ? BalanceUnpack::deferred : BalanceUnpack::now);
   cl_check(device.queue().flush(), "clFlush");
-  const LocalSegments segs = finish_segments(reads, dm);  // waits: footprint sizes
+  LocalSegments segs = finish_segments(reads, dm);  // waits: footprint sizes
   // The tables of the cells' layout, made once with them (the origin table
   // is the layout's, already on the device); the frame's view uploaded.
   if (!S.tables)
@@ -515,6 +525,7 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     if (nsamples > INT_MAX)
       throw ArgumentError("--size", "the frame has " + std::to_string(nsamples) +
                                         " samples: more than 32-bit offsets can index");
+    segs.sample_count = nsamples;  // (the stages check `samples` against it)
     const cl::Buffer& samples =
         S.samples.at_least(device, static_cast<std::size_t>(nsamples) * 16, "samples");
     e_local = enqueue_resample(device, segs, soff, tables, *S.rgba, opt.order, samples,

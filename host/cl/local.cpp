@@ -5,6 +5,7 @@
 #include <limits>
 #include <string>
 
+#include "buffer_checks.hpp"
 #include "simdvol/layout.hpp"
 #include "simdvol/local_cl.hpp"
 #include "simdvol/resample.hpp"
@@ -63,11 +64,35 @@ cl::NDRange segment_range(int64_t count) {
   return cl::NDRange(round_up(static_cast<std::size_t>(std::max<int64_t>(count, 1)), kSegmentWgs));
 }
 
+constexpr std::size_t kCellBitsInts = 104;  // resample_cell_bits
+
+// The tables' layout, and their buffers' sizes (the kernels index `table`
+// by voxel position, read one sv_view and, for interleaved cells, the pair
+// table by position and the cell bits after it).
 void check_tables(const LocalSegments& segs, const ResampleTables& t, const VoxelBuffer& voxels) {
   const VoxelLayout& L = voxels.layout();
   if (L.dims() != t.dims || L.pes() != t.pes || L.interleaved != t.interleaved)
     throw ArgumentError("resample tables", "were made for another voxel layout");
   if (segs.pes != t.pes) throw ArgumentError("segments", "PE count differs from the voxels'");
+  const int64_t n = t.dims[0] + t.dims[1] + t.dims[2];
+  detail::check_buffer(t.view, 1, sizeof(sv_view), "tables.view", "sv_view");
+  detail::check_buffer(t.table, n, sizeof(cl_int), "tables.table", "int entries (nx + ny + nz)");
+  if (t.pairs() != nullptr)
+    detail::check_buffer(t.pairs, n + 6 + (t.cell_bits ? int64_t(kCellBitsInts / 2) : 0),
+                         sizeof(cl_long), "tables.pairs",
+                         t.cell_bits ? "long entries (nx + ny + nz + 6, then 104 ints of cell bits)"
+                                     : "long entries (nx + ny + nz + 6)");
+}
+
+// A lane order, if any, must be made for `segs` and hold its positions (and
+// the PEs after them where with_pe).
+void check_lanes(const SegmentOrder* lanes, const LocalSegments& segs) {
+  if (!lanes) return;
+  if (lanes->count != segs.count)
+    throw ArgumentError("segment order", "was made for other segments");
+  detail::check_buffer(lanes->order, lanes->count + (lanes->with_pe ? (lanes->count + 7) / 8 : 0),
+                       sizeof(cl_int), "lanes.order",
+                       lanes->with_pe ? "int positions and PEs" : "int positions");
 }
 
 // The resample kernels' prefetch ahead (resample.cl, sv_prefetch_pe_ahead):
@@ -91,8 +116,6 @@ PrefetchArgs prefetch_args(const ResampleTables& t, const VoxelLayout& L) {
                    static_cast<cl_int>(L.cell()[2]), on ? 1 : 0}}};
 }
 
-constexpr std::size_t kCellBitsInts = 104;  // resample_cell_bits
-
 // The kernels with the cell bits (`_ilc`) where the tables carry them, at
 // order 1 on interleaved cells (elsewhere the cell bits are not read).
 std::string with_cell_bits(const std::string& name, const ResampleTables& t, const VoxelLayout& L,
@@ -104,25 +127,12 @@ std::string with_cell_bits(const std::string& name, const ResampleTables& t, con
 // pair table (resample_pair_table), with the cell bits where `cell_bits`
 // says so; the planar kernels never read it (any buffer will do). Tables
 // made without one (a caller's own ResampleTables) get it here from their
-// address table, read back (a few KiB, blocking), without cell bits. One of
-// the wrong size is an ArgumentError.
+// address table, read back (a few KiB, blocking), without cell bits. The
+// sizes of both were checked (check_tables).
 cl::Buffer pair_table(Device& device, const ResampleTables& t, const VoxelLayout& L, bool v8) {
   if (!v8 || !L.interleaved) return t.table;
   const int64_t n = t.dims[0] + t.dims[1] + t.dims[2];
-  if (t.pairs() != nullptr) {
-    const std::size_t size = buffer_size(t.pairs, "clGetMemObjectInfo(resample pair table)");
-    if (size < static_cast<std::size_t>(n + 6) * sizeof(cl_long) +
-                   (t.cell_bits ? kCellBitsInts * sizeof(cl_int) : 0))
-      throw ArgumentError("resample tables",
-                          t.cell_bits ? "the pair table holds fewer than nx + ny + nz + 6 entries "
-                                        "and the cell bits"
-                                      : "the pair table holds fewer than nx + ny + nz + 6 entries");
-    return t.pairs;
-  }
-  const std::size_t size = buffer_size(t.table, "clGetMemObjectInfo(resample address table)");
-  if (size < static_cast<std::size_t>(n) * sizeof(cl_int))
-    throw ArgumentError("resample tables",
-                        "the address table holds fewer than nx + ny + nz entries");
+  if (t.pairs() != nullptr) return t.pairs;
   std::vector<cl_int> table(static_cast<std::size_t>(n));
   cl_check(device.queue().enqueueReadBuffer(t.table, CL_TRUE, 0, table.size() * sizeof(cl_int),
                                             table.data()),
@@ -130,10 +140,20 @@ cl::Buffer pair_table(Device& device, const ResampleTables& t, const VoxelLayout
   return upload(device, resample_pair_table(table, t.dims), "resample pair table");
 }
 
-// An occupancy for skipping, if any, must be that of `voxels` for `order`.
+// An occupancy for skipping, if any, must be that of `voxels` for `order`,
+// its reach one byte per brick.
 void check_occupancy(const DeviceOccupancy* skip, const VoxelBuffer& voxels, int order) {
-  if (skip && (skip->dims != voxels.layout().dims() || skip->order != order))
+  if (!skip) return;
+  if (skip->dims != voxels.layout().dims() || skip->order != order)
     throw ArgumentError("occupancy", "was made for other voxels or another interpolation order");
+  for (int a = 0; a < 3; ++a)
+    if (skip->bricks[static_cast<std::size_t>(a)] != (skip->dims[a] + kBrick - 1) / kBrick)
+      throw ArgumentError("skip.bricks",
+                          "axis " + std::to_string(a) + " has " +
+                              std::to_string(skip->bricks[static_cast<std::size_t>(a)]) +
+                              " bricks, not ceil(" + std::to_string(skip->dims[a]) + " / " +
+                              std::to_string(kBrick) + ")");
+  detail::check_buffer(skip->reach, skip->count(), 1, "skip.reach", "bytes of brick reach");
 }
 
 }  // namespace
@@ -150,12 +170,48 @@ LocalSegments upload_segments(Device& device, const Matching& m) {
   LocalSegments s;
   s.pes = P;
   s.count = static_cast<int64_t>(m.segments.size());
+  s.sample_count = 0;
+  for (const sv_segment& g : m.segments) s.sample_count += std::max(g.k1 - g.k0, 0);
   std::vector<cl_int> off(m.seg_offset.begin(), m.seg_offset.end());
   s.segments = upload(device, m.segments, "segments");
   s.seg_offset = upload(device, off, "segment offsets");
   s.rects = upload(device, m.rects, "footprint rectangles");
   s.host_rects = m.rects;
   return s;
+}
+
+void check_segments(const LocalSegments& segs, bool all) {
+  const int64_t P = segs.pes;
+  if (P < 1 || (P & (P - 1)) != 0)
+    throw ArgumentError("segs.pes", std::to_string(P) + " is not a power of two");
+  if (segs.count < 0 || segs.count > kInt32Max)
+    throw ArgumentError("segs.count", std::to_string(segs.count) + " is outside 0 .. 2^31 - 1");
+  detail::check_buffer(segs.segments, segs.count, sizeof(sv_segment), "segs.segments", "segments");
+  if (all) {
+    detail::check_buffer(segs.seg_offset, P + 1, sizeof(cl_int), "segs.seg_offset",
+                         "int offsets (P + 1)");
+    detail::check_buffer(segs.rects, P, sizeof(sv_rect), "segs.rects", "rectangles (P)");
+  }
+  if (segs.bounds_pending)
+    detail::check_buffer(segs.bounds, segs.count, sizeof(cl_short2), "segs.bounds",
+                         "short2 bounds");
+}
+
+void check_samples(const LocalSegments& segs, const cl::Buffer& sample_off,
+                   const cl::Buffer& samples) {
+  detail::check_buffer(sample_off, segs.count + 1, sizeof(cl_int), "sample_off",
+                       "int offsets (count + 1)");
+  detail::check_buffer(samples, std::max<int64_t>(segs.sample_count, 0), sizeof(cl_float4),
+                       "samples", "float4 samples");
+}
+
+void check_footprints(const DeviceFootprints& fp, int64_t pes) {
+  if (static_cast<int64_t>(fp.rect_offset.size()) != pes + 1)
+    throw ArgumentError("fp.rect_offset", "holds " + std::to_string(fp.rect_offset.size()) +
+                                              " offsets, not P + 1 = " + std::to_string(pes + 1));
+  detail::check_buffer(fp.offsets, pes, sizeof(cl_int), "fp.offsets", "int offsets (P)");
+  detail::check_buffer(fp.pixels, std::max<int64_t>(fp.size(), 1), sizeof(cl_float4), "fp.pixels",
+                       "float4 pixels");
 }
 
 void check_bounds_unpacked(const LocalSegments& segs, const char* stage) {
@@ -356,6 +412,8 @@ DeviceFootprints make_footprints(Device& device, const std::vector<sv_rect>& rec
 }
 
 cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp) {
+  detail::check_buffer(fp.pixels, std::max<int64_t>(fp.size(), 1), sizeof(cl_float4), "fp.pixels",
+                       "float4 pixels");
   const std::string name = "simdvol_zero4";
   cl::Kernel k = stage_kernel(device, name, 1);
   const cl_int n = static_cast<cl_int>(std::max<int64_t>(fp.size(), 1));
@@ -380,9 +438,10 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
                            const cl::Buffer& samples, LocalKernel variant,
                            const SegmentOrder* lanes, const DeviceOccupancy* skip) {
   check_bounds_unpacked(segs, "enqueue_resample");
+  check_segments(segs);
+  check_samples(segs, sample_off, samples);
   check_tables(segs, tables, voxels);
-  if (lanes && lanes->count != segs.count)
-    throw ArgumentError("segment order", "was made for other segments");
+  check_lanes(lanes, segs);
   const bool v8 = variant == LocalKernel::vector8;
   if (skip && !v8) throw ArgumentError("occupancy", "only the vector8 resample kernel skips");
   check_occupancy(skip, voxels, order);
@@ -409,8 +468,11 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                         const cl::Buffer& samples, DeviceFootprints& fp) {
   check_bounds_unpacked(segs, "enqueue_local");
+  check_segments(segs);
+  check_samples(segs, sample_off, samples);
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
     throw ArgumentError("footprints", "PE count differs from the segments'");
+  check_footprints(fp, segs.pes);
   const std::string name = "simdvol_local";
   cl::Kernel k = stage_kernel(device, name, 1);
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
@@ -482,6 +544,7 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
 }
 
 SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs) {
+  check_segments(segs);
   SegmentOrder o;
   o.count = segs.count;
   const std::size_t n = static_cast<std::size_t>(std::max<int64_t>(segs.count, 1));
@@ -503,14 +566,15 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                                  const ResampleTables& tables, const VoxelBuffer& voxels, int order,
                                  DeviceFootprints& fp, LocalKernel variant,
                                  const DeviceOccupancy* skip, const SegmentOrder* lanes) {
+  const bool v8 = variant == LocalKernel::vector8;
+  if (!v8) check_bounds_unpacked(segs, "the scalar resample + local");
+  check_segments(segs);
   check_tables(segs, tables, voxels);
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
     throw ArgumentError("footprints", "PE count differs from the segments'");
+  check_footprints(fp, segs.pes);
   check_occupancy(skip, voxels, order);
-  if (lanes && lanes->count != segs.count)
-    throw ArgumentError("segment order", "was made for other segments");
-  const bool v8 = variant == LocalKernel::vector8;
-  if (!v8) check_bounds_unpacked(segs, "the scalar resample + local");
+  check_lanes(lanes, segs);
   const std::string name =
       v8 ? with_cell_bits(detail::voxel_kernel("simdvol_resample_local_v8", voxels.layout()),
                           tables, voxels.layout(), order)

@@ -381,6 +381,7 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
 cl::Event enqueue_zero_uncovered(Device& device, const DeviceMatching& m, DeviceFootprints& fp) {
   if (static_cast<int64_t>(fp.rect_offset.size()) != m.pes + 1)
     throw ArgumentError("footprints", "made for another PE count than the matching");
+  check_footprints(fp, m.pes);
   const std::string name = "simdvol_zero_uncovered";
   cl::Kernel k = device.kernel("match", name, match_defines());
   set_args(k, name, m.candidates, m.rects, m.rowsum, static_cast<cl_int>(m.pes),

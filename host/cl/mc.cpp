@@ -4,6 +4,7 @@
 #include <limits>
 #include <string>
 
+#include "buffer_checks.hpp"
 #include "simdvol/mc.hpp"
 
 namespace simdvol {
@@ -45,6 +46,23 @@ void check_pixels(int width, int height) {
     throw ArgumentError("size", "viewing grid must be 1 .. 2^31 - 2 pixels");
 }
 
+// The kernels' defines need exact opacity for stratified picks (mc.cl's
+// #error): refused as the reference refuses them (render.cpp, composite.cpp).
+void check_params(const CompositeParams& p) {
+  if (p.stratified && !p.exact_opacity)
+    throw ArgumentError("--mc-stratified", "needs exact opacity (--exact-opacity)");
+}
+
+// Per-pixel lists of `npx` pixels over `segs`: the offsets and the items the
+// walks index (enqueue_ray_lists makes the items one per segment).
+void check_rays(const DeviceRayLists& rays, const LocalSegments& segs) {
+  const int64_t npx = int64_t(rays.width) * rays.height;
+  detail::check_buffer(rays.offset, npx + 1, sizeof(cl_int), "rays.offset",
+                       "int offsets (width x height + 1)");
+  detail::check_buffer(rays.items, segs.count, sizeof(cl_int), "rays.items",
+                       "int items (one per segment)");
+}
+
 DeviceMcStats* prepare_stats(Device& device, DeviceMcStats* stats, int64_t n, cl::Buffer& dummy) {
   if (stats) {
     stats->count = n;
@@ -62,6 +80,7 @@ DeviceMcStats* prepare_stats(Device& device, DeviceMcStats* stats, int64_t n, cl
 DeviceRayLists enqueue_ray_lists(Device& device, const LocalSegments& segs,
                                  const ViewGeometry& view) {
   check_bounds_unpacked(segs, "enqueue_ray_lists");
+  check_segments(segs, false);
   const int width = view.width(), height = view.height();
   check_pixels(width, height);
   DeviceRayLists r;
@@ -137,8 +156,13 @@ cl::Event enqueue_mc_whole(Device& device, const LocalSegments& segs, const cl::
                            DeviceMcStats* stats) {
   check_bounds_unpacked(segs, "enqueue_mc_whole");
   if (p.samples <= 0) throw ArgumentError("--samples", "must be positive");
+  check_params(p);
   check_pixels(rays.width, rays.height);
   const int npx = rays.width * rays.height;
+  check_segments(segs, false);
+  check_samples(segs, sample_off, samples);
+  check_rays(rays, segs);
+  detail::check_buffer(image, npx, sizeof(cl_float4), "image", "float4 pixels (width x height)");
   cl::Buffer dummy;
   prepare_stats(device, stats, npx, dummy);
   const std::string name = "simdvol_mc_whole";
@@ -154,6 +178,9 @@ DeviceAllocation enqueue_mc_allocation(Device& device, const LocalSegments& segs
   check_bounds_unpacked(segs, "enqueue_mc_allocation");
   if (budget < 0) throw ArgumentError("budget", "must not be negative");
   check_pixels(rays.width, rays.height);
+  check_segments(segs, false);
+  check_samples(segs, sample_off, samples);
+  check_rays(rays, segs);
   DeviceAllocation a;
   a.alpha = device.buffer(CL_MEM_READ_WRITE,
                           static_cast<std::size_t>(std::max<int64_t>(segs.count, 1)) * 4, nullptr,
@@ -180,8 +207,15 @@ cl::Event enqueue_mc_local(Device& device, const LocalSegments& segs, const cl::
   check_bounds_unpacked(segs, "enqueue_mc_local");
   if (!alloc && p.samples <= 0) throw ArgumentError("--samples", "must be positive");
   if (width < 1) throw ArgumentError("width", "must be positive");
+  check_params(p);
   if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
     throw ArgumentError("footprints", "PE count differs from the segments'");
+  check_segments(segs);
+  check_samples(segs, sample_off, samples);
+  check_footprints(fp, segs.pes);
+  if (alloc)
+    detail::check_buffer(alloc->walks, segs.count, sizeof(cl_int), "alloc.walks",
+                         "int walks (one per segment)");
   cl::Buffer dummy;
   prepare_stats(device, stats, segs.count, dummy);
   const std::string name = "simdvol_mc_local";

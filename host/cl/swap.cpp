@@ -6,6 +6,7 @@
 #include <limits>
 #include <string>
 
+#include "buffer_checks.hpp"
 #include "simdvol/swap_cl.hpp"
 
 namespace simdvol {
@@ -40,6 +41,26 @@ cl::Buffer float4_buffer(Device& device, int64_t n, const std::string& what) {
   const std::size_t bytes = static_cast<std::size_t>(std::max<int64_t>(n, 1)) * sizeof(cl_float4);
   check_allocation(bytes, device.info().max_alloc_bytes, what, "use a smaller --size");
   return device.buffer(CL_MEM_READ_WRITE, bytes, nullptr, what);
+}
+
+// A plan whose tables are on the device (upload_swap_plan): a table per
+// level and the display's.
+void check_uploaded(const DeviceSwapPlan& d) {
+  const auto levels = static_cast<std::size_t>(d.plan.stages() + 1);
+  if (d.rects.size() != levels || d.offsets.size() != levels || !d.xpe() || !d.ype())
+    throw ArgumentError("swap plan", "its tables are not on the device (upload_swap_plan)");
+}
+
+// Level L's buffer of a swap: the plan's level_size(L) float4 pixels.
+void check_level(const DeviceSwapPlan& d, int L, const cl::Buffer& b, const char* argument) {
+  detail::check_buffer(b, d.plan.level_size(L), sizeof(cl_float4), argument,
+                       "float4 pixels of the level");
+}
+
+void check_local_bytes(int64_t local_bytes) {
+  if (local_bytes < 0)
+    throw ArgumentError("local_bytes", std::to_string(local_bytes) +
+                                           " is negative (0: the device's local memory size)");
 }
 
 // swap.cl takes no define, but the host builds it in one program with
@@ -218,9 +239,12 @@ cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d) {
   return e;
 }
 
-cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, const cl::Buffer& in,
-                             const cl::Buffer& out) {
-  if (k < 0 || k >= d.plan.stages()) throw ArgumentError("stage", "outside 0 .. N-1");
+namespace {
+
+// enqueue_swap_stage's launch, its arguments checked by the caller
+// (enqueue_swap sizes its own level buffers: no check per stage).
+cl::Event swap_stage(Device& device, const DeviceSwapPlan& d, int k, const cl::Buffer& in,
+                     const cl::Buffer& out) {
   const std::string name = "simdvol_swap_stage";
   cl::Kernel kern = swap_kernel(device, name);
   const auto kk = static_cast<std::size_t>(k);
@@ -228,6 +252,18 @@ cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, con
   set_args(kern, name, in, d.rects[kk], d.offsets[kk], out, d.rects[kk + 1], d.offsets[kk + 1],
            static_cast<cl_int>(pes), static_cast<cl_int>(k), static_cast<cl_int>(d.plan.front[kk]));
   return device.run(kern, name, cl::NDRange(round_up(pes, kBlock)), cl::NDRange(kBlock));
+}
+
+}  // namespace
+
+cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& d, int k, const cl::Buffer& in,
+                             const cl::Buffer& out) {
+  if (k < 0 || k >= d.plan.stages()) throw ArgumentError("stage", "outside 0 .. N-1");
+  check_uploaded(d);
+  check_level(d, k, in, "in");
+  check_level(d, k + 1, out, "out");
+  if (in() == out()) throw ArgumentError("out", "is `in`: a stage writes another buffer");
+  return swap_stage(device, d, k, in, out);
 }
 
 int64_t swap_group_pixels(const SwapPlan& plan, int k0, int m, int L) {
@@ -309,6 +345,11 @@ cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, i
     throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
                                       " outside 0 .. N-1 (N = " + std::to_string(N) +
                                       ") or m outside 1 .. " + std::to_string(kSwapFusedStages));
+  check_local_bytes(local_bytes);
+  check_uploaded(d);
+  check_level(d, k0, in, "in");
+  check_level(d, k0 + m, out, "out");
+  if (in() == out()) throw ArgumentError("out", "is `in`: the launch writes another buffer");
   // PoCL checks a launch's local memory only with an assertion: too much
   // aborts the process, so it is checked here.
   const std::array<int64_t, 2> lbytes = swap_stages_local_bytes(d.plan, k0, m);
@@ -328,6 +369,10 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
     throw ArgumentError("footprints", "do not match the swap plan's rectangles");
   if (max_fused < 1 || max_fused > kSwapFusedStages)
     throw ArgumentError("max_fused", "outside 1 .. " + std::to_string(kSwapFusedStages));
+  check_local_bytes(local_bytes);
+  check_uploaded(d);
+  // (level 0: fp.rect_offset is the plan's offsets, fp.size() its size)
+  check_footprints(fp, static_cast<int64_t>(fp.rect_offset.size()) - 1);
   DeviceSwapRun r;
   const int N = d.plan.stages();
   r.last = fp.pixels;
@@ -377,7 +422,7 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
   }
   for (; k < N; ++k) {
     if (d.plan.level_size(k + 1) > 0) {
-      r.stages.push_back(enqueue_swap_stage(device, d, k, in, slot(k + 1)));
+      r.stages.push_back(swap_stage(device, d, k, in, slot(k + 1)));
       r.first_stage.push_back(k);
     }
     in = slot(k + 1);
@@ -390,6 +435,8 @@ cl::Event enqueue_display(Device& device, const DeviceSwapPlan& d, const cl::Buf
                           cl::Buffer& image) {
   const int w = d.plan.width, h = d.plan.height;
   const auto N = static_cast<std::size_t>(d.plan.stages());
+  check_uploaded(d);
+  check_level(d, d.plan.stages(), last, "last");
   image = float4_buffer(device, int64_t(w) * h, "intermediate image");
   const std::string name = "simdvol_display";
   cl::Kernel k = swap_kernel(device, name);
@@ -404,6 +451,8 @@ cl::Event enqueue_display(Device& device, const DeviceSwapPlan& d, const cl::Buf
 cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
                        cl::Buffer& out) {
   const int ow = view.out_width, oh = view.out_height;
+  detail::check_buffer(intermediate, int64_t(view.width()) * view.height(), sizeof(cl_float4),
+                       "intermediate", "float4 pixels (width x height)");
   std::vector<cl_int> ix(static_cast<std::size_t>(ow)), iy(static_cast<std::size_t>(oh));
   std::vector<cl_float> tx(ix.size()), ty(iy.size());
   for (int x = 0; x < ow; ++x) {

@@ -9,13 +9,22 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "simdvol/classify.hpp"
+#include "simdvol/engine.hpp"
 #include "simdvol/layout.hpp"
+#include "simdvol/local.hpp"
+#include "simdvol/local_cl.hpp"
+#include "simdvol/match.hpp"
+#include "simdvol/mc_cl.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/stages.hpp"
+#include "simdvol/swap.hpp"
+#include "simdvol/swap_cl.hpp"
 #include "stage_testing.hpp"
 
 namespace simdvol {
@@ -205,6 +214,413 @@ TEST(CallerBuffers, TooSmallOrNullBuffersAreRejected) {
   PeArray array(dev, pe_grid(4));
   CellBuffer cells(dev, CL);
   EXPECT_THROW(array.enqueue_layout(own_buffer(dev, 16 * 16 * 16 * 4 - 4), cells), ArgumentError);
+}
+
+// `call` throws ArgumentError, its message naming `argument` first
+// ("<argument>: <problem>").
+template <class F>
+void expect_refused(F&& call, const std::string& argument) {
+  std::string what;
+  EXPECT_THROW(
+      {
+        try {
+          call();
+        } catch (const ArgumentError& e) {
+          what = e.what();
+          throw;
+        }
+      },
+      ArgumentError);
+  EXPECT_EQ(what.rfind(argument + ": ", 0), 0u) << "the refusal: " << what;
+}
+#define EXPECT_REFUSED(argument, ...)               \
+  do {                                              \
+    SCOPED_TRACE(argument);                         \
+    expect_refused([&] { __VA_ARGS__; }, argument); \
+  } while (0)
+
+// The device stages of a small frame on the host's matching (P = 64, so
+// that the swap runs fused launches), every caller buffer sized exactly.
+struct Frame {
+  Dims3 dims{16, 16, 16};
+  int64_t pes = 64;
+  ViewGeometry view;
+  KdSplit split;
+  Matching m;
+  VoxelLayout L;
+  std::optional<VoxelBuffer> voxels;
+  LocalSegments segs;
+  ResampleTables tables;
+  cl::Buffer soff;
+  int64_t nsamples = 0;
+  cl::Buffer samples;
+
+  explicit Frame(Device& dev)
+      : view(make_view(std::array<int64_t, 3>{16, 16, 16}, {1.0, 1.0, 1.0}, {20, 35, 10}, 24, 24,
+                       Sampling::voxel)),
+        split(kd_split(dims, pes)),
+        m(match_reference(view, split)),
+        L(make_voxel_layout(make_cell_layout(dims, pes, 1))) {
+    voxels.emplace(dev, L);
+    std::vector<Rgba> cells(static_cast<std::size_t>(L.elements()));
+    for (std::size_t i = 0; i < cells.size(); ++i) {
+      const float a = static_cast<float>(i % 7) / 8.0f;
+      cells[i] = {a * 0.5f, a * 0.25f, a * 0.75f, a};
+    }
+    voxels->write(dev, cells);
+    segs = upload_segments(dev, m);
+    tables = make_resample_tables(dev, L, view);
+    soff = upload_sample_offsets(dev, m);
+    nsamples = sample_offsets(m).back();
+    samples = sized(dev, nsamples * 16);
+  }
+  static cl::Buffer sized(Device& dev, int64_t bytes) {
+    return cl::Buffer(dev.context(), CL_MEM_READ_WRITE,
+                      static_cast<std::size_t>(std::max<int64_t>(bytes, 16)));
+  }
+  // Footprints for the matching with buffers of exactly their sizes.
+  DeviceFootprints footprints(Device& dev) const {
+    DeviceFootprints fp = make_footprints(dev, segs.host_rects);
+    fp.pixels = sized(dev, fp.size() * 16);
+    cl_check(
+        dev.queue().enqueueFillBuffer(fp.pixels, 0.0f, 0, static_cast<std::size_t>(fp.size()) * 16),
+        "fill");
+    return fp;
+  }
+};
+
+// A copy of `segs` with one of its buffers replaced.
+LocalSegments with_buffer(const LocalSegments& segs, cl::Buffer LocalSegments::*member,
+                          cl::Buffer b) {
+  LocalSegments s = segs;
+  s.*member = std::move(b);
+  return s;
+}
+
+// The resample and local stages (local_cl.hpp) check the sizes of the
+// segments', samples', tables', footprints', lane order's and occupancy's
+// buffers on the host before they enqueue: each one a buffer too small
+// for what the kernels index is an ArgumentError naming it (without the
+// checks the kernels read or write past it).
+TEST(CallerBuffers, ResampleAndLocalStagesRefuseUndersizedBuffers) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Frame f(dev);
+  ASSERT_GT(f.segs.count, 8);
+  ASSERT_GT(f.nsamples, 8);
+  ASSERT_EQ(f.segs.sample_count, f.nsamples);
+  const VoxelBuffer& vb = *f.voxels;
+  DeviceFootprints fp = f.footprints(dev);
+  ASSERT_GT(fp.size(), 8);
+  const cl::Buffer small = Frame::sized(dev, 16);
+
+  // The samples: one float4 short, and sample_off one int short.
+  const cl::Buffer few_samples = Frame::sized(dev, (f.nsamples - 1) * 16);
+  const cl::Buffer few_offsets = Frame::sized(dev, f.segs.count * 4);
+  for (const LocalKernel variant : {LocalKernel::vector8, LocalKernel::segment}) {
+    EXPECT_REFUSED("samples",
+                   enqueue_resample(dev, f.segs, f.soff, f.tables, vb, 1, few_samples, variant));
+    EXPECT_REFUSED("sample_off",
+                   enqueue_resample(dev, f.segs, few_offsets, f.tables, vb, 1, f.samples, variant));
+  }
+  EXPECT_REFUSED("samples", enqueue_local(dev, f.segs, f.soff, few_samples, fp));
+  EXPECT_REFUSED("sample_off", enqueue_local(dev, f.segs, few_offsets, f.samples, fp));
+  {  // the message names the sizes
+    std::string what;
+    try {
+      enqueue_resample(dev, f.segs, f.soff, f.tables, vb, 1, few_samples);
+    } catch (const ArgumentError& e) {
+      what = e.what();
+    }
+    EXPECT_NE(what.find(std::to_string((f.nsamples - 1) * 16) + " bytes"), std::string::npos)
+        << what;
+    EXPECT_NE(what.find(std::to_string(f.nsamples * 16) + " bytes"), std::string::npos) << what;
+  }
+
+  // The segments' buffers (every stage that takes them).
+  for (const auto& [member, name] :
+       std::vector<std::pair<cl::Buffer LocalSegments::*, std::string>>{
+           {&LocalSegments::segments, "segs.segments"},
+           {&LocalSegments::seg_offset, "segs.seg_offset"},
+           {&LocalSegments::rects, "segs.rects"}}) {
+    const LocalSegments bad = with_buffer(f.segs, member, small);
+    EXPECT_REFUSED(name, enqueue_resample(dev, bad, f.soff, f.tables, vb, 1, f.samples));
+    EXPECT_REFUSED(name, enqueue_local(dev, bad, f.soff, f.samples, fp));
+    EXPECT_REFUSED(name, enqueue_resample_local(dev, bad, f.tables, vb, 1, fp));
+    EXPECT_REFUSED(name,
+                   enqueue_resample_local(dev, bad, f.tables, vb, 1, fp, LocalKernel::segment));
+    EXPECT_REFUSED(name, enqueue_segment_order(dev, bad));
+  }
+  {  // pending bounds: one short2 per segment
+    LocalSegments pending = f.segs;
+    pending.bounds_pending = true;
+    pending.bounds = small;
+    EXPECT_REFUSED("segs.bounds", enqueue_segment_order(dev, pending));
+    EXPECT_REFUSED("segs.bounds", enqueue_resample_local(dev, pending, f.tables, vb, 1, fp));
+  }
+
+  // The footprints: their pixels and their offsets.
+  for (const bool pixels : {true, false}) {
+    const std::string name = pixels ? "fp.pixels" : "fp.offsets";
+    DeviceFootprints bad = fp;
+    (pixels ? bad.pixels : bad.offsets) =
+        pixels ? Frame::sized(dev, (fp.size() - 1) * 16) : Frame::sized(dev, (f.pes - 1) * 4);
+    EXPECT_REFUSED(name, enqueue_resample_local(dev, f.segs, f.tables, vb, 1, bad));
+    EXPECT_REFUSED(name,
+                   enqueue_resample_local(dev, f.segs, f.tables, vb, 1, bad, LocalKernel::segment));
+    EXPECT_REFUSED(name, enqueue_local(dev, f.segs, f.soff, f.samples, bad));
+    if (pixels) EXPECT_REFUSED(name, enqueue_zero_footprints(dev, bad));
+  }
+
+  // The tables: the address table, the view and the pair table (planar
+  // cells too: a caller's table is checked wherever it is set).
+  for (const int which : {0, 1, 2}) {
+    const std::string name = which == 0   ? "tables.table"
+                             : which == 1 ? "tables.view"
+                                          : "tables.pairs";
+    ResampleTables bad = f.tables;
+    (which == 0 ? bad.table : which == 1 ? bad.view : bad.pairs) = small;
+    EXPECT_REFUSED(name, enqueue_resample_local(dev, f.segs, bad, vb, 1, fp));
+    EXPECT_REFUSED(name, enqueue_resample_local(dev, f.segs, bad, vb, 1, fp, LocalKernel::segment));
+    EXPECT_REFUSED(name, enqueue_resample(dev, f.segs, f.soff, bad, vb, 1, f.samples));
+    EXPECT_REFUSED(
+        name, enqueue_resample(dev, f.segs, f.soff, bad, vb, 1, f.samples, LocalKernel::segment));
+  }
+
+  // The lane order and the occupancy.
+  SegmentOrder lanes = enqueue_segment_order(dev, f.segs);
+  lanes.order = Frame::sized(dev, f.segs.count * 4);  // without the PEs after the positions
+  EXPECT_REFUSED("lanes.order", enqueue_resample_local(dev, f.segs, f.tables, vb, 1, fp,
+                                                       LocalKernel::vector8, nullptr, &lanes));
+  EXPECT_REFUSED("lanes.order", enqueue_resample(dev, f.segs, f.soff, f.tables, vb, 1, f.samples,
+                                                 LocalKernel::vector8, &lanes));
+  DeviceOccupancy skip = enqueue_occupancy(dev, vb, 1);
+  ASSERT_GT(skip.count(), 1);
+  skip.reach =
+      cl::Buffer(dev.context(), CL_MEM_READ_WRITE, static_cast<std::size_t>(skip.count() - 1));
+  EXPECT_REFUSED("skip.reach", enqueue_resample_local(dev, f.segs, f.tables, vb, 1, fp,
+                                                      LocalKernel::vector8, &skip));
+  EXPECT_REFUSED("skip.reach", enqueue_resample(dev, f.segs, f.soff, f.tables, vb, 1, f.samples,
+                                                LocalKernel::vector8, nullptr, &skip));
+
+  // The footprints of enqueue_zero_uncovered (match.cl).
+  DeviceMatching dm = enqueue_match(dev, f.view, f.split);
+  const LocalSegments ds = device_segments(dev, dm);
+  DeviceFootprints dfp = make_footprints(dev, ds.host_rects);
+  ASSERT_GT(dfp.size(), 1);
+  dfp.pixels = Frame::sized(dev, (dfp.size() - 1) * 16);
+  EXPECT_REFUSED("fp.pixels", enqueue_zero_uncovered(dev, dm, dfp));
+  dev.finish();
+}
+
+// The Monte Carlo stages (mc_cl.hpp) check the segments', samples', ray
+// lists', image's, footprints' and allocation's buffers the same way, and
+// refuse stratified picks without exact opacity as the reference does
+// (before building: the kernels' #error made it a BuildError).
+TEST(CallerBuffers, MonteCarloStagesRefuseUndersizedBuffers) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Frame f(dev);
+  enqueue_resample(dev, f.segs, f.soff, f.tables, *f.voxels, 1, f.samples);
+  DeviceRayLists rays = enqueue_ray_lists(dev, f.segs, f.view);
+  const int W = f.view.width(), H = f.view.height();
+  const cl::Buffer image = Frame::sized(dev, int64_t(W) * H * 16);
+  DeviceFootprints fp = f.footprints(dev);
+  CompositeParams p;
+  p.mode = CompositeMode::mc;
+  p.samples = 4;
+  p.exact_opacity = true;
+  const cl::Buffer small = Frame::sized(dev, 16);
+  const cl::Buffer few_samples = Frame::sized(dev, (f.nsamples - 1) * 16);
+  const cl::Buffer few_offsets = Frame::sized(dev, f.segs.count * 4);
+  const DeviceAllocation alloc = enqueue_mc_allocation(dev, f.segs, f.soff, f.samples, rays, 8);
+
+  EXPECT_REFUSED("image", enqueue_mc_whole(dev, f.segs, f.soff, f.samples, rays, p,
+                                           Frame::sized(dev, (int64_t(W) * H - 1) * 16)));
+  EXPECT_REFUSED("samples", enqueue_mc_whole(dev, f.segs, f.soff, few_samples, rays, p, image));
+  EXPECT_REFUSED("sample_off",
+                 enqueue_mc_whole(dev, f.segs, few_offsets, f.samples, rays, p, image));
+  EXPECT_REFUSED("samples", enqueue_mc_local(dev, f.segs, f.soff, few_samples, W, p, nullptr, fp));
+  EXPECT_REFUSED("sample_off",
+                 enqueue_mc_local(dev, f.segs, few_offsets, f.samples, W, p, nullptr, fp));
+  EXPECT_REFUSED("samples", enqueue_mc_allocation(dev, f.segs, f.soff, few_samples, rays, 8));
+  EXPECT_REFUSED("segs.segments",
+                 enqueue_mc_whole(dev, with_buffer(f.segs, &LocalSegments::segments, small), f.soff,
+                                  f.samples, rays, p, image));
+  EXPECT_REFUSED(
+      "segs.segments",
+      enqueue_ray_lists(dev, with_buffer(f.segs, &LocalSegments::segments, small), f.view));
+  for (const auto& [member, name] :
+       std::vector<std::pair<cl::Buffer LocalSegments::*, std::string>>{
+           {&LocalSegments::segments, "segs.segments"},
+           {&LocalSegments::seg_offset, "segs.seg_offset"},
+           {&LocalSegments::rects, "segs.rects"}})
+    EXPECT_REFUSED(name, enqueue_mc_local(dev, with_buffer(f.segs, member, small), f.soff,
+                                          f.samples, W, p, nullptr, fp));
+  {
+    DeviceRayLists bad = rays;
+    bad.offset = Frame::sized(dev, int64_t(W) * H * 4);
+    EXPECT_REFUSED("rays.offset", enqueue_mc_whole(dev, f.segs, f.soff, f.samples, bad, p, image));
+  }
+  for (const bool pixels : {true, false}) {
+    DeviceFootprints bad = fp;
+    (pixels ? bad.pixels : bad.offsets) =
+        pixels ? Frame::sized(dev, (fp.size() - 1) * 16) : Frame::sized(dev, (f.pes - 1) * 4);
+    EXPECT_REFUSED(pixels ? "fp.pixels" : "fp.offsets",
+                   enqueue_mc_local(dev, f.segs, f.soff, f.samples, W, p, nullptr, bad));
+  }
+  {
+    DeviceAllocation bad = alloc;
+    bad.walks = Frame::sized(dev, (f.segs.count - 1) * 4);
+    EXPECT_REFUSED("alloc.walks", enqueue_mc_local(dev, f.segs, f.soff, f.samples, W, p, &bad, fp));
+  }
+  CompositeParams strat = p;
+  strat.stratified = true;
+  strat.exact_opacity = false;
+  EXPECT_REFUSED("--mc-stratified",
+                 enqueue_mc_whole(dev, f.segs, f.soff, f.samples, rays, strat, image));
+  EXPECT_REFUSED("--mc-stratified",
+                 enqueue_mc_local(dev, f.segs, f.soff, f.samples, W, strat, nullptr, fp));
+  dev.finish();
+}
+
+// The swap, display and warp (swap_cl.hpp) check their level buffers
+// against the plan's level sizes, the intermediate image against the
+// view's grid, and refuse a negative local memory budget.
+TEST(CallerBuffers, SwapDisplayAndWarpRefuseUndersizedBuffers) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Frame f(dev);
+  const DeviceSwapPlan plan = upload_swap_plan(
+      dev, plan_swap(f.m.rects, f.split, f.view, pe_grid(f.pes), SwapLayout::cut_and_stack));
+  const int N = plan.plan.stages();
+  ASSERT_GE(N, kSwapFusedMin);
+  DeviceFootprints fp = f.footprints(dev);
+  auto level = [&](int L, int64_t less) {
+    return Frame::sized(dev, (plan.plan.level_size(L) - less) * 16);
+  };
+  int k = 0;  // a stage whose levels each hold two pixels at least
+  while (k < N - 1 && (plan.plan.level_size(k) < 2 || plan.plan.level_size(k + 1) < 2)) ++k;
+  ASSERT_GE(plan.plan.level_size(k), 2);
+  ASSERT_GE(plan.plan.level_size(k + 1), 2);
+  EXPECT_REFUSED("in", enqueue_swap_stage(dev, plan, k, level(k, 1), level(k + 1, 0)));
+  EXPECT_REFUSED("out", enqueue_swap_stage(dev, plan, k, level(k, 0), level(k + 1, 1)));
+  const int m = kSwapFusedMin;
+  ASSERT_GE(plan.plan.level_size(0), 2);
+  ASSERT_GE(plan.plan.level_size(m), 2);
+  EXPECT_REFUSED("in", enqueue_swap_stages(dev, plan, 0, m, level(0, 1), level(m, 0)));
+  EXPECT_REFUSED("out", enqueue_swap_stages(dev, plan, 0, m, level(0, 0), level(m, 1)));
+  const cl::Buffer same = level(0, 0);
+  EXPECT_REFUSED("out", enqueue_swap_stages(dev, plan, 0, m, same, same));
+  EXPECT_REFUSED("local_bytes", enqueue_swap_stages(dev, plan, 0, m, level(0, 0), level(m, 0), -1));
+  EXPECT_REFUSED("local_bytes", enqueue_swap(dev, plan, fp, kSwapFusedStages, -1));
+  {
+    DeviceFootprints bad = fp;
+    bad.pixels = level(0, 1);
+    EXPECT_REFUSED("fp.pixels", enqueue_swap(dev, plan, bad));
+  }
+  cl::Buffer image;
+  ASSERT_GE(plan.plan.level_size(N), 2);
+  EXPECT_REFUSED("last", enqueue_display(dev, plan, level(N, 1), image));
+  cl::Buffer out;
+  const int64_t npx = int64_t(f.view.width()) * f.view.height();
+  EXPECT_REFUSED("intermediate", enqueue_warp(dev, f.view, Frame::sized(dev, (npx - 1) * 16), out));
+  dev.finish();
+}
+
+// The same stages with every caller buffer of exactly the size asked for
+// (no byte to spare) run, and give what the stages give on simdvol's own
+// buffers; a byte less is refused.
+TEST(CallerBuffers, ExactSizesAreTakenAByteLessRefused) {
+  SIMDVOL_TEST_DEVICE(dev);
+  Frame f(dev);
+  const VoxelBuffer& vb = *f.voxels;
+  const SegmentOrder lanes = enqueue_segment_order(dev, f.segs);
+  const DeviceOccupancy skip = enqueue_occupancy(dev, vb, 1);
+  EXPECT_NO_THROW(enqueue_resample(dev, f.segs, f.soff, f.tables, vb, 1, f.samples,
+                                   LocalKernel::vector8, &lanes, &skip));
+  DeviceFootprints fp1 = f.footprints(dev), fp2 = f.footprints(dev);
+  EXPECT_NO_THROW(enqueue_local(dev, f.segs, f.soff, f.samples, fp1));
+  EXPECT_NO_THROW(enqueue_resample_local(dev, f.segs, f.tables, vb, 1, fp2));
+  const Footprints a = read_footprints(dev, fp1), b = read_footprints(dev, fp2);
+  ASSERT_EQ(a.pixels.size(), b.pixels.size());
+  EXPECT_EQ(std::memcmp(a.pixels.data(), b.pixels.data(), a.pixels.size() * sizeof(Rgba)), 0);
+  int64_t lit = 0;
+  for (const Rgba& c : a.pixels) lit += c.a > 0;
+  EXPECT_GT(lit, 0);
+
+  // Monte Carlo, whole ray and per sub-ray, stratified with exact opacity.
+  DeviceRayLists rays = enqueue_ray_lists(dev, f.segs, f.view);
+  const int W = f.view.width(), H = f.view.height();
+  const cl::Buffer image = Frame::sized(dev, int64_t(W) * H * 16);
+  CompositeParams p;
+  p.mode = CompositeMode::mc;
+  p.samples = 4;
+  p.exact_opacity = p.stratified = true;
+  EXPECT_NO_THROW(enqueue_mc_whole(dev, f.segs, f.soff, f.samples, rays, p, image));
+  const DeviceAllocation alloc = enqueue_mc_allocation(dev, f.segs, f.soff, f.samples, rays, 8);
+  DeviceAllocation exact = alloc;
+  exact.walks = Frame::sized(dev, f.segs.count * 4);
+  cl_check(dev.queue().enqueueCopyBuffer(alloc.walks, exact.walks, 0, 0,
+                                         static_cast<std::size_t>(f.segs.count) * 4),
+           "copy");
+  DeviceFootprints mfp = f.footprints(dev);
+  EXPECT_NO_THROW(enqueue_mc_local(dev, f.segs, f.soff, f.samples, W, p, &exact, mfp));
+
+  // The swap from exactly sized levels, the display and the warp.
+  const DeviceSwapPlan plan = upload_swap_plan(
+      dev, plan_swap(f.m.rects, f.split, f.view, pe_grid(f.pes), SwapLayout::cut_and_stack));
+  const int N = plan.plan.stages();
+  std::vector<cl::Buffer> levels{fp1.pixels};
+  for (int L = 1; L <= N; ++L) levels.push_back(Frame::sized(dev, plan.plan.level_size(L) * 16));
+  const int m = kSwapFusedMin;
+  EXPECT_NO_THROW(
+      enqueue_swap_stages(dev, plan, 0, m, levels[0], levels[static_cast<std::size_t>(m)]));
+  for (int k = m; k < N; ++k)
+    EXPECT_NO_THROW(enqueue_swap_stage(dev, plan, k, levels[static_cast<std::size_t>(k)],
+                                       levels[static_cast<std::size_t>(k + 1)]));
+  const DeviceSwapRun run = enqueue_swap(dev, plan, fp1);
+  cl::Buffer im, im2, out;
+  EXPECT_NO_THROW(enqueue_display(dev, plan, levels[static_cast<std::size_t>(N)], im));
+  enqueue_display(dev, plan, run.last, im2);
+  const Image x = read_device_image(dev, im, W, H), y = read_device_image(dev, im2, W, H);
+  EXPECT_EQ(std::memcmp(x.pixels().data(), y.pixels().data(), x.pixels().size() * sizeof(Rgba)), 0);
+  const cl::Buffer inter = Frame::sized(dev, int64_t(W) * H * 16);
+  cl_check(dev.queue().enqueueCopyBuffer(im, inter, 0, 0, static_cast<std::size_t>(W) * H * 16),
+           "copy");
+  EXPECT_NO_THROW(enqueue_warp(dev, f.view, inter, out));
+
+  // A byte less.
+  auto less = [&](int64_t bytes) { return Frame::sized(dev, bytes - 1); };
+  EXPECT_REFUSED("samples",
+                 enqueue_resample(dev, f.segs, f.soff, f.tables, vb, 1, less(f.nsamples * 16)));
+  DeviceFootprints short_fp = fp2;
+  short_fp.pixels = less(fp2.size() * 16);
+  EXPECT_REFUSED("fp.pixels", enqueue_resample_local(dev, f.segs, f.tables, vb, 1, short_fp));
+  EXPECT_REFUSED("image", enqueue_mc_whole(dev, f.segs, f.soff, f.samples, rays, p,
+                                           less(int64_t(W) * H * 16)));
+  EXPECT_REFUSED(
+      "out", enqueue_swap_stages(dev, plan, 0, m, levels[0], less(plan.plan.level_size(m) * 16)));
+  EXPECT_REFUSED("intermediate", enqueue_warp(dev, f.view, less(int64_t(W) * H * 16), out));
+  dev.finish();
+}
+
+// A moved-from RenderEngine holds no state: render and options refuse it
+// (they dereferenced a null state before).
+TEST(CallerBuffers, MovedFromEngineIsRefused) {
+  SIMDVOL_TEST_DEVICE(dev);
+  EngineOptions eo;
+  eo.pes = 8;
+  RenderEngine a(dev, eo);
+  RenderEngine b(std::move(a));
+  EXPECT_EQ(b.options().pes, 8);
+  const Volume vol = shepp_logan(16);
+  RenderOptions opt;
+  opt.width = opt.height = 16;
+  opt.classifier = classifier_preset("ct");
+  EXPECT_REFUSED("engine", a.render(vol, opt));  // NOLINT(bugprone-use-after-move)
+  EXPECT_REFUSED("engine", a.options());         // NOLINT(bugprone-use-after-move)
+  RenderEngine c(dev, eo);
+  c = std::move(b);
+  EXPECT_REFUSED("engine", b.render(vol, opt));  // NOLINT(bugprone-use-after-move)
+  EXPECT_EQ(c.render(vol, opt).width(), 16);
 }
 
 }  // namespace

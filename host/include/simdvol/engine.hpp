@@ -214,6 +214,8 @@ class RenderEngine {
  public:
   explicit RenderEngine(Device& device, EngineOptions options = {});
   ~RenderEngine();
+  /// A moved-from engine may only be destroyed or assigned to: its
+  /// options() and render() throw ArgumentError ("engine: was moved from").
   RenderEngine(RenderEngine&&) noexcept;
   RenderEngine& operator=(RenderEngine&&) noexcept;
 

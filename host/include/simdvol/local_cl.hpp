@@ -47,10 +47,28 @@ struct LocalSegments {
   /// stage throws ArgumentError on such segments (enqueue_balance_unpack
   /// first, then device_segments again).
   bool bounds_pending = false;
-  cl::Buffer bounds;
+  cl::Buffer bounds;  ///< cl_short2[count] where bounds_pending
+  /// The segments' samples (the sum of k1 - k0, sample_offsets(m).back())
+  /// where the host knows it: upload_segments sets it; device_segments
+  /// cannot without a read (-1), and a caller that has the total (the
+  /// engine reads it to size its buffer) may set it. The stages that take
+  /// a `samples` buffer check its size against it where it is not -1.
+  int64_t sample_count = -1;
 };
 /// ArgumentError naming `stage` where segs.bounds_pending.
 void check_bounds_unpacked(const LocalSegments& segs, const char* stage);
+/// The checks every stage taking segments makes first (on the host: one
+/// clGetMemObjectInfo per buffer, nothing enqueued, no wait): ArgumentError,
+/// naming the member and the sizes, where P is not a power of two, count is
+/// outside 0 .. 2^31 - 1, or the buffers hold fewer than `count` segments,
+/// P + 1 offsets and P rectangles (`all` false: the segments alone, for the
+/// stages that read nothing else), or `bounds` fewer than `count` short2
+/// where bounds_pending.
+void check_segments(const LocalSegments& segs, bool all = true);
+/// ArgumentError where `sample_off` holds fewer than segs.count + 1 ints or
+/// `samples` fewer than segs.sample_count float4 (where that is known).
+void check_samples(const LocalSegments& segs, const cl::Buffer& sample_off,
+                   const cl::Buffer& samples);
 /// Uploads m's segments, offsets and rectangles (blocking). ArgumentError if
 /// P is not a power of two or the counts exceed int32.
 LocalSegments upload_segments(Device& device, const Matching& m);
@@ -152,6 +170,10 @@ struct DeviceFootprints {
   cl::Buffer pixels;                 ///< cl_float4[rect_offset[P]] (at least one element)
   int64_t size() const { return rect_offset.empty() ? 0 : rect_offset.back(); }
 };
+/// ArgumentError where fp holds no rect_offset for `pes` PEs or its buffers
+/// fewer than P offsets or max(fp.size(), 1) pixels (host-side, as
+/// check_segments): the stages that write footprints check them first.
+void check_footprints(const DeviceFootprints& fp, int64_t pes);
 DeviceFootprints make_footprints(Device& device, const std::vector<sv_rect>& rects);
 /// Zero-fills the footprints.
 cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp);
@@ -190,7 +212,12 @@ SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs);
 enum class LocalKernel { vector8, segment };
 struct DeviceOccupancy;
 /// Resamples every sample of `segs` into `samples` (cl_float4, at
-/// sample_offsets(m).back() elements at least), in segment order. With
+/// sample_offsets(m).back() elements at least: checked against
+/// segs.sample_count where that is known; `sample_off` cl_int[count + 1]),
+/// in segment order. Every stage here checks the sizes of the buffers it is
+/// given (check_segments, check_samples, check_footprints, the tables'
+/// `table`, `view`, `pairs` and `origins`, the order's and the occupancy's)
+/// before it enqueues anything: ArgumentError naming the one too small. With
 /// `lanes` (made for `segs`) the vector8 kernel takes the segments in that
 /// order into its lanes (the same samples). With `skip` (the occupancy of
 /// `voxels` for `order`; vector8 only) the samples out of reach are stored

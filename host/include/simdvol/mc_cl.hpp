@@ -25,7 +25,11 @@
 // opacity and, per ray, the walks of its segments (allocate_walks).
 //
 // Every enqueue_* validates first, enqueues without waiting and returns the
-// kernels' events; buffers must outlive the queue's work.
+// kernels' events; buffers must outlive the queue's work. The validation
+// takes the sizes of the caller's buffers on the host (check_segments,
+// check_samples, check_footprints in local_cl.hpp; the ray lists' offsets
+// and items, the image, the allocation's walks): ArgumentError naming the
+// one too small for what the kernels index.
 #pragma once
 
 #include <cstdint>
@@ -66,7 +70,8 @@ struct DeviceMcStats {
 
 /// Whole-ray Monte Carlo into `image` (cl_float4[width * height], the
 /// intermediate image, row-major). p.samples walks per ray; p.streams,
-/// p.exact_opacity, p.drop_transparent honoured. `stats`, if given, receives
+/// p.exact_opacity, p.drop_transparent honoured; p.stratified needs
+/// p.exact_opacity (ArgumentError "--mc-stratified", as the reference). `stats`, if given, receives
 /// the work counters.
 cl::Event enqueue_mc_whole(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
                            const cl::Buffer& samples, const DeviceRayLists& rays,

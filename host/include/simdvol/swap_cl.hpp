@@ -116,12 +116,16 @@ struct DeviceSwapRun {
 /// max_fused and local_bytes.
 DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& plan, const DeviceFootprints& fp,
                            int max_fused = kSwapFusedStages, int64_t local_bytes = 0);
-/// Enqueues stage k alone: level k's buffer `in` -> level k + 1's `out`.
+/// Enqueues stage k alone: level k's buffer `in` -> level k + 1's `out`
+/// (another buffer). ArgumentError where `in` holds fewer than
+/// level_size(k) float4 or `out` fewer than level_size(k + 1).
 cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& plan, int k,
                              const cl::Buffer& in, const cl::Buffer& out);
 /// Enqueues stages k0 .. k0 + m - 1 (1 <= m <= kSwapFusedStages) in one
 /// launch: level k0 in `in`, level k0 + m into `out` (large enough for it,
-/// not `in`); the levels between stay in the work-groups' local memory.
+/// not `in`: both checked, as for enqueue_swap_stage); the levels between
+/// stay in the work-groups' local memory. A negative local_bytes is an
+/// ArgumentError (here and in enqueue_swap).
 /// ArgumentError if they need more than `local_bytes` (0: the device's
 /// local memory size; swap_stages_local_need), since PoCL aborts on a
 /// launch with too much.
@@ -140,14 +144,16 @@ std::array<int64_t, 2> swap_stages_local_bytes(const SwapPlan& plan, int k0, int
 int64_t swap_stages_local_need(const SwapPlan& plan, int k0, int m);
 
 /// Display: level N's buffer -> the intermediate image (float4,
-/// width x height, allocated here into `image`).
+/// width x height, allocated here into `image`). ArgumentError where `last`
+/// holds fewer than level_size(N) float4.
 cl::Event enqueue_display(Device& device, const DeviceSwapPlan& plan, const cl::Buffer& last,
                           cl::Buffer& image);
 
 /// warp_to_output on the device (voxel sampling): `intermediate`
 /// (view.width() x view.height() float4) -> `out` (out_width x out_height,
 /// allocated here). Source positions are computed on the host in double,
-/// exactly as warp_to_output; same float arithmetic.
+/// exactly as warp_to_output; same float arithmetic. ArgumentError where
+/// `intermediate` holds fewer than view.width() x view.height() float4.
 cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
                        cl::Buffer& out);
 
