@@ -630,6 +630,16 @@ int main(int argc, char** argv) {
         for (const std::string& n : vol.notes()) std::cerr << "simdvol: note: " << n << "\n";
       }
       if (classify == "auto") classify = vol.range().min < -500.0f ? "ct" : "mri";
+      // A preset's name is the preset, even where a file of that name lies
+      // here: said, so that nobody takes the preset for their file.
+      if (const auto names = classifier_preset_names();
+          render->count("--classify") > 0 &&
+          std::find(names.begin(), names.end(), classify) != names.end()) {
+        std::error_code ec;
+        if (fs::exists(classify, ec))
+          std::cerr << "simdvol: note: --classify " << classify << " is the preset; for the file "
+                    << classify << " here, give ./" << classify << "\n";
+      }
       opt.classifier = classifier_from_spec(classify);
 
       std::optional<Device> device;

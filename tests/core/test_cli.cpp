@@ -1224,6 +1224,24 @@ TEST_F(Cli, MismatchWritesBothOutputsOrNeither) {
   EXPECT_GT(fs::file_size(dir_ / "keep.csv"), 3u);
 }
 
+// --classify ct is the preset even where a file ./ct lies beside: said in
+// a note (nothing said for ./ct, the file, or without --classify).
+TEST_F(Cli, PresetNameBesideAFileOfThatNameIsSaid) {
+  std::ofstream(dir_ / "ct") << "density 0 0 100 1\n";
+  const std::string in_dir = "cd " + dir_.string() + " &&";
+  Result r = run_once("render --phantom-size 16 --size 8 --classify ct -o x.png", "", in_dir);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("note: --classify ct is the preset; for the file ct here, give ./ct"),
+            std::string::npos)
+      << r.output;
+  r = run_once("render --phantom-size 16 --size 8 --classify ./ct -o y.png", "", in_dir);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("note: --classify"), std::string::npos) << r.output;
+  r = run_once("render --phantom-size 16 --size 8 -o z.png", "", in_dir);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("note: --classify"), std::string::npos) << r.output;
+}
+
 // `simdvol devices` is where a bad SIMDVOL_DEVICE's error points: it lists
 // the devices all the same (it failed with that error), then says what is
 // wrong, exit 1. A number past long's range is named as given (it was
