@@ -17,12 +17,16 @@ namespace fs = std::filesystem;
 
 namespace simdvol {
 
+std::string_view trim_blanks(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+  return s;
+}
+
 CLI::Validator decimal_integer() {
   return CLI::Validator(
       [](std::string& v) {
-        std::string_view s = v;
-        while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-        while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+        std::string_view s = trim_blanks(v);
         if (!s.empty() && (s.front() == '+' || s.front() == '-')) s.remove_prefix(1);
         if (s.empty() || s.find_first_not_of("0123456789") != std::string_view::npos)
           return "expected a whole number in decimal, not '" + v + "'";

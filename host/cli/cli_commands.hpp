@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <ostream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "simdvol/engine.hpp"
@@ -20,6 +21,10 @@ namespace simdvol {
 /// no word said. Refuses any text but optional blanks and sign, then
 /// decimal digits without a leading zero ("0" itself is fine).
 CLI::Validator decimal_integer();
+
+/// `s` without its leading and trailing blanks (spaces, tabs), as the
+/// options' validators read a value.
+std::string_view trim_blanks(std::string_view s);
 
 /// A number for `arg` (finite, the whole text used); ArgumentError else.
 double parse_number(const std::string& s, const std::string& arg);

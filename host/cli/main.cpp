@@ -50,9 +50,7 @@ template <class T>
 CLI::Validator in_range() {
   return CLI::Validator(
       [](std::string& v) {
-        std::string_view s = v;
-        while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-        while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+        std::string_view s = trim_blanks(v);
         if (!s.empty() && s.front() == '+') s.remove_prefix(1);
         const std::size_t digits =
             s.find_first_not_of("0123456789", s.empty() || s[0] != '-' ? 0 : 1);
