@@ -1257,7 +1257,10 @@ int main(int argc, char** argv) {
     if (o.json) {
       // A temporary file renamed into place, removed where a write fails
       // (a full disk): the file given keeps what it held.
-      write_file_atomically(*o.json, {root.dump(2), "\n"});
+      // (A volume's name that is not UTF-8 threw here, after every case had
+      // run, and no JSON was written: such bytes become U+FFFD.)
+      write_file_atomically(
+          *o.json, {root.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), "\n"});
       std::printf("wrote %s\n", o.json->string().c_str());
     }
   } catch (const ArgumentError& e) {

@@ -150,7 +150,40 @@ DeviceInfo query_device(const cl::Device& d) {
   return info;
 }
 
+// PoCL 3.1 reads these when the platforms are asked for, and stops the
+// process on some values: POCL_CACHE_DIR set but empty fails an assertion
+// (signal 6), POCL_MAX_PTHREAD_COUNT=-1 or 2147483647 is a segmentation
+// fault. Refused first, naming the variable.
+void check_pocl_environment() {
+  if (const char* dir = std::getenv("POCL_CACHE_DIR"); dir && *dir == '\0')
+    throw ArgumentError("POCL_CACHE_DIR",
+                        "is set but empty (PoCL stops on it): unset it or name a directory");
+  if (const char* n = std::getenv("POCL_MAX_PTHREAD_COUNT"); n && *n) {
+    std::string_view v(n);
+    while (!v.empty() && (v.front() == ' ' || v.front() == '\t')) v.remove_prefix(1);
+    while (!v.empty() && (v.back() == ' ' || v.back() == '\t')) v.remove_suffix(1);
+    const bool digits =
+        !v.empty() && v.size() <= 5 && v.find_first_not_of("0123456789") == std::string_view::npos;
+    if (!digits || std::stoi(std::string(v)) > 65536)
+      throw ArgumentError("POCL_MAX_PTHREAD_COUNT",
+                          std::string("\"") + n +
+                              "\" is not a thread count 0 .. 65536 (PoCL stops on some such "
+                              "values)");
+  }
+}
+
+// Where PoCL keeps its cache, for the message when it finds no device (it
+// finds none where it cannot make that directory).
+std::string pocl_cache_place() {
+  if (const char* d = std::getenv("POCL_CACHE_DIR"); d && *d)
+    return std::string("POCL_CACHE_DIR=") + d;
+  if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/pocl";
+  if (const char* h = std::getenv("HOME"); h && *h) return std::string(h) + "/.cache/pocl";
+  return "$HOME/.cache/pocl, with HOME unset";
+}
+
 std::vector<cl::Platform> platforms_or_throw() {
+  check_pocl_environment();
   std::vector<cl::Platform> platforms;
   cl_int err = cl::Platform::get(&platforms);
   // ocl-icd answers CL_PLATFORM_NOT_FOUND_KHR (-1001) when no ICD is installed.
@@ -181,7 +214,11 @@ std::vector<Found> all_devices() {
   if (out.empty())
     throw NoDeviceError(
         "no OpenCL device found on any platform: install an OpenCL driver, e.g. "
-        "the pocl-opencl-icd package (apt-get install pocl-opencl-icd)");
+        "the pocl-opencl-icd package (apt-get install pocl-opencl-icd); where it is "
+        "installed, PoCL also finds no device when it cannot make its cache directory (" +
+        pocl_cache_place() +
+        "): make that a directory this user can write, or set "
+        "POCL_CACHE_DIR to one");
   return out;
 }
 
@@ -663,7 +700,23 @@ cl::Program Device::build(const std::string& source, const std::string& options)
   if (err != CL_SUCCESS) {
     std::string log;
     program.getBuildInfo(device_, CL_PROGRAM_BUILD_LOG, &log);
-    throw BuildError(err, opts, trim(log));
+    log = trim(log);
+    // A log of many errors (a bad -D in SIMDVOL_CL_OPTIONS repeated made one
+    // of 5.7 MB): its head, which names the first errors.
+    constexpr std::size_t kLogHead = 8192;
+    if (log.size() > kLogHead)
+      log = log.substr(0, kLogHead) + "\n[... " + std::to_string(log.size() - kLogHead) +
+            " more bytes of build log]";
+    // Say where options came from the environment; and PoCL's failure to
+    // write its cache shows as a build failure without a compiler message.
+    if (const char* env = std::getenv("SIMDVOL_CL_OPTIONS"); env && *env)
+      log += "\n(the options include SIMDVOL_CL_OPTIONS from the environment)";
+    if (err == CL_BUILD_PROGRAM_FAILURE && log.find("error") == std::string::npos)
+      log +=
+          "\n(no compiler error in the log: PoCL fails so where it cannot write its cache "
+          "directory, " +
+          pocl_cache_place() + "; POCL_DEBUG=all shows more)";
+    throw BuildError(err, opts, log);
   }
   if (dir) {
     std::vector<std::vector<unsigned char>> bins;

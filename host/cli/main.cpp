@@ -626,6 +626,15 @@ int main(int argc, char** argv) {
                               "applies only to the built-in phantom (a volume file is given)");
         vol = rv.load();
         for (const std::string& n : vol.notes()) std::cerr << "simdvol: note: " << n << "\n";
+        // The files read beside the one named (a pair's other half, a
+        // detached header's data files: an output linked to one replaced
+        // it), known once the volume is read; before any frame.
+        if (!vol.companion_files().empty()) {
+          for (int f = 0; f < frames; ++f)
+            check_not_an_input(numbered(outp, f, frames), vol.companion_files(), {}, "-o");
+          if (render->count("--trace") > 0)
+            check_not_an_input(tracep, vol.companion_files(), {}, "--trace");
+        }
       }
       if (classify == "auto") classify = vol.range().min < -500.0f ? "ct" : "mri";
       // A preset's name is the preset, even where a file of that name lies

@@ -1148,6 +1148,7 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
   NrrdShape shape;
   VoxelType vtype;
   std::optional<NrrdVolumeStream> stream;  // one volume of a 4-D file, read alone
+  std::vector<fs::path> data_files;        // a detached header's (Volume::companion_files)
   {
     NrrdPtr hdr(nrrdNew());
     NioPtr nio(nrrdIoStateNew());
@@ -1168,6 +1169,7 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
 
     uint64_t available = 0;
     const std::vector<fs::path> files = nrrd_data_files(path, nio.get());
+    data_files = files;
     if (files.empty()) {
       // attached: the data follow the header in this file
       const std::optional<uint64_t> off = nrrd_header_end(path);
@@ -1329,6 +1331,7 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
       throw FileError(path, "unsupported NRRD type");
   }
   vol.set_orientation(nrrd_orientation(nrrd.get(), s.axes));
+  for (const fs::path& f : data_files) vol.add_companion_file(f);
   return vol;
 }
 
@@ -1467,6 +1470,9 @@ Volume load_nifti(const std::filesystem::path& path, std::optional<int64_t> volu
       throw FileError(path, "unsupported NIfTI datatype " + std::to_string(nim->datatype));
   }
   vol.set_orientation(nifti_orientation(nim.get(), info));
+  // A pair: both halves, whichever was named (.hdr or .img, plain or .gz).
+  for (const fs::path& f : {header, info.data})
+    if (f != path) vol.add_companion_file(f);
   return vol;
 }
 

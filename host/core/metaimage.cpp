@@ -489,6 +489,7 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) dirs[i][j] = m[i * ndims + j];
   vol.set_orientation(closest_orientation(dirs, "LPS"));
+  if (data_path != path) vol.add_companion_file(data_path);
   return vol;
 }
 

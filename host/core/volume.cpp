@@ -201,6 +201,7 @@ Volume reorient(const Volume& v, std::string_view to, const std::string& argumen
   Volume out(dims, v.type(), spacing);
   out.set_orientation(std::string(to));
   for (const std::string& n : v.notes()) out.add_note(n);
+  for (const std::filesystem::path& f : v.companion_files()) out.add_companion_file(f);
   // The input's index steps along each output axis (negative where reversed).
   std::array<int64_t, 3> in_stride{1, v.nx(), v.nx() * v.ny()};
   std::array<int64_t, 3> step{};

@@ -1242,6 +1242,88 @@ TEST_F(Cli, PresetNameBesideAFileOfThatNameIsSaid) {
   EXPECT_EQ(r.output.find("note: --classify"), std::string::npos) << r.output;
 }
 
+// An output linked to the other file of a two-file volume replaced it
+// with exit 0: the .hdr of an .img named (plain or gzipped pair, either
+// half named), a detached NRRD's data file, a MetaImage's ElementDataFile.
+// Refused once the volume is read, before any frame.
+TEST_F(Cli, OutputNeverReplacesAVolumesOtherFile) {
+  const int64_t dims[8] = {3, 8, 8, 8, 1, 1, 1, 1};
+  nifti_image* nim = nifti_make_new_nim(dims, DT_FLOAT32, 1);
+  ASSERT_NE(nim, nullptr);
+  auto* f = static_cast<float*>(nim->data);
+  for (std::size_t i = 0; i < 512; ++i) f[i] = static_cast<float>(i % 61);
+  ASSERT_EQ(nifti_set_filenames(nim, path("p.hdr").c_str(), 0, 1), 0);
+  nifti_image_write(nim);
+  ASSERT_EQ(nifti_set_filenames(nim, path("g.hdr.gz").c_str(), 0, 1), 0);
+  nifti_image_write(nim);
+  nifti_image_free(nim);
+  std::string raw(512 * 4, '\0');
+  for (std::size_t i = 0; i < 512; ++i) {
+    const float v = static_cast<float>(i % 61);
+    std::memcpy(&raw[i * 4], &v, 4);
+  }
+  std::ofstream(dir_ / "n.raw", std::ios::binary) << raw;
+  std::ofstream(dir_ / "m.raw", std::ios::binary) << raw;
+  std::ofstream(dir_ / "n.nhdr") << "NRRD0004\ntype: float\ndimension: 3\nsizes: 8 8 8\n"
+                                    "endian: little\nencoding: raw\ndata file: n.raw\n\n";
+  std::ofstream(dir_ / "m.mhd") << "ObjectType = Image\nNDims = 3\nDimSize = 8 8 8\n"
+                                   "ElementType = MET_FLOAT\nElementByteOrderMSB = False\n"
+                                   "ElementDataFile = m.raw\n";
+  struct Case {
+    std::string volume, other;
+  };
+  const Case cases[] = {{"p.img", "p.hdr"},       {"p.hdr", "p.img"},  {"g.img.gz", "g.hdr.gz"},
+                        {"g.hdr.gz", "g.img.gz"}, {"n.nhdr", "n.raw"}, {"m.mhd", "m.raw"}};
+  const auto bytes = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), {});
+  };
+  for (const Case& c : cases) {
+    const std::string before = bytes(dir_ / c.other);
+    fs::remove(dir_ / "o.png");
+    fs::create_symlink(c.other, dir_ / "o.png");
+    const Result r = run("render " + path(c.volume) + " --size 16 -o " + path("o.png"));
+    EXPECT_EQ(r.code, 1) << c.volume << "\n" << r.output;
+    EXPECT_NE(r.output.find("-o: writing " + path("o.png") + " would replace"), std::string::npos)
+        << c.volume << "\n"
+        << r.output;
+    EXPECT_EQ(bytes(dir_ / c.other), before) << c.other;
+    // Under another name it renders.
+    const Result ok = run("render " + path(c.volume) + " --size 16 -o " + path("ok.png"));
+    EXPECT_EQ(ok.code, 0) << c.volume << "\n" << ok.output;
+  }
+}
+
+// PoCL 3.1 stops the process on some values of its variables (an empty
+// POCL_CACHE_DIR fails an assertion, POCL_MAX_PTHREAD_COUNT=-1 is a
+// segmentation fault): refused first, naming the variable. A cache
+// directory PoCL cannot make is named where the build then fails.
+TEST_F(Cli, PoclVariablesThatStopPoclAreRefused) {
+  const std::string args = "render --phantom-size 16 --size 8 -o " + path("x.png");
+  Result r = run("devices", "POCL_CACHE_DIR=");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("POCL_CACHE_DIR: is set but empty"), std::string::npos) << r.output;
+  for (const char* bad : {"-1", "2147483647", "garbage"}) {
+    r = run(args, std::string("POCL_MAX_PTHREAD_COUNT=") + bad);
+    EXPECT_EQ(r.code, 1) << bad << "\n" << r.output;
+    EXPECT_NE(
+        r.output.find(std::string("POCL_MAX_PTHREAD_COUNT: \"") + bad + "\" is not a thread count"),
+        std::string::npos)
+        << r.output;
+  }
+  EXPECT_EQ(run(args, "POCL_MAX_PTHREAD_COUNT=2").code, 0);
+  // A file where the cache should be: PoCL's build fails without a compiler
+  // message, and the message says where the cache was looked for.
+  std::ofstream(dir_ / "cachefile") << "x";
+  r = run("render --phantom-size 16 --size 8 -o " + path("y.png"),
+          "POCL_CACHE_DIR=" + path("cachefile") + " SIMDVOL_CACHE_DIR=off");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot write its cache directory, POCL_CACHE_DIR=" + path("cachefile")),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "y.png"));
+}
+
 // `simdvol devices` is where a bad SIMDVOL_DEVICE's error points: it lists
 // the devices all the same (it failed with that error), then says what is
 // wrong, exit 1. A number past long's range is named as given (it was

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -72,6 +73,13 @@ class Volume {
   const std::vector<std::string>& notes() const { return notes_; }
   void add_note(std::string note) { notes_.push_back(std::move(note)); }
 
+  /// The files the loader read beside the one named, where a format keeps
+  /// the voxels apart from the header (an Analyze or NIfTI .hdr's .img and
+  /// the other way round, a detached NRRD's or MetaImage's data files):
+  /// what an output must not replace. Empty for one-file formats.
+  const std::vector<std::filesystem::path>& companion_files() const { return companions_; }
+  void add_companion_file(std::filesystem::path p) { companions_.push_back(std::move(p)); }
+
  private:
   std::array<int64_t, 3> dims_{0, 0, 0};
   std::array<double, 3> spacing_{1.0, 1.0, 1.0};
@@ -79,6 +87,7 @@ class Volume {
   std::vector<float> data_;
   std::string orientation_;
   std::vector<std::string> notes_;
+  std::vector<std::filesystem::path> companions_;
 };
 
 /// Whether `code` names each of the axes R/L, A/P, S/I once, in upper case
