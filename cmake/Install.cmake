@@ -21,6 +21,8 @@ include(CMakePackageConfigHelpers)
 
 set(SIMDVOL_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/simdvol)
 set(SIMDVOL_INSTALL_KERNELDIR ${CMAKE_INSTALL_DATADIR}/simdvol/kernels)
+set(SIMDVOL_INSTALL_OIIO_MODULE
+    ${CMAKE_INSTALL_LIBDIR}/simdvol/${CMAKE_SHARED_MODULE_PREFIX}simdvol_oiio${CMAKE_SHARED_MODULE_SUFFIX})
 
 # Consumers compile the headers as C++20.
 target_compile_features(simdvol_core PUBLIC cxx_std_20)
@@ -56,7 +58,7 @@ get_target_property(SIMDVOL_CORE_TYPE simdvol_core TYPE)
 configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/simdvolConfig.cmake.in
   ${PROJECT_BINARY_DIR}/simdvolConfig.cmake
   INSTALL_DESTINATION ${SIMDVOL_INSTALL_CMAKEDIR}
-  PATH_VARS SIMDVOL_INSTALL_KERNELDIR)
+  PATH_VARS SIMDVOL_INSTALL_KERNELDIR SIMDVOL_INSTALL_OIIO_MODULE)
 write_basic_package_version_file(${PROJECT_BINARY_DIR}/simdvolConfigVersion.cmake
   VERSION ${PROJECT_VERSION} COMPATIBILITY SameMinorVersion)
 install(FILES
@@ -67,4 +69,5 @@ install(FILES
   ${PROJECT_SOURCE_DIR}/cmake/FindMetaIO.cmake
   ${PROJECT_SOURCE_DIR}/cmake/FindMinc.cmake
   ${PROJECT_SOURCE_DIR}/cmake/FindTeemNrrd.cmake
+  ${PROJECT_SOURCE_DIR}/cmake/simdvol_oiio_module_path.cpp
   DESTINATION ${SIMDVOL_INSTALL_CMAKEDIR})

@@ -295,18 +295,29 @@ int run(const std::string& dump_dir) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string dump;
+  std::string dump, exr;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--dump") == 0 && i + 1 < argc) {
       dump = argv[++i];
+    } else if (std::strcmp(argv[i], "--exr") == 0 && i + 1 < argc) {
+      exr = argv[++i];
     } else {
-      std::fprintf(stderr, "usage: %s [--dump DIR]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--dump DIR] [--exr FILE]\n", argv[0]);
       return 2;
     }
   }
   std::printf("simdvol kernels installed in %s\n", SIMDVOL_KERNEL_DIR);
   try {
-    return run(dump);
+    const int rc = run(dump);
+    // --exr: an image through the library's OpenImageIO module, which the
+    // installed package's simdvolConfig.cmake told this program where to find.
+    if (rc == 0 && !exr.empty()) {
+      simdvol::Image img(4, 4);
+      for (simdvol::Rgba& p : img.pixels()) p = {0.25f, 0.5f, 0.75f, 1.0f};
+      simdvol::write_image(img, exr);
+      std::printf("wrote %s\n", exr.c_str());
+    }
+    return rc;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "simdvol-embed: %s\n", e.what());
     return 2;

@@ -74,6 +74,16 @@ std::vector<fs::path> own_directories() {
   return dirs;
 }
 
+}  // namespace
+}  // namespace simdvol
+
+// Defined (weak) in a program linking an installed static simdvol_core
+// (cmake/simdvol_oiio_module_path.cpp): that package's module.
+extern "C" __attribute__((weak)) const char* simdvol_installed_oiio_module();
+
+namespace simdvol {
+namespace {
+
 // Where the module may be: $SIMDVOL_OIIO_MODULE alone if set; else beside
 // the program or library (the build tree), in its installed place relative
 // to them (bin/../lib/simdvol, lib/simdvol), then the build tree's and the
@@ -87,6 +97,11 @@ std::vector<fs::path> module_candidates(const char* env) {
     c.push_back((d / SIMDVOL_OIIO_BIN_TO_MODULE / name).lexically_normal());
     c.push_back(d / "simdvol" / name);
   }
+  // The installed package a program was built against (its find_package
+  // says where), before the build tree's path (a package installed from a
+  // build that is later removed) and the configured prefix's (installed
+  // elsewhere with --prefix).
+  if (simdvol_installed_oiio_module != nullptr) c.push_back(simdvol_installed_oiio_module());
   c.push_back(SIMDVOL_OIIO_BUILD_PATH);
   c.push_back(SIMDVOL_OIIO_INSTALL_PATH);
   std::vector<fs::path> unique;
