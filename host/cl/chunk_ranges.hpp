@@ -10,6 +10,7 @@
 #include <initializer_list>
 #include <string>
 
+#include "env_switch.hpp"
 #include "simdvol/stages.hpp"
 #include "voxel_ranges.hpp"
 
@@ -61,8 +62,7 @@ inline bool nt_aligned(std::initializer_list<const cl::Buffer*> outs) {
 /// without), in 2026-11 on a 2-core AMD EPYC with planar cells 15-30 %
 /// slower, and on fresh memory they cost (nt_out).
 inline bool nt_stores() {
-  const char* e = std::getenv("SIMDVOL_NT_STORES");
-  return e && std::string(e) == "1";
+  return detail::env_switch("SIMDVOL_NT_STORES").value_or(false);
 }
 
 /// Whether the fused shade + classify stores its voxel cells of `bytes`
@@ -80,8 +80,7 @@ inline bool nt_stores() {
 /// took the phantom's first frame 45 ms longer, so not there.
 inline bool nt_out(std::uint64_t bytes) {
   constexpr std::uint64_t kMinBytes = 64ull << 20;
-  const char* e = std::getenv("SIMDVOL_NT_STORES");
-  return bytes >= kMinBytes && !(e && std::string(e) == "0");
+  return bytes >= kMinBytes && detail::env_switch("SIMDVOL_NT_STORES").value_or(true);
 }
 
 /// The row width SV_RW of the float16 shade kernels for cells of x extent

@@ -17,6 +17,7 @@
 #include <sstream>
 #include <thread>
 
+#include "env_switch.hpp"
 #include "kernel_files.hpp"
 
 namespace simdvol {
@@ -283,7 +284,11 @@ int choose_device(const std::vector<DeviceInfo>& devices, std::optional<int> req
     long i = std::strtol(env, &end, 10);
     // (Past long's range strtol gives LONG_MAX and ERANGE: "device
     // 9223372036854775807" named a number nobody gave.)
-    if (end == env || *end != '\0' || errno == ERANGE)
+    // Blanks after the number as before it (strtol skips those: " 0" was
+    // taken, "0 " refused).
+    const bool number = end != env;
+    while (*end == ' ' || *end == '\t') ++end;
+    if (!number || *end != '\0' || errno == ERANGE)
       throw ArgumentError("SIMDVOL_DEVICE", std::string("\"") + env +
                                                 "\" is not a device index (see `simdvol devices`)");
     return check(i, "SIMDVOL_DEVICE");
@@ -816,8 +821,7 @@ constexpr std::size_t kHugePage = std::size_t(2) << 20;
 constexpr std::size_t kHugeMin = std::size_t(4) << 20;
 
 bool huge_pages_wanted() {  // (read at each fresh large buffer: a few a render)
-  const char* e = std::getenv("SIMDVOL_HUGE_PAGES");
-  return e && std::string(e) == "1";
+  return detail::env_switch("SIMDVOL_HUGE_PAGES").value_or(false);
 }
 
 // Device::own_host_bytes: the memory huge_alloc handed out, not yet freed.

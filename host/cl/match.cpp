@@ -1,6 +1,7 @@
 // The match and balance stages on the device (see match_cl.hpp).
 #include "simdvol/match_cl.hpp"
 
+#include "env_switch.hpp"
 #include "simdvol/local_cl.hpp"
 
 #include <algorithm>
@@ -335,9 +336,8 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
     koff[p] = static_cast<cl_int>(std::min<int64_t>(kwords, INT_MAX));
     kwords += int64_t(cand[p].w) * ((int64_t(cand[p].h) + 7) / 8 * 8);
   }
-  const char* ke = std::getenv("SIMDVOL_MATCH_SAVED");
   m.columns_saved = view.grid.grid[2] <= 32767 && kwords <= INT_MAX - 8 &&
-                    !(ke != nullptr && std::string(ke) == "0");
+                    detail::env_switch("SIMDVOL_MATCH_SAVED").value_or(true);
   m.column_scratch = device.scratch_buffer(
       rw,
       static_cast<std::size_t>(m.columns_saved ? std::max<int64_t>(kwords, 1) : 1) *

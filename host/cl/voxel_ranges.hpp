@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <string>
 
+#include "simdvol/error.hpp"
 #include "simdvol/stages.hpp"
 
 namespace simdvol::detail {
@@ -21,9 +22,14 @@ inline std::string voxel_kernel(const std::string& name, const VoxelLayout& L) {
 /// bench/bench_shade_classify.cpp --sweep); 256 keeps >= 64 groups down to
 /// small volumes. SIMDVOL_VOXEL_WGS overrides it (for benchmarking).
 inline std::size_t voxel_wgs() {
-  if (const char* e = std::getenv("SIMDVOL_VOXEL_WGS")) {  // benchmarking knob
-    const long v = std::strtol(e, nullptr, 10);
-    if (v >= 8 && v <= 4096 && (v & (v - 1)) == 0) return static_cast<std::size_t>(v);
+  if (const char* e = std::getenv("SIMDVOL_VOXEL_WGS"); e && *e) {  // benchmarking knob
+    char* end = nullptr;
+    const long v = std::strtol(e, &end, 10);
+    if (*end == '\0' && v >= 8 && v <= 4096 && (v & (v - 1)) == 0)
+      return static_cast<std::size_t>(v);
+    // (100 or -256 fell back to 256 without a word.)
+    throw ArgumentError("SIMDVOL_VOXEL_WGS",
+                        std::string("\"") + e + "\" is not a power of two 8 .. 4096");
   }
   return 256;
 }

@@ -1324,6 +1324,26 @@ TEST_F(Cli, PoclVariablesThatStopPoclAreRefused) {
   EXPECT_FALSE(fs::exists(dir_ / "y.png"));
 }
 
+// The benchmarking switches take only their values: anything else was read
+// as unset (SIMDVOL_HUGE_PAGES=true, SIMDVOL_VOXEL_WGS=100 as 256) and the
+// run measured the default without a word.
+TEST_F(Cli, BenchmarkSwitchesTakeOnlyTheirValues) {
+  const std::string args = "render --phantom-size 128 --size 16 -o " + path("x.png");
+  for (const char* bad : {"SIMDVOL_HUGE_PAGES=true", "SIMDVOL_NT_STORES=on",
+                          "SIMDVOL_MATCH_SAVED=false", "SIMDVOL_VOXEL_WGS=100"}) {
+    const Result r = run(args, bad);
+    const std::string name(bad, std::strchr(bad, '=') - bad);
+    EXPECT_EQ(r.code, 1) << bad << "\n" << r.output;
+    EXPECT_NE(
+        r.output.find("simdvol: error: " + name + ": \"" + std::string(std::strchr(bad, '=') + 1)),
+        std::string::npos)
+        << r.output;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "x.png"));
+  for (const char* good : {"SIMDVOL_HUGE_PAGES=1", "SIMDVOL_NT_STORES=0", "SIMDVOL_VOXEL_WGS=128"})
+    EXPECT_EQ(run(args, good).code, 0) << good;
+}
+
 // `simdvol devices` is where a bad SIMDVOL_DEVICE's error points: it lists
 // the devices all the same (it failed with that error), then says what is
 // wrong, exit 1. A number past long's range is named as given (it was
