@@ -566,6 +566,8 @@ Classifier classifier_from_spec(const std::string& spec) {
   const std::filesystem::path p(spec);
   std::error_code ec;
   if (!std::filesystem::exists(p, ec)) {
+    // (A loop of symbolic links, or no permission, is that, not a missing file.)
+    if (ec && ec != std::errc::no_such_file_or_directory) throw FileError(p, ec.message());
     std::string list;
     for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
     throw FileError(p, "no such classifier file, and not a preset (" + list + ")");

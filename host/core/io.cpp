@@ -1520,6 +1520,15 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
       throw FileError(path, "a .raw file needs its layout (dims, type, endianness) to be given");
     return load_raw(path, *raw);
   }
+  // A name that cannot be looked up is told as such, not as its ending
+  // (a missing file, or a loop of symbolic links, was "unknown volume file
+  // extension ''").
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st))
+    throw FileError(path, ec && ec != std::errc::no_such_file_or_directory
+                              ? ec.message()
+                              : std::string("no such file"));
   throw FileError(path, "unknown volume file extension '" + path.extension().string() +
                             "' (expected " + std::string(kVolumeFileNames) + ")");
 }

@@ -1065,6 +1065,12 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --phantom-size 16 -o " + path("fifo.png"), "fifo.png is not a regular file"},
       {"render --phantom-size 16 -o " + path("dangling.png"),
        "directory " + path("nodir2") + " of " + path("dangling.png") + " does not exist"},
+      // A name that cannot be looked up (it was "unknown volume file
+      // extension ''", and as --classify "no such classifier file").
+      {"info " + path("loopA"), path("loopA") + ": Too many levels of symbolic links"},
+      {"render --classify " + path("loopA") + " -o " + path("x.png"),
+       path("loopA") + ": Too many levels of symbolic links"},
+      {"info " + path("missing"), path("missing") + ": no such file"},
       {"mismatch --size 8 --size3 4 --csv ''", "--csv: empty output path"},
       {"mismatch --size 8 --size3 4 --plot ''", "--plot: empty output path"},
       // Options that do nothing in the chosen mode are refused, not ignored.
@@ -1116,6 +1122,8 @@ TEST_F(Cli, BadArgumentsFailClearly) {
   ASSERT_EQ(mkfifo(path("fifo.png").c_str(), 0600), 0);
   std::ofstream(dir_ / "afile") << "keep";
   fs::create_symlink("nodir2/x.png", dir_ / "dangling.png");
+  fs::create_symlink("loopB", dir_ / "loopA");
+  fs::create_symlink("loopA", dir_ / "loopB");
   fs::create_directories(dir_ / "adir");
   fs::create_directories(dir_ / "adir.nrrd");
   for (const Case& c : cases) {

@@ -3057,7 +3057,11 @@ TEST_F(IoTest, LoadVolumeDispatchesByExtension) {
   expect_file_error([&] { simdvol::load_volume(file("a.raw")); }, file("a.raw"), {"layout"});
   write_file(file("a.vol"), vox);
   expect_file_error([&] { simdvol::load_volume(file("a.vol"), l); }, file("a.vol"), {"extension"});
+  write_file(file("noext"), vox);
   expect_file_error([&] { simdvol::load_volume(file("noext")); }, file("noext"), {"extension"});
+  // A name that is not there is told as such, not by its ending.
+  expect_file_error([&] { simdvol::load_volume(file("missing")); }, file("missing"),
+                    {"no such file"});
   // The extension decides, not the contents: a NRRD named .nii is a bad NIfTI.
   write_file(file("b.nii"), concat(nrrd_header(VoxelType::u8, false, "raw") + "\n", vox));
   expect_file_error([&] { simdvol::load_volume(file("b.nii")); }, file("b.nii"), {"NIfTI"});
