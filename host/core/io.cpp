@@ -1598,7 +1598,11 @@ void write_file_atomically(const fs::path& path, std::initializer_list<std::stri
   const fs::path target = write_target(path);
   const fs::path dir = target.parent_path().empty() ? fs::path(".") : target.parent_path();
   const std::string name = target.filename().string();
-  std::string tmpl = (dir / (name.substr(0, 64) + ".tmp-XXXXXX")).string();
+  // (Shorter still where the directory's path is long: within 4,095 bytes.)
+  const std::size_t around = dir.string().size() + 1 + std::strlen(".tmp-XXXXXX");
+  const std::size_t room = around < 4095 ? 4095 - around : 0;
+  std::string tmpl =
+      (dir / (name.substr(0, std::min<std::size_t>(64, room)) + ".tmp-XXXXXX")).string();
   std::vector<char> tbuf(tmpl.begin(), tmpl.end());
   tbuf.push_back('\0');
   const int fd = ::mkstemp(tbuf.data());

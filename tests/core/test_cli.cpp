@@ -1407,6 +1407,23 @@ TEST_F(Cli, OutputNamesNearTheFileSystemLimitWork) {
   for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
   EXPECT_EQ(names, (std::set<std::string>{stem + ".png", stem + ".nrrd", stem + ".csv",
                                           stem + ".tif", "m.csv", "m.csv.tmp"}));
+  // Paths of Linux's 4,095 bytes, in directories 250 bytes a name: a
+  // turntable's frames and a NRRD (the temporary's suffix took the path over
+  // the limit where the output's own fitted).
+  fs::path deep = dir_;
+  while (deep.string().size() + 251 < 4070) deep /= std::string(250, 'd');
+  deep /= std::string(4070 - deep.string().size() - 1, 'e');  // 4,070 bytes: 24 left for a name
+  fs::create_directories(deep);
+  const std::size_t left = 4095 - deep.string().size() - 1;
+  const std::string frame_stem(left - std::strlen("_0000.png"), 'f');
+  r = run("render --phantom-size 16 --size 16x16 --frames 2 -o " +
+          (deep / (frame_stem + ".png")).string());
+  EXPECT_EQ(r.code, 0) << r.output.substr(0, 300);
+  EXPECT_TRUE(fs::exists(deep / (frame_stem + "_0001.png")));
+  const std::string nrrd_stem(left - std::strlen(".nrrd"), 'n');
+  r = run("phantom shepp-logan --size 8 -o " + (deep / (nrrd_stem + ".nrrd")).string());
+  EXPECT_EQ(r.code, 0) << r.output.substr(0, 300);
+  EXPECT_EQ(std::distance(fs::directory_iterator(deep), fs::directory_iterator{}), 3);
 }
 
 // A light direction is a direction at any length: |light| by hypot (the
