@@ -47,8 +47,8 @@ fs::path temp_path_for(const fs::path& path) {
   // Shorter still where the directory's path is long: the whole path within
   // Linux's 4,095 bytes (a turntable frame within 20 bytes of it failed as
   // "File name too long" where the frame's own name fits).
-  const std::size_t around = path.parent_path().string().size() + 1 + std::strlen(tag) +
-                             path.extension().string().size();
+  const std::size_t around =
+      path.parent_path().string().size() + 1 + std::strlen(tag) + path.extension().string().size();
   const std::size_t room = around < 4095 ? 4095 - around : 0;
   fs::path name = path.stem().string().substr(0, std::min<std::size_t>(64, room));
   name += tag;
