@@ -1,7 +1,9 @@
 #include "cli_commands.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <iomanip>
 #include <iostream>
 #include <locale>
@@ -38,14 +40,16 @@ CLI::Validator decimal_integer() {
 }
 
 double parse_number(const std::string& s, const std::string& arg) {
-  try {
-    std::size_t used = 0;
-    const double v = std::stod(s, &used);
-    if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument(s);
-    return v;
-  } catch (const std::exception&) {
+  // strtod, not stod: stod throws on any ERANGE, so 5e-324 (a subnormal)
+  // was "not a number".
+  char* end = nullptr;
+  errno = 0;
+  const double v = std::strtod(s.c_str(), &end);
+  if (s.empty() || end != s.c_str() + s.size() || std::isnan(v))
     throw ArgumentError(arg, "'" + s + "' is not a number");
-  }
+  if (!std::isfinite(v) || (errno == ERANGE && std::fabs(v) > 1.0))
+    throw ArgumentError(arg, "'" + s + "' is beyond the largest number (about 1.8e308)");
+  return v;
 }
 
 std::vector<double> parse_numbers(const std::string& s, std::size_t n, const std::string& arg,

@@ -522,6 +522,14 @@ int main(int argc, char** argv) {
         throw ArgumentError("--engine",
                             "unknown engine '" + engine + "' (available: reference, opencl)");
       const PeGrid pes = parse_pe_grid(pe_spec, "--pe");
+      // The engine lays its PEs out as pe_grid(count) does: another shape
+      // was taken as its count alone (and named by --times as given).
+      if (const PeGrid used = pe_grid(pes.count(), "--pe");
+          used.width != pes.width || used.height != pes.height)
+        throw ArgumentError(
+            "--pe", pe_spec + ": the engine arranges " + std::to_string(pes.count()) + " PEs as " +
+                        std::to_string(used.width) + "x" + std::to_string(used.height) + " (give " +
+                        std::to_string(pes.count()) + " or that shape)");
       EngineOptions eo;
       eo.pes = pes.count();
       eo.fused = true;

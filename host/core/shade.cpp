@@ -57,6 +57,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <string>
 
@@ -82,6 +83,15 @@ bool finite3(const Vec3& v) {
 
 }  // namespace
 
+namespace {
+// A number as %g writes it (1e+40, not 40 digits of std::to_string).
+std::string number_text(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+}  // namespace
+
 void validate(const ShadeParams& p) {
   const auto need_finite = [](double v, const char* option) {
     if (!std::isfinite(v))
@@ -102,6 +112,24 @@ void validate(const ShadeParams& p) {
     throw ArgumentError("--depth-cue",
                         "k1 + k2 * d must be > 0 for d in [0, 1] (k1 = " + std::to_string(p.k1) +
                             ", k2 = " + std::to_string(p.k2) + ")");
+  // The device lights in float: each coefficient a float, and the light a
+  // voxel can get, ka + max(kd, ks) / min(k1, k1 + k2), far from float's
+  // largest (a k1 of 1e-40 made the cue infinite there, and inf * 0 a NaN,
+  // where the reference's double gave 0: images 42-52 dB apart).
+  constexpr double kMaxLight = 1e30;
+  for (const double v : {p.ka, p.kd, p.ks, p.shininess})
+    if (v > kMaxLight)
+      throw ArgumentError("--phong", "coefficients and the exponent must be at most 1e30 (got " +
+                                         number_text(v) + ")");
+  for (const double v : {p.k1, p.k2})
+    if (std::fabs(v) > kMaxLight)
+      throw ArgumentError("--depth-cue",
+                          "k1 and k2 must lie in -1e30 .. 1e30 (got " + number_text(v) + ")");
+  const double light = p.ka + std::max(p.kd, p.ks) / std::min(p.k1, p.k1 + p.k2);
+  if (!(light <= kMaxLight))
+    throw ArgumentError("--phong and --depth-cue",
+                        "a voxel's light could reach ka + max(kd, ks) / min(k1, k1 + k2) = " +
+                            number_text(light) + ", beyond 1e30 (float arithmetic overflows)");
 }
 
 Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& grad_scale) {

@@ -1071,6 +1071,19 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --classify " + path("loopA") + " -o " + path("x.png"),
        path("loopA") + ": Too many levels of symbolic links"},
       {"info " + path("missing"), path("missing") + ": no such file"},
+      // Lighting beyond float: the device's image was 42-52 dB from the
+      // reference's (an infinite cue times 0), or it refused with
+      // "shade.k1" where the reference rendered.
+      {"render --light 1,0,0 --depth-cue 1e-40,0 -o " + path("x.png"),
+       "--phong and --depth-cue: a voxel's light could reach"},
+      {"render --engine reference --phong 0,0,3e38,1 -o " + path("x.png"),
+       "--phong: coefficients and the exponent must be at most 1e30 (got 3e+38)"},
+      {"render --light 1e400,0,0 -o " + path("x.png"),
+       "--light: '1e400' is beyond the largest number"},
+      // The engine's own shape of 8192 PEs is 128x64: 1x8192 was taken as
+      // its count alone.
+      {"render --pe 1x8192 -o " + path("x.png"),
+       "--pe: 1x8192: the engine arranges 8192 PEs as 128x64"},
       {"mismatch --size 8 --size3 4 --csv ''", "--csv: empty output path"},
       {"mismatch --size 8 --size3 4 --plot ''", "--plot: empty output path"},
       // Options that do nothing in the chosen mode are refused, not ignored.

@@ -357,6 +357,22 @@ TEST(Shade, RejectsBadParameters) {
   p = ShadeParams{};
   p.shininess = std::nan("");
   EXPECT_THROW(shade(vol, v, p), ArgumentError);
+  // Light beyond what float arithmetic holds (the device's cue became
+  // infinite at k1 = 1e-40, inf * 0 a NaN; 42-52 dB from the reference).
+  p = ShadeParams{};
+  p.k1 = 1e-40;
+  p.k2 = 0;
+  EXPECT_THROW(shade(vol, v, p), ArgumentError);
+  p = ShadeParams{};
+  p.ks = 3e38;
+  EXPECT_THROW(shade(vol, v, p), ArgumentError);
+  p = ShadeParams{};
+  p.k2 = 1e39;
+  EXPECT_THROW(shade(vol, v, p), ArgumentError);
+  p = ShadeParams{};
+  p.k1 = 1e-30;  // light 0.7e30 + 0.1: within the bound
+  p.k2 = 0;
+  EXPECT_NO_THROW(shade(vol, v, p));
   ViewGeometry bad = v;
   bad.radius = 0;
   EXPECT_THROW(shade(vol, bad, ShadeParams{}), ArgumentError);
