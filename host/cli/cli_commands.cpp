@@ -45,7 +45,9 @@ double parse_number(const std::string& s, const std::string& arg) {
   char* end = nullptr;
   errno = 0;
   const double v = std::strtod(s.c_str(), &end);
-  if (s.empty() || end != s.c_str() + s.size() || std::isnan(v))
+  // (Hexadecimal, 0x1p3 for 8, is C's, not a number a user writes: refused.)
+  if (s.empty() || end != s.c_str() + s.size() || std::isnan(v) ||
+      s.find_first_of("xX") != std::string::npos)
     throw ArgumentError(arg, "'" + s + "' is not a number");
   if (!std::isfinite(v) || (errno == ERANGE && std::fabs(v) > 1.0))
     throw ArgumentError(arg, "'" + s + "' is beyond the largest number (about 1.8e308)");

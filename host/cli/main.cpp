@@ -508,7 +508,9 @@ int main(int argc, char** argv) {
       validate(opt.shade);
       if (frames < 1 || frames > 100000)
         throw ArgumentError("--frames", std::to_string(frames) + " is outside 1..100000");
-      if (!std::isfinite(step)) throw ArgumentError("--step", "must be finite");
+      // Degrees per frame, bounded as --view's angles are (1e300 was taken).
+      if (!(step >= -360.0 && step <= 360.0))
+        throw ArgumentError("--step", "must be in -360 .. 360 degrees per frame");
       // The last frame's angle, before any frame is rendered.
       if (!std::isfinite(opt.view.phi + (frames - 1) * step))
         throw ArgumentError("--step", "the last frame's angle (--view's PHI + " +

@@ -1080,6 +1080,9 @@ TEST_F(Cli, BadArgumentsFailClearly) {
        "--phong: coefficients and the exponent must be at most 1e30 (got 3e+38)"},
       {"render --light 1e400,0,0 -o " + path("x.png"),
        "--light: '1e400' is beyond the largest number"},
+      {"render --view 0x1p3,0,0 -o " + path("x.png"), "--view: '0x1p3' is not a number"},
+      {"render --frames 2 --step 1e300 -o " + path("t.png"),
+       "--step: must be in -360 .. 360 degrees per frame"},
       // The engine's own shape of 8192 PEs is 128x64: 1x8192 was taken as
       // its count alone.
       {"render --pe 1x8192 -o " + path("x.png"),
