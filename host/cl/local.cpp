@@ -470,8 +470,6 @@ cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buf
   check_bounds_unpacked(segs, "enqueue_local");
   check_segments(segs);
   check_samples(segs, sample_off, samples);
-  if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
-    throw ArgumentError("footprints", "PE count differs from the segments'");
   check_footprints(fp, segs.pes);
   const std::string name = "simdvol_local";
   cl::Kernel k = stage_kernel(device, name, 1);
@@ -570,8 +568,6 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
   if (!v8) check_bounds_unpacked(segs, "the scalar resample + local");
   check_segments(segs);
   check_tables(segs, tables, voxels);
-  if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
-    throw ArgumentError("footprints", "PE count differs from the segments'");
   check_footprints(fp, segs.pes);
   check_occupancy(skip, voxels, order);
   check_lanes(lanes, segs);

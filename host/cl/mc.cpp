@@ -208,8 +208,6 @@ cl::Event enqueue_mc_local(Device& device, const LocalSegments& segs, const cl::
   if (!alloc && p.samples <= 0) throw ArgumentError("--samples", "must be positive");
   if (width < 1) throw ArgumentError("width", "must be positive");
   check_params(p);
-  if (static_cast<int64_t>(fp.rect_offset.size()) != segs.pes + 1)
-    throw ArgumentError("footprints", "PE count differs from the segments'");
   check_segments(segs);
   check_samples(segs, sample_off, samples);
   check_footprints(fp, segs.pes);

@@ -602,25 +602,6 @@ int main(int argc, char** argv) {
         if (tracep.lexically_normal() == outp.lexically_normal())
           throw ArgumentError("--trace", "names the same file as -o");
       }
-      // No output may replace what the render reads: the volume (a link
-      // named out.png pointing at it; a DICOM slice named slice.tif), an
-      // Analyze .hdr's .img, or the --classify file.
-      {
-        std::vector<fs::path> inputs;
-        fs::path dicom_dir;
-        if (!rv.path.empty()) {
-          const fs::path vp = rv.path;
-          inputs.push_back(vp);
-          if (upper(vp.extension().string()) == ".HDR")
-            inputs.push_back(fs::path(vp).replace_extension(".img"));
-          if (rv.kind() == VolumeFileKind::dicom)
-            dicom_dir = fs::is_directory(vp) ? vp : fs::absolute(vp).parent_path();
-        }
-        if (std::error_code ec; fs::is_regular_file(classify, ec)) inputs.push_back(classify);
-        for (int f = 0; f < frames; ++f)
-          check_not_an_input(numbered(outp, f, frames), inputs, dicom_dir, "-o");
-        if (render->count("--trace") > 0) check_not_an_input(tracep, inputs, dicom_dir, "--trace");
-      }
       std::vector<std::vector<KernelSpan>> traced;
 
       Volume vol;
@@ -636,15 +617,25 @@ int main(int argc, char** argv) {
                               "applies only to the built-in phantom (a volume file is given)");
         vol = rv.load();
         for (const std::string& n : vol.notes()) std::cerr << "simdvol: note: " << n << "\n";
-        // The files read beside the one named (a pair's other half, a
-        // detached header's data files: an output linked to one replaced
-        // it), known once the volume is read; before any frame.
-        if (!vol.companion_files().empty()) {
-          for (int f = 0; f < frames; ++f)
-            check_not_an_input(numbered(outp, f, frames), vol.companion_files(), {}, "-o");
-          if (render->count("--trace") > 0)
-            check_not_an_input(tracep, vol.companion_files(), {}, "--trace");
+      }
+      // No output may replace what the render reads, once the volume is
+      // read and before any frame: the volume (a link named out.png
+      // pointing at it; a DICOM slice named slice.tif, or another of its
+      // series), the files its loader read beside it (a pair's other half,
+      // a detached header's data files), or the --classify file.
+      {
+        std::vector<fs::path> inputs = vol.companion_files();
+        fs::path dicom_dir;
+        if (!rv.path.empty()) {
+          const fs::path vp = rv.path;
+          inputs.push_back(vp);
+          if (rv.kind() == VolumeFileKind::dicom)
+            dicom_dir = fs::is_directory(vp) ? vp : fs::absolute(vp).parent_path();
         }
+        if (std::error_code ec; fs::is_regular_file(classify, ec)) inputs.push_back(classify);
+        for (int f = 0; f < frames; ++f)
+          check_not_an_input(numbered(outp, f, frames), inputs, dicom_dir, "-o");
+        if (render->count("--trace") > 0) check_not_an_input(tracep, inputs, dicom_dir, "--trace");
       }
       if (classify == "auto") classify = vol.range().min < -500.0f ? "ct" : "mri";
       // A preset's name is the preset, even where a file of that name lies

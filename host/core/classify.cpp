@@ -62,16 +62,13 @@
 #include <sstream>
 
 #include "file_checks.hpp"
+#include "number_text.hpp"
 #include "simdvol/error.hpp"
 
 namespace simdvol {
 namespace {
 
-std::string fmt(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
+using detail::number_text;
 
 void validate_ramp(const Ramp& r, const std::string& what) {
   if (r.x.size() != r.y.size())
@@ -81,13 +78,14 @@ void validate_ramp(const Ramp& r, const std::string& what) {
     if (!std::isfinite(r.x[k]) || !std::isfinite(r.y[k]))
       throw ArgumentError(what, "ramp point " + std::to_string(k) + " is not finite");
     if (r.y[k] < 0.0f || r.y[k] > 1.0f)
-      throw ArgumentError(
-          what, "ramp value " + fmt(r.y[k]) + " at x = " + fmt(r.x[k]) + " is outside [0, 1]");
+      throw ArgumentError(what, "ramp value " + number_text(r.y[k]) +
+                                    " at x = " + number_text(r.x[k]) + " is outside [0, 1]");
     if (k > 0 && r.x[k] < r.x[k - 1])
-      throw ArgumentError(what, "ramp x values must be ascending (" + fmt(r.x[k]) + " after " +
-                                    fmt(r.x[k - 1]) + ")");
+      throw ArgumentError(what, "ramp x values must be ascending (" + number_text(r.x[k]) +
+                                    " after " + number_text(r.x[k - 1]) + ")");
     if (k > 0 && !std::isfinite(r.x[k] - r.x[k - 1]))
-      throw ArgumentError(what, "ramp x values " + fmt(r.x[k - 1]) + " and " + fmt(r.x[k]) +
+      throw ArgumentError(what, "ramp x values " + number_text(r.x[k - 1]) + " and " +
+                                    number_text(r.x[k]) +
                                     " are too far apart for float arithmetic");
   }
 }
@@ -113,8 +111,9 @@ bool pair_fits_float(const Material& a, const Material& b) {
 }
 
 std::string too_far_apart(const Material& a, const Material& b) {
-  return "materials '" + a.name + "' (mean " + fmt(a.mean) + ", sigma " + fmt(a.sigma) + ") and '" +
-         b.name + "' (mean " + fmt(b.mean) + ", sigma " + fmt(b.sigma) +
+  return "materials '" + a.name + "' (mean " + number_text(a.mean) + ", sigma " +
+         number_text(a.sigma) + ") and '" + b.name + "' (mean " + number_text(b.mean) + ", sigma " +
+         number_text(b.sigma) +
          ") are too far apart for their sigmas in float arithmetic ((difference of the means)^2 "
          "/ (2 sigma^2) overflows)";
 }
@@ -135,19 +134,21 @@ void validate(const Classifier& c) {
     const std::string what = "classifier.material '" + mat.name + "'";
     if (!std::isfinite(mat.mean)) throw ArgumentError(what, "mean is not finite");
     if (!(mat.sigma > 0.0f) || !std::isfinite(mat.sigma))
-      throw ArgumentError(what, "sigma must be > 0 (got " + fmt(mat.sigma) + ")");
+      throw ArgumentError(what, "sigma must be > 0 (got " + number_text(mat.sigma) + ")");
     // (The reference's double would take it; the kernels' float cannot.)
     if (!std::isfinite(half_inv_var(mat)))
-      throw ArgumentError(what, "sigma " + fmt(mat.sigma) + " is too small for float arithmetic");
+      throw ArgumentError(what,
+                          "sigma " + number_text(mat.sigma) + " is too small for float arithmetic");
     for (float v : {mat.r, mat.g, mat.b})
       if (!(v >= 0.0f && v <= 1.0f))
-        throw ArgumentError(what, "colour component " + fmt(v) + " is outside [0, 1]");
+        throw ArgumentError(what, "colour component " + number_text(v) + " is outside [0, 1]");
     if (!(mat.opacity >= 0.0f && mat.opacity <= 1.0f))
-      throw ArgumentError(what, "opacity " + fmt(mat.opacity) + " is outside [0, 1]");
+      throw ArgumentError(what, "opacity " + number_text(mat.opacity) + " is outside [0, 1]");
     if (i > 0 && !(m[i - 1].mean < mat.mean))
       throw ArgumentError("classifier", "material means must be strictly ascending ('" +
-                                            m[i - 1].name + "' " + fmt(m[i - 1].mean) + ", then '" +
-                                            mat.name + "' " + fmt(mat.mean) + ")");
+                                            m[i - 1].name + "' " + number_text(m[i - 1].mean) +
+                                            ", then '" + mat.name + "' " + number_text(mat.mean) +
+                                            ")");
     if (i > 0 && !pair_fits_float(m[i - 1], mat))
       throw ArgumentError("classifier", too_far_apart(m[i - 1], mat));
   }
@@ -299,7 +300,7 @@ std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& sh
                                        std::to_string(vol.voxel_count()) + " voxels");
   if (!(opacity_step > 0.0) || !std::isfinite(opacity_step))
     throw ArgumentError("opacity_step",
-                        "must be positive and finite (got " + fmt(opacity_step) + ")");
+                        "must be positive and finite (got " + number_text(opacity_step) + ")");
   validate(c);
   const bool need_range = c.kind == Classifier::Kind::mixture && c.mixture.relative;
   const ValueRange range = need_range ? vol.range() : ValueRange{};
@@ -428,9 +429,10 @@ struct Parser {
 
   void append_x(std::vector<float>& xs, float x, const std::string& directive) const {
     if (!xs.empty() && !(x > xs.back()))
-      fail(directive + " x values must be ascending (" + fmt(x) + " after " + fmt(xs.back()) + ")");
+      fail(directive + " x values must be ascending (" + number_text(x) + " after " +
+           number_text(xs.back()) + ")");
     if (!xs.empty() && !std::isfinite(x - xs.back()))
-      fail(directive + " x values " + fmt(xs.back()) + " and " + fmt(x) +
+      fail(directive + " x values " + number_text(xs.back()) + " and " + number_text(x) +
            " are too far apart for float arithmetic (their difference overflows)");
     xs.push_back(x);
   }
@@ -533,8 +535,8 @@ Classifier load_classifier(const std::filesystem::path& path) {
   for (std::size_t k = 0; k < c.mixture.materials.size(); ++k) {
     if (!std::isfinite(half_inv_var(c.mixture.materials[k]))) {
       ps.line = material_lines[k];
-      ps.fail("sigma " + fmt(c.mixture.materials[k].sigma) + " of '" + c.mixture.materials[k].name +
-              "' is too small for float arithmetic");
+      ps.fail("sigma " + number_text(c.mixture.materials[k].sigma) + " of '" +
+              c.mixture.materials[k].name + "' is too small for float arithmetic");
     }
   }
   // Sort by mean, keeping each material's line number for the messages.
@@ -548,7 +550,7 @@ Classifier load_classifier(const std::filesystem::path& path) {
     if (k > 0 && mats[order[k]].mean == mats[order[k - 1]].mean) {
       ps.line = std::max(material_lines[order[k]], material_lines[order[k - 1]]);
       ps.fail("materials '" + mats[order[k - 1]].name + "' and '" + mats[order[k]].name +
-              "' have the same mean " + fmt(mats[order[k]].mean));
+              "' have the same mean " + number_text(mats[order[k]].mean));
     }
     if (k > 0 && !pair_fits_float(mats[order[k - 1]], mats[order[k]])) {
       ps.line = std::max(material_lines[order[k]], material_lines[order[k - 1]]);

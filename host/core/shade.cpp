@@ -61,6 +61,7 @@
 #include <limits>
 #include <string>
 
+#include "number_text.hpp"
 #include "simdvol/error.hpp"
 
 namespace simdvol {
@@ -83,16 +84,8 @@ bool finite3(const Vec3& v) {
 
 }  // namespace
 
-namespace {
-// A number as %g writes it (1e+40, not 40 digits of std::to_string).
-std::string number_text(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-}  // namespace
-
 void validate(const ShadeParams& p) {
+  using detail::number_text;
   const auto need_finite = [](double v, const char* option) {
     if (!std::isfinite(v))
       throw ArgumentError(option, "must be finite (got " + std::to_string(v) + ")");
