@@ -16,6 +16,7 @@ typedef ulong sv_u64;
 typedef long sv_i64;
 typedef int sv_i32;
 #define SV_FN static inline
+#define SV_CAST(T, x) ((T)(x))
 #else
 #include <stdint.h>
 typedef uint32_t sv_u32;
@@ -23,13 +24,16 @@ typedef uint64_t sv_u64;
 typedef int64_t sv_i64;
 typedef int32_t sv_i32;
 #define SV_FN static inline
+/* static_cast in C++, so that a program including this header (through the
+ * public headers) stays clean under -Wold-style-cast. */
+#define SV_CAST(T, x) (static_cast<T>(x))
 #endif
 
 /* Fixed-point positions: object-space coordinates in voxel units with
  * SV_FRAC_BITS fractional bits. floor() of a position is an arithmetic shift,
  * identical on host and device, which makes the matching stage exact. */
 #define SV_FRAC_BITS 32
-#define SV_ONE ((sv_i64)1 << SV_FRAC_BITS)
+#define SV_ONE (SV_CAST(sv_i64, 1) << SV_FRAC_BITS)
 
 /* The viewing grid and its map into the volume (thesis eq 5.1/5.5):
  *   X_a(i, j, k) = origin[a] + i * step[a][0] + j * step[a][1] + k * step[a][2]
@@ -51,9 +55,9 @@ typedef struct sv_u32x4 {
 } sv_u32x4;
 
 SV_FN sv_u32 sv_mulhilo(sv_u32 a, sv_u32 b, sv_u32* hi) {
-  sv_u64 p = (sv_u64)a * (sv_u64)b;
-  *hi = (sv_u32)(p >> 32);
-  return (sv_u32)p;
+  sv_u64 p = SV_CAST(sv_u64, a) * SV_CAST(sv_u64, b);
+  *hi = SV_CAST(sv_u32, p >> 32);
+  return SV_CAST(sv_u32, p);
 }
 
 SV_FN sv_u32x4 sv_philox4x32_10(sv_u32x4 c, sv_u32 k0, sv_u32 k1) {
@@ -85,8 +89,8 @@ SV_FN void sv_uniform4(sv_u64 seed, sv_u32 ray, sv_u32 q, sv_u32 step, float* u)
   c.v[1] = q;
   c.v[2] = step;
   c.v[3] = 0x73696d64u; /* "simd" */
-  sv_u32x4 r = sv_philox4x32_10(c, (sv_u32)seed, (sv_u32)(seed >> 32));
-  for (int w = 0; w < 4; ++w) u[w] = (float)(r.v[w] >> 8) * (1.0f / 16777216.0f);
+  sv_u32x4 r = sv_philox4x32_10(c, SV_CAST(sv_u32, seed), SV_CAST(sv_u32, seed >> 32));
+  for (int w = 0; w < 4; ++w) u[w] = SV_CAST(float, r.v[w] >> 8) * (1.0f / 16777216.0f);
 }
 
 /* The draw of walk `sample`: sv_uniform4's word sample mod 4. */

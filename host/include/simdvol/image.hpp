@@ -28,12 +28,15 @@ class Image {
   Image(int width, int height, std::vector<Rgba> pixels);
   int width() const { return w_; }
   int height() const { return h_; }
-  Rgba& at(int x, int y) { return px_[static_cast<std::size_t>(y) * w_ + x]; }
-  const Rgba& at(int x, int y) const { return px_[static_cast<std::size_t>(y) * w_ + x]; }
+  Rgba& at(int x, int y) { return px_[index(x, y)]; }
+  const Rgba& at(int x, int y) const { return px_[index(x, y)]; }
   std::vector<Rgba>& pixels() { return px_; }
   const std::vector<Rgba>& pixels() const { return px_; }
 
  private:
+  std::size_t index(int x, int y) const {
+    return static_cast<std::size_t>(y) * static_cast<std::size_t>(w_) + static_cast<std::size_t>(x);
+  }
   int w_ = 0, h_ = 0;
   std::vector<Rgba> px_;
 };
