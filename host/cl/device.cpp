@@ -12,6 +12,7 @@
 #include <cerrno>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -660,6 +661,23 @@ std::optional<std::filesystem::path> program_cache_dir() {
   const char* env = std::getenv("SIMDVOL_CACHE_DIR");
   if (!env || !*env || std::string_view(env) == "off") return std::nullopt;
   return fs::path(env);
+}
+
+std::optional<std::string> program_cache_problem() {
+  const std::optional<fs::path> dir = program_cache_dir();
+  if (!dir) return std::nullopt;
+  const std::string what = "SIMDVOL_CACHE_DIR=" + dir->string();
+  const std::string then = ": programs are built from source every run, not kept";
+  std::error_code ec;
+  const fs::file_status st = fs::status(*dir, ec);
+  if (fs::exists(st)) {
+    if (!fs::is_directory(st)) return what + " is not a directory" + then;
+  } else if (fs::create_directories(*dir, ec); ec) {
+    return what + " cannot be made (" + ec.message() + ")" + then;
+  }
+  if (::access(dir->c_str(), W_OK | X_OK) != 0)
+    return what + " cannot be written (" + std::strerror(errno) + ")" + then;
+  return std::nullopt;
 }
 
 cl::Program Device::build(const std::string& source, const std::string& options) {

@@ -655,6 +655,8 @@ int main(int argc, char** argv) {
       if (engine == "opencl") {
         device.emplace(device_index >= 0 ? std::optional<int>(device_index) : std::nullopt);
         gpu.emplace(*device, eo);
+        if (const std::optional<std::string> p = program_cache_problem())
+          std::cerr << "simdvol: note: " << *p << "\n";
       }
       const double phi0 = opt.view.phi;
       // A turntable writes frame f while frame f + 1 renders (one write in

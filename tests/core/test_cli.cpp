@@ -1348,6 +1348,31 @@ TEST_F(Cli, PoclVariablesThatStopPoclAreRefused) {
   EXPECT_FALSE(fs::exists(dir_ / "y.png"));
 }
 
+// SIMDVOL_CACHE_DIR that cannot keep programs: the render goes on (built
+// from source, only slower), and says so; it said nothing before.
+TEST_F(Cli, ProgramCacheThatCannotBeWrittenIsNoted) {
+  std::ofstream(dir_ / "afile") << "x";
+  const std::string args = "render --phantom-size 16 --size 8 -o ";
+  Result r = run(args + path("a.png"), "SIMDVOL_CACHE_DIR=" + path("afile"));
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("simdvol: note: SIMDVOL_CACHE_DIR=" + path("afile") +
+                          " is not a directory: programs are built from source"),
+            std::string::npos)
+      << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "a.png"));
+  r = run(args + path("b.png"), "SIMDVOL_CACHE_DIR=" + path("afile") + "/sub");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("SIMDVOL_CACHE_DIR=" + path("afile") + "/sub cannot be made ("),
+            std::string::npos)
+      << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "b.png"));
+  // A directory that can be made and written: no note, and it is made.
+  r = run(args + path("c.png"), "SIMDVOL_CACHE_DIR=" + path("cache/programs"));
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("SIMDVOL_CACHE_DIR"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::is_directory(dir_ / "cache/programs"));
+}
+
 // The benchmarking switches take only their values: anything else was read
 // as unset (SIMDVOL_HUGE_PAGES=true, SIMDVOL_VOXEL_WGS=100 as 256) and the
 // run measured the default without a word.

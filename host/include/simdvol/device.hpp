@@ -190,6 +190,12 @@ std::string program_key(std::string_view kind, std::string_view stage, const Def
 /// stages); later processes build the program from the file in 2-10 ms
 /// instead of 45-75 (a one-frame brainsmall render 0.44-0.53 -> 0.17-0.21 s).
 std::optional<std::filesystem::path> program_cache_dir();
+/// Why program_cache_dir() cannot keep binaries (it names a file, or a
+/// directory that cannot be made or written), as a sentence naming
+/// SIMDVOL_CACHE_DIR; nullopt where it can or where it is unset. Device::build
+/// then only builds from source (the library says nothing; the CLI prints
+/// this as a note). Makes the directory if it is missing, as build() would.
+std::optional<std::string> program_cache_problem();
 
 /// Throws ArgumentError naming `what` if a buffer of `bytes` exceeds the
 /// device's largest allocation `max_alloc_bytes` (or is zero). `hint`, if
