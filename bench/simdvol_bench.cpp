@@ -129,11 +129,13 @@ constexpr const char* kUsage =
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
     "                     [--volume-index N]\n"
     "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2, or a volume file\n"
-    "    (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .den, a DICOM series; classified as `simdvol "
+    "    (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .mha, .mhd, .mgh, .mgz, .mnc, .den, a DICOM\n"
+    "    series; classified as `simdvol "
     "render --classify "
     "auto`:\n"
     "    ct for Hounsfield data, mri otherwise); --volume-index N: volume N of each 4-D file\n"
-    "    given (NIfTI, NRRD, a DICOM series of time points), its cases named FILE@N\n"
+    "    given (NIfTI, NRRD, MetaImage, MGH, MINC, a DICOM series of time points), its cases\n"
+    "    named FILE@N\n"
     "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNx (exact opacity), mcNs (exact\n"
     "    opacity, stratified picks), each with sub for per sub-ray (mcNsub, mcNxsub, mcNssub)\n";
 

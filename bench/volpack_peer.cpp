@@ -381,7 +381,8 @@ std::vector<std::string> unmatched() {
       "voxel length along the ray",
       "resampling: shear-warp interpolates bilinearly within each voxel slice (the slices "
       "composite at the major axis' spacing), then warps the intermediate image bilinearly "
-      "into 8-bit pixels; simdvol resamples in 3-D along rays (order 3 B-spline here) and "
+      "into 8-bit pixels; simdvol resamples in 3-D along rays (order 3 here: Aitken's cubic "
+      "Lagrange interpolation) and "
       "scales bilinearly, in float",
   };
 }

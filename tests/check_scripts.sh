@@ -18,7 +18,7 @@ check() {  # check <want rc> <text the output must hold> <command...>
     fail=1
   fi
 }
-for s in fetch-data install-deps install-peers check-format test; do
+for s in fetch-data install-deps install-peers check-format test embed-check; do
   check 2 "$s: takes no arguments, not '--bogus'" "$root/scripts/$s" --bogus
   check 0 "$(sed -n '2s/^# //p' "$root/scripts/$s")" "$root/scripts/$s" --help
 done

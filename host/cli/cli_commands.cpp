@@ -25,18 +25,18 @@ std::string_view trim_blanks(std::string_view s) {
   return s;
 }
 
+std::string decimal_problem(const std::string& v) {
+  std::string_view s = trim_blanks(v);
+  if (!s.empty() && (s.front() == '+' || s.front() == '-')) s.remove_prefix(1);
+  if (s.empty() || s.find_first_not_of("0123456789") != std::string_view::npos)
+    return "expected a whole number in decimal, not '" + v + "'";
+  if (s.size() > 1 && s.front() == '0')
+    return "'" + v + "' has a leading zero (it would be read as octal): write it without";
+  return std::string();
+}
+
 CLI::Validator decimal_integer() {
-  return CLI::Validator(
-      [](std::string& v) {
-        std::string_view s = trim_blanks(v);
-        if (!s.empty() && (s.front() == '+' || s.front() == '-')) s.remove_prefix(1);
-        if (s.empty() || s.find_first_not_of("0123456789") != std::string_view::npos)
-          return "expected a whole number in decimal, not '" + v + "'";
-        if (s.size() > 1 && s.front() == '0')
-          return "'" + v + "' has a leading zero (it would be read as octal): write it without";
-        return std::string();
-      },
-      "", "decimal");
+  return CLI::Validator([](std::string& v) { return decimal_problem(v); }, "", "decimal");
 }
 
 double parse_number(const std::string& s, const std::string& arg) {

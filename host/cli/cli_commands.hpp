@@ -20,6 +20,9 @@ namespace simdvol {
 /// 0, so "010" was 8 and "0x10" 16, a number other than the one meant and
 /// no word said. Refuses any text but optional blanks and sign, then
 /// decimal digits without a leading zero ("0" itself is fine).
+/// Why `v` is not a whole number in plain decimal (digits, a sign, blanks
+/// either side; no leading zero, exponent or point), or empty where it is.
+std::string decimal_problem(const std::string& v);
 CLI::Validator decimal_integer();
 
 /// `s` without its leading and trailing blanks (spaces, tabs), as the

@@ -77,10 +77,13 @@ std::vector<std::string> split(const std::string& s, char sep) {
   return out;
 }
 
+// A whole number in a list (--size WxH, --raw-dims), by the rule of the
+// options CLI11 reads (decimal_integer): "010" was taken as 10 here and
+// refused there.
 int64_t parse_int(const std::string& s, const std::string& arg) {
+  if (const std::string why = decimal_problem(s); !why.empty()) throw ArgumentError(arg, why);
   const double v = parse_number(s, arg);
-  if (v != std::floor(v) || std::fabs(v) > 9.0e15)
-    throw ArgumentError(arg, "'" + s + "' is not an integer");
+  if (std::fabs(v) > 9.0e15) throw ArgumentError(arg, "'" + s + "' is beyond 9e15");
   return static_cast<int64_t>(v);
 }
 
@@ -126,17 +129,17 @@ struct VolumeArgs {
         ->check(kNotNegative)
         ->check(in_range<uint64_t>());
     app->add_option("--volume-index", volume_index,
-                    "4-D NIfTI and NRRD files (a time or diffusion series of 3-D volumes), and "
-                    "DICOM series with several images at each position (time points, echoes): "
-                    "which volume, from 0")
+                    "4-D NIfTI, NRRD, MetaImage, MGH and MINC files (a time or diffusion "
+                    "series of 3-D volumes), and DICOM series with several images at each "
+                    "position (time points, echoes): which volume, from 0")
         ->check(decimal_integer())
         ->check(in_range<int64_t>());
-    app->add_option(
-        "--orient", orient,
-        "turn the volume's axes to point this way in the patient, as its NIfTI, "
-        "NRRD or DICOM header says they lie: CODE is three letters, one each of R/L, A/P, "
-        "S/I (RAS: x to the right, y to the front, z up); by default the voxels "
-        "keep the file's order");
+    app->add_option("--orient", orient,
+                    "turn the volume's axes to point this way in the patient, as its NIfTI, "
+                    "NRRD, DICOM, MetaImage, MGH or MINC header says they lie: CODE is three "
+                    "letters, one each of R/L, A/P, "
+                    "S/I (RAS: x to the right, y to the front, z up); by default the voxels "
+                    "keep the file's order");
   }
 
   // The kind of file (by name, by being a directory or by DICOM's marker);
@@ -341,7 +344,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render->add_flag("--no-skip-empty", no_skip_empty,
                    "opencl: resample every sample, also those whose stencil reads only "
-                   "transparent voxels (the same image; for timing comparisons)");
+                   "transparent voxels, and match every PE (as --no-skip-pes; the same image; "
+                   "for direct with balancing, to float rounding; for timing comparisons)");
   render->add_flag(
       "--no-skip-pes", no_skip_pes,
       "opencl, direct, adaptive, whole-ray mc, per sub-ray mc with --balance-sweeps 0: "
@@ -580,6 +584,19 @@ int main(int argc, char** argv) {
       refuse_unless(engine == "opencl",
                     {"--device", "--layout", "--no-skip-empty", "--no-skip-pes", "--trace"},
                     "--engine opencl");
+      // The PEs are left out only where the engine can (engine.cpp: mask_pes),
+      // and only where the empty samples are skipped too.
+      {
+        const CompositeMode m = opt.composite.mode;
+        refuse_unless(m == CompositeMode::direct || m == CompositeMode::adaptive ||
+                          eo.mc_scope == McScope::whole || balance_sweeps == 0,
+                      {"--no-skip-pes"},
+                      "direct, adaptive, whole-ray Monte Carlo, and per sub-ray Monte Carlo "
+                      "with --balance-sweeps 0 (with balancing every PE is matched already)");
+        refuse_unless(!no_skip_empty, {"--no-skip-pes"},
+                      "renders that skip the empty samples (--no-skip-empty matches every PE "
+                      "already)");
+      }
       refuse_unless(!no_shade, {"--light", "--phong", "--depth-cue"},
                     "lit renders (not with --no-shade)");
       refuse_unless(frames > 1, {"--step"}, "turntables (--frames 2 or more)");

@@ -36,7 +36,8 @@ int64_t ceil_div(int64_t a, int64_t b) {
 }
 
 bool parse_int(std::string_view s, int64_t& out) {
-  if (s.empty()) return false;
+  // Plain decimal: "0512" is refused, as the CLI's whole numbers are.
+  if (s.empty() || (s.size() > 1 && s.front() == '0')) return false;
   auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), out);
   return ec == std::errc() && ptr == s.data() + s.size();
 }

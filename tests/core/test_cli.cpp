@@ -1042,6 +1042,19 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"phantom shepp-logan --size 064 -o " + path("c.nrrd"), "--size: '064' has a leading zero"},
       {"phantom shepp-logan --size 8 --supersample 04 -o " + path("c.nrrd"), "--supersample: '04'"},
       {"mismatch --size 010 --size3 4", "--size: '010'"},
+      // The same rule inside lists (010x64 was a 10x64 image, 0512 PEs 512).
+      {"render --size 010x64 -o " + path("x.png"), "--size: '010' has a leading zero"},
+      {"render --size 1e2 -o " + path("x.png"),
+       "--size: expected a whole number in decimal, not '1e2'"},
+      {"render --pe 0512 -o " + path("x.png"), "--pe: \"0512\" is not a PE count"},
+      {"render --pe 032x16 -o " + path("x.png"), "--pe: \"032x16\" is not a PE count"},
+      {"info " + path("vol.raw") + " --raw-dims 02,2,2", "--raw-dims: '02' has a leading zero"},
+      // --no-skip-pes where every PE is matched already.
+      {"render --composite mc --mc-scope subray --no-skip-pes -o " + path("x.png"),
+       "--no-skip-pes: applies only to direct, adaptive, whole-ray Monte Carlo, and per sub-ray "
+       "Monte Carlo with --balance-sweeps 0"},
+      {"render --no-skip-empty --no-skip-pes -o " + path("x.png"),
+       "--no-skip-pes: applies only to renders that skip the empty samples"},
       // Angles in -360 .. 360 degrees, as the bench tools take them (1e300
       // was taken); lists without a trailing comma, as render's others.
       {"render --view 1e300,0,0 -o " + path("x.png"),
