@@ -7,6 +7,8 @@
 #                                                 the whole public API)
 #   share/simdvol/kernels/*.cl, simdvol_shared.h  (the kernel sources, as
 #                                                 embedded in the library)
+#   share/doc/simdvol/KERNELS.md                  (the kernel ABI; the headers
+#                                                 point to it)
 #   lib/cmake/simdvol/simdvolConfig.cmake, ...ConfigVersion.cmake,
 #     simdvolTargets.cmake, FindNiftiIO.cmake, FindTeemNrrd.cmake, FindGdcmLibs.cmake,
 #     FindMetaIO.cmake, FindMinc.cmake
@@ -52,6 +54,9 @@ install(FILES ${SIMDVOL_PUBLIC_HEADERS} ${PROJECT_SOURCE_DIR}/kernels/simdvol_sh
 file(GLOB SIMDVOL_KERNEL_SOURCES CONFIGURE_DEPENDS
   ${PROJECT_SOURCE_DIR}/kernels/*.cl ${PROJECT_SOURCE_DIR}/kernels/*.h)
 install(FILES ${SIMDVOL_KERNEL_SOURCES} DESTINATION ${SIMDVOL_INSTALL_KERNELDIR})
+# That description, where simdvol.hpp and the kernels' users are pointed to
+# (CMAKE_INSTALL_DOCDIR: share/doc/simdvol).
+install(FILES ${PROJECT_SOURCE_DIR}/docs/KERNELS.md DESTINATION ${CMAKE_INSTALL_DOCDIR})
 
 install(EXPORT simdvolTargets NAMESPACE simdvol:: DESTINATION ${SIMDVOL_INSTALL_CMAKEDIR})
 get_target_property(SIMDVOL_CORE_TYPE simdvol_core TYPE)

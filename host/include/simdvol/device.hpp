@@ -30,6 +30,20 @@
 // destructor throws.
 #pragma once
 
+// OpenCL 1.2 headers. The library is built with these three definitions, and
+// the CMake target simdvol::simdvol passes them on as interface compile
+// definitions to every file of a program that links it: simdvol's headers and
+// the program's code then see one configuration of <CL/opencl.hpp> (its
+// classes' inline functions depend on CL_HPP_TARGET_OPENCL_VERSION, and
+// cl::Buffer, cl::Kernel, ... cross the library's interface). The guards below
+// matter only where a file is compiled without them (not through the CMake
+// package). A file that calls OpenCL 2.0+ functions
+// (clCreateCommandQueueWithProperties, ...) raises only the C headers' version,
+// first of all, before any OpenCL or simdvol header:
+//   #undef CL_TARGET_OPENCL_VERSION
+//   #define CL_TARGET_OPENCL_VERSION 300
+// (defining it again without the #undef is a "redefined" warning); it leaves
+// the two CL_HPP_ definitions as they are.
 #ifndef CL_TARGET_OPENCL_VERSION
 #define CL_TARGET_OPENCL_VERSION 120
 #endif

@@ -33,7 +33,10 @@
 // RenderEngine keeps the PE array and the buffers the engine allocates
 // itself (voxel cells, shading, classified voxels, samples, offsets,
 // images) across frames, reallocated only when the volume's dims or the
-// sizes grow: fresh buffers cost page faults (POCL.md: ~3.5 ms per MiB).
+// sizes grow: fresh buffers cost page faults (on PoCL a fresh buffer is new
+// host memory, a fault per 4 KiB page the kernels first touch; the frame's
+// scratch buffers took ~33,000 of them per 256^3 frame before they were
+// reused: docs/PERFORMANCE.md, "Buffer reuse").
 // Buffers allocated inside the stage functions (matching, footprints, swap
 // levels) are still made per frame. render_opencl is a one-shot RenderEngine.
 #pragma once

@@ -4,12 +4,18 @@
 // layouts are described in pe_array.hpp, kernel arguments in kernels/common.cl.
 //
 // For later stages (shade, classify, ...): take a CellBuffer, build the
-// stage's kernel with device.kernel("<stage>", "simdvol_<stage>"), and pass
+// stage's kernel with device.kernel("<stage>", "simdvol_<stage>", defines),
+// and pass
 //   cells.cells(), cells.origins(), cells.dims_arg(), cells.cell_arg(),
 //   cells.block_arg(), (int)cells.layout().pes()
-// in the order common.cl documents. A stage that produces another per-voxel
-// array of the same shape allocates it with CellBuffer(device, layout) (or
-// its own buffer of layout().elements() elements of its type).
+// where the kernel's own argument list has them, with its other arguments
+// between and after them (common.cl says what each geometry argument holds;
+// docs/KERNELS.md, section 5, lists each kernel's arguments in order). The
+// shade kernels, for one, take (cells, out, origins, dims, cell, block, pes,
+// vstride, params): the output second, the voxel stride and the parameters
+// after pes. A stage that produces another per-voxel array of the same shape
+// allocates it with CellBuffer(device, layout) (or its own buffer of
+// layout().elements() elements of its type).
 #pragma once
 
 #include <vector>

@@ -22,6 +22,10 @@ struct RenderOptions {
   int order = 1;                       ///< 0..3
   CompositeParams composite{};
   ShadeParams shade{};
+  /// Must be set: the default, a mixture of no materials, cannot be rendered
+  /// (render_reference, render_opencl and RenderEngine::render throw
+  /// ArgumentError "classifier: the material mixture has no materials").
+  /// For example classifier_preset("ct") (classify.hpp lists the presets).
   Classifier classifier{};
 };
 

@@ -37,6 +37,12 @@ struct ShadeSample {
   float diffuse = 0;   ///< Id = ka + cue * kd * |N.L|
   float specular = 0;  ///< Is = cue * ks * |N.H|^n
   float gradient = 0;  ///< |grad f| (value units per smallest voxel spacing)
+  /// 0 in the reference's shade(); the device's shading (the shade kernels'
+  /// fourth channel, read back as ShadeSample by VoxelBuffer::read) holds the
+  /// voxel's value here instead, which the classify kernels read. To compare
+  /// the two, compare it with the volume's value, not with the reference's 0;
+  /// to feed the reference's shading to the classify kernels, set it to the
+  /// value first (docs/KERNELS.md, "Voxel cells").
   float pad = 0;
 };
 

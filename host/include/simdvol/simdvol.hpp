@@ -8,7 +8,9 @@
 //                          functions and the render engine
 //
 // The kernel ABI (arguments, buffer layouts, work sizes, stage order) is in
-// docs/KERNELS.md; the structs shared with the kernels in simdvol_shared.h.
+// docs/KERNELS.md of the source tree, installed as share/doc/simdvol/KERNELS.md
+// (under the install prefix); the structs shared with the kernels in
+// simdvol_shared.h.
 #pragma once
 
 // CPU library

@@ -9,10 +9,16 @@
 // floats from p * 4 * stride; quantity c (0..3) of interior voxel
 // (lx, ly, lz), 0 <= l < cell, is float c * stride + (lz * cy + ly) * cx + lx
 // of the block. stride = cx * cy * cz rounded up to a multiple of 16 (each
-// plane starts on a 64-byte line); the tails are zero (shade) or unspecified
-// (classify). Interior positions past the volume's far faces (padding) hold
-// the result for the edge-replicated value there; gathers skip them. With
-// one PE the buffer is the flat volume, planar.
+// plane starts on a 64-byte line). The tails (positions cx * cy * cz ..
+// stride - 1) are zero from the shade and the fused shade + classify
+// kernels; the classify kernels classify them as they classify the voxels,
+// so after the shade's zero tails they hold what value 0 with Id = Is = |g|
+// = 0 classifies to: colour 0 and that value's alpha after the opacity step,
+// not 0 where the classifier gives value 0 any opacity. No later stage reads
+// the RGBA tails (the gathers, the occupancy scan and the resample take the
+// cells' voxels only). Interior positions past the volume's far faces
+// (padding) hold the result for the edge-replicated value there; gathers
+// skip them. With one PE the buffer is the flat volume, planar.
 // Interleaved voxel cells (VoxelLayout::interleaved; classified voxels of the
 // fused shade + classify only): the same blocks of 4 * stride floats, but
 // the four quantities of a position together, quantity c of position e at
@@ -173,8 +179,10 @@ Defines shade_defines(const sv_shade_params& params);
 
 /// Decomposition of the shade kernel (kernels/shade.cl, which records the
 /// measurements): vec16 (the default, fastest measured: explicit float16 on
-/// chunks of 16 voxels; needs cells whose x extent is 4, 8 or a multiple of
-/// 16, and falls back to rows for other cells) or the scalar alternatives.
+/// chunks of 16 voxels, simdvol_shade16, for every x extent of the cells: the
+/// row width SV_RW is 16 where cx is a multiple of 16, cx where it is 8 or 4,
+/// and 1 for any other cx, per-lane positions and row-wise loads) or the
+/// scalar alternatives.
 enum class ShadeKernel { range3d, voxel, rows, vec16 };
 
 /// Shades `cells` (halo >= 1, filled by the layout stage) into `out` (a voxel
@@ -188,6 +196,12 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
 /// relative mixtures only) and the opacity step. Throws ArgumentError for an
 /// invalid classifier (as the reference does), more than SV_MAX_MATERIALS
 /// materials or SV_MAX_KNOTS ramp points, or a step that is not positive.
+/// opacity_step: the distance between consecutive samples of a ray in units
+/// of the smallest voxel spacing (the unit the classifier's opacities are
+/// given for); pass the view's ViewGeometry::step, as the engine and the
+/// reference renderer do (make_view: 1 with voxel sampling, the spanned
+/// length over min(width, height) with pixel sampling). Each alpha becomes
+/// 1 - (1 - alpha)^opacity_step (alpha itself for exactly 1).
 sv_classify_params classify_params(const Classifier& c, const ValueRange& range,
                                    double opacity_step);
 
