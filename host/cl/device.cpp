@@ -303,7 +303,12 @@ int choose_device(const std::vector<DeviceInfo>& devices, std::optional<int> req
 std::string_view kernel_file(std::string_view name) {
   for (const auto& f : detail::embedded_kernel_files())
     if (f.name == name) return f.source;
-  throw ArgumentError("kernel file", "no embedded kernel file \"" + std::string(name) + "\"");
+  std::string why = "no embedded kernel file \"" + std::string(name) + "\"";
+  // program_source takes stage names and adds ".cl" itself.
+  if (name.size() > 6 && name.substr(name.size() - 6) == ".cl.cl")
+    why += " (program_source takes the stage's name, \"" +
+           std::string(name.substr(0, name.size() - 6)) + "\", without .cl)";
+  throw ArgumentError("kernel file", why);
 }
 
 std::vector<std::string> kernel_files() {

@@ -198,6 +198,17 @@ TEST(KernelFiles, ProgramSourceOfSeveralStages) {
   EXPECT_LT(three.find("#line 1 \"match.cl\"\n"), three.find("#line 1 \"swap.cl\"\n"));
   EXPECT_NE(three.find(std::string(kernel_file("swap.cl"))), std::string::npos);
   EXPECT_THROW(program_source("resample", d, {"local", "no_such_stage"}), ArgumentError);
+  // A file name where the stage's name belongs is said to be one.
+  try {
+    (void)program_source("shade", {}, {"classify.cl"});
+    ADD_FAILURE() << "classify.cl taken";
+  } catch (const ArgumentError& e) {
+    EXPECT_NE(std::string(e.what()).find("no embedded kernel file \"classify.cl.cl\" "
+                                         "(program_source takes the stage's name, \"classify\", "
+                                         "without .cl)"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(DeviceTest, EveryKernelFileCompilesOnItsOwn) {
