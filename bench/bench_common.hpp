@@ -70,7 +70,8 @@ class KeepHeap {
 /// keep their buffers in the device's pool between frames). Returns the
 /// last call's result.
 template <class F>
-auto time_warm(int runs, F&& f, double& ms, double* first_ms = nullptr) {
+auto time_warm(int runs, F&& f, double& ms, double* first_ms = nullptr,
+               Summary* summary = nullptr) {
   KeepHeap keep;
   auto t0 = Clock::now();
   auto result = f();
@@ -81,7 +82,9 @@ auto time_warm(int runs, F&& f, double& ms, double* first_ms = nullptr) {
     result = f();
     t.push_back(ms_since(t0));
   }
-  ms = median(std::move(t));
+  const Summary s = summarize(std::move(t));
+  ms = s.median;
+  if (summary) *summary = s;
   return result;
 }
 

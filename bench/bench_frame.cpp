@@ -64,12 +64,9 @@ using simdvol::bench::time_warm;
 
 namespace {
 
-// (the upper of the middle two for an even count, as this tool has always
-// reported; bench_common's median takes their mean)
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
+// The median, the mean of the middle two for an even count, as every tool
+// reports it (it was the upper of the two here).
+using simdvol::bench::median;
 // The value named `name` in a list kept in first-seen order (added if new).
 template <class V>
 V& slot(std::vector<std::pair<std::string, V>>& list, const std::string& name) {

@@ -71,12 +71,12 @@ void communication(const Frame& f, int64_t pes, SwapLayout layout) {
     const PixelBit& b = plan.bits[static_cast<std::size_t>(k)];
     std::printf("%5d  %c%-2d %5lld %9lld %10.2f %9lld %9lld %9lld %10.1f\n", k,
                 b.axis == 0 ? 'x' : 'y', b.level, static_cast<long long>(s.max_distance),
-                static_cast<long long>(s.moved), s.moved * 16.0 / 1048576.0,
+                static_cast<long long>(s.moved), s.moved * 16.0 / 1e6,
                 static_cast<long long>(s.max_sent), static_cast<long long>(s.max_held),
                 static_cast<long long>(s.max_kept), double(s.held) / double(pes));
   }
   std::printf("total moved %lld px = %.2f MB; most sent by one PE %lld px (%lld B)\n",
-              static_cast<long long>(c.moved), c.moved * 16.0 / 1048576.0,
+              static_cast<long long>(c.moved), c.moved * 16.0 / 1e6,
               static_cast<long long>(c.max_pe_sent), static_cast<long long>(c.max_pe_sent * 16));
   std::printf(
       "bound (ch. 6.2): cell %lldx%lldx%lld voxels, step %.3f: S = (a^2+b^2+c^2)/2 = %.1f px; "

@@ -436,6 +436,7 @@ std::string fmt_psnr(double p) {
 struct RefResult {
   Image image;
   double ms = NAN;        // median of the timed renders
+  Summary times;          // their median, min, max and count
   double first_ms = NAN;  // the warm-up render
 };
 class RefCache {
@@ -463,7 +464,7 @@ class RefCache {
     };
     RefResult& r = cache_[k];
     if (use == Use::timed && std::isnan(r.ms))
-      r.image = time_warm(runs_, render, r.ms, &r.first_ms);
+      r.image = time_warm(runs_, render, r.ms, &r.first_ms, &r.times);
     else if (r.image.width() == 0)
       r.image = render();
     return r;
@@ -693,7 +694,7 @@ struct Harness {
           o.layout_once ? r.first_layout : med("layout"), med("shade") + med("classify"),
           med("match"), med("balance"), med("resample_local"), med("offsets") + med("rays"),
           med("walk"), med("plan"), med("swap"), med("display") + med("warp"), st.utilisation(),
-          double(st.swap.moved * st.swap.bytes_per_pixel) / 1048576.0, ref_ms, ref_ms / w.median,
+          double(st.swap.moved * st.swap.bytes_per_pixel) / 1e6, ref_ms, ref_ms / w.median,
           fmt_psnr(q).c_str());
     } catch (const std::exception& e) {
       std::printf("%-34s skipped: %s\n", id.c_str(), e.what());
@@ -866,10 +867,8 @@ struct Harness {
       for (const Player& p : players) {
         table.push_back({p.name, summarize(p.ms), p.first, psnr(p.img, ref.image)});
         if (table.size() == 2) {
-          Row refrow{"simdvol reference (order 3)",
-                     {ref.ms, ref.ms, ref.ms, o.reference_runs},
-                     ref.first_ms,
-                     INFINITY};
+          // Its own min and max (they were the median three times).
+          Row refrow{"simdvol reference (order 3)", ref.times, ref.first_ms, INFINITY};
           table.push_back(refrow);
         }
       }
@@ -1232,7 +1231,8 @@ int main(int argc, char** argv) {
           }
     std::printf(
         "(first: the warm-up frame, with fresh buffers and any program builds; util: mean / max "
-        "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B (the JSON adds "
+        "PE load after balancing; XNet_MB: the binary swap's pixels moved x 16 B, in 10^6 B (the "
+        "JSON adds "
         "the halo exchange of the voxel cells); speedup: the "
         "reference's ms / ours; mcNsub is compared with the reference's per sub-ray Monte Carlo "
         "at the same PE cells and balance sweeps)\n");
