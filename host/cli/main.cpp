@@ -137,9 +137,8 @@ struct VolumeArgs {
     app->add_option("--orient", orient,
                     "turn the volume's axes to point this way in the patient, as its NIfTI, "
                     "NRRD, DICOM, MetaImage, MGH or MINC header says they lie: CODE is three "
-                    "letters, one each of R/L, A/P, "
-                    "S/I (RAS: x to the right, y to the front, z up); by default the voxels "
-                    "keep the file's order");
+                    "letters, one each of R/L, A/P, S/I (RAS: x to the right, y to the front, "
+                    "z up); by default the voxels keep the file's order");
   }
 
   // The kind of file (by name, by being a directory or by DICOM's marker);
