@@ -338,8 +338,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render
       ->add_option("--depth-cue", depth_cue,
-                   "K1,K2: diffuse and specular light times 1 / (K1 + K2 d), d = 0 at the "
-                   "volume's front, 1 at its back (1,0: no cueing)")
+                   "K1,K2: diffuse and specular light times 1 / (K1 + K2 d), d the voxel's "
+                   "depth across the sphere around the volume (radius half its diagonal): 0 "
+                   "at its nearest point, 1 at its farthest (1,0: no cueing)")
       ->capture_default_str();
   render->add_flag("--no-skip-empty", no_skip_empty,
                    "opencl: resample every sample, also those whose stencil reads only "
