@@ -1,37 +1,131 @@
-"""Independent renderer for simdvol's axis-aligned views, written from the
-documented mathematics (README render table, ../shared/DESIGN.md, thesis
-eq 4.1-4.4, 5.2, 5.10, 5.11, 7.2).  numpy only, float64 throughout.
+"""Independent renderer for simdvol, written from the documented mathematics
+(README render table, "Transfer-function files", "Where the samples lie";
+../shared/DESIGN.md; thesis eq 4.1-4.4, 5.2, 5.10-5.17, 7.2;
+docs/KERNELS.md's sv_view and opacity_step; the public headers' comments).
+numpy only, float64 throughout.
 
-Scope: axis-aligned views (every entry of T(theta, phi, varphi) in
-{-1, 0, 1}), --sampling voxel, unit voxel spacing, --order 0 or 1,
---composite direct, material-mixture classifiers, output size chosen so that
-one output pixel is one voxel (min(W, H) == the volume's longest side).
+Scope: any view T(theta, phi, varphi) (eq 5.2), --sampling voxel (rays at
+voxel spacing into an intermediate image, then a bilinear 2-D scale) and
+pixel, --fit longest and diagonal, --order 0..3 (Aitken / Lagrange on
+nested stencils, samples of orders 2 and 3 clamped to valid opacities),
+any voxel spacing, --composite direct, material-mixture and
+density / gradient / color ramp classifiers, shaded or not.
 
 Conventions and where each comes from are marked DOC (README / DESIGN /
-thesis) or CODE (found first in host/core/*.cpp; README.md's "Where the
-samples lie" and the material paragraph now say them).  Each can be
-switched to a rival reading (see Conventions): every switch makes cases
-fail, so the check tells them apart.
+KERNELS / HARDENING / thesis), HDR (a public header's comment,
+host/include/simdvol/*.hpp) or CODE (found only in host/core/*.cpp).  Each
+can be switched to a rival reading (see Conventions): every switch makes
+cases fail (run_cases.py), so the check tells them apart.
 """
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 
+@dataclass
+class Conventions:
+    # depth cue d per voxel:
+    #   'faces' : d = (voxel centre's depth from the front face) / (extent)
+    #   'sphere': DOC README --depth-cue: d = (z + R) / 2R over the bounding
+    #             sphere, z the voxel centre's depth (i + 0.5 - n/2) * s
+    depth: str = 'sphere'
+    # DOC README (material paragraph): C = min(1, c * Id + Is)
+    clamp_colour: bool = True
+    # z phase of the samples along a ray:
+    #   'code': DOC README "Where the samples lie": D = ceil(diagonal / step)
+    #           samples centred on the volume's centre, (k + 1/2 - D/2) step
+    #   'half': samples at (i + 1/2) step;  'int': at i step
+    zphase: str = 'code'
+    # intermediate image grid for voxel sampling:
+    #   'code'   : DOC README: ceil(W / scale) + 2 pixels, centred
+    #   'aligned': at the 1:1 image's pixel positions
+    igrid: str = 'code'
+    # the rotation:
+    #   'eq5.2'     : DOC thesis eq 5.2 / README: T = A(varphi) B(phi) C(theta)
+    #                 maps object to viewing space; a sample p lands at T^T p
+    #   'inverse'   : the sample lands at T p (the rotation's sign flipped)
+    #   'neg-angles': T(-theta, -phi, -varphi)
+    #   'reversed'  : T = C(theta) B(phi) A(varphi)
+    rotation: str = 'eq5.2'
+    # the third point of an order-2 stencil (f = floor x, t = x - f):
+    #   'centred'       : HDR resample.hpp: f - 1 if t <= 1/2, else f + 2
+    #   'centred-strict': f - 1 if t < 1/2, else f + 2 (the tie the other way)
+    #   'far'           : f + 2 if t <= 1/2, else f - 1
+    #   'low' / 'high'  : always f - 1 / always f + 2
+    order2: str = 'centred'
+    # samples of orders 2 and 3 before compositing:
+    #   'premult': DOC README --order: alpha in [0, 1], colour in [0, alpha]
+    #   'none', 'alpha' (alpha only), 'unit' (alpha and colour in [0, 1])
+    sample_clamp: str = 'premult'
+    # the unit of length for non-unit spacing (viewing grid step, opacity
+    # step, depth cue, gradient):
+    #   'smallest': DOC KERNELS.md opacity_step, view.hpp, HARDENING:
+    #               the smallest voxel spacing
+    #   'largest' : the largest
+    spacing_unit: str = 'smallest'
+    # gradient (thesis eq 4.3's operator):
+    #   'physical': HDR shade.hpp / CODE shade.cpp: central differences over
+    #               the physical distance, value units per unit length
+    #   'index'   : per voxel index, the spacing ignored
+    grad_scale: str = 'physical'
+    # sample positions:
+    #   'grid' : DOC README "Conventions", KERNELS.md sv_view: the first
+    #            sample's position and the grid's three steps rounded to
+    #            32.32 fixed point (see Geometry.grid)
+    #   'float': float64 throughout (within about 1e-8 voxel of 'grid';
+    #            samples on a voxel boundary or half-way may fall the other way)
+    positions: str = 'grid'
+    # a ramp beyond its first and last points:
+    #   'held': HDR classify.hpp Ramp: "constant beyond the ends"
+    #   'zero': 0 there
+    ramp_ends: str = 'held'
+    # the fraction t = x - floor(x) that decides the order-0 and order-2
+    # ties at t = 1/2:
+    #   'float32': HDR view.hpp fixed_frac: the 32-bit fraction as a float
+    #              (24 bits: a t within 2^-25 of 1/2 is 1/2)
+    #   'exact'  : the fraction itself
+    tie_frac: str = 'float32'
+
+
 # ----------------------------------------------------------------- rotation
-def rotation(theta, phi, varphi):
-    """DOC thesis eq 5.2: T = A(varphi) B(phi) C(theta), degrees."""
+def _snap(v):
+    """sin and cos of a multiple of 30 degrees are 0, +-1/2 or +-1 exactly;
+    the double's values are an ulp off.  simdvol's viewing grid is 32.32
+    fixed point (DOC README "Conventions", KERNELS.md sv_view), whose
+    2^-32 cannot hold that ulp, so its grid holds the exact values.  Ours
+    (Geometry.grid) rounds the same way; this keeps --positions float's
+    axis-aligned views exact too (a sample half-way between two voxels is
+    then half-way, as there)."""
+    for e in (0.0, 0.5, -0.5, 1.0, -1.0):
+        if abs(v - e) < 1e-15:
+            return e
+    return v
+
+
+def _factors(theta, phi, varphi):
     t, p, v = (math.radians(a) for a in (theta, phi, varphi))
-    A = np.array([[0, 0, 1], [-math.sin(v), math.cos(v), 0], [math.cos(v), math.sin(v), 0]])
-    B = np.array([[math.sin(p), 0, math.cos(p)], [0, 1, 0], [math.cos(p), 0, -math.sin(p)]])
-    C = np.array([[math.cos(t), math.sin(t), 0], [-math.sin(t), math.cos(t), 0], [0, 0, 1]])
-    T = A @ B @ C
-    Ti = np.rint(T)
-    if np.abs(T - Ti).max() > 1e-9:
-        raise ValueError("not an axis-aligned view: %s" % T)
-    assert abs(np.linalg.det(Ti) - 1) < 1e-12
-    return Ti.astype(int)
+    ct, st = _snap(math.cos(t)), _snap(math.sin(t))
+    cp, sp = _snap(math.cos(p)), _snap(math.sin(p))
+    cv, sv = _snap(math.cos(v)), _snap(math.sin(v))
+    A = np.array([[0, 0, 1], [-sv, cv, 0], [cv, sv, 0]], float)
+    B = np.array([[sp, 0, cp], [0, 1, 0], [cp, 0, -sp]], float)
+    C = np.array([[ct, st, 0], [-st, ct, 0], [0, 0, 1]], float)
+    return A, B, C
+
+
+def rotation(theta, phi, varphi, conv=None):
+    """DOC thesis eq 5.2: T = A(varphi) B(phi) C(theta), degrees; object ->
+    viewing space.  Returns the matrix M with which a viewing position p
+    lands in object space at p @ M (= T^T p)."""
+    rule = conv.rotation if conv else 'eq5.2'
+    if rule == 'neg-angles':
+        A, B, C = _factors(-theta, -phi, -varphi)
+    else:
+        A, B, C = _factors(theta, phi, varphi)
+    T = C @ B @ A if rule == 'reversed' else A @ B @ C
+    assert np.abs(T @ T.T - np.eye(3)).max() < 1e-12 and abs(np.linalg.det(T) - 1) < 1e-12
+    return T.T if rule == 'inverse' else T
 
 
 # --------------------------------------------------------------- classifier
@@ -50,9 +144,23 @@ class Mixture:
     relative: bool = False
 
 
-def load_materials(path):
-    """DOC README 'material NAME MEAN SIGMA R G B OPACITY', 'relative', '#'."""
-    mats, rel = [], False
+@dataclass
+class Ramps:
+    """DOC README "Transfer-function files": opacity = density ramp x
+    gradient ramp (of |grad|), colour = the colour ramp (white without one).
+    A ramp: points (x, y), linear between them; beyond the first and last
+    point its end values (the README's example ends each ramp with a point
+    at the largest value, VolPack's convention; CODE classify.cpp Ramp says
+    the ends are held)."""
+    density: list = field(default_factory=list)
+    gradient: list = field(default_factory=list)
+    colour: list = field(default_factory=list)     # (x, r, g, b)
+
+
+def load_classifier(path):
+    """DOC README: 'material NAME MEAN SIGMA R G B OPACITY', 'relative', or
+    'density x y ...', 'gradient x y ...', 'color x r g b ...'; '#'."""
+    mats, rel, ramps = [], False, Ramps()
     for line in open(path):
         line = line.split('#', 1)[0].split()
         if not line:
@@ -62,23 +170,48 @@ def load_materials(path):
             mats.append(Material(n, float(m), float(s), (float(r), float(g), float(b)), float(a)))
         elif line[0] == 'relative':
             rel = True
+        elif line[0] in ('density', 'gradient'):
+            v = [float(x) for x in line[1:]]
+            getattr(ramps, line[0]).extend(zip(v[0::2], v[1::2]))
+        elif line[0] in ('color', 'colour'):
+            v = [float(x) for x in line[1:]]
+            ramps.colour.extend(zip(v[0::4], v[1::4], v[2::4], v[3::4]))
         else:
             raise ValueError(line)
-    mats.sort(key=lambda m: m.mean)
-    return Mixture(mats, rel)
+    if mats:
+        mats.sort(key=lambda m: m.mean)
+        return Mixture(mats, rel)
+    return ramps
+
+
+load_materials = load_classifier
+
+
+def ramp(points, v, col=1, ends='held'):
+    if not points:
+        return np.ones_like(v)            # DOC README: no colour ramp: white
+    xs = np.array([p[0] for p in points])
+    ys = np.array([p[col] for p in points])
+    if ends == 'zero':
+        return np.interp(v, xs, ys, left=0.0, right=0.0)
+    return np.interp(v, xs, ys)           # linear, ends held
 
 
 AT_MEAN = 'upper'
 
 
-def classify(vol, mix):
-    """DOC thesis eq 4.4 + README: a voxel mixes the two materials whose means
-    bracket its value, fractions in proportion to their Gaussian likelihoods
-    P_m(I) = N(I; mean_m, sigma_m) (normalised densities, 1/sigma included),
-    pure first/last material outside the means.  DOC classify.hpp comment:
-    alpha = sum p a, premultiplied colour = sum p a c.
-    Returns alpha, premultiplied rgb (float64)."""
+def classify(vol, mix, gmag=None, ends='held'):
+    """Returns alpha and the unlit colour C (not premultiplied), float64.
+    Mixture: DOC thesis eq 4.4 + README: a voxel mixes the two materials
+    whose means bracket its value, fractions in proportion to their Gaussian
+    likelihoods N(I; mean, sigma), pure first / last material outside the
+    means; alpha = sum p a, premultiplied colour = sum p a c.
+    Ramps: alpha = density(v) gradient(|g|), C = colour(v)."""
     v = vol.astype(np.float64)
+    if isinstance(mix, Ramps):
+        alpha = ramp(mix.density, v, 1, ends) * ramp(mix.gradient, gmag, 1, ends)
+        C = np.stack([ramp(mix.colour, v, c, ends) for c in (1, 2, 3)], -1)
+        return alpha, C
     if mix.relative:
         lo, hi = v.min(), v.max()
         I = (v - lo) / (hi - lo) if hi > lo else np.zeros_like(v)
@@ -97,10 +230,8 @@ def classify(vol, mix):
     add(last & ~first, np.ones((last & ~first).sum()), M[-1])
     for i in range(len(M) - 1):
         a, b = M[i], M[i + 1]
-        # A value exactly at an inner material's mean is bracketed by two
-        # pairs; 'upper' (CODE classify.cpp: i = last material with
-        # mean_i <= I) mixes it with the next material, 'lower' with the one
-        # before.  The docs do not say.
+        # DOC README: a value exactly at an inner material's mean belongs to
+        # the pair above it ('upper'); 'lower' is the rival.
         if AT_MEAN == 'upper':
             mask = (I >= a.mean) & (I < b.mean)
         else:
@@ -112,7 +243,9 @@ def classify(vol, mix):
         pa = 1.0 / (1.0 + np.exp(lb - la))
         add(mask, pa, a)
         add(mask, 1.0 - pa, b)
-    return alpha, col
+    with np.errstate(invalid='ignore', divide='ignore'):
+        C = np.where(alpha[..., None] > 0, col / alpha[..., None], 0.0)
+    return alpha, C
 
 
 # ------------------------------------------------------------------ shading
@@ -128,69 +261,49 @@ class Shade:
     k2: float = 0.6
 
 
-@dataclass
-class Conventions:
-    # depth cue d per voxel:
-    #   'faces' : d = (voxel centre's depth from the front face) / (extent),
-    #             what README.md said before (0 at the volume's front, 1 at
-    #             its back)
-    #   'sphere': README --depth-cue (CODE shade.cpp): d = (z + R) / 2R over
-    #             the bounding sphere, z the voxel centre (i + 0.5 - n/2)
-    #             along the view
-    depth: str = 'sphere'
-    # CODE classify.cpp: C = min(1, c * Id + Is) (undocumented clamp)
-    clamp_colour: bool = True
-    # z phase of the samples along a ray:
-    #   'code': CODE view.cpp: D = ceil(diagonal) samples centred on the
-    #           volume's centre: z_k = k + 1/2 - D/2 (phase depends on D's parity)
-    #   'half': samples at voxel 'centres' i + 1/2 (as x, y are)
-    #   'int' : samples at the voxel values' positions i
-    zphase: str = 'code'
-    # intermediate image grid for voxel sampling with a 2-D scale:
-    #   'code'   : CODE view.cpp: ceil(W / scale) + 2 pixels, centred
-    #   'aligned': at the 1:1 image's pixel positions
-    igrid: str = 'code'
-
-
-def gradient(v):
-    """DOC thesis eq 4.3 operator; DOC README/DESIGN 'neighbours beyond the
-    volume are edge-replicated' -> one-sided half differences at the edge.
-    Array order is [z, y, x]; returns g as (..., 3) in (x, y, z)."""
+def gradient(v, scale=(1.0, 1.0, 1.0)):
+    """DOC thesis eq 4.3 operator (central differences); DOC README/DESIGN
+    'neighbours beyond the volume are edge-replicated' -> one-sided half
+    differences at the edge.  scale[a] = unit / spacing[a]: the derivative
+    over physical distance (HDR shade.hpp: 'value units per smallest voxel
+    spacing').  Array order [z, y, x]; returns g as (..., 3) in (x, y, z)."""
     f = v.astype(np.float64)
     p = np.pad(f, 1, mode='edge')
-    gx = 0.5 * (p[1:-1, 1:-1, 2:] - p[1:-1, 1:-1, :-2])
-    gy = 0.5 * (p[1:-1, 2:, 1:-1] - p[1:-1, :-2, 1:-1])
-    gz = 0.5 * (p[2:, 1:-1, 1:-1] - p[:-2, 1:-1, 1:-1])
+    gx = 0.5 * (p[1:-1, 1:-1, 2:] - p[1:-1, 1:-1, :-2]) * scale[0]
+    gy = 0.5 * (p[1:-1, 2:, 1:-1] - p[1:-1, :-2, 1:-1]) * scale[1]
+    gz = 0.5 * (p[2:, 1:-1, 1:-1] - p[:-2, 1:-1, 1:-1]) * scale[2]
     return np.stack([gx, gy, gz], axis=-1)
 
 
-def lit_voxels(vol, mix, T, shade, conv, step=1.0):
-    """Premultiplied RGBA per voxel (array [z, y, x, 4]) for view T."""
-    alpha, pcol = classify(vol, mix)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        c = np.where(alpha[..., None] > 0, pcol / alpha[..., None], 0.0)
+def lit_voxels(vol, cls, M, shade, conv, s, step=1.0):
+    """Premultiplied RGBA per voxel (array [z, y, x, 4]).  M: viewing ->
+    object (p @ M); s: spacing in units of the unit length (x, y, z)."""
+    gs = 1.0 / s if conv.grad_scale == 'physical' else np.ones(3)
+    g = gradient(vol, gs)
+    gl = np.sqrt((g * g).sum(-1))
+    alpha, c = classify(vol, cls, gl, conv.ramp_ends)
     if shade.enabled:
-        g = gradient(vol)
-        gl = np.sqrt((g * g).sum(-1))
         L = np.array(shade.light, float)
         L /= np.linalg.norm(L)
         V = np.array([0.0, 0.0, -1.0])          # DOC: z into the scene, observer in -z
         H = (V + L) / np.linalg.norm(V + L)     # DOC thesis eq 4.2
-        Lo, Ho = T.T @ L, T.T @ H               # viewing -> object (T orthonormal)
+        Lo, Ho = L @ M, H @ M                    # viewing -> object (physical)
         with np.errstate(invalid='ignore', divide='ignore'):
             N = np.where(gl[..., None] > 0, g / gl[..., None], 0.0)
         nl = np.abs(N @ Lo)                      # DOC: two-sided |N.L|, |N.H|
         nh = np.abs(N @ Ho)
         nz, ny, nx = vol.shape
-        zz, yy, xx = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing='ij')
-        pos = np.stack([xx, yy, zz], -1) + 0.5   # voxel centres, index space
         dims = np.array([nx, ny, nz], float)
-        depth = (pos - dims / 2) @ T[2]          # viewing z of the voxel centre
+        zz, yy, xx = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing='ij')
+        pos = (np.stack([xx, yy, zz], -1) + 0.5 - dims / 2) * s   # voxel centre, physical
+        vdir = M[2]                              # viewing +z in object space
+        depth = pos @ vdir
+        ext = dims * s
         if conv.depth == 'faces':
-            ext = np.abs(T[2]) @ dims            # extent of the volume along the view
-            d = (depth + ext / 2) / ext
+            e = np.abs(vdir) @ ext
+            d = (depth + e / 2) / e
         else:
-            R = 0.5 * np.linalg.norm(dims)
+            R = 0.5 * math.sqrt(float((ext * ext).sum()))
             d = (depth + R) / (2 * R)
         cue = 1.0 / (shade.k1 + shade.k2 * d)
         Id = shade.ka + cue * shade.kd * nl      # DOC eq 4.1: ambient + cued diffuse
@@ -202,81 +315,157 @@ def lit_voxels(vol, mix, T, shade, conv, step=1.0):
         C = np.minimum(C, 1.0)
     # DOC: opacity corrected for the step, alpha' = 1 - (1 - alpha)^step
     a1 = alpha if step == 1.0 else 1.0 - (1.0 - alpha) ** step
+    a1 = np.where(alpha > 0, a1, 0.0)
     return np.concatenate([a1[..., None] * C, a1[..., None]], axis=-1)
 
 
+# --------------------------------------------------------------- geometry
+def centred(n, step=1.0):
+    return (np.arange(n) + 0.5 - n / 2) * step
+
+
+@dataclass
+class Geometry:
+    M: np.ndarray          # viewing -> object rotation, p @ M
+    s: np.ndarray          # spacing / unit, (x, y, z)
+    dims: np.ndarray       # (nx, ny, nz)
+    step: float            # viewing-grid spacing, unit lengths
+    scale: float           # output pixels per unit length
+    cx: np.ndarray         # grid coordinates of the traced image's rays
+    cy: np.ndarray         #   (viewing position / step), x and y,
+    cz: np.ndarray         #   and of the samples' depths, front to back
+    sampling: str
+    positions: str
+
+    @property
+    def xs(self):
+        return self.cx * self.step
+
+    @property
+    def ys(self):
+        return self.cy * self.step
+
+    def steps(self):
+        """S[b]: the object index-space move of one grid step along viewing
+        axis b.  DOC README: viewing space centred on the volume's centre,
+        which sits at n/2 in index space (voxel i's value at i, it owns
+        [i, i+1)); lengths in unit lengths: X = (T^T p) / s + n/2."""
+        return self.step * self.M / self.s[None, :]
+
+    def grid(self):
+        """(X0, S): sample (i, j, k) lies at X0 + i S[0] + j S[1] + k S[2].
+        'grid': DOC README "Conventions" / KERNELS.md sv_view: the viewing
+        grid maps (i, j, k) to volume coordinates in 32.32 fixed point,
+        X = origin + i step0 + j step1 + k step2: the first sample's position
+        and the three steps, each rounded to 2^-32 (then every position is
+        exact in float64 here).  'float': unrounded float64."""
+        S = self.steps()
+        c0 = np.array([self.cx[0], self.cy[0], self.cz[0]])
+        X0 = self.dims / 2 + c0 @ S
+        if self.positions == 'grid':
+            X0 = np.rint(np.ldexp(X0, 32)) / 2.0 ** 32
+            S = np.rint(np.ldexp(S, 32)) / 2.0 ** 32
+        return X0, S
+
+
+def geometry(shape, spacing, view, size, sampling, fit, conv):
+    nz, ny, nx = shape
+    dims = np.array([nx, ny, nz], float)
+    M = rotation(*view, conv)
+    sp = np.array(spacing, float)
+    unit = sp.min() if conv.spacing_unit == 'smallest' else sp.max()
+    s = sp / unit
+    ext = dims * sp / unit                       # extents in unit lengths
+    longest = ext.max()
+    R = 0.5 * math.sqrt(float((ext * ext).sum()))
+    # DOC README --size / --fit: the longest side (or the diagonal) spans min(W, H)
+    span = longest if fit == 'longest' else 2 * R
+    W, H = size
+    scale = min(W, H) / span
+    # DOC README --sampling: voxel: steps of one (unit) voxel; pixel: of a pixel
+    step = 1.0 if sampling == 'voxel' else span / min(W, H)
+    if conv.zphase == 'code':
+        D = max(1, math.ceil(2 * R / step))       # DOC README: ceil(diagonal / step)
+        cz = centred(D)
+    else:
+        e = np.abs(M[2]) @ ext
+        m = math.ceil(e / 2 / step) + 2
+        cz = np.arange(-m, m) + (0.5 if conv.zphase == 'half' else 0.0)
+    if sampling == 'pixel':                      # DOC: the output's pixel centres
+        cx, cy = centred(W), centred(H)
+    elif conv.igrid == 'code':                   # DOC README: ceil(W / scale) + 2, centred
+        cx, cy = centred(math.ceil(W / scale) + 2), centred(math.ceil(H / scale) + 2)
+    else:
+        m = math.ceil(W / scale / 2) + 1
+        cx = np.arange(-m, m) + 0.5
+        m = math.ceil(H / scale / 2) + 1
+        cy = np.arange(-m, m) + 0.5
+    return Geometry(M, s, dims, step, scale, cx, cy, cz, sampling, conv.positions)
+
+
 # ---------------------------------------------------------- ray casting
-def cast(rgba, dims, T, xs, ys, zs, order):
-    """Composite rays through viewing positions xs (columns) x ys (rows),
-    samples at depths zs (ascending = front to back).  Image [len(ys), len(xs), 4]."""
-    acc = np.zeros((len(ys), len(xs), 4))
-    Y, X = np.meshgrid(ys, xs, indexing='ij')
+def cast(rgba, g, order, conv, nudge=None):
+    """Composite the rays of the grid g (rows g.cy, columns g.cx), samples
+    at g.cz, front to back.  Image [len(cy), len(cx), 4].
+    nudge: a constant offset added to every sample's object position."""
+    acc = np.zeros((len(g.cy), len(g.cx), 4))
+    J, I = np.meshgrid(np.arange(len(g.cy)), np.arange(len(g.cx)), indexing='ij')
     flat = rgba.reshape(-1, 4)
-    n_i = dims.astype(int)
-    for z in zs:                                  # DOC: front to back = increasing z
-        p = np.stack([X, Y, np.full_like(X, z)], -1)
-        obj = p @ T + dims / 2                    # T^T p + n/2 (row vectors)
+    n_i = g.dims.astype(np.int64)
+    X0, S = g.grid()
+    base = X0 + I[..., None] * S[0] + J[..., None] * S[1]
+    if nudge is not None:
+        base = base + np.asarray(nudge, float)
+    for k in range(len(g.cz)):                   # DOC: front to back = increasing z
+        obj = base + k * S[2]
         fl = np.floor(obj)
         # DOC: voxel i owns [i, i+1) for matching -> inside iff floor in [0, n)
         inside = np.all((fl >= 0) & (fl < n_i), axis=-1)
         if not inside.any():
             continue
-        s = sample(flat, n_i, obj[inside], order)
+        s = sample(flat, n_i, obj[inside], order, conv)
+        if order >= 2:
+            s = clamp_sample(s, conv.sample_clamp)
         a = acc[inside]
         acc[inside] = a + (1.0 - a[:, 3:4]) * s   # DOC: over(front, back), premultiplied
     return acc
 
 
-def centred(n, step=1.0):
-    return (np.arange(n) + 0.5 - n / 2) * step
+def clamp_sample(s, rule):
+    """DOC README --order: orders 2 and 3 overshoot, so their samples are
+    clamped to valid opacities: alpha in [0, 1], each premultiplied colour
+    in [0, alpha], before compositing."""
+    if rule == 'none':
+        return s
+    a = np.clip(s[:, 3:4], 0.0, 1.0)
+    if rule == 'alpha':
+        c = s[:, :3]
+    elif rule == 'unit':
+        c = np.clip(s[:, :3], 0.0, 1.0)
+    else:
+        c = np.clip(s[:, :3], 0.0, None)
+        c = np.minimum(c, a)
+    return np.concatenate([c, a], -1)
 
 
 def render(vol, mix, view=(0, 0, 0), size=None, order=1, shade=Shade(), conv=Conventions(),
-           sampling='voxel'):
-    """vol: numpy [z, y, x].  Returns premultiplied RGBA image [H, W, 4].
-    DOC: the volume's longest side spans min(W, H), centred; 0,0,0 looks along
-    +z, x right, y down; viewing space centred on the volume's centre.  DOC
-    'voxel i owns [i, i+1) for matching while its value sits at i for
-    interpolation' -> the centre is at n/2 in the interpolation's index
-    space.  Output pixel centres at x + 1/2 - W/2 (in pixels)."""
-    T = rotation(*view)
+           sampling='voxel', spacing=(1.0, 1.0, 1.0), fit='longest', nudge=None):
+    """vol: numpy [z, y, x].  Returns premultiplied RGBA image [H, W, 4]."""
     nz, ny, nx = vol.shape
-    dims = np.array([nx, ny, nz], float)
-    longest = dims.max()
-    W, H = size if size else (int(longest), int(longest))
-    scale = min(W, H) / longest                   # output pixels per voxel
-    step = 1.0 if sampling == 'voxel' else 1.0 / scale
-    rgba = lit_voxels(vol, mix, T, shade, conv, step)
-    diag = np.linalg.norm(dims)
-    if conv.zphase == 'code':
-        D = max(1, math.ceil(diag / step))        # CODE: ceil(diagonal / step) samples
-        zs = centred(D, step)
-    else:
-        ext = np.abs(T[2]) @ dims
-        m = math.ceil(ext / 2 / step) + 2
-        zs = (np.arange(-m, m) + (0.5 if conv.zphase == 'half' else 0.0)) * step
-    if sampling == 'pixel':                       # DOC: affine map, one sample per pixel
-        return cast(rgba, dims, T, centred(W, step), centred(H, step), zs, order)
-    if scale == 1.0 and conv.igrid == 'code' and W % 2 == 0 and H % 2 == 0:
-        # one pixel per voxel: no warp needed (the intermediate grid's centres
-        # coincide with the output's; checked against the warp path below)
-        return cast(rgba, dims, T, centred(W), centred(H), zs, order)
-    # DOC: voxel sampling at voxel spacing, then a bilinear 2-D scale.
-    if conv.igrid == 'code':
-        # CODE view.cpp: ceil(out / scale) + 2 intermediate pixels, centred
-        Wi, Hi = math.ceil(W / scale) + 2, math.ceil(H / scale) + 2
-        xi, yi = centred(Wi), centred(Hi)
-    else:
-        # 'aligned': the intermediate pixels at the 1:1 image's positions
-        # (half-integers for an even face), one transparent pixel beyond.
-        m = math.ceil(W / scale / 2) + 1
-        xi = np.arange(-m, m) + 0.5
-        m = math.ceil(H / scale / 2) + 1
-        yi = np.arange(-m, m) + 0.5
-    inter = cast(rgba, dims, T, xi, yi, zs, order)
-    u = centred(W) / scale                        # output pixel centres, voxel units
-    v = centred(H) / scale
-    return warp(inter, xi, yi, u, v)
+    if size is None:
+        m = int(max(nx, ny, nz))
+        size = (m, m)
+    W, H = size
+    g = geometry(vol.shape, spacing, view, size, sampling, fit, conv)
+    rgba = lit_voxels(vol, mix, g.M, shade, conv, g.s, g.step)
+    im = cast(rgba, g, order, conv, nudge)
+    if sampling == 'pixel':
+        return im
+    # DOC: voxel sampling at voxel spacing, then a bilinear 2-D scale; the
+    # output pixel centres (x + 1/2 - W/2) / scale in viewing units.
+    u = centred(W) / g.scale
+    v = centred(H) / g.scale
+    return warp(im, g.xs, g.ys, u, v)
 
 
 def warp(im, xi, yi, u, v):
@@ -303,30 +492,60 @@ def warp(im, xi, yi, u, v):
     return top + ty * (bot - top)
 
 
-def sample(flat, n_i, pos, order):
-    nx, ny, nz = n_i
-
-    def idx(ix, iy, iz):
-        ix = np.clip(ix, 0, nx - 1)               # DOC: edge-replicated neighbours
-        iy = np.clip(iy, 0, ny - 1)
-        iz = np.clip(iz, 0, nz - 1)
-        return (iz * ny + iy) * nx + ix
-
+# ------------------------------------------------------------ resampling
+def stencil(x, order, conv):
+    """Nodes and Lagrange weights along one axis for positions x (array).
+    DOC README --order / thesis eq 5.13-5.16: the order-k estimate is the
+    Lagrange polynomial through k + 1 nodes (Aitken's scheme builds it
+    progressively; the value does not depend on how); nested stencils.
+    Nodes (HDR resample.hpp), f = floor(x), t = x - f:
+      order 0: ceil(x - 1/2)            (DOC eq 5.10: a tie goes down)
+      order 1: f, f + 1                 (eq 5.11)
+      order 2: f, f + 1, and f - 1 if t <= 1/2 else f + 2
+      order 3: f - 1, f, f + 1, f + 2
+    The ties are decided on t as Conventions.tie_frac says."""
+    f = np.floor(x)
+    t = x - f
+    td = t.astype(np.float32).astype(np.float64) if conv.tie_frac == 'float32' else t
     if order == 0:
-        # DOC eq 5.10: nearest, a tie (x = k + 1/2) goes to the lower voxel
-        k = np.ceil(pos - 0.5).astype(np.int64)
-        return flat[idx(k[:, 0], k[:, 1], k[:, 2])]
+        return [np.where(td <= 0.5, f, f + 1)], [np.ones_like(x)]
     if order == 1:
-        f = np.floor(pos)
-        t = pos - f
-        f = f.astype(np.int64)
-        out = np.zeros((pos.shape[0], 4))
-        for dx in (0, 1):
-            wx = t[:, 0] if dx else 1 - t[:, 0]
-            for dy in (0, 1):
-                wy = t[:, 1] if dy else 1 - t[:, 1]
-                for dz in (0, 1):
-                    wz = t[:, 2] if dz else 1 - t[:, 2]
-                    out += (wx * wy * wz)[:, None] * flat[idx(f[:, 0] + dx, f[:, 1] + dy, f[:, 2] + dz)]
-        return out
-    raise ValueError("order 0 or 1 only")
+        return [f, f + 1], [1 - t, t]
+    if order == 2:
+        rule = conv.order2
+        if rule == 'centred':
+            low = td <= 0.5
+        elif rule == 'centred-strict':
+            low = td < 0.5
+        elif rule == 'far':
+            low = td > 0.5
+        else:
+            low = np.full(t.shape, rule == 'low')
+        offs = [np.zeros_like(t), np.ones_like(t), np.where(low, -1.0, 2.0)]
+    else:
+        offs = [np.full_like(t, o) for o in (-1.0, 0.0, 1.0, 2.0)]
+    ws = []
+    for i, oi in enumerate(offs):
+        w = np.ones_like(t)
+        for j, oj in enumerate(offs):
+            if j != i:
+                w = w * (t - oj) / (oi - oj)      # eq 5.13
+        ws.append(w)
+    return [f + o for o in offs], ws
+
+
+def sample(flat, n_i, pos, order, conv):
+    nx, ny, nz = n_i
+    (nxs, wxs), (nys, wys), (nzs, wzs) = (stencil(pos[:, a], order, conv) for a in range(3))
+    # DOC: neighbours beyond the volume are edge-replicated
+    ixs = [np.clip(n, 0, nx - 1).astype(np.int64) for n in nxs]
+    iys = [np.clip(n, 0, ny - 1).astype(np.int64) for n in nys]
+    izs = [np.clip(n, 0, nz - 1).astype(np.int64) for n in nzs]
+    out = np.zeros((pos.shape[0], 4))
+    for iz, wz in zip(izs, wzs):
+        for iy, wy in zip(iys, wys):
+            row = (iz * ny + iy) * nx
+            wyz = wy * wz
+            for ix, wx in zip(ixs, wxs):
+                out += (wx * wyz)[:, None] * flat[row + ix]
+    return out
