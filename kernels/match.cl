@@ -249,8 +249,9 @@ __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_pe(
   rects[p] = out;
 }
 
-/* seg_offset[p] = segments before PE p; lofs[p].a = start of PE p's list of
- * links along a (the lists of axis x, then y, then z, each PE-major). One
+/* seg_offset[p] = segments before PE p; lofs[p] = (seg_offset[p], the start
+ * of PE p's list of links along x, along y, along z): component a + 1 for
+ * axis a (the lists of axis x, then y, then z, each PE-major). One
  * work-item. */
 __kernel __attribute__((reqd_work_group_size(WGS, 1, 1))) void simdvol_match_scan(
     global const int4* petot, int pes, global int* seg_offset, global int4* lofs) {
