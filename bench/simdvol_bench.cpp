@@ -432,11 +432,10 @@ std::string fmt_psnr(double p) {
 
 // The reference image of one frame, cached within the run; timed (as
 // time_warm) where its time is reported, rendered once where only its image
-// is compared (the turntables' frames: ms NaN until a timed get).
+// is compared (the turntables' frames: times.count 0 until a timed get).
 struct RefResult {
   Image image;
-  double ms = NAN;        // median of the timed renders
-  Summary times;          // their median, min, max and count
+  Summary times;          // the timed renders' median, min, max and count
   double first_ms = NAN;  // the warm-up render
 };
 class RefCache {
@@ -463,9 +462,10 @@ class RefCache {
                             : render_reference(vol, opt);
     };
     RefResult& r = cache_[k];
-    if (use == Use::timed && std::isnan(r.ms))
-      r.image = time_warm(runs_, render, r.ms, &r.first_ms, &r.times);
-    else if (r.image.width() == 0)
+    if (use == Use::timed && r.times.count == 0) {
+      double median_ms = 0;
+      r.image = time_warm(runs_, render, median_ms, &r.first_ms, &r.times);
+    } else if (r.image.width() == 0)
       r.image = render();
     return r;
   }
@@ -674,7 +674,7 @@ struct Harness {
             r.subray_sweeps >= 0
                 ? refs.get(L.spec.name, *L.vol, opt, RefCache::Use::timed, pes, r.subray_sweeps)
                 : refs.get(L.spec.name, *L.vol, opt);
-        ref_ms = ref.ms;
+        ref_ms = ref.times.median;
         q = psnr(ref.image, img);
         diff = max_abs_diff(ref.image, img);
         j["reference"] = {{"ms", ref_ms},
