@@ -303,13 +303,22 @@ int choose_device(const std::vector<DeviceInfo>& devices, std::optional<int> req
 std::string_view kernel_file(std::string_view name) {
   for (const auto& f : detail::embedded_kernel_files())
     if (f.name == name) return f.source;
-  std::string why = "no embedded kernel file \"" + std::string(name) + "\"";
-  // program_source takes stage names and adds ".cl" itself.
-  if (name.size() > 6 && name.substr(name.size() - 6) == ".cl.cl")
-    why += " (program_source takes the stage's name, \"" +
-           std::string(name.substr(0, name.size() - 6)) + "\", without .cl)";
-  throw ArgumentError("kernel file", why);
+  throw ArgumentError("kernel file", "no embedded kernel file \"" + std::string(name) + "\"");
 }
+
+namespace {
+// The file of a stage named as program_source takes it; a file name given
+// instead ("classify.cl") is said to be one.
+std::string stage_file(std::string_view stage) {
+  std::string file = std::string(stage) + ".cl";
+  if (stage.size() > 3 && stage.substr(stage.size() - 3) == ".cl")
+    throw ArgumentError("kernel file", "no embedded kernel file \"" + file +
+                                           "\" (program_source takes the stage's name, \"" +
+                                           std::string(stage.substr(0, stage.size() - 3)) +
+                                           "\", without .cl)");
+  return file;
+}
+}  // namespace
 
 std::vector<std::string> kernel_files() {
   std::vector<std::string> names;
@@ -330,13 +339,13 @@ void append_part(std::string& s, std::string_view file, std::string_view text) {
 }  // namespace
 
 std::string program_source(std::string_view stage, const Defines& defines) {
-  std::string stage_file = std::string(stage) + ".cl";
-  std::string_view stage_text = kernel_file(stage_file);  // throws first if missing
+  const std::string file = stage_file(stage);
+  std::string_view stage_text = kernel_file(file);  // throws first if missing
   std::string s;
   for (const auto& [name, value] : defines) s += "#define " + name + " " + value + "\n";
   append_part(s, "simdvol_shared.h", kernel_file("simdvol_shared.h"));
   if (stage != "common") append_part(s, "common.cl", kernel_file("common.cl"));
-  append_part(s, stage_file, stage_text);
+  append_part(s, file, stage_text);
   return s;
 }
 
@@ -344,7 +353,7 @@ std::string program_source(std::string_view stage, const Defines& defines,
                            std::initializer_list<std::string_view> then) {
   std::string s = program_source(stage, defines);
   for (std::string_view next : then) {
-    const std::string file = std::string(next) + ".cl";
+    const std::string file = stage_file(next);
     append_part(s, file, kernel_file(file));
   }
   return s;
