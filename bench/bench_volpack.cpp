@@ -125,6 +125,7 @@ Image timed(Row& row, int runs, const std::function<Image()>& render) {
 }  // namespace
 
 int main(int argc, char** argv) try {
+  simdvol::remove_temporary_files_on_signals();
   std::filesystem::path data = std::filesystem::path(SIMDVOL_DATA_DIR) / "brainsmall.den";
   std::vector<int> sizes{256, 512};
   int runs = 5, ref_runs = 3, bf_runs = 2, frames = 1, order = 3, cl_order = 1;

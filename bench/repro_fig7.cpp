@@ -183,6 +183,7 @@ constexpr const char* kUsage =
 }  // namespace
 
 int main(int argc, char** argv) try {
+  simdvol::remove_temporary_files_on_signals();
   std::filesystem::path out, brain = std::filesystem::path(SIMDVOL_DATA_DIR) / "brainsmall.den";
   int64_t pes = 8192;
   int size = 256, order = 1;

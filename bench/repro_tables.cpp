@@ -117,6 +117,7 @@ static_assert(kMaxBalanceSweeps == 64, "kUsage gives S: 0..64");
 }  // namespace
 
 int main(int argc, char** argv) try {
+  simdvol::remove_temporary_files_on_signals();
   int size = 256, image = 256, order = 1, sweeps = kBalanceSweeps;
   int64_t pes = 8192;
   std::vector<double> views{0, 30, 45};

@@ -1085,6 +1085,7 @@ json scaling(int argc, char** argv, const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  simdvol::remove_temporary_files_on_signals();
   Options o;
   try {
     o = parse_args(argc, argv);

@@ -18,6 +18,7 @@
 #include <sstream>
 #include <thread>
 
+#include "../core/temp_files.hpp"
 #include "env_switch.hpp"
 #include "kernel_files.hpp"
 
@@ -656,6 +657,7 @@ void store_binary(const fs::path& file, std::uint64_t check,
   put_u64(data, fnv1a(std::string_view(reinterpret_cast<const char*>(bin.data()), bin.size()),
                       kFnvOffset));
   data.append(bin.begin(), bin.end());
+  const TempFileMark mark(tmp);
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     out.write(data.data(), static_cast<std::streamsize>(data.size()));
@@ -752,7 +754,12 @@ cl::Program Device::build(const std::string& source, const std::string& options)
       log +=
           "\n(no compiler error in the log: PoCL fails so where it cannot write its cache "
           "directory, " +
-          pocl_cache_place() + "; POCL_DEBUG=all shows more)";
+          pocl_cache_place() +
+          (file_size_limit()
+               ? ", or where the file-size limit (ulimit -f, " +
+                     std::to_string(*file_size_limit()) + " bytes) cuts its files short"
+               : std::string()) +
+          "; POCL_DEBUG=all shows more)";
     throw BuildError(err, opts, log);
   }
   if (dir) {

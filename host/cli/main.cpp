@@ -261,6 +261,7 @@ void progress(int done, int total) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  simdvol::remove_temporary_files_on_signals();
   CLI::App app{
       "simdvol: data-parallel volume rendering (Zou 1995) on OpenCL, with a serial reference"};
   app.require_subcommand(1);

@@ -22,6 +22,7 @@
 #include "file_checks.hpp"
 #include "oiio_module.hpp"
 #include "simdvol/error.hpp"
+#include "temp_files.hpp"
 
 namespace simdvol {
 namespace {
@@ -184,9 +185,11 @@ std::vector<unsigned char> png_bytes(const Image& img) {
 // libpng reports errors through this (then longjmps back to write_png).
 struct PngError {
   char message[256] = "";
+  int errno_at_fail = 0;  // libpng's "Write Error" does not say why
 };
 void png_fail(png_structp png, png_const_charp msg) {
   auto* e = static_cast<PngError*>(png_get_error_ptr(png));
+  e->errno_at_fail = errno;
   std::snprintf(e->message, sizeof e->message, "%s", msg ? msg : "libpng error");
   png_longjmp(png, 1);
 }
@@ -215,6 +218,9 @@ bool write_png(const char* path, const unsigned char* rgb, int w, int h, PngErro
   }
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_write_struct(&png, &info);
+    if (std::ferror(f) && err->errno_at_fail != 0)
+      std::snprintf(err->message, sizeof err->message, "cannot write it: %s",
+                    std::strerror(err->errno_at_fail));
     std::fclose(f);
     return false;
   }
@@ -310,6 +316,7 @@ void write_image(const Image& img, const fs::path& path) {
     throw FileError(path, "output directory '" + dir.string() + "' does not exist");
 
   const fs::path tmp = temp_path_for(target);
+  const TempFileMark mark(tmp);
   std::string problem;
   try {
     problem = write_file(img, tmp, format);
@@ -323,7 +330,7 @@ void write_image(const Image& img, const fs::path& path) {
   if (!problem.empty()) {
     std::error_code ignored;
     fs::remove(tmp, ignored);
-    throw FileError(path, problem);
+    throw FileError(path, problem + file_size_limit_note());
   }
 }
 

@@ -27,6 +27,7 @@
 
 #include "file_checks.hpp"
 #include "simdvol/error.hpp"
+#include "temp_files.hpp"
 
 extern "C" {
 #include <nifti2_io.h>
@@ -1610,10 +1611,11 @@ void write_file_atomically(const fs::path& path, std::initializer_list<std::stri
     throw FileError(path,
                     "cannot create a temporary file in " + dir.string() + ": " + errno_text(errno));
   const fs::path tmp(tbuf.data());
+  const TempFileMark mark(tmp);
   auto fail = [&](const std::string& problem) {
     std::error_code ec;
     fs::remove(tmp, ec);
-    throw FileError(path, problem);
+    throw FileError(path, problem + file_size_limit_note());
   };
   ::fchmod(fd, 0644);
   bool ok = true;

@@ -561,6 +561,36 @@ TEST_F(Cli, TurntableStopsAtAFrameItCannotWrite) {
   EXPECT_EQ(simdvol::read_image(path("t_0001.png")).width(), 16);
 }
 
+// A file-size limit (ulimit -f) that cuts the image short: before, SIGXFSZ
+// ended the program (exit 153) with the temporary file left beside the
+// output; now each format's write fails with a message naming the output
+// and the limit, exit 1, the old file kept and nothing left beside it.
+TEST_F(Cli, FileSizeLimitFailsTheWriteAndKeepsTheOldFile) {
+  for (const char* name : {"out.png", "out.exr", "out.tif"}) {
+    SCOPED_TRACE(name);
+    std::ofstream(path(name)) << "kept";
+    // sh's ulimit -f counts 512-byte blocks: 10,240 bytes.
+    const Result r =
+        run_once("render --engine reference --phantom-size 32 --size 256x256 -o " + path(name), "",
+                 "ulimit -f 20;");
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_NE(r.output.find("simdvol: error: " + path(name) + ": "), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("(the file-size limit, ulimit -f, is 10240 bytes)"), std::string::npos)
+        << r.output;
+    std::set<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
+    EXPECT_EQ(names, (std::set<std::string>{name}));
+    std::ifstream in(path(name));
+    EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), {}), "kept");
+    fs::remove(path(name));
+  }
+  // libpng's own message ("Write Error") does not say why: ours does.
+  const Result r =
+      run_once("render --engine reference --phantom-size 32 --size 256x256 -o " + path("out.png"),
+               "", "ulimit -f 20;");
+  EXPECT_NE(r.output.find("cannot write it: File too large"), std::string::npos) << r.output;
+}
+
 TEST_F(Cli, SkipPesLeavesPesOutWithTheSameImage) {
   // --times reports the PEs that got samples: fewer by default (the PEs with
   // nothing in reach take no part) than with --no-skip-pes, and without

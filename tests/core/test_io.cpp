@@ -25,8 +25,10 @@
 #include <string>
 #include <vector>
 
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include "../../host/core/temp_files.hpp"
 #include "dicom_testing.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
@@ -788,7 +790,8 @@ TEST_F(IoTest, AFailedAtomicWriteKeepsTheFileAndLeavesNoTemporary) {
       [&] {
         simdvol::write_file_atomically(file("out.json"), {"{", big, "}"});
       },
-      file("out.json"), {"write failed"});
+      file("out.json"),
+      {"write failed: File too large", "(the file-size limit, ulimit -f, is 4096 bytes)"});
   ::setrlimit(RLIMIT_FSIZE, &old);
   std::signal(SIGXFSZ, old_handler);
   const Bytes kept = read_file(file("out.json"));
@@ -800,6 +803,92 @@ TEST_F(IoTest, AFailedAtomicWriteKeepsTheFileAndLeavesNoTemporary) {
   simdvol::write_file_atomically(file("out.json"), {"{", "}"});
   const Bytes now = read_file(file("out.json"));
   EXPECT_EQ(std::string(now.begin(), now.end()), "{}");
+}
+
+// remove_temporary_files_on_signals(): a signal that ends the program
+// (SIGINT from ^C, SIGTERM, SIGHUP, SIGQUIT) removes the temporary files of
+// the writes in progress and still ends it by that signal; a file whose
+// mark was let go (renamed into place) stays. Each case runs in a child
+// process, which the signal ends.
+namespace {
+
+/// Forks; the child makes `marked` (marked) and `kept` (its mark let go),
+/// calls `setup`, raises `sig` and would exit 7 after it. Returns the
+/// child's wait status.
+int raise_in_child(int sig, const fs::path& marked, const fs::path& kept, void (*setup)()) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const rlimit no_core{0, 0};
+    ::setrlimit(RLIMIT_CORE, &no_core);  // SIGQUIT's default action dumps core
+    setup();
+    { const simdvol::TempFileMark gone(kept); }
+    const simdvol::TempFileMark mark(marked);
+    std::ofstream(marked) << "partial";
+    std::ofstream(kept) << "renamed into place";
+    ::raise(sig);
+    ::_exit(7);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return status;
+}
+
+}  // namespace
+
+TEST_F(IoTest, EndingSignalsRemoveTheTemporaryFiles) {
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) {
+    SCOPED_TRACE(strsignal(sig));
+    const fs::path tmp = file("out.tmp-1.png"), kept = file("kept.png");
+    const int status =
+        raise_in_child(sig, tmp, kept, [] { simdvol::remove_temporary_files_on_signals(); });
+    ASSERT_TRUE(WIFSIGNALED(status)) << status;  // ended by the signal, as without the handler
+    EXPECT_EQ(WTERMSIG(status), sig);
+    EXPECT_FALSE(fs::exists(tmp));
+    EXPECT_TRUE(fs::exists(kept));
+    fs::remove(kept);
+  }
+  // Without the handlers (as before, and in a library's caller that did not
+  // ask for them) the temporary file stays.
+  const int status = raise_in_child(SIGTERM, file("a.tmp"), file("b"), [] {});
+  ASSERT_TRUE(WIFSIGNALED(status));
+  EXPECT_EQ(WTERMSIG(status), SIGTERM);
+  EXPECT_TRUE(fs::exists(file("a.tmp")));
+  // A signal the program ignores (nohup's SIGHUP) stays ignored.
+  const int ignored = raise_in_child(SIGHUP, file("c.tmp"), file("d"), [] {
+    std::signal(SIGHUP, SIG_IGN);
+    simdvol::remove_temporary_files_on_signals();
+  });
+  ASSERT_TRUE(WIFEXITED(ignored)) << ignored;
+  EXPECT_EQ(WEXITSTATUS(ignored), 7);
+  EXPECT_TRUE(fs::exists(file("c.tmp")));
+}
+
+// The file-size limit: with the handlers a write past it is a FileError
+// (EFBIG), where SIGXFSZ ended the process and left the temporary file.
+TEST_F(IoTest, FileSizeLimitIsAnErrorWithTheHandlers) {
+  write_file(file("out.json"), std::string("old contents"));
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    simdvol::remove_temporary_files_on_signals();
+    const rlimit small{4096, RLIM_INFINITY};
+    ::setrlimit(RLIMIT_FSIZE, &small);
+    try {
+      simdvol::write_file_atomically(file("out.json"), {std::string(100000, 'x')});
+    } catch (const simdvol::FileError& e) {
+      ::_exit(std::string(e.what()).find("File too large") != std::string::npos ? 0 : 2);
+    }
+    ::_exit(3);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status)) << "ended by signal "
+                                 << (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  const Bytes kept = read_file(file("out.json"));
+  EXPECT_EQ(std::string(kept.begin(), kept.end()), "old contents");
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"out.json"}));
 }
 
 // ------------------------------------------------------------- NIfTI

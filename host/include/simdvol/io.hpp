@@ -171,6 +171,16 @@ Volume load_volume(const std::filesystem::path& path,
 void write_file_atomically(const std::filesystem::path& path,
                            std::initializer_list<std::string_view> parts);
 
+/// For programs (the library installs no handler unless asked): SIGINT,
+/// SIGTERM, SIGHUP and SIGQUIT first remove the temporary files of the
+/// writes in progress (write_file_atomically, write_image, save_nrrd, the
+/// program cache), then end the process as before; and a write past the
+/// file-size limit (ulimit -f) fails as a FileError ("File too large")
+/// instead of SIGXFSZ ending the process. A signal the program already
+/// ignores or handles keeps its disposition. The simdvol program and the
+/// bench programs call it first.
+void remove_temporary_files_on_signals();
+
 /// Writes an attached-header NRRD (raw encoding) in the volume's own type,
 /// atomically: a temporary file beside `path`, then rename. A volume with
 /// an orientation is written in RAS space, its axes' directions scaled by
