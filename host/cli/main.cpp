@@ -682,60 +682,81 @@ int main(int argc, char** argv) {
       // elsewhere the future's destructor waits for the write to finish, so
       // no temporary file is left behind.
       std::future<void> writing;
-      for (int f = 0; f < frames; ++f) {
-        opt.view.phi = phi0 + f * step;
-        Image img;
-        if (device) {
-          EngineTimes t;
-          EngineStats st;
-          img = gpu->render(vol, opt, &t, show_times ? &st : nullptr);
-          if (!trace.empty()) traced.push_back(std::move(t.kernels));
-          if (show_times) {
-            std::ostringstream os;
-            os << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
-               << " PEs): layout " << t.layout_ms << " ms, shade " << t.shade_ms << " ms, classify "
-               << t.classify_ms << " ms, match " << t.match_ms << " ms, balance " << t.balance_ms
-               << " ms, resample+local " << t.resample_local_ms << " ms (brick occupancy "
-               << t.occupancy_ms << " ms), offsets " << t.offsets_ms << " ms, ray lists "
-               << t.rays_ms << " ms, walks " << t.walk_ms << " ms, plan " << t.plan_ms
-               << " ms (host), swap " << t.swap_ms << " ms (";
-            for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
-              os << (k ? " " : "") << t.swap_stage_ms[k];
-            const auto busy =
-                std::count_if(st.loads.begin(), st.loads.end(), [](int64_t l) { return l > 0; });
-            os << "), display " << t.display_ms << " ms, warp " << t.warp_ms << " ms; frame wall "
-               << t.device_wall_ms << " ms; kernels " << t.kernels_ms << " ms in a " << t.span_ms
-               << " ms span";
-            if (t.longest_wait_ms > 0)
-              os << " (longest wait " << t.longest_wait_ms << " ms, before "
-                 << t.longest_wait_before << ")";
-            os << "; " << st.samples << " samples on " << busy << " of " << st.loads.size()
-               << " PEs, utilisation " << st.utilisation();
-            if (st.unshaded_pes > 0) os << ", shade left out " << st.unshaded_pes << " PEs";
-            if (st.classification_kept) os << ", classification kept";
-            if (st.classification_let_go) os << ", classification let go (memory ran out)";
-            os << "\n";
-            std::cerr << os.str();
+      // A frame that fails (out of memory, a frame it cannot write) still
+      // leaves the trace of the frames rendered before it: that is where
+      // one looks for why.
+      const auto write_trace_of_frames_before_error = [&] {
+        if (trace.empty() || traced.empty()) return;
+        try {
+          write_file_atomically(tracep, {kernel_trace_json(traced)});
+          std::cerr << "simdvol: note: --trace " << tracep.string() << " holds the "
+                    << (traced.size() == 1 ? std::string("frame")
+                                           : std::to_string(traced.size()) + " frames")
+                    << " rendered before the error\n";
+        } catch (const std::exception& e) {
+          std::cerr << "simdvol: note: --trace not written: " << e.what() << "\n";
+        }
+      };
+      try {
+        for (int f = 0; f < frames; ++f) {
+          opt.view.phi = phi0 + f * step;
+          Image img;
+          if (device) {
+            EngineTimes t;
+            EngineStats st;
+            img = gpu->render(vol, opt, &t, show_times ? &st : nullptr);
+            if (!trace.empty()) traced.push_back(std::move(t.kernels));
+            if (show_times) {
+              std::ostringstream os;
+              os << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
+                 << " PEs): layout " << t.layout_ms << " ms, shade " << t.shade_ms
+                 << " ms, classify " << t.classify_ms << " ms, match " << t.match_ms
+                 << " ms, balance " << t.balance_ms << " ms, resample+local " << t.resample_local_ms
+                 << " ms (brick occupancy " << t.occupancy_ms << " ms), offsets " << t.offsets_ms
+                 << " ms, ray lists " << t.rays_ms << " ms, walks " << t.walk_ms << " ms, plan "
+                 << t.plan_ms << " ms (host), swap " << t.swap_ms << " ms (";
+              for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
+                os << (k ? " " : "") << t.swap_stage_ms[k];
+              const auto busy =
+                  std::count_if(st.loads.begin(), st.loads.end(), [](int64_t l) { return l > 0; });
+              os << "), display " << t.display_ms << " ms, warp " << t.warp_ms << " ms; frame wall "
+                 << t.device_wall_ms << " ms; kernels " << t.kernels_ms << " ms in a " << t.span_ms
+                 << " ms span";
+              if (t.longest_wait_ms > 0)
+                os << " (longest wait " << t.longest_wait_ms << " ms, before "
+                   << t.longest_wait_before << ")";
+              os << "; " << st.samples << " samples on " << busy << " of " << st.loads.size()
+                 << " PEs, utilisation " << st.utilisation();
+              if (st.unshaded_pes > 0) os << ", shade left out " << st.unshaded_pes << " PEs";
+              if (st.classification_kept) os << ", classification kept";
+              if (st.classification_let_go) os << ", classification let go (memory ran out)";
+              os << "\n";
+              std::cerr << os.str();
+            }
+          } else {
+            RenderTimes t;
+            img = eo.mc_scope == McScope::subray
+                      ? render_subray_reference(vol, opt, eo.pes, eo.balance_sweeps, allocate, &t)
+                      : render_reference(vol, opt, &t);
+            if (show_times)
+              std::cerr << "frame " << f << " (reference): shade " << t.shade_ms << " ms, classify "
+                        << t.classify_ms << " ms, resample+composite " << t.resample_composite_ms
+                        << " ms, warp " << t.warp_ms << " ms\n";
           }
-        } else {
-          RenderTimes t;
-          img = eo.mc_scope == McScope::subray
-                    ? render_subray_reference(vol, opt, eo.pes, eo.balance_sweeps, allocate, &t)
-                    : render_reference(vol, opt, &t);
-          if (show_times)
-            std::cerr << "frame " << f << " (reference): shade " << t.shade_ms << " ms, classify "
-                      << t.classify_ms << " ms, resample+composite " << t.resample_composite_ms
-                      << " ms, warp " << t.warp_ms << " ms\n";
+          if (writing.valid()) {
+            writing.get();
+            progress(f, frames);
+          }
+          writing = std::async(
+              std::launch::async,
+              [im = std::move(img), p = numbered(outp, f, frames)] { write_image(im, p); });
         }
-        if (writing.valid()) {
-          writing.get();
-          progress(f, frames);
-        }
-        writing = std::async(
-            std::launch::async,
-            [im = std::move(img), p = numbered(outp, f, frames)] { write_image(im, p); });
+        writing.get();
+      } catch (...) {
+        if (writing.valid()) writing.wait();  // its temporary file gone before the trace
+        write_trace_of_frames_before_error();
+        throw;
       }
-      writing.get();
       progress(frames, frames);
       if (!trace.empty()) write_file_atomically(tracep, {kernel_trace_json(traced)});
       if (frames == 1) std::cout << "wrote " << fs::absolute(outp).string() << "\n";

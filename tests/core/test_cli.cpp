@@ -807,6 +807,41 @@ TEST_F(Cli, KeptClassificationLetGoWhereMemoryRunsOut) {
   }
 }
 
+// --trace of a turntable that fails part way: the frames rendered before
+// the error are in the trace (before, it was written only after the last
+// frame, and a failure lost it all), with a note saying so; the error is
+// still the exit status.
+TEST_F(Cli, TraceKeepsTheFramesBeforeAnError) {
+  const std::string tf = path("tf.txt");
+  std::ofstream(tf) << "density 0 0 24 1 255 1\ngradient 0 0 5 0 20 1 221 1\ncolor 0 1 1 1\n";
+  // The footprints' second request: frame 1 (a transfer function keeps no
+  // classification, so frame 0 asks for them once).
+  const Result r =
+      run("render --phantom-size 32 --size 32x32 --classify " + tf +
+              " --frames 4 --step 30 --trace " + path("t.json") + " -o " + path("t.png"),
+          "SIMDVOL_FAIL_ALLOCATION=footprints:2");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("clCreateBuffer(footprints, "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("simdvol: note: --trace " + path("t.json") +
+                          " holds the frame rendered before the error"),
+            std::string::npos)
+      << r.output;
+  std::ifstream in(path("t.json"));
+  const std::string json((std::istreambuf_iterator<char>(in)), {});
+  EXPECT_NE(json.find("\"name\": \"simdvol_layout\""), std::string::npos) << json.substr(0, 400);
+  EXPECT_NE(json.find("\"frame\": 0"), std::string::npos);
+  EXPECT_EQ(json.find("\"frame\": 1"), std::string::npos);
+  EXPECT_TRUE(fs::exists(path("t_0000.png")));
+  EXPECT_FALSE(fs::exists(path("t_0001.png")));
+  // Without the failure all four frames are in it.
+  const Result ok = run("render --phantom-size 32 --size 32x32 --classify " + tf +
+                        " --frames 4 --step 30 --trace " + path("t.json") + " -o " + path("t.png"));
+  ASSERT_EQ(ok.code, 0) << ok.output;
+  std::ifstream in2(path("t.json"));
+  const std::string all((std::istreambuf_iterator<char>(in2)), {});
+  EXPECT_NE(all.find("\"frame\": 3"), std::string::npos);
+}
+
 // A single frame keeps no classification (it would only write it, and hold
 // as much memory as the RGBA voxel cells): it never asks for the kept
 // planes, so a failure injected there changes nothing.
