@@ -1,15 +1,19 @@
 """Independent renderer for simdvol, written from the documented mathematics
 (README render table, "Transfer-function files", "Where the samples lie";
 ../shared/DESIGN.md; thesis eq 4.1-4.4, 5.2, 5.10-5.17, 7.2;
-docs/KERNELS.md's sv_view and opacity_step; the public headers' comments).
-numpy only, float64 throughout.
+docs/KERNELS.md's sv_view, opacity_step and mc.cl; thesis ch. 7; the
+public headers' comments).
+numpy only, float64 throughout but for Monte Carlo's walks (float32, as
+simdvol's).
 
 Scope: any view T(theta, phi, varphi) (eq 5.2), --sampling voxel (rays at
 voxel spacing into an intermediate image, then a bilinear 2-D scale) and
 pixel, --fit longest and diagonal, --order 0..3 (Aitken / Lagrange on
 nested stencils, samples of orders 2 and 3 clamped to valid opacities),
-any voxel spacing, --composite direct, material-mixture and
-density / gradient / color ramp classifiers, shaded or not.
+any voxel spacing, --composite direct, adaptive and mc (whole ray,
+reproduced draw for draw: Philox4x32-10; and the estimate's exact
+distribution, for the statistics), material-mixture and density / gradient
+/ color ramp classifiers, shaded or not.
 
 Conventions and where each comes from are marked DOC (README / DESIGN /
 KERNELS / HARDENING / thesis), HDR (a public header's comment,
@@ -86,6 +90,24 @@ class Conventions:
     #              (24 bits: a t within 2^-25 of 1/2 is 1/2)
     #   'exact'  : the fraction itself
     tie_frac: str = 'float32'
+    # the fraction t in the interpolation weights:
+    #   'exact'  : t itself (the direct cases: within 2^-25 of 'float32')
+    #   'float32': DOC README "Where the samples lie": 'a sample's fraction
+    #              within its voxel is a float' (HDR view.hpp fixed_frac): a
+    #              t within 2^-25 of 1 is 1, so the weight 1 - t of a voxel
+    #              is 0 where 'exact' gives it 1e-9.  The adaptive and Monte
+    #              Carlo cases take this: the exact-opacity draws are keyed by
+    #              the first sample with alpha > 0, which such a weight decides.
+    weight_frac: str = 'exact'
+    # voxel alphas near 0 (no matter to direct compositing; they decide the
+    # first sample with alpha > 0, which keys the exact-opacity draws):
+    #   'plain'  : alpha as computed, 1 - (1 - alpha)^step in float64 (0 for
+    #              alpha below 1e-16)
+    #   'float32': CODE classify.cpp:313-324: an alpha below 2^-126
+    #              (FLT_MIN, where the device's float exp stops) is 0, and
+    #              the correction without the cancellation of 1 - alpha,
+    #              -expm1(step log1p(-alpha)), the step as a float
+    tiny_alphas: str = 'plain'
 
 
 # ----------------------------------------------------------------- rotation
@@ -240,9 +262,11 @@ def classify(vol, mix, gmag=None, ends='held'):
         x = I[mask]
         la = -0.5 * ((x - a.mean) / a.sigma) ** 2 - math.log(a.sigma)
         lb = -0.5 * ((x - b.mean) / b.sigma) ** 2 - math.log(b.sigma)
-        pa = 1.0 / (1.0 + np.exp(lb - la))
-        add(mask, pa, a)
-        add(mask, 1.0 - pa, b)
+        # each fraction on its own: 1 - pa would lose the upper material's
+        # share below 1e-16, which float32 keeps (tiny alphas decide which
+        # sample is the first with alpha > 0: Monte Carlo's exact opacity)
+        add(mask, 1.0 / (1.0 + np.exp(lb - la)), a)
+        add(mask, 1.0 / (1.0 + np.exp(la - lb)), b)
     with np.errstate(invalid='ignore', divide='ignore'):
         C = np.where(alpha[..., None] > 0, col / alpha[..., None], 0.0)
     return alpha, C
@@ -314,7 +338,13 @@ def lit_voxels(vol, cls, M, shade, conv, s, step=1.0):
     if conv.clamp_colour:
         C = np.minimum(C, 1.0)
     # DOC: opacity corrected for the step, alpha' = 1 - (1 - alpha)^step
-    a1 = alpha if step == 1.0 else 1.0 - (1.0 - alpha) ** step
+    if conv.tiny_alphas == 'float32':
+        alpha = np.where(alpha >= 2.0 ** -126, alpha, 0.0)
+        st = float(np.float32(step))
+        with np.errstate(divide='ignore'):
+            a1 = alpha if step == 1.0 else -np.expm1(st * np.log1p(-alpha))
+    else:
+        a1 = alpha if step == 1.0 else 1.0 - (1.0 - alpha) ** step
     a1 = np.where(alpha > 0, a1, 0.0)
     return np.concatenate([a1[..., None] * C, a1[..., None]], axis=-1)
 
@@ -507,6 +537,8 @@ def stencil(x, order, conv):
     f = np.floor(x)
     t = x - f
     td = t.astype(np.float32).astype(np.float64) if conv.tie_frac == 'float32' else t
+    if conv.weight_frac == 'float32':
+        t = t.astype(np.float32).astype(np.float64)
     if order == 0:
         return [np.where(td <= 0.5, f, f + 1)], [np.ones_like(x)]
     if order == 1:
@@ -549,3 +581,535 @@ def sample(flat, n_i, pos, order, conv):
             for ix, wx in zip(ixs, wxs):
                 out += (wx * wyz)[:, None] * flat[row + ix]
     return out
+
+
+# ------------------------------------------------------ samples per ray
+def ray_samples(rgba, g, order, conv, nudge=None):
+    """The samples of every ray of the grid g, as cast() composites them:
+    array [D, len(cy), len(cx), 4] (k = 0 .. D - 1 front to back, the depth
+    index of DOC README "Where the samples lie"), premultiplied, 0 outside
+    the volume (DOC: such a sample is transparent, so it changes no
+    compositing mode)."""
+    out = np.zeros((len(g.cz), len(g.cy), len(g.cx), 4))
+    J, I = np.meshgrid(np.arange(len(g.cy)), np.arange(len(g.cx)), indexing='ij')
+    flat = rgba.reshape(-1, 4)
+    n_i = g.dims.astype(np.int64)
+    X0, S = g.grid()
+    base = X0 + I[..., None] * S[0] + J[..., None] * S[1]
+    if nudge is not None:
+        base = base + np.asarray(nudge, float)
+    for k in range(len(g.cz)):
+        obj = base + k * S[2]
+        fl = np.floor(obj)
+        inside = np.all((fl >= 0) & (fl < n_i), axis=-1)
+        if not inside.any():
+            continue
+        s = sample(flat, n_i, obj[inside], order, conv)
+        if order >= 2:
+            s = clamp_sample(s, conv.sample_clamp)
+        out[k][inside] = s
+    return out
+
+
+def composite_adaptive(smp, threshold, stop='levoy', compare='float32'):
+    """DOC README --composite adaptive: front-to-back over as direct,
+    stopping at --threshold (Levoy); HDR composite.hpp: 'stopping once
+    accumulated alpha >= threshold', i.e. before each sample the ray stops if
+    its alpha has reached the threshold (so the sample that reaches it is
+    composited).  The threshold and the accumulated alpha are floats (HDR
+    CompositeParams, Rgba; the CLI's FLOAT): compared as float32 (a ray
+    into bone of opacity 0.3 reaches 0.3f exactly, at --threshold 0.3,
+    where float64's 0.3 lies below 0.3f; rival compare='float64': the
+    threshold's float against our float64 alpha).  Rivals (stop=):
+      'early': the sample whose over would reach the threshold is left out
+      'late' : one more sample after the one that reaches it."""
+    thr = np.float32(threshold)
+    if compare == 'float32':
+        reached = lambda acc: acc[..., 3].astype(np.float32) >= thr  # noqa: E731
+    else:
+        reached = lambda acc: acc[..., 3] >= float(thr)  # noqa: E731
+    acc = np.zeros(smp.shape[1:])
+    done = np.zeros(smp.shape[1:-1], bool)
+    extra = np.zeros(smp.shape[1:-1], bool)
+    for s in smp:
+        nxt = acc + (1.0 - acc[..., 3:4]) * s
+        if stop == 'early':
+            done |= reached(nxt)
+        take = ~done
+        acc = np.where(take[..., None], nxt, acc)
+        if stop == 'late':
+            done |= extra
+            extra |= reached(acc)
+        elif stop == 'levoy':
+            done |= reached(acc)
+    return acc
+
+
+def render_samples(vol, mix, view=(0, 0, 0), size=None, order=1, shade=Shade(),
+                   conv=Conventions(), sampling='voxel', spacing=(1.0, 1.0, 1.0),
+                   fit='longest', nudge=None):
+    """(geometry, samples [D, Hi, Wi, 4]) of render()'s rays."""
+    nz, ny, nx = vol.shape
+    if size is None:
+        m = int(max(nx, ny, nz))
+        size = (m, m)
+    g = geometry(vol.shape, spacing, view, size, sampling, fit, conv)
+    rgba = lit_voxels(vol, mix, g.M, shade, conv, g.s, g.step)
+    return g, ray_samples(rgba, g, order, conv, nudge)
+
+
+def finish(g, im, size):
+    """The intermediate image to the output: pixel sampling as it is, voxel
+    sampling through render()'s bilinear warp (DOC KERNELS.md section 4:
+    adaptive and Monte Carlo leave an intermediate image, then the warp)."""
+    if g.sampling == 'pixel':
+        return im
+    W, H = size
+    return warp(im, g.xs, g.ys, centred(W) / g.scale, centred(H) / g.scale)
+
+
+def warp_is_pick(g, size):
+    """Where voxel sampling's warp takes every output pixel from exactly one
+    intermediate pixel (1:1, the output's pixel centres on the rays), the
+    intermediate (row, column) of each output row and column, else None.
+    Pixel sampling: the identity."""
+    W, H = size
+    if g.sampling == 'pixel':
+        return np.arange(H), np.arange(W)
+    fx = (centred(W) / g.scale - g.xs[0]) / (g.xs[1] - g.xs[0])
+    fy = (centred(H) / g.scale - g.ys[0]) / (g.ys[1] - g.ys[0])
+    if np.any(fx != np.floor(fx)) or np.any(fy != np.floor(fy)):
+        return None
+    return fy.astype(int), fx.astype(int)
+
+
+# --------------------------------------------------------------- Philox
+# DOC README --streams: Philox4x32-10 (Salmon et al., SC'11; Random123)
+# keyed by --seed.  Vectorised: uint64 holds every 32 x 32 product.
+_MASK = np.uint64(0xFFFFFFFF)
+_PHILOX_M = (np.uint64(0xD2511F53), np.uint64(0xCD9E8D57))
+_PHILOX_W = (0x9E3779B9, 0xBB67AE85)
+
+
+def philox4x32_10(c, k):
+    """c: four arrays (broadcast together) of 32-bit counter words, k: the
+    two key words (ints).  Returns the four output words (uint64 arrays)."""
+    c0, c1, c2, c3 = (np.asarray(x, np.uint64) & _MASK for x in c)
+    c0, c1, c2, c3 = np.broadcast_arrays(c0, c1, c2, c3)
+    k0, k1 = int(k[0]) & 0xFFFFFFFF, int(k[1]) & 0xFFFFFFFF
+    for _ in range(10):
+        p0 = _PHILOX_M[0] * c0
+        p1 = _PHILOX_M[1] * c2
+        c0, c1, c2, c3 = ((p1 >> np.uint64(32)) ^ c1 ^ np.uint64(k0), p1 & _MASK,
+                          (p0 >> np.uint64(32)) ^ c3 ^ np.uint64(k1), p0 & _MASK)
+        k0 = (k0 + _PHILOX_W[0]) & 0xFFFFFFFF
+        k1 = (k1 + _PHILOX_W[1]) & 0xFFFFFFFF
+    return c0, c1, c2, c3
+
+
+# Random123's known answers (kat_vectors: philox4x32 10 rounds)
+PHILOX_KAT = [
+    ((0, 0, 0, 0), (0, 0), (0x6627e8d5, 0xe169c58d, 0xbc57ac4c, 0x9b00dbd8)),
+    ((0xffffffff,) * 4, (0xffffffff,) * 2, (0x408f276d, 0x41c83b0e, 0xa20bc7c6, 0x6d5451fd)),
+    ((0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344), (0xa4093822, 0x299f31d0),
+     (0xd16cfe09, 0x94fdcceb, 0x5001e420, 0x24126ea1)),
+]
+
+
+def philox_selftest():
+    for c, k, want in PHILOX_KAT:
+        got = tuple(int(w) for w in philox4x32_10(c, k))
+        assert got == want, ('Philox4x32-10 known answer', c, k, [hex(w) for w in got])
+
+
+@dataclass
+class McConventions:
+    """How simdvol draws a walk's random numbers; DOC = README --streams /
+    KERNELS.md (simdvol_shared.h's section), HDR = a public header's comment
+    (host/include/simdvol/mc.hpp, composite.hpp), CODE = found only in code
+    (each is a doc gap; run_cases.py's docstring lists them)."""
+    # the 32-bit word to u in [0, 1):
+    #   'top24': CODE simdvol_shared.h sv_uniform4: (w >> 8) * 2^-24, a float
+    #            with 24 random bits (HDR-ish: its comment says '24 random bits')
+    #   'low24': (w & 0xFFFFFF) * 2^-24
+    u: str = 'top24'
+    # counter words: DOC README 'counter (ray, walk / 4, depth)', KERNELS.md
+    # '(ray, sample >> 2, step, "simd")'; "simd" as the word 0x73696d64
+    # (CODE: ASCII, first letter in the high byte).  'swap': (ray, depth,
+    # walk / 4)
+    counter: str = 'rqs'
+    simd: int = 0x73696d64
+    # key words: CODE (seed mod 2^32, seed >> 32); 'swap': the other way
+    key: str = 'lohi'
+    # the ray word: HDR mc.hpp: j * width + i on the viewing grid (the
+    # intermediate image with voxel sampling, the output with pixel
+    # sampling); DOC KERNELS.md: SV_SHARED_RAY = 0xFFFFFFFF for every ray
+    # with --streams shared.  Rival 'col': i * height + j.
+    ray: str = 'row'
+    shared_key: int = 0xFFFFFFFF
+    # the depth word: HDR mc.hpp: the ABSOLUTE depth index k of the viewing
+    # grid (0 .. D - 1); rival 'opaque': counted from the ray's first sample
+    # with alpha > 0
+    depth: str = 'absolute'
+    # the exact-opacity draws (stratified walks, the no-stop fallback): HDR
+    # composite.hpp: at the depth of the ray's first sample with alpha > 0;
+    # rival 'zero': at depth 0
+    exact_depth: str = 'opaque'
+    # the colour a walk picks: DOC DESIGN.md / HDR composite.hpp: C'_s /
+    # alpha_s (unpremultiplied); rival 'premult': C'_s
+    colour: str = 'unpremult'
+    # exact opacity when no walk stops: HDR composite.hpp: one pick from the
+    # conditional distribution (walk n's draw); rival 'none': colour 0
+    fallback: str = 'pick'
+    # stratified targets: HDR composite.hpp: t_m = ((m + u_m) / n) * alpha;
+    # rival 'unscaled': (m + u_m) / n
+    strata: str = 'alpha'
+
+
+MC_CONV = McConventions()
+
+
+def uniforms(seed, keys, walks, steps, mc=MC_CONV):
+    """u[..., m] for walks m = 0 .. walks - 1 of rays keys[...] at depth
+    steps[...] (arrays broadcast together): DOC README 'counter (ray,
+    walk / 4, depth), word walk mod 4'."""
+    keys = np.asarray(keys, np.uint64)
+    steps = np.asarray(steps, np.uint64)
+    keys, steps = np.broadcast_arrays(keys, steps)
+    nq = (walks + 3) // 4
+    q = np.arange(nq, dtype=np.uint64)
+    kw = (seed & 0xFFFFFFFF, seed >> 32)
+    if mc.key == 'swap':
+        kw = kw[::-1]
+    r, s = keys[..., None], steps[..., None]
+    ctr = (r, q, s, mc.simd) if mc.counter == 'rqs' else (r, s, q, mc.simd)
+    words = np.stack(philox4x32_10(ctr, kw), -1)           # [..., nq, 4]
+    words = words.reshape(keys.shape + (4 * nq,))[..., :walks]
+    if mc.u == 'low24':
+        words = words & np.uint64(0xFFFFFF)
+    else:
+        words = words >> np.uint64(8)
+    return (words.astype(np.float64) * 2.0 ** -24).astype(np.float32)
+
+
+# --------------------------------------------------------------- Monte Carlo
+@dataclass
+class McParams:
+    samples: int = 32
+    seed: int = 1
+    streams: str = 'per-ray'
+    exact: bool = False
+    stratified: bool = False
+
+
+@dataclass
+class McResult:
+    est: np.ndarray          # [R, 4] float32: the rays' estimates
+    picks: np.ndarray        # [R, n] int: each walk's sample (-1: none)
+    fallback: np.ndarray     # [R] int: exact opacity's conditional pick (-1)
+    alts: list               # (ray, walk, other pick): the near ties
+    col: np.ndarray          # [D, R, 3] float32 picked colours
+    acc: np.ndarray          # [R] float32 exact opacity
+    ray_alts: list = field(default_factory=list)   # (ray, other estimate [4])
+
+
+def mc_keys(shape, p, mc=MC_CONV):
+    Hi, Wi = shape
+    J, I = np.meshgrid(np.arange(Hi), np.arange(Wi), indexing='ij')
+    if p.streams == 'shared':
+        return np.full(Hi * Wi, mc.shared_key, np.uint64)
+    ids = J * Wi + I if mc.ray == 'row' else I * Hi + J
+    return ids.reshape(-1).astype(np.uint64)
+
+
+def _invert(cum, alpha, t):
+    """The conditional pick by inversion (HDR composite.hpp): per ray r and
+    target t[r, m], the first sample s with alpha_s > 0 whose cumulative
+    opacity cum_s exceeds t, else the last sample with alpha_s > 0 (-1: none).
+    cum, alpha: [D, R]."""
+    opq = alpha > 0
+    hit = opq[:, :, None] & (cum[:, :, None] > t[None])
+    first = np.argmax(hit, 0)
+    D = alpha.shape[0]
+    last = np.where(opq.any(0), D - 1 - np.argmax(opq[::-1], 0), -1)
+    return np.where(hit.any(0), first, last[:, None])
+
+
+def _near_invert(cum, alpha, t, pick, eps):
+    """Near ties of _invert: (ray, walk, other pick) where t lies within eps
+    of the boundary below or above the picked sample's interval."""
+    out = []
+    D, R = alpha.shape
+    opq = alpha > 0
+    for r, m in zip(*np.nonzero(pick >= 0)):
+        s = pick[r, m]
+        tt = float(t[r, m])
+        ks = np.nonzero(opq[:, r])[0]
+        i = np.searchsorted(ks, s)
+        below = float(cum[ks[i - 1], r]) if i > 0 else 0.0
+        if i > 0 and abs(tt - below) < eps:
+            out.append((r, m, int(ks[i - 1])))
+        if i + 1 < len(ks) and abs(float(cum[s, r]) - tt) < eps:
+            out.append((r, m, int(ks[i + 1])))
+    return out
+
+
+FLT_MIN = 2.0 ** -126
+
+
+def mc_composite(smp, p, keys, mc=MC_CONV, eps=1e-5, k0=None):
+    """Whole-ray Monte Carlo (DOC README --composite mc, thesis eq 7.3,
+    7.12, 7.13; DESIGN.md; HDR composite.hpp composite_mc_walks) on the
+    samples smp [D, R, 4], in float32 as simdvol stores its samples.
+    Walk m visits the samples front to back and stops at the first s with
+    u(m, s) < alpha_s (thesis 7.2's step (2); u drawn at the ray's key, walk
+    m, depth s), picking C_s = C'_s / alpha_s; a walk that passes every
+    sample picks black.  Plain: colour = mean of the picks, alpha = the
+    fraction of walks that stopped (eq 7.13).  --exact-opacity (ch. 7.5 (a),
+    HDR): alpha = over's recurrence in float, colour = alpha * mean of the
+    stopped walks' picks, or with none stopped (alpha > 0) alpha * C of one
+    pick by inverting the cumulative opacity at t = u * alpha (u: walk n's
+    draw at the depth of the first sample with alpha > 0).  --mc-stratified
+    (README; HDR): walk m draws u_m at that depth and picks by inversion at
+    t_m = ((m + u_m) / n) * alpha; colour = alpha * mean of the picks.
+    eps: a comparison within eps (u against alpha_s, t against a cumulative
+    opacity) is a near tie, whose other outcome goes to alts.  The depth
+    of the exact-opacity draws has near ties too: a sample alpha below
+    FLT_MIN (2^-126) is subnormal or 0 in float32 as the arithmetic's order
+    and rounding make it, so where a ray's first samples with alpha > 0 lie
+    below it, the estimates with the draws keyed at each of them and at the
+    first sample above it go to ray_alts.  k0: the depth of those draws
+    per ray (default: the first sample with float32 alpha > 0)."""
+    n = p.samples
+    s32 = smp.astype(np.float32)
+    D, R = s32.shape[:2]
+    alpha = s32[..., 3]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        col = np.where(alpha[..., None] > 0, s32[..., :3] / alpha[..., None], np.float32(0))
+    if mc.colour == 'premult':
+        col = s32[..., :3].copy()
+    cum = np.zeros((D, R), np.float32)
+    c = np.zeros(R, np.float32)
+    one = np.float32(1)
+    for k in range(D):
+        c = c + (one - c) * alpha[k]
+        cum[k] = c
+    acc = c
+    opq = alpha > 0
+    first_opq = np.where(opq.any(0), np.argmax(opq, 0), 0)
+    given = k0 is not None
+    if not given:
+        k0 = first_opq if mc.exact_depth == 'opaque' else np.zeros(R, int)
+    picks = np.full((R, n), -1)
+    fallback = np.full(R, -1)
+    alts = []
+    if not p.stratified:
+        chase = np.zeros((R, n), bool)
+        for k in range(D):
+            need = (picks == -1).any(1) | chase.any(1)
+            rows = np.nonzero(opq[k] & need)[0]
+            if len(rows) == 0:
+                continue
+            step = k - first_opq[rows] if mc.depth == 'opaque' else np.full(len(rows), k)
+            u = uniforms(p.seed, keys[rows], n, step, mc)
+            a = alpha[k, rows][:, None]
+            stop = u < a
+            near = np.abs(u.astype(np.float64) - a) < eps
+            pr = picks[rows]
+            free = pr == -1
+            for r, m in zip(*np.nonzero(free & ~stop & near)):
+                alts.append((rows[r], m, k))
+            cr = chase[rows]
+            for r, m in zip(*np.nonzero(cr & stop)):
+                alts.append((rows[r], m, k))
+            cr &= ~stop
+            cr |= free & stop & near
+            chase[rows] = cr
+            pr[free & stop] = k
+            picks[rows] = pr
+        for r, m in zip(*np.nonzero(chase)):
+            alts.append((r, m, -1))
+    if p.exact or p.stratified:
+        if p.stratified:
+            u = uniforms(p.seed, keys, n, k0, mc)                      # [R, n]
+            inv_n = np.float32(1) / np.float32(n)
+            t = (np.arange(n, dtype=np.float32)[None] + u) * inv_n
+            t = t * acc[:, None] if mc.strata == 'alpha' else t
+            t = t.astype(np.float32)
+            picks = np.where(acc[:, None] > 0, _invert(cum, alpha, t), -1)
+            alts += _near_invert(cum, alpha, t, picks, eps)
+        else:
+            u = uniforms(p.seed, keys, n + 1, k0, mc)[:, n]
+            t = (u * acc)[:, None].astype(np.float32)
+            fb = np.where(acc > 0, _invert(cum, alpha, t)[:, 0], -1)
+            none = (picks == -1).all(1) & (acc > 0)
+            fallback = np.where(none, fb, -1)
+            if mc.fallback == 'none':
+                fallback[:] = -1
+            alts += [(r, n, o) for r, m, o in _near_invert(cum, alpha, t, fb[:, None], eps)
+                     if none[r]]
+    est = np.stack([mc_estimate(picks[r], fallback[r], col[:, r], acc[r], p)
+                    for r in range(R)]) if R else np.zeros((0, 4), np.float32)
+    ray_alts = []
+    if (p.exact or p.stratified) and mc.exact_depth == 'opaque' and R and not given:
+        a64 = smp[..., 3]
+        pos = a64 > 0
+        tiny = pos & (a64 < FLT_MIN)
+        # the candidates: samples with alpha > 0 up to the first >= FLT_MIN
+        normal = pos & ~tiny
+        first_normal = np.where(normal.any(0), np.argmax(normal, 0), D)
+        cand = pos & (np.arange(D)[:, None] <= first_normal[None])
+        for j in range(1, 4):
+            rank = np.cumsum(cand, 0)
+            sel = cand & (rank == j)
+            rows = np.nonzero(sel.any(0) & tiny.any(0))[0]
+            if len(rows) == 0:
+                break
+            kj = np.argmax(sel[:, rows], 0)
+            rows, kj = rows[kj != k0[rows]], kj[kj != k0[rows]]
+            if len(rows):
+                alt = mc_composite(smp[:, rows], p, keys[rows], mc, eps, kj)
+                ray_alts += [(r, alt.est[i]) for i, r in enumerate(rows)]
+    return McResult(est, picks, fallback, alts, col, acc, ray_alts)
+
+
+def mc_estimate(picks, fallback, col, acc, p):
+    """One ray's estimate from its walks' picks (-1: none) and, for exact
+    opacity, the fallback pick; colour sums in double, as HDR McStats' and
+    KERNELS.md's 'doubles for the Monte Carlo colour sums' say."""
+    n = len(picks)
+    hit = picks >= 0
+    sums = col[picks[hit]].astype(np.float64).sum(0) if hit.any() else np.zeros(3)
+    if not (p.exact or p.stratified):
+        return np.array(list(sums * (1.0 / n)) + [hit.sum() * (1.0 / n)], np.float32)
+    a = float(acc)
+    if p.stratified:
+        rgb = a * (sums * (1.0 / n)) if a > 0 else np.zeros(3)
+    elif hit.any():
+        rgb = a * (sums / hit.sum())
+    elif fallback >= 0:
+        rgb = a * col[fallback].astype(np.float64)
+    else:
+        rgb = np.zeros(3)
+    return np.array(list(rgb) + [a], np.float32)
+
+
+# ------------------------------------------------- Monte Carlo's moments
+def mc_moments(smp, p, expect='over', var='exact'):
+    """The exact distribution of a whole-ray Monte Carlo estimate, per ray
+    (independent of how the random numbers are made: the walks are taken
+    as independent and uniform, DOC README 'per-ray streams').  smp
+    [D, R, 4] float64.  Returns (mean, var, e4), each [R, 4]: the
+    expectation, the variance and the fourth central moment of the
+    estimate with p.samples walks.
+    p_k = alpha_k prod_{j<k} (1 - alpha_j) (eq 7.3), c_k = C'_k / alpha_k,
+    A = sum p_k.  Plain: a walk's colour X = c_k w.p. p_k, 0 w.p. 1 - A
+    (alpha: 1 w.p. A); the mean of n independent walks has variance v1 / n
+    and E e^4 = (mu4 + 3 (n - 1) v1^2) / n^3.  Exact opacity: alpha exact;
+    colour = A * mean of max(H, 1) independent picks from q_k = p_k / A, H ~
+    Binomial(n, A) the walks that stop (the fallback pick when H = 0 is
+    independent of them).  Stratified: colour = (A / n) sum_m Y_m, Y_m the
+    colour at t uniform in stratum [m A / n, (m + 1) A / n) of the cumulative
+    opacity, independent over m.
+    Rivals (a biased expectation): expect='eq7.12' (the thesis's printed
+    index: prod_{j<=i}), 'drop-last' (each ray's last sample with alpha > 0
+    left out), 'premult' (colour premultiplied twice: c_k alpha_k), 'ge'
+    (a walk stops where u >= alpha_k);
+    var='walks2x': the variance of 2n walks."""
+    n = p.samples
+    if var == 'walks2x':
+        n = 2 * n
+    a = smp[..., 3]
+    D, R = a.shape
+    trans = np.cumprod(np.vstack([np.ones((1, R)), 1.0 - a[:-1]]), 0)   # prod_{j<k}
+    pk = a * trans
+    with np.errstate(invalid='ignore', divide='ignore'):
+        c = np.where(a[..., None] > 0, smp[..., :3] / a[..., None], 0.0)
+    A = np.cumsum(pk, 0)[-1]
+    pe = pk
+    ce = c
+    if expect == 'eq7.12':
+        pe = a * trans * (1.0 - a)
+    elif expect == 'drop-last':
+        last = D - 1 - np.argmax((a > 0)[::-1], 0)
+        pe = np.where(np.arange(D)[:, None] == last[None], 0.0, pk)
+    elif expect == 'premult':
+        ce = c * a[..., None]
+    elif expect == 'ge':
+        # the pick comparison the wrong way round, u >= alpha_k, over the
+        # samples that draw (alpha > 0)
+        opq = a > 0
+        pa = np.where(opq, a, 1.0)
+        keep = np.cumprod(np.vstack([np.ones((1, R)), pa[:-1]]), 0)
+        pe = np.where(opq, (1.0 - a) * keep, 0.0)
+    mean = np.zeros((R, 4))
+    mean[:, :3] = (pe[..., None] * ce).sum(0)
+    mean[:, 3] = pe.sum(0) if expect == 'drop-last' else A
+    v = np.zeros((R, 4))
+    e4 = np.zeros((R, 4))
+    if not (p.exact or p.stratified):
+        # raw moments of one walk's X (0 outside the picks)
+        m1 = (pk[..., None] * c).sum(0)
+        m2 = (pk[..., None] * c ** 2).sum(0)
+        m3 = (pk[..., None] * c ** 3).sum(0)
+        m4 = (pk[..., None] * c ** 4).sum(0)
+        v1 = m2 - m1 ** 2
+        c4 = m4 - 4 * m1 * m3 + 6 * m1 ** 2 * m2 - 3 * m1 ** 4
+        va = A * (1 - A)
+        c4a = A * (1 - A) * (1 - 3 * A + 3 * A * A)          # Bernoulli's mu4
+        v[:, :3] = v1 / n
+        v[:, 3] = va / n
+        e4[:, :3] = (c4 + 3 * (n - 1) * v1 ** 2) / n ** 3
+        e4[:, 3] = (c4a + 3 * (n - 1) * va ** 2) / n ** 3
+        return mean, np.maximum(v, 0), np.maximum(e4, 0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        q = np.where(A > 0, pk / A, 0.0)
+    if not p.stratified:
+        m1 = (q[..., None] * c).sum(0)
+        m2 = (q[..., None] * c ** 2).sum(0)
+        m3 = (q[..., None] * c ** 3).sum(0)
+        m4 = (q[..., None] * c ** 4).sum(0)
+        vq = m2 - m1 ** 2
+        c4q = m4 - 4 * m1 * m3 + 6 * m1 ** 2 * m2 - 3 * m1 ** 4
+        h = np.arange(n + 1)
+        lc = np.array([math.lgamma(n + 1) - math.lgamma(i + 1) - math.lgamma(n - i + 1)
+                       for i in h])
+        # Binomial(n, A) probabilities, A = 0 and 1 included
+        A1 = A[:, None]
+        la = np.where(A1 > 0, np.log(np.maximum(A1, 1e-300)) * h, np.where(h == 0, 0.0, -np.inf))
+        lb = np.where(A1 < 1, np.log(np.maximum(1 - A1, 1e-300)) * (n - h),
+                      np.where(h == n, 0.0, -np.inf))
+        pmf = np.exp(lc[None] + la + lb)                      # [R, n + 1]
+        hp = np.maximum(h, 1).astype(float)
+        E1 = (pmf / hp).sum(1)
+        E3 = (pmf / hp ** 3).sum(1)
+        E3b = (pmf * (hp - 1) / hp ** 3).sum(1)
+        v[:, :3] = (A ** 2 * E1)[:, None] * vq
+        e4[:, :3] = (A ** 4)[:, None] * (c4q * E3[:, None] + 3 * vq ** 2 * E3b[:, None])
+        return mean, np.maximum(v, 0), np.maximum(e4, 0)
+    # stratified: the colour c(t) is piecewise constant over the cumulative
+    # opacity; G_j(t) = int_0^t c^j, linear between the breakpoints cum_k
+    cum = np.cumsum(pk, 0)                                     # [D, R]
+    b = A[None] * (np.arange(n + 1)[:, None] / n)              # [n + 1, R]
+    G = []
+    for j in range(5):
+        cj = c ** j if j else np.ones_like(c)
+        Gk = np.cumsum(pk[..., None] * cj, 0)                   # [D, R, 3]
+        # index of the sample whose interval holds b: first k with cum_k > b
+        idx = (cum[:, None, :] <= b[None] + 0.0).sum(0)         # [n + 1, R]
+        idx = np.minimum(idx, D - 1)
+        prev_cum = np.where(idx > 0, np.take_along_axis(cum, np.maximum(idx - 1, 0), 0), 0.0)
+        prev_G = np.where((idx > 0)[..., None],
+                          np.take_along_axis(Gk, np.maximum(idx - 1, 0)[..., None], 0), 0.0)
+        cv = np.take_along_axis(cj, idx[..., None], 0)
+        G.append(prev_G + (b - prev_cum)[..., None] * cv)
+    w = A / n
+    with np.errstate(invalid='ignore', divide='ignore'):
+        M = [np.where((w > 0)[:, None], (Gj[1:] - Gj[:-1]) / w[None, :, None], 0.0) for Gj in G]
+    m1, m2, m3, m4 = M[1], M[2], M[3], M[4]                     # [n, R, 3]
+    vm = np.maximum(m2 - m1 ** 2, 0)
+    c4m = np.maximum(m4 - 4 * m1 * m3 + 6 * m1 ** 2 * m2 - 3 * m1 ** 4, 0)
+    sv = vm.sum(0)
+    v[:, :3] = (w ** 2)[:, None] * sv
+    e4[:, :3] = (w ** 4)[:, None] * (c4m.sum(0) + 3 * (sv ** 2 - (vm ** 2).sum(0)))
+    return mean, v, e4

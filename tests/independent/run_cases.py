@@ -10,6 +10,16 @@ usage: python3 run_cases.py --simdvol PATH [--work DIR] [--data DIR] [--quick]
        [--order2 centred-strict|far|low|high] [--sample-clamp none|alpha|unit]
        [--spacing-unit largest] [--grad-scale index] [--positions float]
        [--ramp-ends zero] [--tie-frac exact]
+       --composite adaptive and mc: [--thr-nudge 1e-6] [--mc-tol 1e-5]
+       [--mc-eps 2e-6] [--mc-fragile 8] [--zmax 4]; their rival conventions
+       (each fails some --quick case): [--weight-frac exact]
+       [--tiny-alphas plain] [--adaptive-stop early|late]
+       [--adaptive-compare float64] [--mc-u low24]
+       [--mc-counter swap] [--mc-simd 0x646d6973] [--mc-key swap]
+       [--mc-ray col] [--mc-shared-key 0] [--mc-depth opaque]
+       [--mc-exact-depth zero] [--mc-colour premult] [--mc-fallback none]
+       [--mc-strata unscaled]; biased or wrong statistics:
+       [--mc-expect eq7.12|drop-last|premult|ge] [--mc-var walks2x]
 Writes volumes, classifier files and images under --work (default: a
 temporary directory, removed after); uses brainsmall.den from --data
 (default $SIMDVOL_DATA_DIR, else the repository's data/) where it is there,
@@ -34,8 +44,79 @@ of the grid's origin could move a boundary sample of a few rays; a wrong
 convention moves whole regions, hundreds of pixels, which no nudge
 explains).  With the grid modelled no case here needs one.  The test
 simdvol_independent_check runs --quick.
+
+--composite adaptive (README: direct's over, stopping at --threshold) is
+judged as direct: --tol, the nudges, and also a copy of our image with the
+threshold moved by +-(--thr-nudge) (simdvol sums the alphas in float, so a
+ray whose alpha lands within a rounding of the threshold may stop one sample
+earlier or later); the accumulated alpha is compared with the threshold
+as floats (bone's alpha 0.3 reaches --threshold 0.3 exactly in float32,
+where float64's 0.3 lies below 0.3f: --adaptive-compare float64 fails 140
+pixels there).  Both compositing modes below take their samples as README
+"Where the samples lie" says, the fraction within a voxel a float also in
+the interpolation weights (--weight-frac; a t within 2^-25 of 1 is 1, so a
+voxel's weight 1 - t is 0 where float64 gives 1e-9), and a voxel's alpha
+below 2^-126 as 0 with the opacity step taken without cancellation
+(--tiny-alphas; found only in classify.cpp).  Neither changes a sample by
+more than 1e-7, so direct keeps its float64 weights.  They matter because
+the exact-opacity draws are keyed by the first sample with alpha > 0: an
+alpha of 1e-20 in one renderer and 0 in the other moves every draw of the
+ray (--tiny-alphas plain: 634 pixels of a --quick image off by up to 0.12).
+
+Whole-ray --composite mc is reproduced: Philox4x32-10 (checked against
+Random123's known answers first), key (seed mod 2^32, seed >> 32), counter
+(ray, walk / 4, depth, 0x73696d64 "simd"), word walk mod 4, u = (word >> 8)
+2^-24; ray = j * width + i on the viewing grid (the intermediate image with
+voxel sampling, the output with pixel sampling), 0xFFFFFFFF for every ray
+with --streams shared; depth = the sample's absolute index k on the ray (0
+.. D - 1).  Walk m stops at the first sample with u(m, k) < alpha_k and
+picks C'_k / alpha_k; colour = mean of the picks (black for a walk that
+stops nowhere), alpha = the fraction that stopped.  --exact-opacity: alpha
+= over's, colour = alpha * mean of the stopped walks' picks, or, with none
+stopped, alpha * the pick of inverting the cumulative opacity at t = u
+alpha (u: walk n's draw at the depth of the first sample with alpha > 0;
+the first sample with alpha > 0 whose cumulative opacity exceeds t, else
+the last).  --mc-stratified: walk m draws at that depth and inverts at t_m
+= ((m + u_m) / n) alpha; colour = alpha * mean.  Then voxel sampling's warp.
+Our samples are rounded to float32 and the picks, the cumulative opacity
+and t computed in float32 as simdvol's are (ir.mc_composite).  A pixel
+passes when every channel is within --mc-tol (1e-5).  Near ties: our
+samples are simdvol's to a few float ulp, so a comparison (u against
+alpha_k, t against a cumulative opacity) within --mc-eps (2e-6) may fall
+the other way there.  So may the depth that keys the exact-opacity draws
+where a ray's first samples with alpha > 0 have alphas below 2^-126:
+subnormal in float32, they are 0 or not as the order of simdvol's float
+operations rounds them (ours are float64 products rounded once); each of
+those samples and the first one above 2^-126 is then a candidate depth.  A pixel over
+--mc-tol passes only if taking the other outcome of one or two near ties of
+its rays (the pixel's ray; with voxel sampling the 2 x 2 rays its warp
+reads) brings it within --mc-tol, and at most --mc-fragile (8) such pixels
+in an image: a wrong convention changes hundreds.  In the full set one
+image needs a walk's near tie (1 pixel) and one the draws' depth (4 pixels,
+a material mixture's Gaussian tail whose alphas underflow); --quick none.
+
+Statistics, independent of how the random numbers are made: with per-ray
+streams at pixel sampling (or voxel sampling where the warp is 1:1) each
+pixel is one ray's estimate, independent of the others, whose exact
+distribution follows from the ray's samples (ir.mc_moments: the mean is
+the direct image; the variance v and fourth moment of the n-walk estimate
+for plain, exact-opacity (H ~ Binomial(n, alpha) walks stop, at least one
+pick) and stratified walks).  Per channel, e = simdvol - mean:
+  z mean = sum e / sqrt(sum v),
+  z sq   = (sum e^2 - sum v) / sqrt(sum (E e^4 - v^2))  (exact, not a bound);
+both must lie within --zmax (4); a channel with no randomness (exact
+opacity's alpha) must be within 1e-5 everywhere.  Per sub-ray Monte Carlo
+(--mc-scope subray, with or without --allocate): the expectation is the
+direct image too (each sub-ray's estimate is unbiased for its over, and the
+sub-rays' draws are independent, being keyed by the absolute depth (HDR
+mc.hpp), so eq 7.15's over of them is unbiased), but the variance depends
+on where the PE cells and the balancing cut the rays, which the docs do
+not give; two seeds give it: z = sum(x1 + x2 - 2 mean) / sqrt(sum (x1 -
+x2)^2), since E (x1 - x2)^2 = 2 v whatever v is.  --mc-expect and --mc-var
+are biased or wrong statistics, each failing some --quick case.
 """
 import argparse
+import dataclasses
 import math
 import os
 import shutil
@@ -222,6 +303,56 @@ SHADINGS = {
 
 
 @dataclass(frozen=True)
+class Comp:
+    """--composite and its options (README render table)."""
+    mode: str = 'direct'            # direct, adaptive, mc
+    threshold: float = 0.95         # adaptive
+    samples: int = 16               # mc: walks per ray
+    seed: int = 1
+    streams: str = 'per-ray'
+    exact: bool = False             # --exact-opacity
+    strat: bool = False             # --mc-stratified (with exact)
+    scope: str = 'whole'            # --mc-scope
+    allocate: bool = False          # --allocate (subray)
+
+    def args(self, seed=None):
+        if self.mode == 'direct':
+            return []
+        if self.mode == 'adaptive':
+            return ['--composite', 'adaptive', '--threshold', repr(self.threshold)]
+        a = ['--composite', 'mc', '--samples', str(self.samples),
+             '--seed', str(self.seed if seed is None else seed)]
+        if self.streams != 'per-ray':
+            a += ['--streams', self.streams]
+        if self.exact:
+            a.append('--exact-opacity')
+        if self.strat:
+            a.append('--mc-stratified')
+        if self.scope != 'whole':
+            a += ['--mc-scope', self.scope]
+        if self.allocate:
+            a.append('--allocate')
+        return a
+
+    def label(self):
+        if self.mode == 'adaptive':
+            return 'adaptive t=%g' % self.threshold
+        s = 'mc%d' % self.samples + ('x' if self.exact else '') + ('s' if self.strat else '')
+        if self.scope != 'whole':
+            s += ' ' + self.scope + (' alloc' if self.allocate else '')
+        if self.streams != 'per-ray':
+            s += ' ' + self.streams
+        return s + ' seed=%d' % self.seed
+
+    def params(self, seed=None):
+        return ir.McParams(self.samples, self.seed if seed is None else seed, self.streams,
+                           self.exact or self.strat, self.strat)
+
+
+DIRECT = Comp()
+
+
+@dataclass(frozen=True)
 class Case:
     group: str
     vol: str
@@ -232,6 +363,7 @@ class Case:
     sampling: str = 'voxel'
     fit: str = 'longest'
     cls: str = 'mat'
+    comp: Comp = DIRECT
 
     def name(self, vols):
         s = '%s view=%s order=%d %s' % (self.vol, ','.join('%.6g' % a for a in self.view),
@@ -242,6 +374,8 @@ class Case:
             s += ' %dx%d %s' % (self.size + (self.sampling,))
         if self.fit != 'longest':
             s += ' fit=' + self.fit
+        if self.comp.mode != 'direct':
+            s += ' ' + self.comp.label()
         return s
 
 
@@ -356,6 +490,103 @@ def cases(quick):
         add(Case('ramps', 'brain', (20, 35, 10), 1, 'phong', cls='tf'))
         add(Case('ramps', 'brain', (0, 90, 0), 1, 'noshade', cls='tf'))
         add(Case('brain', 'brain', (20, 35, 10), 1, 'phong'))
+    out += composite_cases(quick)
+    return out
+
+
+# a seed with both key words non-zero (the key is the 64-bit seed)
+SEED_BIG = 0x9E3779B97F4A7C15
+
+
+def composite_cases(quick):
+    """--composite adaptive and mc."""
+    out = []
+    add = out.append
+    ad = lambda t: Comp('adaptive', threshold=t)  # noqa: E731
+    mc = lambda n, seed, **kw: Comp('mc', samples=n, seed=seed, **kw)  # noqa: E731
+    # -- adaptive
+    if quick:
+        add(Case('adaptive', 'a', (20, 35, 10), 1, 'phong', (64, 48), comp=ad(0.5)))
+        add(Case('adaptive', 'a', (0, 0, 0), 0, 'noshade', comp=ad(0.95)))
+        add(Case('adaptive', 'b', (-73.4, 151.7, 12.9), 1, 'phong', (72, 60), 'pixel',
+                 comp=ad(1.0)))
+        add(Case('adaptive', 'c', (20, 35, 10), 3, 'phong', cls='tf', comp=ad(0.8)))
+        # bone's opacity 0.3 reaches the threshold 0.3f exactly
+        add(Case('adaptive', 'b', (0, 90, 0), 1, 'phong', comp=ad(0.3)))
+    else:
+        for v, vs, ps in (('a', (64, 48), (64, 64)), ('b', (60, 50), (72, 60))):
+            for view in ((0, 0, 0), (0, 90, 0), (20, 35, 10), (-73.4, 151.7, 12.9)):
+                for order in (0, 1, 2, 3):
+                    for t in (0.3, 0.95):
+                        add(Case('adaptive', v, view, order, 'phong', comp=ad(t)))
+                add(Case('adaptive', v, view, 1, 'noshade', vs, comp=ad(0.5)))
+                add(Case('adaptive', v, view, 2, 'phong2', ps, 'pixel', comp=ad(1.0)))
+        for view in ((0, 0, 0), (20, 35, 10), (45, 45, 45)):
+            for t in (0.5, 0.8, 1.0):
+                add(Case('adaptive', 'c', view, 1, 'phong', cls='tf', comp=ad(t)))
+                add(Case('adaptive', 'a', view, 3, 'phong', (64, 64), 'pixel', cls='tf',
+                         comp=ad(t)))
+        add(Case('adaptive', 'brain', (0, 90, 0), 1, 'phong', comp=ad(0.95)))
+        add(Case('adaptive', 'brain', (20, 35, 10), 1, 'phong', cls='tf', comp=ad(0.5)))
+    # -- whole-ray Monte Carlo: reproduced exactly and, where a pixel is one
+    # ray (pixel sampling, or voxel sampling at 1:1) with per-ray streams,
+    # the statistics
+    if quick:
+        add(Case('mc', 'a', (20, 35, 10), 1, 'phong', (64, 48), comp=mc(16, SEED_BIG)))
+        add(Case('mc', 'a', (20, 35, 10), 1, 'phong', (64, 64), 'pixel', comp=mc(16, 5)))
+        add(Case('mc', 'b', (0, 90, 0), 0, 'noshade', comp=mc(8, 3, streams='shared')))
+        add(Case('mc', 'c', (0, 0, 0), 1, 'phong', (56, 40), 'pixel', cls='tf',
+                 comp=mc(4, 13, exact=True)))
+        add(Case('mc', 'a', (30, 0, 0), 1, 'phong', (64, 64), 'pixel', cls='tf',
+                 comp=mc(16, 11, exact=True, strat=True)))
+        add(Case('mc', 'b', (20, 35, 10), 1, 'phong', (72, 60), 'pixel',
+                 comp=mc(8, 5, exact=True, strat=True)))
+        add(Case('mc', 'a', (-73.4, 151.7, 12.9), 3, 'phong', (64, 48),
+                 comp=mc(8, SEED_BIG, exact=True)))
+    else:
+        for v, vs, ps in (('a', (64, 48), (64, 64)), ('b', (60, 50), (72, 60))):
+            for view in ((0, 0, 0), (20, 35, 10), (-73.4, 151.7, 12.9)):
+                for order in (0, 1, 3):
+                    add(Case('mc', v, view, order, 'phong', comp=mc(16, 2 + order)))
+                    add(Case('mc', v, view, order, 'phong', ps, 'pixel', comp=mc(8, SEED_BIG)))
+                    add(Case('mc', v, view, order, 'phong', comp=mc(4, 7, exact=True)))
+                    add(Case('mc', v, view, order, 'phong', ps, 'pixel',
+                             comp=mc(16, SEED_BIG, exact=True, strat=True)))
+                add(Case('mc', v, view, 1, 'phong', vs, comp=mc(32, 9, streams='shared')))
+                add(Case('mc', v, view, 2, 'noshade', ps, 'pixel',
+                         comp=mc(4, 9, streams='shared')))
+        for v, ps in (('a', (64, 64)), ('c', (56, 40))):
+            for view in ((0, 0, 0), (0, 90, 0), (20, 35, 10), (-73.4, 151.7, 12.9)):
+                for order in (0, 1, 2, 3):
+                    add(Case('mc', v, view, order, 'phong', cls='tf', comp=mc(4, 7, exact=True)))
+                    add(Case('mc', v, view, order, 'phong', cls='tf',
+                             comp=mc(16, SEED_BIG, exact=True, strat=True)))
+                add(Case('mc', v, view, 1, 'phong', ps, 'pixel', cls='tf',
+                         comp=mc(2, 13, exact=True)))
+                add(Case('mc', v, view, 1, 'phong', ps, 'pixel', cls='tf',
+                         comp=mc(32, 13, exact=True, strat=True)))
+                add(Case('mc', v, view, 1, 'phong', ps, 'pixel', cls='tf',
+                         comp=mc(8, 13, exact=True, strat=True, streams='shared')))
+        # walk counts not a multiple of 4 (a Philox block serves walks 4q .. 4q + 3)
+        for n, kw in ((1, {}), (3, {}), (5, dict(exact=True)), (7, dict(exact=True, strat=True)),
+                      (1, dict(exact=True, strat=True))):
+            add(Case('mc', 'a', (20, 35, 10), 1, 'phong', (48, 48), 'pixel', comp=mc(n, 77, **kw)))
+        add(Case('mc', 'brain', (0, 90, 0), 1, 'phong', cls='tf', comp=mc(16, 4)))
+        add(Case('mc', 'brain', (20, 35, 10), 1, 'phong', comp=mc(8, 4, exact=True, strat=True)))
+    # -- per sub-ray Monte Carlo: unbiased (two seeds), pixel sampling
+    if quick:
+        add(Case('mc-subray', 'a', (20, 35, 10), 1, 'phong', (64, 64), 'pixel',
+                 comp=mc(8, 21, scope='subray')))
+        add(Case('mc-subray', 'b', (20, 35, 10), 1, 'phong', (72, 60), 'pixel',
+                 comp=mc(8, 23, exact=True, scope='subray', allocate=True)))
+    else:
+        for v, ps in (('a', (64, 64)), ('b', (72, 60))):
+            for view in ((0, 0, 0), (20, 35, 10), (-73.4, 151.7, 12.9)):
+                for kw in (dict(), dict(allocate=True), dict(exact=True),
+                           dict(exact=True, allocate=True), dict(exact=True, strat=True),
+                           dict(exact=True, strat=True, allocate=True)):
+                    add(Case('mc-subray', v, view, 1, 'phong', ps, 'pixel',
+                             comp=mc(8, 21, scope='subray', **kw)))
     return out
 
 
@@ -409,6 +640,37 @@ def main():
                     help='float: our samples in float64 instead of on the 32.32 grid')
     ap.add_argument('--tie-frac', default='float32', choices=['float32', 'exact'],
                     help='exact: decide the half-voxel ties on the exact fraction')
+    # adaptive and Monte Carlo: tolerances
+    ap.add_argument('--thr-nudge', type=float, default=1e-6,
+                    help='adaptive: a pixel over --tol is fragile if the threshold +- this '
+                    'explains it')
+    ap.add_argument('--mc-tol', type=float, default=1e-5)
+    ap.add_argument('--mc-eps', type=float, default=2e-6,
+                    help='a walk\'s comparison within this is a near tie')
+    ap.add_argument('--mc-fragile', type=int, default=8,
+                    help='most pixels of an MC image over --mc-tol, each explained by a near tie')
+    ap.add_argument('--zmax', type=float, default=4.0, help='statistics: largest |z| allowed')
+    # adaptive and Monte Carlo: rival conventions
+    ap.add_argument('--weight-frac', default='float32', choices=['float32', 'exact'],
+                    help='adaptive, mc: the fraction in the interpolation weights')
+    ap.add_argument('--tiny-alphas', default='float32', choices=['float32', 'plain'],
+                    help='adaptive, mc: voxel alphas below 2^-126 and the opacity step')
+    ap.add_argument('--adaptive-stop', default='levoy', choices=['levoy', 'early', 'late'])
+    ap.add_argument('--adaptive-compare', default='float32', choices=['float32', 'float64'])
+    ap.add_argument('--mc-u', default='top24', choices=['top24', 'low24'])
+    ap.add_argument('--mc-counter', default='rqs', choices=['rqs', 'swap'])
+    ap.add_argument('--mc-simd', default='0x73696d64', help='the counter\'s fourth word')
+    ap.add_argument('--mc-key', default='lohi', choices=['lohi', 'swap'])
+    ap.add_argument('--mc-ray', default='row', choices=['row', 'col'])
+    ap.add_argument('--mc-shared-key', default='0xffffffff')
+    ap.add_argument('--mc-depth', default='absolute', choices=['absolute', 'opaque'])
+    ap.add_argument('--mc-exact-depth', default='opaque', choices=['opaque', 'zero'])
+    ap.add_argument('--mc-colour', default='unpremult', choices=['unpremult', 'premult'])
+    ap.add_argument('--mc-fallback', default='pick', choices=['pick', 'none'])
+    ap.add_argument('--mc-strata', default='alpha', choices=['alpha', 'unscaled'])
+    ap.add_argument('--mc-expect', default='over',
+                    choices=['over', 'eq7.12', 'drop-last', 'premult', 'ge'])
+    ap.add_argument('--mc-var', default='exact', choices=['exact', 'walks2x'])
     o = ap.parse_args()
     SIMDVOL, DATA = o.simdvol, o.data
     WORK = o.work or tempfile.mkdtemp(prefix='simdvol-indep.')
@@ -419,11 +681,27 @@ def main():
             shutil.rmtree(WORK, ignore_errors=True)
 
 
-def render_mine(vol, case, conv, nudge=None):
+def render_mine(vol, case, conv, nudge=None, threshold=None):
     shade = SHADINGS[case.shading][0]
-    return ir.render(vol.data, ir.load_classifier(vol.cls[case.cls]), view=case.view,
-                     size=case.size or vol.face, order=case.order, shade=shade, conv=conv,
-                     sampling=case.sampling, spacing=vol.spacing, fit=case.fit, nudge=nudge)
+    mix = ir.load_classifier(vol.cls[case.cls])
+    size = case.size or vol.face
+    if case.comp.mode == 'direct':
+        return ir.render(vol.data, mix, view=case.view, size=size, order=case.order,
+                         shade=shade, conv=conv, sampling=case.sampling, spacing=vol.spacing,
+                         fit=case.fit, nudge=nudge)
+    g, smp = ir.render_samples(vol.data, mix, view=case.view, size=size, order=case.order,
+                               shade=shade, conv=dataclasses.replace(conv, weight_frac=WEIGHT_FRAC,
+                                                         tiny_alphas=TINY_ALPHAS),
+                               sampling=case.sampling,
+                               spacing=vol.spacing, fit=case.fit, nudge=nudge)
+    if case.comp.mode == 'adaptive':
+        t = case.comp.threshold if threshold is None else threshold
+        return ir.finish(g, ir.composite_adaptive(smp, t, ADAPTIVE_STOP, ADAPTIVE_COMPARE), size)
+    return g, smp
+
+
+ADAPTIVE_STOP, ADAPTIVE_COMPARE = 'levoy', 'float32'
+WEIGHT_FRAC, TINY_ALPHAS = 'float32', 'float32'
 
 
 def judge(o, mine, img, vol, case, conv, nudged):
@@ -440,6 +718,9 @@ def judge(o, mine, img, vol, case, conv, nudged):
                     for sz in (-1, 1):
                         nudged.append(render_mine(vol, case, conv,
                                                   (sx * o.nudge, sy * o.nudge, sz * o.nudge)))
+            if case.comp.mode == 'adaptive' and o.thr_nudge > 0:
+                for d in (-o.thr_nudge, o.thr_nudge):
+                    nudged.append(render_mine(vol, case, conv, threshold=case.comp.threshold + d))
         ok_px = np.zeros_like(over)
         for alt in nudged:
             ok_px |= np.abs(alt - img).max(-1) <= o.tol
@@ -449,13 +730,168 @@ def judge(o, mine, img, vol, case, conv, nudged):
     return md, p, n_over, fragile, fragile == n_over and n_over <= o.fragile
 
 
+@dataclass
+class McMine:
+    """Our whole-ray Monte Carlo of a case: the geometry, the rays' samples
+    [D, R, 4], the estimate (ir.McResult), its output image."""
+    g: object
+    smp: np.ndarray
+    res: object
+    img: np.ndarray
+    size: tuple
+    p: object
+
+
+def mc_mine(vol, case, conv, mcc, eps):
+    g, smp = render_mine(vol, case, conv)
+    D, Hi, Wi = smp.shape[:3]
+    p = case.comp.params()
+    flat = smp.reshape(D, Hi * Wi, 4)
+    size = case.size or vol.face
+    if case.comp.scope != 'whole':
+        return McMine(g, flat, None, None, size, p)
+    res = ir.mc_composite(flat, p, ir.mc_keys((Hi, Wi), p, mcc), mcc, eps)
+    img = ir.finish(g, res.est.reshape(Hi, Wi, 4).astype(np.float64), size)
+    return McMine(g, flat, res, img, size, p)
+
+
+def _footprint(mm, ys, xs):
+    """The rays (flat intermediate indices) that the output pixels (ys, xs)
+    are made of."""
+    Hi, Wi = len(mm.g.cy), len(mm.g.cx)
+    if mm.g.sampling == 'pixel':
+        return set((ys * Wi + xs).tolist())
+    W, H = mm.size
+    fx = (ir.centred(W) / mm.g.scale - mm.g.xs[0]) / (mm.g.xs[1] - mm.g.xs[0])
+    fy = (ir.centred(H) / mm.g.scale - mm.g.ys[0]) / (mm.g.ys[1] - mm.g.ys[0])
+    out = set()
+    for y, x in zip(ys, xs):
+        x0, y0 = int(math.floor(fx[x])), int(math.floor(fy[y]))
+        for j in (y0, y0 + 1):
+            for i in (x0, x0 + 1):
+                if 0 <= j < Hi and 0 <= i < Wi:
+                    out.add(j * Wi + i)
+    return out
+
+
+def judge_mc(o, mm, img):
+    """Exact reproduction of a whole-ray Monte Carlo image: (max|diff|,
+    PSNR, pixels over --mc-tol, of which explained by near ties, ok).  A
+    pixel over --mc-tol is explained if taking the other outcome of one or
+    two of its rays' near ties (ir.mc_composite's alts) brings it within."""
+    md, p = metrics(mm.img.astype(np.float32), img)
+    over = np.abs(mm.img - img).max(-1) > o.mc_tol
+    n_over = int(over.sum())
+    if n_over == 0:
+        return md, p, 0, 0, True
+    ys, xs = np.nonzero(over)
+    rays = _footprint(mm, ys, xs)
+    res, Hi, Wi = mm.res, len(mm.g.cy), len(mm.g.cx)
+    n = mm.p.samples
+    deltas = []
+    for r, m, other in res.alts:
+        if r not in rays:
+            continue
+        picks, fb = res.picks[r].copy(), res.fallback[r]
+        if m == n:
+            fb = other
+        else:
+            picks[m] = other
+        est = ir.mc_estimate(picks, fb, res.col[:, r], res.acc[r], mm.p)
+        d = np.zeros((Hi * Wi, 4))
+        d[r] = est.astype(np.float64) - res.est[r]
+        deltas.append(ir.finish(mm.g, d.reshape(Hi, Wi, 4), mm.size))
+    for r, est in res.ray_alts:
+        if r in rays:
+            d = np.zeros((Hi * Wi, 4))
+            d[r] = est.astype(np.float64) - res.est[r]
+            deltas.append(ir.finish(mm.g, d.reshape(Hi, Wi, 4), mm.size))
+    fragile = 0
+    for y, x in zip(ys, xs):
+        cand = [d[y, x] for d in deltas if np.any(d[y, x] != 0)]
+        tries = [[c] for c in cand] + [[a, b] for i, a in enumerate(cand) for b in cand[i + 1:]]
+        if any(np.abs(mm.img[y, x] + sum(t) - img[y, x]).max() <= o.mc_tol for t in tries):
+            fragile += 1
+    return md, p, n_over, fragile, fragile == n_over and n_over <= o.mc_fragile
+
+
+def stat_whole(o, mm, img):
+    """z-scores of a whole-ray, per-ray-stream Monte Carlo image against its
+    exact distribution (ir.mc_moments), per channel R, G, B, A: the summed
+    error over the pixels against its standard deviation (mean), the summed
+    squared error against its expectation and standard deviation (mse).
+    None where a pixel is not one ray."""
+    pick = ir.warp_is_pick(mm.g, mm.size)
+    if pick is None or mm.p.streams != 'per-ray':
+        return None
+    Wi = len(mm.g.cx)
+    mean, var, e4 = ir.mc_moments(mm.smp, mm.p, MC_EXPECT, MC_VAR)
+    J, I = np.meshgrid(pick[0], pick[1], indexing='ij')
+    idx = (J * Wi + I).reshape(-1)
+    e = img.reshape(-1, 4).astype(np.float64) - mean[idx]
+    v, f = var[idx], e4[idx]
+    return zscores(e, v, f)
+
+
+def zscores(e, v, f):
+    zm, zs = [], []
+    for c in range(4):
+        V = v[:, c].sum()
+        if V < 1e-12:
+            # no randomness (exact opacity's alpha): the estimate is exact
+            bad = np.abs(e[:, c]).max() > 1e-5
+            zm.append(math.inf if bad else 0.0)
+            zs.append(math.inf if bad else 0.0)
+            continue
+        zm.append(e[:, c].sum() / math.sqrt(V))
+        VV = (f[:, c] - v[:, c] ** 2).sum()
+        zs.append(((e[:, c] ** 2).sum() - V) / math.sqrt(max(VV, 1e-300)))
+    return zm, zs
+
+
+def stat_two_seeds(o, mm, x1, x2):
+    """Per sub-ray Monte Carlo at pixel sampling: its expectation is the
+    direct image (see the docstring); two images of independent seeds give
+    per channel z = sum(x1 + x2 - 2 mu) / sqrt(sum (x1 - x2)^2)."""
+    if mm.g.sampling != 'pixel':
+        return None, None
+    mean = ir.mc_moments(mm.smp, ir.McParams(mm.p.samples), MC_EXPECT)[0]
+    a, b = (x.reshape(-1, 4).astype(np.float64) for x in (x1, x2))
+    zm = []
+    for c in range(4):
+        Q = ((a[:, c] - b[:, c]) ** 2).sum()
+        S = (a[:, c] + b[:, c] - 2 * mean[:, c]).sum()
+        if Q < 1e-12:
+            bad = max(np.abs(x[:, c] - mean[:, c]).max() for x in (a, b)) > 1e-5
+            zm.append(math.inf if bad else 0.0)
+        else:
+            zm.append(S / math.sqrt(Q))
+    return (zm, None), mean.reshape(x1.shape)
+
+
+MC_EXPECT, MC_VAR = 'over', 'exact'
+
+
+def fmt_z(z):
+    return '[' + ' '.join('%+.2f' % x for x in z) + ']'
+
+
 def run(o):
+    global ADAPTIVE_STOP, ADAPTIVE_COMPARE, WEIGHT_FRAC, TINY_ALPHAS, MC_EXPECT, MC_VAR
     ir.AT_MEAN = o.at_mean
+    ir.philox_selftest()
     conv = ir.Conventions(depth=o.depth, clamp_colour=not o.no_clamp, zphase=o.zphase,
                           igrid=o.igrid, rotation=o.rotation, order2=o.order2,
                           sample_clamp=o.sample_clamp, spacing_unit=o.spacing_unit,
                           grad_scale=o.grad_scale, positions=o.positions,
                           ramp_ends=o.ramp_ends, tie_frac=o.tie_frac)
+    mcc = ir.McConventions(u=o.mc_u, counter=o.mc_counter, simd=int(o.mc_simd, 0),
+                           key=o.mc_key, ray=o.mc_ray, shared_key=int(o.mc_shared_key, 0),
+                           depth=o.mc_depth, exact_depth=o.mc_exact_depth,
+                           colour=o.mc_colour, fallback=o.mc_fallback, strata=o.mc_strata)
+    ADAPTIVE_STOP, MC_EXPECT, MC_VAR = o.adaptive_stop, o.mc_expect, o.mc_var
+    ADAPTIVE_COMPARE = o.adaptive_compare
+    WEIGHT_FRAC, TINY_ALPHAS = o.weight_frac, o.tiny_alphas
     engines = o.engines.split(',')
     vols = write_inputs()
     if o.no_brain:
@@ -484,35 +920,73 @@ def run(o):
                            '--view', ','.join(repr(float(a)) for a in case.view),
                            '--order', str(case.order), '--size', '%dx%d' % size,
                            '--sampling', case.sampling, '--fit', case.fit] + sargs
-        futures.append([pool.submit(run_simdvol, args,
-                                    os.path.join(WORK, 'c%03d_%s.tif' % (n, e)), e)
-                        for e in engines])
+        # per sub-ray Monte Carlo: two seeds
+        seeds = [None] if case.comp.scope == 'whole' else [case.comp.seed, case.comp.seed + 1]
+        futures.append([[pool.submit(run_simdvol, args + case.comp.args(sd),
+                                     os.path.join(WORK, 'c%03d_%s%s.tif' % (n, e, '' if sd is None
+                                                                          else '_%d' % i)), e)
+                         for i, sd in enumerate(seeds)] for e in engines])
     failed, groups = 0, {}
     print('%-60s %-9s %10s %8s %s' % ('case', 'engine', 'max|diff|', 'PSNR dB', 'over tol'))
     for (case, name), futs in zip(todo, futures):
         vol = vols[case.vol]
-        mine = render_mine(vol, case, conv).astype(np.float32)
+        mm = None
+        if case.comp.mode == 'mc':
+            mm = mc_mine(vol, case, conv, mcc, o.mc_eps)
+        else:
+            mine = render_mine(vol, case, conv).astype(np.float32)
         nudged = []
-        for e, fut in zip(engines, futs):
-            img = fut.result()
-            md, p, n_over, fragile, ok = judge(o, mine, img, vol, case, conv, nudged)
-            g = groups.setdefault((case.group, e), [0.0, math.inf, 0, 0])
-            g[0], g[1], g[2] = max(g[0], md), min(g[1], p), g[2] + 1
-            g[3] += fragile
-            note = ''
-            if n_over:
-                note = '%d px (%d fragile)' % (n_over, fragile)
+        for e, fs in zip(engines, futs):
+            imgs = [f.result() for f in fs]
+            img = imgs[0]
+            g = groups.setdefault((case.group, e), [0.0, math.inf, 0, 0, 0.0, 0.0])
+            note, ok, zs = '', True, None
+            if mm is None or mm.res is not None:
+                if mm is None:
+                    md, p, n_over, fragile, ok = judge(o, mine, img, vol, case, conv, nudged)
+                    tol = o.tol
+                else:
+                    md, p, n_over, fragile, ok = judge_mc(o, mm, img)
+                    tol = o.mc_tol
+                    zs = stat_whole(o, mm, img)
+                g[0], g[1] = max(g[0], md), min(g[1], p)
+                g[3] += fragile
+                if n_over:
+                    note = '%d px (%d fragile)' % (n_over, fragile)
+                if not ok:
+                    note += '  <-- FAIL (tol %g)' % tol
+            else:
+                # (the first seed's image against the expectation: its noise)
+                zs, mu = stat_two_seeds(o, mm, imgs[0], imgs[1])
+                md, p = metrics(mu.astype(np.float32), img)
+            g[2] += 1
+            if zs is not None:
+                zm, zq = zs
+                note += ' z ' + fmt_z(zm)
+                g[4] = max(g[4], max(abs(z) for z in zm))
+                if zq is not None:
+                    note += ' zsq ' + fmt_z(zq)
+                    g[5] = max(g[5], max(abs(z) for z in zq))
+                if max(abs(z) for z in zm + (zq or [])) > o.zmax:
+                    ok = False
+                    note += '  <-- FAIL (|z| > %g)' % o.zmax
             if not ok:
                 failed += 1
-                note += '  <-- FAIL (tol %g)' % o.tol
-            print('%-60s %-9s %10.3g %8.2f %s' % (name, e, md, p, note), flush=True)
+            print('%-60s %-9s %10.3g %8.2f %s' % (name, e, md, p, note.strip()), flush=True)
     pool.shutdown()
     print()
     print('%-15s %-9s %5s %10s %9s %s' % ('group', 'engine', 'cases', 'max|diff|', 'min PSNR',
                                          'fragile px'))
-    for (grp, e), (md, p, n, fr) in groups.items():
-        print('%-15s %-9s %5d %10.3g %9.2f %d' % (grp, e, n, md, p, fr))
-    print('%d images, %d failed; %.1f s' % (len(todo) * len(engines), failed, time.time() - t0))
+    for (grp, e), (md, p, n, fr, zm, zq) in groups.items():
+        if grp == 'mc-subray':     # statistics alone
+            line = '%-15s %-9s %5d %10s %9s %s' % (grp, e, n, '-', '-', '-')
+        else:
+            line = '%-15s %-9s %5d %10.3g %9.2f %d' % (grp, e, n, md, p, fr)
+        if zm or zq:
+            line += '   max |z| mean %.2f, mse %.2f' % (zm, zq)
+        print(line)
+    nimg = sum(len(f) for fs in futures for f in fs)
+    print('%d images, %d failed; %.1f s' % (nimg, failed, time.time() - t0))
     return 0 if failed == 0 else 1
 
 
