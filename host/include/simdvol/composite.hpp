@@ -22,7 +22,8 @@ enum class CompositeMode {
 };
 
 enum class RandomStreams {
-  per_ray,  ///< decorrelated: Philox keyed by (seed, ray, sample, step) — default
+  per_ray,  ///< decorrelated: Philox4x32-10 keyed by the seed, counter (ray, walk / 4, step) —
+            ///< default
   shared,   ///< the thesis's single front-end sequence shared by all rays
 };
 
