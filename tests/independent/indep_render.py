@@ -434,11 +434,12 @@ def geometry(shape, spacing, view, size, sampling, fit, conv):
 
 
 # ---------------------------------------------------------- ray casting
-def cast(rgba, g, order, conv, nudge=None):
-    """Composite the rays of the grid g (rows g.cy, columns g.cx), samples
-    at g.cz, front to back.  Image [len(cy), len(cx), 4].
-    nudge: a constant offset added to every sample's object position."""
-    acc = np.zeros((len(g.cy), len(g.cx), 4))
+def ray_steps(rgba, g, order, conv, nudge=None):
+    """The grid g's samples depth by depth: yields (k, inside, samples) for
+    k = 0 .. D - 1 front to back, inside the mask [len(cy), len(cx)] of the
+    rays whose sample k lies in the volume, samples their premultiplied
+    values there.  nudge: a constant offset added to every sample's object
+    position."""
     J, I = np.meshgrid(np.arange(len(g.cy)), np.arange(len(g.cx)), indexing='ij')
     flat = rgba.reshape(-1, 4)
     n_i = g.dims.astype(np.int64)
@@ -456,6 +457,15 @@ def cast(rgba, g, order, conv, nudge=None):
         s = sample(flat, n_i, obj[inside], order, conv)
         if order >= 2:
             s = clamp_sample(s, conv.sample_clamp)
+        yield k, inside, s
+
+
+def cast(rgba, g, order, conv, nudge=None):
+    """Composite the rays of the grid g (rows g.cy, columns g.cx), samples
+    at g.cz, front to back.  Image [len(cy), len(cx), 4].
+    nudge: a constant offset added to every sample's object position."""
+    acc = np.zeros((len(g.cy), len(g.cx), 4))
+    for _, inside, s in ray_steps(rgba, g, order, conv, nudge):
         a = acc[inside]
         acc[inside] = a + (1.0 - a[:, 3:4]) * s   # DOC: over(front, back), premultiplied
     return acc
@@ -591,22 +601,7 @@ def ray_samples(rgba, g, order, conv, nudge=None):
     the volume (DOC: such a sample is transparent, so it changes no
     compositing mode)."""
     out = np.zeros((len(g.cz), len(g.cy), len(g.cx), 4))
-    J, I = np.meshgrid(np.arange(len(g.cy)), np.arange(len(g.cx)), indexing='ij')
-    flat = rgba.reshape(-1, 4)
-    n_i = g.dims.astype(np.int64)
-    X0, S = g.grid()
-    base = X0 + I[..., None] * S[0] + J[..., None] * S[1]
-    if nudge is not None:
-        base = base + np.asarray(nudge, float)
-    for k in range(len(g.cz)):
-        obj = base + k * S[2]
-        fl = np.floor(obj)
-        inside = np.all((fl >= 0) & (fl < n_i), axis=-1)
-        if not inside.any():
-            continue
-        s = sample(flat, n_i, obj[inside], order, conv)
-        if order >= 2:
-            s = clamp_sample(s, conv.sample_clamp)
+    for k, inside, s in ray_steps(rgba, g, order, conv, nudge):
         out[k][inside] = s
     return out
 
