@@ -2,9 +2,11 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -589,6 +591,49 @@ TEST_F(Cli, FileSizeLimitFailsTheWriteAndKeepsTheOldFile) {
       run_once("render --engine reference --phantom-size 32 --size 256x256 -o " + path("out.png"),
                "", "ulimit -f 20;");
   EXPECT_NE(r.output.find("cannot write it: File too large"), std::string::npos) << r.output;
+}
+
+// The program installs remove_temporary_files_on_signals()'s handlers
+// (IoTest.EndingSignalsRemoveTheTemporaryFiles tests what they do): its
+// /proc status shows SIGINT, SIGTERM, SIGHUP and SIGQUIT caught and SIGXFSZ
+// ignored, and SIGTERM still ends it by that signal, leaving no temporary
+// file. Started directly (no shell between), so that the signal reaches it.
+TEST_F(Cli, ProgramCatchesTheEndingSignals) {
+  const std::string out = path("long.png");
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    // A long render: pixel sampling of the reference engine at 1024^2.
+    ::execl(SIMDVOL_CLI, SIMDVOL_CLI, "render", "--engine", "reference", "--phantom-size", "64",
+            "--sampling", "pixel", "--size", "1024x1024", "--frames", "1000", "-o", out.c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ASSERT_GT(pid, 0);
+  // The masks in hex, bit n - 1 for signal n.
+  const auto mask = [&](const std::string& field) -> unsigned long long {
+    std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+    std::string line;
+    while (std::getline(in, line))
+      if (line.rfind(field + ":", 0) == 0)
+        return std::stoull(line.substr(field.size() + 1), nullptr, 16);
+    return 0;
+  };
+  const auto bit = [](int sig) { return 1ull << (sig - 1); };
+  const unsigned long long want = bit(SIGINT) | bit(SIGTERM) | bit(SIGHUP) | bit(SIGQUIT);
+  unsigned long long caught = 0;
+  for (int i = 0; i < 500 && (caught & want) != want; ++i) {
+    ::usleep(10000);
+    caught = mask("SigCgt");
+  }
+  EXPECT_EQ(caught & want, want) << std::hex << caught;
+  EXPECT_NE(mask("SigIgn") & bit(SIGXFSZ), 0u);
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFSIGNALED(status)) << status;
+  EXPECT_EQ(WTERMSIG(status), SIGTERM);
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
 }
 
 TEST_F(Cli, SkipPesLeavesPesOutWithTheSameImage) {
