@@ -76,6 +76,11 @@
 #else
 #define SV_NK_BLUE_OF(cp) ((cp)->blue.count)
 #endif
+/* SV_STEP_ONE 1: the opacity step is 1 for every voxel (step_is_one), so
+ * alpha is taken as it is; 0 (the default): cp->step_is_one decides. */
+#ifndef SV_STEP_ONE
+#define SV_STEP_ONE 0
+#endif
 
 /* sv_log, sv_exp and their float16 forms are in common.cl. */
 
@@ -258,7 +263,7 @@ SV_FN void sv_classify_voxel(__constant const sv_classify_params* cp, float id, 
   } else {
     a = sv_mixture(cp, SV_NMAT_OF(cp), v, &cr, &cg, &cb, &t);
   }
-#ifdef SV_STEP_ONE
+#if SV_STEP_ONE
   const float a1 = a;
 #else
   const float a1 = cp->step_is_one ? a : sv_step_alpha(a, t, cp->opacity_step);
@@ -449,7 +454,7 @@ SV_FN float16 sv_step_alpha16(float16 a, float16 t, float s) {
 SV_FN void sv_lit16(__constant const sv_classify_params* cp, float16 a, float16 t, int16 ok,
                     float16 qr, float16 qg, float16 qb, float16 id, float16 is, float16* r,
                     float16* g, float16* b, float16* alpha) {
-#ifdef SV_STEP_ONE
+#if SV_STEP_ONE
   const float16 a1 = a;
 #else
   const float16 a1 = cp->step_is_one ? a : sv_step_alpha16(a, t, cp->opacity_step);
