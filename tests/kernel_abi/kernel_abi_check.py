@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The swap, Monte Carlo, adaptive and warp kernels from docs/KERNELS.md alone: Python + pyopencl.
+"""The direct frame's, swap, Monte Carlo, adaptive and warp kernels from docs/KERNELS.md alone.
 
 Keeps KERNELS.md honest for a host in another language (its section 7).
 Builds the programs from the INSTALLED kernel sources as section 1 assembles
@@ -25,8 +25,38 @@ wrote for the same inputs:
   adaptive    simdvol_adaptive_whole at two thresholds: composite_adaptive;
   warp        the warp tables from section 5's formula (equal the library's,
               from output_to_intermediate), simdvol_warp: warp_to_output.
-Prints one line per stage; a disagreement names the case, the check and the
-first differing value.
+and the direct frame's stages before the swap (section 4, 1-6), the host's
+share computed here from sections 3 and 5 and compared with the library's:
+  layout      cell, block, strides, origins, pe_of_cell and the cells with
+              halo; simdvol_layout, _layout_voxel (bit for bit
+              layout_reference's), simdvol_gather (the volume);
+  params      sv_shade_params' ka .. k2, spec_floor, grad_over, surface_g2,
+              the struct sizes, shade_defines and classify_defines;
+  shade       simdvol_shade16 (SV_RW from cx): shade() within section 8's
+              1e-5 (|g| 1e-6 relative), channel 3 the value, zero tails;
+              simdvol_shade_rows and simdvol_shade within 1e-6 of it;
+  shade+cls   simdvol_classify16(_in_place) on it; simdvol_shade_classify16
+              equal to shade16 + classify16, within 1e-5 of classify(), its
+              _il form bit for bit the planar cells, both brick marks;
+  tables      the reference's voxels in planar and interleaved voxel cells
+              (voxels_to_cells), the resample address, pair and cell-bit
+              tables, rect_off, sample_off;
+  occupancy   simdvol_occupancy(_il) and simdvol_occupancy_reach (orders
+              0-3) against the page's rule;
+  lanes       simdvol_segment_order (kb, with_pe) against the page's rule;
+  resample    per order 0-3 simdvol_resample_v8 within 1e-5 of
+              resample_reference; _v8_il (lanes' order, skip) equal to it;
+  local       simdvol_local on those samples within 1e-5 of
+              footprints_reference(local_reference);
+  fused       simdvol_resample_local_v8 within 1e-5 of it; _il with the
+              matching's segments and the balanced bounds (kb), footprints
+              zeroed by simdvol_zero_uncovered alone (on the rows of
+              simdvol_match_rows_nolinks, geo and stepc made here), the
+              lanes' order with PEs and skipping, and _ilc (order 1, cell
+              bits): bit for bit the plain one.
+Prints one line per stage (with the largest difference where a tolerance
+applies); a disagreement names the case, the check and the first differing
+value.
 
 Usage: /usr/bin/python3 tests/kernel_abi/kernel_abi_check.py
          --kernels PREFIX/share/simdvol/kernels --cases DIR [-v]
@@ -41,6 +71,7 @@ import sys
 os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "0")
 import numpy as np  # noqa: E402
 import pyopencl as cl  # noqa: E402
+import pyopencl.cltypes  # noqa: E402,F401
 
 LAYOUTS = ("cut-and-stack", "hierarchical")
 FUSED_MAX = 7  # simdvol_swap_stages: 1 <= m <= 7 stages a launch
@@ -71,21 +102,46 @@ class Tally:
     """Per stage the checks that agreed; each disagreement printed at once."""
 
     def __init__(self, verbose):
-        self.ok, self.failed, self.verbose = {}, [], verbose
+        self.ok, self.failed, self.verbose, self.largest = {}, [], verbose, {}
 
-    def same(self, stage, case, what, got, want, channels=1):
-        """Bit for bit: floats by their bits (+0 and -0 differ), ints by value."""
+    def same(self, stage, case, what, got, want, channels=1, zeros_alike=False):
+        """Bit for bit: floats by their bits (+0 and -0 differ unless zeros_alike: section 8's
+        "equal"), ints by value."""
+        self.close(stage, case, what, got, want, None, channels=channels, zeros_alike=zeros_alike)
+
+    def close(self, stage, case, what, got, want, tol, rel=False, channels=1, zeros_alike=False):
+        """With tol: |got - want| <= tol (times max(1, |want|) where rel), NaN only with NaN."""
         g, w = np.ascontiguousarray(got).ravel(), np.ascontiguousarray(want).ravel()
         diff = None
         if g.size != w.size:
             diff = f"{g.size} values, the reference has {w.size}"
         else:
-            bad = np.flatnonzero(bits(g) != bits(w))
+            if tol is not None:
+                g64, w64 = g.astype(np.float64), w.astype(np.float64)
+                lim = tol * (np.maximum(1.0, np.abs(w64)) if rel else 1.0)
+                ok = (np.abs(g64 - w64) <= lim) | (np.isnan(g64) & np.isnan(w64))
+                self.largest[stage] = max(self.largest.get(stage, 0.0),  # in tol's measure
+                                          float(np.nanmax(np.abs(g64 - w64) * tol / lim,
+                                                          initial=0.0)))
+            elif zeros_alike and g.dtype == np.float32:
+                ok = (bits(g) == bits(w)) | ((g == 0) & (w == 0))
+            else:
+                ok = bits(g) == bits(w)
+            bad = np.flatnonzero(~ok)
             if bad.size:
                 i = int(bad[0])
-                at = f"[{i // 4}].{'rgba'[i % 4]}" if channels == 4 else f"[{i}]"
-                diff = (f"{bad.size} of {g.size} values differ, the first {at}: "
-                        f"{show(g[i])}, the reference {show(w[i])}")
+                at = f"[{i // channels}].{'rgba'[i % channels]}" if channels > 1 else f"[{i}]"
+                diff = (f"{bad.size} of {g.size} values differ"
+                        + (f" by more than {tol:g}{' x max(1, |ref|)' * rel}" if tol else "")
+                        + f", the first {at}: {show(g[i])}, the reference {show(w[i])}")
+        self.record(stage, case, what, diff)
+
+    def text(self, stage, case, what, got, want):
+        """Lists of tuples of strings, equal as text."""
+        got, want = [tuple(map(str, x)) for x in got], [tuple(map(str, x)) for x in want]
+        self.record(stage, case, what, None if got == want else f"{got}, the reference {want}")
+
+    def record(self, stage, case, what, diff):
         if diff:
             self.failed.append(f"{case}: {what}: {diff}")
             print(f"kernel-abi-check: FAILED {case}: {what}: {diff}", flush=True)
@@ -463,6 +519,543 @@ def check_warp(host, tally, d, M):
                host.read(out, np.float32, 4 * ow * oh), load(d, "warp_ref.f32"), 4)
 
 
+# ---------------------------------------------------------------- direct frame (sections 3-5)
+ORDERS = (0, 1, 2, 3)
+CHUNK = 64  # shade16 / classify16: L0 = min(64, 2^k >= chunks), L1 = max(1, min(64 / L0, P))
+NAN = np.float32(np.nan)
+
+
+def int4(x, y=0, z=0, w=0):
+    return cl.cltypes.make_int4(*(int(v) for v in (x, y, z, w)))
+
+
+def pow2_at_least(n):
+    return 1 << max(int(n) - 1, 0).bit_length()
+
+
+def shared_define(kdir, name):
+    """A constant of simdvol_shared.h (SV_ORDER_BLOCK, SV_BRICK_LOG2)."""
+    for line in (kdir / "simdvol_shared.h").read_text().splitlines():
+        w = line.split()
+        if w[:2] == ["#define", name]:
+            return int(w[2])
+    raise RuntimeError(f"simdvol_shared.h: no {name}")
+
+
+class Cells:
+    """Section 3 "Cells with halo" / "Voxel cells" and the per-PE tables, from
+    kd_split's rule: c_a = ceil(n_a / splits_a), origin index_a * c_a, and
+    (pe_array.hpp, which the page names) the PE bits of an axis, read from the
+    highest to the lowest, spell the cell's index along it."""
+
+    def __init__(self, dims, P, halo=1):
+        N = log2_exact(P)
+        self.dims, self.P, self.h = np.array(dims), P, halo
+        self.bit_axis = kd_bit_axis(dims, P)
+        self.pos = [[b for b in range(N) if self.bit_axis[b] == a] for a in range(3)]  # low first
+        self.splits = np.array([1 << len(p) for p in self.pos])
+        self.cell = -(-self.dims // self.splits)
+        self.block = self.cell + 2 * halo
+        self.stride = -(-int(np.prod(self.block)) // 16) * 16  # bx by bz rounded up to 16
+        self.vstride = -(-int(np.prod(self.cell)) // 16) * 16  # cx cy cz rounded up to 16
+        pe = np.arange(P)
+        self.cidx = np.stack([self.pe_bits(a, pe, inverse=True) for a in range(3)], 1)
+        self.origins = self.cidx * self.cell
+        self.origins4, self.cidx4 = (np.c_[t, 0 * t[:, :1]].astype(np.int32)  # int4, w = 0
+                                     for t in (self.origins, self.cidx))
+        self.pe_of_cell = np.zeros(P, np.int32)  # (iz sy + iy) sx + ix
+        s = self.splits
+        self.pe_of_cell[(self.cidx[:, 2] * s[1] + self.cidx[:, 1]) * s[0] + self.cidx[:, 0]] = pe
+
+    def pe_bits(self, a, ci, inverse=False):
+        """The PE index bits that cell index ci along axis a stands for (inverse: the cell index
+        along a of PE ci)."""
+        pairs = [(b, k) if inverse else (k, b) for k, b in enumerate(self.pos[a])]
+        return sum(((ci >> src) & 1) << dst for src, dst in pairs) + 0 * ci
+
+    def args(self, stage):
+        """common.cl's geometry arguments (section 2): dims, cell (w = halo), block (w = stride),
+        splits; cell0 = (cx, cy, cz, 0) (match.cl's `cell`, the voxel cells')."""
+        d, c, b = self.dims, self.cell, self.block
+        return {"dims": int4(*d), "cell": int4(*c, self.h), "block": int4(*b, self.stride),
+                "splits": int4(*self.splits), "cell0": int4(*c)}[stage]
+
+    def layout(self, vol):
+        """float[P * stride]: position l in [-h, c + h) at ((lz+h) by + ly+h) bx + lx+h of PE p's
+        block, the volume value at clamp(origin + l, 0, n - 1); the tail zero."""
+        out = np.zeros((self.P, self.stride), np.float32)
+        r = [np.arange(-self.h, c + self.h) for c in self.cell]
+        for p, o in enumerate(self.origins):
+            x, y, z = (np.clip(o[a] + r[a], 0, self.dims[a] - 1) for a in range(3))
+            out[p, :np.prod(self.block)] = vol[np.ix_(z, y, x)].ravel()
+        return out.ravel()
+
+    def voxel_index(self):
+        """Per (PE, position e = (lz cy + ly) cx + lx) of the cells' interiors: the flat voxel
+        at the clamped position (padding edge-replicated) and whether it is inside."""
+        c, n = self.cell, self.dims
+        lz, ly, lx = np.meshgrid(*(np.arange(c[a]) for a in (2, 1, 0)), indexing="ij")
+        g = [self.origins[:, a, None] + l.ravel()[None] for a, l in enumerate((lx, ly, lz))]
+        inside = (g[0] < n[0]) & (g[1] < n[1]) & (g[2] < n[2])
+        g = [np.minimum(g[a], n[a] - 1) for a in range(3)]
+        return (g[2] * n[1] + g[1]) * n[0] + g[0], inside
+
+    def to_cells(self, flat4, interleaved):
+        """Voxel cells: float[P * 4 * vstride], planar (c vstride + e) or interleaved (4 e + c)
+        within PE p's block from p 4 vstride; tails zero."""
+        idx, _ = self.voxel_index()
+        out = np.zeros((self.P, self.vstride, 4), np.float32)
+        out[:, :idx.shape[1]] = flat4.reshape(-1, 4)[idx]
+        return (out if interleaved else out.transpose(0, 2, 1)).ravel()
+
+    def planes(self, cells, interleaved=False):
+        """(P, vstride, 4) from voxel cells."""
+        v = cells.reshape(self.P, self.vstride, 4) if interleaved else \
+            cells.reshape(self.P, 4, self.vstride).transpose(0, 2, 1)
+        return np.ascontiguousarray(v)
+
+    def gather(self, cells, interleaved=False):
+        """The in-volume voxels of voxel cells, flat (nz ny nx, 4)."""
+        idx, inside = self.voxel_index()
+        out = np.zeros((int(np.prod(self.dims)), 4), np.float32)
+        out[idx[inside]] = self.planes(cells, interleaved)[:, :idx.shape[1]][inside]
+        return out
+
+    def table(self, interleaved):
+        """Section 3 "Resample address table": table[g] of axis a = the PE bits of g's cell times
+        the PE block (4 vstride floats) + the local coordinate times its stride (1, cx, cx cy;
+        4 times that interleaved); cs = vstride planar, 1 interleaved."""
+        t, unit = [], 4 if interleaved else 1
+        st = [unit, unit * self.cell[0], unit * self.cell[0] * self.cell[1]]
+        for a in range(3):
+            g = np.arange(self.dims[a])
+            t.append(self.pe_bits(a, g // self.cell[a]) * 4 * self.vstride
+                     + (g % self.cell[a]) * st[a])
+        return np.concatenate(t).astype(np.int32), (1 if interleaved else self.vstride), st
+
+
+def pair_table(t, dims):
+    """Section 3 "Resample pair table": per axis n + 2 longs, entry f + 1 (f = -1 .. n) = table at
+    clamp(f) in the low 32 bits, at clamp(f + 1) in the high 32 bits."""
+    out, base = [], 0
+    for n in dims:
+        f = np.arange(-1, n + 1)
+        lo = t[base + np.clip(f, 0, n - 1)].astype(np.uint32).astype(np.uint64)
+        hi = t[base + np.clip(f + 1, 0, n - 1)].astype(np.uint32).astype(np.uint64)
+        out.append((lo | (hi << np.uint64(32))).view(np.int64))
+        base += n
+    return np.concatenate(out)
+
+
+def cell_bits(t, dims):
+    """Section 3 "Cell bits": per axis a shift s with at most 32 cells ((n - 1) >> s < 32) and
+    t[g] = bits[g >> s] + (g & (2^s - 1)) stride. Which s and stride the page does not say; the
+    library's (host/cl/local.cpp, resample_cell_bits): the largest s <= min(30, bit length of n)
+    that holds, stride = t[1] - t[0] (0 where n = 1 or s = 0). 104 ints: bits x, y, z (32 each,
+    0 past the last cell), s x y z, strides x y z, 0, 0; none where an axis has no such s."""
+    bits, shifts, strides, base = [], [], [], 0
+    for n in dims:
+        ta, g = t[base:base + n].astype(np.int64), np.arange(n)
+        for s in range(min(30, n.bit_length()), -1, -1):
+            if (n - 1) >> s >= 32:
+                return np.zeros(0, np.int32)
+            st = int(ta[1] - ta[0]) if n >= 2 and s > 0 else 0
+            if (ta == ta[(g >> s) << s] + (g & ((1 << s) - 1)) * st).all():
+                bits.append(np.pad(ta[::1 << s], (0, 32 - len(ta[::1 << s]))))
+                shifts.append(s)
+                strides.append(st)
+                break
+        base += n
+    return np.concatenate(bits + [shifts, strides, [0, 0]]).astype(np.int32)
+
+
+def shade_params_check(tally, case, sp, M):
+    """Section 2's sv_shade_params fields that the page or shade.hpp give rules for, against
+    the library's struct: grad_scale (min spacing / spacing, ShadeFrame), ka .. k2, enabled,
+    spec_floor (specular_floor: 2^(-100/n), at least FLT_MIN, 0 for n = 0), grad_over (range
+    spans 1e19 or more), surface_g2 (surface_threshold). light, halfway, depth_dir and
+    depth_offset have no rule on the page: the struct is make_shade_frame's."""
+    f, i = sp.view(np.float32), sp.view(np.int32)
+    s = np.array([float(x) for x in M["spacing"].split()])
+    tally.same("params", case, "sv_shade_params grad_scale", f[12:15], np.float32(s.min() / s))
+    lo, hi = (float(x) for x in M["range"].split())
+    n = float(M["shininess"])
+    floor = 0.0 if n == 0 else max(2.0 ** (-100.0 / n), float(np.finfo(np.float32).tiny))
+    span = min(max(hi - lo, 1e-10), 1.0) if np.isfinite(hi - lo) else 1.0
+    want = [float(x) for x in M["ka_kd_ks"].split()] + [n] + [float(x) for x in M["k1_k2"].split()]
+    tally.same("params", case, "sv_shade_params ka kd ks shininess k1 k2", f[17:23],
+               np.float32(want))
+    tally.same("params", case, "sv_shade_params enabled, grad_over", i[[23, 25]],
+               [1, int(hi - lo >= 1e19)])
+    tally.same("params", case, "sv_shade_params spec_floor", f[24:25], [np.float32(floor)])
+    tally.same("params", case, "sv_shade_params surface_g2", f[26:27],
+               [np.float32((1e-6 * span) ** 2)])
+
+
+def classify_defines(cp):
+    """Section 5 classify.cl: SV_KIND, SV_STEP_ONE, then SV_NMAT (mixture) or the
+    five ramps' counts SV_NK_* (transfer), from the sv_classify_params bytes."""
+    i = cp.view(np.int32)
+    # SV_STEP_ONE: defined (1) only where step_is_one; classify.cl tests it with #ifdef, so a
+    # "SV_STEP_ONE 0" would take every step as 1 (the page: "= 1 when opacity_step == 1").
+    d = [("SV_KIND", i[0])] + ([("SV_STEP_ONE", 1)] if i[3] else [])
+    if i[0] == 0:
+        return d + [("SV_NMAT", i[2])]
+    ramps = ("DENSITY", "GRADIENT", "RED", "GREEN", "BLUE")
+    return d + [(f"SV_NK_{r}", i[(672 + 272 * k) // 4]) for k, r in enumerate(ramps)]
+
+
+def sv_rw(cx):
+    """shade16's SV_RW from cx: 16 (a multiple of 16), 8, 4, else 1."""
+    return 16 if cx % 16 == 0 else cx if cx in (8, 4) else 1
+
+
+def chunk_run(host, kernel, P, vstride, *args):
+    """2-D (vstride/16, P) / (L0, L1), L0 = min(64, 2^k >= vstride/16),
+    L1 = max(1, min(64/L0, P))."""
+    l0 = min(CHUNK, pow2_at_least(vstride // 16))
+    host.run(kernel, (vstride // 16, P), (l0, max(1, min(CHUNK // l0, P))), *args)
+
+
+def occupancy(flat4, dims, brick):
+    """uint per 4^3 brick (x fastest): 1 where a voxel of it has a channel that is not +-0."""
+    nb = -(-np.array(dims) // brick)
+    v = (flat4.reshape(dims[2], dims[1], dims[0], 4) != 0).any(3)
+    occ = np.zeros(nb[::-1], np.uint32)
+    z, y, x = np.nonzero(v)
+    occ[z // brick, y // brick, x // brick] = 1
+    return occ.ravel(), nb
+
+
+def reach(occ, nb, order):
+    """simdvol_occupancy_reach: OR of occ over bricks b - lo .. b + hi per axis (lo = 1 for
+    orders 2, 3, else 0; hi = 1), bricks past the edges none."""
+    lo, r = (1 if order >= 2 else 0), occ.reshape(nb[::-1]).astype(bool)
+    for ax in range(3):
+        p = np.pad(r, [(lo, 1) if k == ax else (0, 0) for k in range(3)])
+        r = np.logical_or.reduce([np.take(p, np.arange(r.shape[ax]) + k, axis=ax)
+                                  for k in range(lo + 2)])
+    return r.ravel().astype(np.uint8)
+
+
+def match_geo(view, cell):
+    """Section 5 match.cl `geo` (20 floats, double then rounded) and `stepc` (9 longs)."""
+    o = view[0:3].astype(np.float64) / 2.0 ** 32
+    Mv = view[4:16].reshape(3, 4)[:, :3]
+    N = np.linalg.inv(Mv.astype(np.float64) / 2.0 ** 32)
+    c = np.array(cell, np.float64)
+    geo = np.zeros(20)
+    geo[0:2] = (N @ (c / 2 - o))[:2]
+    u = np.stack([N[0] * c, N[1] * c], 1)  # u_a = (u_a.i, u_a.j)
+    geo[2:5], geo[5:8] = u[:, 0], u[:, 1]
+    for a in range(3):
+        L = np.hypot(*u[a])
+        if L <= 1e-9:
+            continue
+        n = np.array([-u[a, 1], u[a, 0]]) / L
+        if abs(n[0]) < 1e-6:
+            continue
+        geo[8 + a], geo[11 + a] = n
+        geo[14 + a] = 0.05 + 0.5 * sum(abs(n @ u[b]) for b in range(3) if b != a)
+    stepc = []
+    for a in range(3):
+        s, d = int(Mv[a, 0]), int(Mv[a, 2])
+        if d == 0:
+            stepc += [1, 0, 0]
+        else:
+            m, delta = abs(d), (-s if d > 0 else s)
+            stepc += [m, delta // m, delta % m]  # floor division: 0 <= dr < m
+    return geo.astype(np.float32), np.array(stepc, np.int64)
+
+
+def segment_order(segs, seg_off, kb, block, with_pe):
+    """simdvol_segment_order: per block of SV_ORDER_BLOCK positions, cut at the PEs' boundaries,
+    a stable sort by min(k1 - k0, 63), longest first; with_pe: then the PE of position 8 w."""
+    n = len(segs)
+    length = np.minimum((kb[:, 1] - kb[:, 0]) if kb is not None else segs["k1"] - segs["k0"], 63)
+    pe = np.searchsorted(seg_off, np.arange(n), side="right") - 1
+    order = []
+    for b0 in range(0, n, block):
+        pos = np.arange(b0, min(b0 + block, n))
+        for p in np.unique(pe[pos]):
+            q = pos[pe[pos] == p]
+            order.append(q[np.argsort(-length[q], kind="stable")])
+    order = np.concatenate(order) if order else np.zeros(0, np.int64)
+    if with_pe:
+        order = np.concatenate([order, pe[np.arange(0, n, 8)]])
+    return order.astype(np.int32)
+
+
+def check_direct(host, tally, d):
+    """Layout, shade, shade + classify (planar, interleaved, marks), the brick occupancy and reach,
+    the resample tables, zero_uncovered (on the rows of simdvol_match_rows_nolinks), the lanes'
+    order, and per order the resample, local and fused resample + local kernels."""
+    M, case, kd = read_meta(d), d.name, host.kdir
+    P, dims, nseg = int(M["pes"]), [int(x) for x in M["dims"].split()], int(M["nseg"])
+    g, log2p = Cells(dims, P), np.int32(log2_exact(P))
+    view, vol = load(d, "view.bin", np.int64), load(d, "volume.f32")
+    # Section 3: the cell geometry and the per-PE tables against the library's.
+    tally.same("layout", case, "cell, block, halo, stride, vstride",
+               np.r_[g.cell, g.block, g.h, g.stride, g.vstride],
+               [int(x) for x in (M["cell"] + " " + M["block"]).split()]
+               + [int(M[k]) for k in ("halo", "cell_stride", "vstride")])
+    tally.same("layout", case, "origins", g.origins4, load(d, "origins.i32"))
+    tally.same("layout", case, "pe_of_cell", g.pe_of_cell, load(d, "pe_of_cell.i32"))
+    cells_ref = load(d, "cells.f32")
+    tally.same("layout", case, "cells with halo (Python)", g.layout(vol.reshape(dims[::-1])),
+               cells_ref)
+    # Layout group: simdvol_layout, sy sz by bz / 64 (volume, cells, origins, pe_of_cell, dims,
+    # cell, block, splits); simdvol_layout_voxel, P stride / 64; simdvol_gather, P cy cz / 64.
+    L = host.layout_group()
+    b_vol, b_org = host.buf(vol), host.buf(g.origins4)
+    b_poc, n_cells = host.buf(g.pe_of_cell), P * g.stride
+    geo_args = [g.args(k) for k in ("dims", "cell", "block")]
+    cells = host.buf(np.full(n_cells, NAN))
+    host.run(L.simdvol_layout, int(g.splits[1] * g.splits[2] * g.block[1] * g.block[2]), 64,
+             b_vol, cells, b_org, b_poc, *geo_args, g.args("splits"))
+    tally.same("layout", case, "simdvol_layout", host.read(cells, np.float32, n_cells), cells_ref)
+    cells_v = host.buf(np.full(n_cells, NAN))
+    host.run(L.simdvol_layout_voxel, n_cells, 64, b_vol, cells_v, b_org, *geo_args, np.int32(P))
+    tally.same("layout", case, "simdvol_layout_voxel", host.read(cells_v, np.float32, n_cells),
+               cells_ref)
+    flat = host.buf(np.full(vol.size, NAN))
+    host.run(L.simdvol_gather, P * int(g.cell[1] * g.cell[2]), 64, cells, flat, b_org, *geo_args,
+             np.int32(P))
+    tally.same("layout", case, "simdvol_gather", host.read(flat, np.float32, vol.size), vol)
+
+    # Shade: shade.cl alone, shade_defines then SV_RW; (cells, out, origins, dims, cell, block,
+    # pes, vstride, sp); sp a __constant buffer of sizeof(sv_shade_params) = 108 bytes.
+    sp, cp = load(d, "shade_params.bin", np.uint8), load(d, "classify_params.bin", np.uint8)
+    tally.same("params", case, "struct sizes 108, 2032", [sp.size, cp.size], [108, 2032])
+    shade_params_check(tally, case, sp, M)
+    defs = [tuple(v.split()) for k, v in (ln.split(" ", 1) for ln in
+            (d / "meta.txt").read_text().splitlines()) if k in ("shade_define", "classify_define")]
+    sdef = [("SV_GRAD_OVER", "1")] if sp.view(np.int32)[25] else []
+    cdef = [(k, str(v)) for k, v in classify_defines(cp)]
+    tally.text("params", case, "shade_defines, classify_defines", sdef + cdef, defs)
+    rw = [("SV_RW", sv_rw(int(g.cell[0])))]
+    vs, nv = g.vstride, P * 4 * g.vstride
+    b_sp, b_cp = host.buf(sp), host.buf(cp)
+    common = (b_org, *geo_args, np.int32(P), np.int32(vs), b_sp)  # after (cells, out)
+    shaded = host.buf(np.full(nv, NAN))
+    chunk_run(host, host.program("shade", sdef + rw).simdvol_shade16, P, vs, cells, shaded, *common)
+    sh = host.read(shaded, np.float32, nv)
+    got, want = g.gather(sh), load(d, "shade.f32").reshape(-1, 4)
+    # Section 8: Id, Is within 1e-5; |g| within 1e-6 max(1, |g|); channel 3 the volume's
+    # value (equal); zero tails.
+    tally.close("shade", case, "shade16 Id, Is", got[:, :2], want[:, :2], 1e-5, channels=2)
+    tally.close("shade", case, "shade16 |g|", got[:, 2], want[:, 2], 1e-6, rel=True)
+    tally.same("shade", case, "shade16 channel 3 = value", got[:, 3], vol, zeros_alike=True)
+    ne = int(np.prod(g.cell))
+    tally.same("shade", case, "shade16 zero tails", g.planes(sh)[:, ne:],
+               np.zeros_like(g.planes(sh)[:, ne:]))
+    # The scalar kernels (same arguments) within 1e-6 of shade16 (section 8), every position:
+    # simdvol_shade_rows 2-D (cy cz, P) / (lr, max(1, min(64 / lr, P))), lr = min(64, 2^k >=
+    # cy cz); simdvol_shade 3-D (cx, cy cz, P) / (LX, LY, LZ), LX = clamp(2^k >= cx, 8, 64),
+    # LY = max(16 / LX, min(256 / LX, 2^k >= cy cz)), LZ = max(1, min(256 / (LX LY), P)).
+    S, cx, rows = host.program("shade", sdef), int(g.cell[0]), int(g.cell[1] * g.cell[2])
+    lr = min(64, pow2_at_least(rows))
+    lx = min(max(pow2_at_least(cx), 8), 64)
+    ly = max(16 // lx, min(256 // lx, pow2_at_least(rows)))
+    lz = max(1, min(256 // (lx * ly), P))
+    for name, gs, ls in (("simdvol_shade_rows", (rows, P), (lr, max(1, min(64 // lr, P)))),
+                         ("simdvol_shade", (cx, rows, P), (lx, ly, lz))):
+        out = host.buf(np.full(nv, NAN))
+        host.run(getattr(S, name), gs, ls, cells, out, *common)
+        v = g.planes(host.read(out, np.float32, nv)).reshape(-1, 4)
+        w = g.planes(sh).reshape(-1, 4)
+        tally.close("shade", case, f"{name} Id, Is = shade16's", v[:, :2], w[:, :2], 1e-6,
+                    channels=2)
+        tally.close("shade", case, f"{name} |g| = shade16's", v[:, 2], w[:, 2], 1e-6, rel=True)
+        tally.same("shade", case, f"{name} channel 3 = shade16's", v[:, 3], w[:, 3])
+    # Classify alone (classify.cl, its defines): simdvol_classify16(shading, out, vstride, pes, cp);
+    # simdvol_classify16_in_place(voxels, vstride, pes, cp): bit for bit, tails included.
+    C, rgba = host.program("classify", cdef), host.buf(np.full(nv, NAN))
+    chunk_run(host, C.simdvol_classify16, P, vs, shaded, rgba, np.int32(vs), np.int32(P), b_cp)
+    sep = host.read(rgba, np.float32, nv)
+    chunk_run(host, C.simdvol_classify16_in_place, P, vs, shaded, np.int32(vs), np.int32(P), b_cp)
+    tally.same("shade+classify", case, "classify16_in_place = classify16",
+               host.read(shaded, np.float32, nv), sep, channels=4)
+    sep = g.planes(sep)[:, :ne]
+    # Fused: program ("shade", d, {"classify"}), d = classify_defines, shade_defines, SV_RW;
+    # (cells .. sp, cp, occ, nbx, nby, mark, live, use_live, kc, kc_mode); occ zeroed.
+    F = host.program("shade", cdef + sdef + rw, ("classify",))
+    brick = 1 << shared_define(kd, "SV_BRICK_LOG2")
+    rgba_ref = load(d, "rgba.f32").reshape(-1, 4)
+    fused = {}
+    for il in (False, True):
+        name = "simdvol_shade_classify16" + ("_il" if il else "")
+        out, occ_b = host.buf(np.full(nv, NAN)), host.zeros(4 * int(np.prod(-(-g.dims // brick))))
+        nbx, nby = (-(-g.dims // brick))[:2]
+        chunk_run(host, getattr(F, name), P, vs, cells, out, *common, b_cp, occ_b,
+                  *i32(nbx, nby, 1), host.empty(16), np.int32(0), host.empty(16), np.int32(0))
+        v = host.read(out, np.float32, nv)
+        fused[il] = g.planes(v, il)
+        occ_want, nb = occupancy(g.gather(v, il), dims, brick)
+        tally.same("shade+classify", case, f"{name} marks",
+                   host.read(occ_b, np.uint32, occ_want.size), occ_want)
+    tally.same("shade+classify", case, "shade_classify16 = shade16, classify16", fused[0][:, :ne],
+               sep, zeros_alike=True, channels=4)
+    tally.same("shade+classify", case, "shade_classify16 zero tails", fused[0][:, ne:],
+               np.zeros_like(fused[0][:, ne:]))
+    tally.same("shade+classify", case, "shade_classify16_il = planar", fused[1], fused[0],
+               channels=4)
+    got = g.gather(fused[0].transpose(0, 2, 1).ravel())
+    tally.close("shade+classify", case, "shade_classify16 against classify()", got, rgba_ref,
+                1e-5, channels=4)
+    tally.same("shade+classify", case, "the same voxels empty", got[:, 3] > 0, rgba_ref[:, 3] > 0)
+
+    # The reference's classified voxels in voxel cells (section 3), against voxels_to_cells.
+    vox = {il: g.to_cells(rgba_ref, il) for il in (False, True)}
+    tally.same("tables", case, "voxel cells (Python)", g.planes(vox[False]).ravel(),
+               load(d, "rgba_cells.f32"))
+    b_vox = {il: host.buf(v) for il, v in vox.items()}
+    # Resample tables (section 3) against resample_address_table, _pair_table, _cell_bits.
+    tab = {}
+    for il in (False, True):
+        t, cs, st = g.table(il)
+        tab[il] = (t, cs, st)
+        sfx = "_il" if il else ""
+        tally.same("tables", case, f"address table{sfx}", t, load(d, f"table{sfx}.i32"))
+        tally.same("tables", case, f"cs{sfx}", [cs], [int(M["cs" + sfx])])
+    pairs = pair_table(tab[True][0], dims)
+    bits = cell_bits(tab[True][0], dims)
+    tally.same("tables", case, "pair table", pairs, load(d, "pairs_il.i64"))
+    tally.same("tables", case, "cell bits", bits, load(d, "cell_bits_il.i32"))
+    b_pairs = host.buf(pairs)
+    b_pairs_c = host.buf(np.concatenate([pairs.view(np.int32), bits])) if bits.size else None
+
+    # Occupancy (resample.cl): (vox, stride, cell, origins, dims, nbx, nby, occ) over
+    # (cz rounded to min(8, cz), P) / (min(8, cz), 1); occ zeroed; then the reach per order.
+    R = {o: host.program("resample", [("ORDER", o)], ("local",)) for o in ORDERS}
+    occ_want, nb = occupancy(rgba_ref, dims, brick)
+    lz = min(8, int(g.cell[2]))
+    for il in (False, True):
+        occ_b = host.zeros(4 * occ_want.size)
+        host.run(getattr(R[1], "simdvol_occupancy" + ("_il" if il else "")), (int(g.cell[2]), P),
+                 (lz, 1), b_vox[il], np.int32(vs), g.args("cell0"), b_org, g.args("dims"),
+                 *i32(*nb[:2]), occ_b)
+        tally.same("occupancy", case, "simdvol_occupancy" + ("_il" if il else ""),
+                   host.read(occ_b, np.uint32, occ_want.size), occ_want)
+    b_reach = {}
+    for o in ORDERS:
+        b_reach[o] = host.empty(occ_want.size)
+        host.run(R[o].simdvol_occupancy_reach, int(nb[1] * nb[2]), 64, occ_b, *i32(*nb),
+                 *i32(1 if o >= 2 else 0, 1), b_reach[o])
+        tally.same("occupancy", case, f"reach, order {o}",
+                   host.read(b_reach[o], np.uint8, occ_want.size), reach(occ_want, nb, o))
+
+    # Segments, offsets, rectangles (section 3), the balanced bounds as kb short2.
+    segs, bsegs = load(d, "segs.bin", SEG), load(d, "bal_segs.bin", SEG)
+    seg_off, rects = load(d, "seg_offset.i32"), load(d, "rects.bin", np.int32).reshape(P, 4)
+    cand = load(d, "cand.bin", np.int32).reshape(P, 4)
+    rect_off = np.r_[0, np.cumsum(rects[:, 2].astype(np.int64) * rects[:, 3])]
+    sample_off = np.r_[0, np.cumsum(bsegs["k1"] - bsegs["k0"])]
+    tally.same("tables", case, "rect_off", rect_off, load(d, "rect_off.i64"))
+    tally.same("tables", case, "sample_off", sample_off, load(d, "sample_off.i64"))
+    kb = np.stack([bsegs["k0"], bsegs["k1"]], 1).astype(np.int16)
+    npix, nsmp = int(rect_off[-1]), int(sample_off[-1])
+    b_segs, b_bsegs, b_soff = host.buf(segs), host.buf(bsegs), host.buf(seg_off)
+    b_rects, b_roff, b_kb = host.buf(rects), host.buf(rect_off[:P].astype(np.int32)), host.buf(kb)
+    b_view, b_smpoff = host.buf(view), host.buf(sample_off.astype(np.int32))
+
+    # zero_uncovered on the rows of simdvol_match_rows_nolinks (section 5 match.cl: H = the
+    # largest candidate height rounded up to 8, at least 8; P H / 8 work-items; save 0).
+    H = max(8, -(-int(cand[:, 3].max()) // 8) * 8)
+    geo, stepc = match_geo(view, g.cell)
+    rowsum = host.empty(16 * P * H)
+    # (view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum, rowlk, kscr,
+    # koff, save): every PE active; rowlk, kscr and koff unused here (save 0).
+    host.run(L.simdvol_match_rows_nolinks, P * H // 8, 64, host.buf(view), host.buf(geo),
+             host.buf(stepc), host.buf(cand), host.buf(g.cidx4), g.args("cell0"), g.args("splits"),
+             b_poc, host.buf(np.ones(P, np.uint8)), *i32(P, H), rowsum, host.empty(16 * P * H),
+             host.empty(16), host.zeros(4 * P), np.int32(0))
+
+    def footprints(zero_uncovered=False):
+        """Footprint buffer: NaN, then zero_uncovered; or zeroed (simdvol_zero4, n / 256)."""
+        fp = host.buf(np.full(4 * max(npix, 1), NAN))
+        if zero_uncovered:
+            host.run(L.simdvol_zero_uncovered, P * H // 8, 64, host.buf(cand), b_rects, rowsum,
+                     *i32(P, H), b_roff, fp)
+        else:
+            host.run(R[1].simdvol_zero4, npix, 256, fp, np.int32(npix))
+        return fp
+
+    # Lanes' order: (segs, nseg, seg_off, log2p, order, kb, use_kb, with_pe),
+    # ceil(nseg / SV_ORDER_BLOCK) / 64; checked against the page's rule.
+    blk, lanes = shared_define(kd, "SV_ORDER_BLOCK"), {}
+    for use_kb, with_pe in ((0, 0), (1, 1)):
+        n_ord = nseg + (-(-nseg // 8) if with_pe else 0)
+        ob = host.empty(4 * n_ord)
+        host.run(R[1].simdvol_segment_order, -(-nseg // blk), 64, b_segs if use_kb else b_bsegs,
+                 np.int32(nseg), b_soff, log2p, ob, b_kb, *i32(use_kb, with_pe))
+        lanes[with_pe] = ob
+        tally.same("order", case, f"simdvol_segment_order use_kb {use_kb} with_pe {with_pe}",
+                   host.read(ob, np.int32, n_ord),
+                   segment_order(segs if use_kb else bsegs, seg_off, kb if use_kb else None,
+                                 blk, with_pe))
+
+    for o in ORDERS:
+        foot_ref, smp_ref = load(d, f"foot_o{o}.f32"), load(d, f"samples_o{o}.f32")
+        # Variants: (name, interleaved, segments with kb, ordered, skip, pairs). The plain planar
+        # one passes 16-byte dummies where the page says a buffer is not read (reach with skip
+        # 0, kb with use_kb 0, pairs on planar cells, origins with pe_cell.w 0); the interleaved
+        # one takes the matching's segments with the balanced kb (the direct frame's deferred
+        # unpack), the lanes' order with PEs (ordered 2), skipping; _ilc (order 1) the cell bits.
+        variants = [("v8", 0, 0, 0, 0, None), ("v8_il", 1, 1, 2, 1, b_pairs)]
+        if o == 1 and b_pairs_c is not None:
+            variants.append(("v8_ilc", 1, 0, 1, 0, b_pairs_c))
+
+        def common(il, ordered, skip, pb):  # order .. pairs as both kernels take them
+            return dict(order=lanes[ordered == 2] if ordered else host.empty(16),
+                        ordered=np.int32(ordered), reach=b_reach[o] if skip else host.empty(16),
+                        nb=i32(*nb[:2], skip), origins=b_org if pb else host.empty(16),
+                        pe_cell=int4(*g.cell, 1 if pb else 0), pairs=pb or host.empty(16),
+                        table=host.buf(tab[il][0]), cs=np.int32(tab[il][1]))
+
+        # Resample (ceil(nseg / 8) / 64): (segs, nseg, sample_off, view, table, vox, cs, out,
+        # order, ordered, reach, nbx, nby, skip, seg_off, log2p, origins, pe_cell, pairs), the
+        # balanced segments.
+        smp = {}
+        for name, il, _, ordered, skip, pb in variants[:2]:
+            a, out = common(il, ordered, skip, pb), host.buf(np.full(4 * max(nsmp, 1), NAN))
+            host.run(getattr(R[o], "simdvol_resample_" + name), -(-nseg // 8), 64, b_bsegs,
+                     np.int32(nseg), b_smpoff, b_view, a["table"], b_vox[il], a["cs"], out,
+                     a["order"], a["ordered"], a["reach"], *a["nb"], b_soff, log2p, a["origins"],
+                     a["pe_cell"], a["pairs"])
+            smp[name] = host.read(out, np.float32, 4 * nsmp)
+        tally.close("resample", case, f"order {o} resample_v8 against resample_reference",
+                    smp["v8"], smp_ref, 1e-5, channels=4)
+        tally.same("resample", case, f"order {o} resample_v8_il (lanes' order, skip)", smp["v8_il"],
+                   smp["v8"], zeros_alike=True, channels=4)
+        # Local (nseg / 64): (segs, nseg, seg_off, log2p, sample_off, samples, rects, rect_off,
+        # foot) into zeroed footprints.
+        fp = footprints()
+        host.run(R[o].simdvol_local, nseg, 64, b_bsegs, np.int32(nseg), b_soff, log2p, b_smpoff,
+                 host.buf(smp["v8"]), b_rects, b_roff, fp)
+        tally.close("local", case, f"order {o} simdvol_local against footprints_reference",
+                    host.read(fp, np.float32, 4 * npix), foot_ref, 1e-5, channels=4)
+        # Fused (ceil(nseg / 8) / 64): (segs, nseg, seg_off, log2p, view, table, vox, cs, rects,
+        # rect_off, foot, reach, nbx, nby, skip, order, ordered, origins, pe_cell, pairs, kb,
+        # use_kb); the interleaved variant's footprints zeroed by zero_uncovered only.
+        base = None
+        for name, il, use_kb, ordered, skip, pb in variants:
+            a, fp = common(il, ordered, skip, pb), footprints(zero_uncovered=bool(use_kb))
+            host.run(getattr(R[o], "simdvol_resample_local_" + name), -(-nseg // 8), 64,
+                     b_segs if use_kb else b_bsegs, np.int32(nseg), b_soff, log2p, b_view,
+                     a["table"], b_vox[il], a["cs"], b_rects, b_roff, fp, a["reach"], *a["nb"],
+                     a["order"], a["ordered"], a["origins"], a["pe_cell"], a["pairs"],
+                     b_kb if use_kb else host.empty(16), np.int32(use_kb))
+            got = host.read(fp, np.float32, 4 * npix)
+            if base is None:
+                base = got
+                tally.close("fused", case, f"order {o} resample_local_v8 against "
+                            "footprints_reference", got, foot_ref, 1e-5, channels=4)
+            else:
+                tally.same("fused", case, f"order {o} resample_local_{name} = v8", got, base,
+                           channels=4)
+
+
 # ---------------------------------------------------------------- main
 SUMMARY = (
     ("plan", "swap plan", "bit_axis, front, pixel bits, rectangles, offsets, xpe, ype: plan_swap"),
@@ -474,6 +1067,18 @@ SUMMARY = (
     ("sub", "mc sub", "footprints and counters: mc_sub_reference's"),
     ("adaptive", "adaptive", "images: composite_adaptive's"),
     ("warp", "warp", "tables and images: output_to_intermediate's, warp_to_output's"),
+    ("layout", "layout", "geometry, origins, pe_of_cell, cells, gather: layout_reference's"),
+    ("params", "params", "sv_shade_params rules, struct sizes, defines: the library's"),
+    ("shade", "shade", "shade16 against shade() (1e-5, |g| 1e-6 rel), value, zero tails"),
+    ("shade+classify", "shade+cls", "fused = shade16 + classify16, _il = planar, marks; "
+     "classify() 1e-5"),
+    ("tables", "tables", "voxel cells, address/pair tables, cell bits, offsets: the library's"),
+    ("occupancy", "occupancy", "simdvol_occupancy(_il), reach per order: the page's rule"),
+    ("order", "lanes", "simdvol_segment_order (with PEs, kb): the page's rule"),
+    ("resample", "resample", "v8 against resample_reference (1e-5); v8_il equal"),
+    ("local", "local", "simdvol_local against footprints_reference (1e-5)"),
+    ("fused", "fused", "resample_local_v8 against footprints_reference (1e-5); _il (kb, "
+     "zero_uncovered, lanes, skip), _ilc bit for bit"),
 )
 
 
@@ -492,12 +1097,15 @@ def main():
     print(f"kernel-abi-check: pyopencl {cl.VERSION_TEXT} on {host.dev.name.strip()}, "
           f"kernels from {args.kernels}")
     kinds = [read_meta(d)["kind"] for d in cases]
+    checks = {"swap": check_swap, "mc": check_mc, "direct": check_direct}
     for d, kind in zip(cases, kinds):
-        (check_swap if kind == "swap" else check_mc)(host, tally, d)
+        checks[kind](host, tally, d)
     print(f"kernel-abi-check: {kinds.count('swap')} swap cases (2 layouts each), "
-          f"{kinds.count('mc')} Monte Carlo cases; bit for bit:")
+          f"{kinds.count('mc')} Monte Carlo cases, {kinds.count('direct')} direct-frame cases; "
+          "bit for bit unless a tolerance is named:")
     for key, stage, text in SUMMARY:
-        print(f"kernel-abi-check: {stage:10s} {tally.ok.get(key, 0):4d} equal  {text}")
+        big = f" (largest difference {tally.largest[key]:.2g})" if key in tally.largest else ""
+        print(f"kernel-abi-check: {stage:10s} {tally.ok.get(key, 0):4d} equal  {text}{big}")
     if tally.failed:
         print(f"kernel-abi-check: FAILED: {len(tally.failed)} differ, the first: {tally.failed[0]}")
         return 1

@@ -14,7 +14,16 @@
 //     allocation_reference) in several variants with their McStats,
 //     segment_alphas, composite_adaptive per ray at two thresholds and, with
 //     voxel sampling, the warp tables of output_to_intermediate and
-//     warp_to_output's image.
+//     warp_to_output's image;
+//   direct-*: a phantom, its view, kd_split's bit_axis, the library's cell
+//     geometry (CellLayout, VoxelLayout), origins and pe_of_cell,
+//     layout_reference's cells, the raw sv_shade_params and
+//     sv_classify_params with their defines, shade() and classify(), the
+//     voxels in voxel cells (voxels_to_cells), resample_address_table
+//     (planar, interleaved), resample_pair_table, resample_cell_bits, the
+//     matching's candidates, segments, offsets and rectangles, the balanced
+//     segments, and per order 0-3 resample_reference's samples and
+//     footprints_reference(local_reference)'s footprints.
 // Nothing here runs a kernel: the Python host does, from KERNELS.md.
 //
 // Usage: kernel-abi-ref DIR. Exit status 0, or 2 on an error.
@@ -168,14 +177,20 @@ std::vector<int64_t> stats_words(const McStats& s) {
   return {s.walks, s.draws, s.skipped, s.fallbacks};
 }
 
-void write_mc_case(const fs::path& dir, const McCase& c) {
-  fs::create_directories(dir);
-  const Dims3& dims = c.volume.dims;
+// shepp_logan(n), n the largest of dims, cropped to dims.
+Volume phantom(const Dims3& dims, const std::array<double, 3>& spacing) {
   const Volume full = shepp_logan(static_cast<int>(std::max({dims[0], dims[1], dims[2]})));
-  Volume vol(dims, VoxelType::f32, c.volume.spacing);
+  Volume vol(dims, VoxelType::f32, spacing);
   for (int64_t z = 0; z < dims[2]; ++z)
     for (int64_t y = 0; y < dims[1]; ++y)
       for (int64_t x = 0; x < dims[0]; ++x) vol.at(x, y, z) = full.at(x, y, z);
+  return vol;
+}
+
+void write_mc_case(const fs::path& dir, const McCase& c) {
+  fs::create_directories(dir);
+  const Dims3& dims = c.volume.dims;
+  const Volume vol = phantom(dims, c.volume.spacing);
   const ViewGeometry view = make_view(vol, c.view.angles, c.view.out_width, c.view.out_height,
                                       c.view.sampling, c.view.framing);
   const std::vector<Rgba> voxels =
@@ -283,6 +298,112 @@ void write_mc_case(const fs::path& dir, const McCase& c) {
   }
 }
 
+// ---------------------------------------------------------------- direct frame
+struct DirectCase {
+  const char* name;
+  struct {
+    Dims3 dims;  // phantom(dims, spacing) times scale
+    std::array<double, 3> spacing;
+    float scale;
+  } volume;
+  struct {
+    ViewAngles angles;
+    int out_width, out_height;
+    Sampling sampling;
+  } view;
+  struct {
+    int64_t pes;
+    const char* classifier;  // classifier_preset
+    int sweeps;              // balance_reference's (0: the matching itself)
+  } run;
+};
+
+void put_defines(Meta& meta, const char* key, const Defines& defines) {
+  for (const auto& [name, value] : defines) meta(key, name + " " + value);
+}
+
+void write_direct_case(const fs::path& dir, const DirectCase& c) {
+  fs::create_directories(dir);
+  const Dims3& dims = c.volume.dims;
+  const int64_t pes = c.run.pes;
+  Volume vol = phantom(dims, c.volume.spacing);
+  for (float& v : vol.data()) v *= c.volume.scale;
+  const ViewGeometry view = make_view(vol, c.view.angles, c.view.out_width, c.view.out_height,
+                                      c.view.sampling, Framing::longest);
+  const KdSplit split = kd_split(dims, pes);
+  const CellLayout cells = make_cell_layout(dims, pes, 1);
+  const VoxelLayout planar = make_voxel_layout(cells), il = make_voxel_layout(cells, true);
+  const ValueRange range = vol.range();
+  const ShadeParams sp{};
+  const sv_shade_params shade_p = shade_params(make_shade_frame(vol, view, sp), sp);
+  const Classifier classifier = classifier_preset(c.run.classifier);
+  const sv_classify_params classify_p = classify_params(classifier, range, view.step);
+  const std::vector<ShadeSample> shading = shade(vol, view, sp);
+  const std::vector<Rgba> rgba = classify(vol, shading, classifier, view.step);
+  cl_int cs = 0, cs_il = 0;
+  const std::vector<cl_int> table = resample_address_table(planar, &cs);
+  const std::vector<cl_int> table_il = resample_address_table(il, &cs_il);
+  const Matching m = match_reference(view, split);
+  const Matching b = c.run.sweeps > 0 ? balance_reference(m, view, split, c.run.sweeps) : m;
+  Meta meta(dir);
+  meta("kind", "direct");
+  meta("pes", pes);
+  meta("dims", words(dims));
+  meta("spacing", words(c.volume.spacing));
+  meta("width", view.width());
+  meta("height", view.height());
+  meta("nseg", m.segments.size());
+  meta("range", std::to_string(range.min) + " " + std::to_string(range.max));
+  meta("shininess", sp.shininess);
+  meta("ka_kd_ks",
+       std::to_string(sp.ka) + " " + std::to_string(sp.kd) + " " + std::to_string(sp.ks));
+  meta("k1_k2", std::to_string(sp.k1) + " " + std::to_string(sp.k2));
+  meta("opacity_step", view.step);
+  meta("cell", words(cells.cell()));  // the library's CellLayout / VoxelLayout
+  meta("block", words(cells.block));
+  meta("halo", cells.halo);
+  meta("cell_stride", cells.cell_stride);
+  meta("vstride", planar.stride);
+  meta("cs", cs);
+  meta("cs_il", cs_il);
+  put_defines(meta, "shade_define", shade_defines(shade_p));
+  put_defines(meta, "classify_define", classify_defines(classify_p));
+  put(dir / "volume.f32", vol.data());
+  put(dir / "view.bin", std::vector<sv_view>{view.grid});
+  put(dir / "bit_axis.i32", split.bit_axis);
+  put(dir / "origins.i32", cell_origin_table(split));
+  std::vector<int32_t> pe_of_cell;
+  const Dims3 s = split.splits();
+  for (int64_t iz = 0; iz < s[2]; ++iz)
+    for (int64_t iy = 0; iy < s[1]; ++iy)
+      for (int64_t ix = 0; ix < s[0]; ++ix)
+        pe_of_cell.push_back(static_cast<int32_t>(split.pe_of_cell({ix, iy, iz})));
+  put(dir / "pe_of_cell.i32", pe_of_cell);
+  put(dir / "cells.f32", layout_reference(vol.data(), cells));
+  put(dir / "shade_params.bin", std::vector<sv_shade_params>{shade_p});
+  put(dir / "classify_params.bin", std::vector<sv_classify_params>{classify_p});
+  put(dir / "shade.f32", shading);
+  put(dir / "rgba.f32", rgba);
+  put(dir / "rgba_cells.f32", voxels_to_cells(rgba, planar));  // (PE, position) elements
+  put(dir / "table.i32", table);
+  put(dir / "table_il.i32", table_il);
+  put(dir / "pairs_il.i64", resample_pair_table(table_il, dims));
+  put(dir / "cell_bits_il.i32", resample_cell_bits(table_il, dims));
+  put(dir / "cand.bin", match_candidates(view, split));
+  put(dir / "segs.bin", m.segments);
+  put(dir / "bal_segs.bin", b.segments);
+  put(dir / "seg_offset.i32", to32(m.seg_offset));
+  put(dir / "rects.bin", m.rects);
+  put(dir / "rect_off.i64", rect_offsets(m));
+  put(dir / "sample_off.i64", sample_offsets(b));
+  for (int order = 0; order <= 3; ++order) {
+    const std::string o = std::to_string(order);
+    put(dir / ("samples_o" + o + ".f32"), resample_reference(b, rgba, dims, view, order));
+    put(dir / ("foot_o" + o + ".f32"),
+        footprints_reference(b, local_reference(b, rgba, dims, view, order)).pixels);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) try {
@@ -324,8 +445,36 @@ int main(int argc, char** argv) try {
        {8192, 3, 3, 33, 0xfedcba9876543210ULL, false}},
   };
   for (const McCase& c : mcs) write_mc_case(out / c.name, c);
-  std::printf("kernel-abi-ref: %zu swap and %zu Monte Carlo cases written to %s\n",
-              std::size(swaps), std::size(mcs), out.c_str());
+  // Direct frame: cells of 16 (P 8), 4 (P 512), 7 (odd dims) and 8 (P 64)
+  // in x, so SV_RW 16, 4, 1 and 8; two views of one volume; voxel and pixel
+  // sampling; mixtures (one relative) and a transfer function; balanced and
+  // not; values spanning 2e20 (SV_GRAD_OVER).
+  const DirectCase directs[] = {
+      {"direct-P8-v1",
+       {{32, 32, 32}, {1, 1, 1}, 1},
+       {{30, 20, 10}, 40, 40, Sampling::voxel},
+       {8, "ct", 8}},
+      {"direct-P8-v2",
+       {{32, 32, 32}, {1, 1, 1}, 1},
+       {{-50, 200, 35}, 36, 44, Sampling::pixel},
+       {8, "ct", 0}},
+      {"direct-P512",
+       {{32, 32, 32}, {1, 1, 1}, 1},
+       {{75, -20, 140}, 40, 40, Sampling::voxel},
+       {512, "ct-bone", 4}},
+      {"direct-P8-odd",
+       {{27, 19, 13}, {1, 1.25, 0.8}, 1},
+       {{10, 110, 300}, 33, 29, Sampling::voxel},
+       {8, "volpack", 3}},
+      {"direct-P64-huge",
+       {{32, 24, 20}, {1, 1, 1}, 1e17f},
+       {{-100, 250, 10}, 31, 37, Sampling::pixel},
+       {64, "mri", 2}},
+  };
+  for (const DirectCase& c : directs) write_direct_case(out / c.name, c);
+  std::printf(
+      "kernel-abi-ref: %zu swap, %zu Monte Carlo and %zu direct-frame cases written to %s\n",
+      std::size(swaps), std::size(mcs), std::size(directs), out.c_str());
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "kernel-abi-ref: %s\n", e.what());
