@@ -24,6 +24,9 @@ os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "0")
 import numpy as np  # noqa: E402
 import pyopencl as cl  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from cl_program import pick_device, program_source  # noqa: E402
+
 TOL = 1e-6
 CHUNK_WGS = 64  # chunks of 16 voxels per work-group (host/cl/chunk_ranges.hpp)
 
@@ -38,28 +41,6 @@ def read_meta(path):
         else:
             meta[key] = value
     return meta
-
-
-def program_source(kdir, stage, defines):
-    src = "".join(f"#define {n} {v}\n" for n, v in defines)
-    for name in ("simdvol_shared.h", "common.cl", stage + ".cl"):
-        text = (kdir / name).read_text()
-        src += f'#line 1 "{name}"\n' + text
-        if text and not text.endswith("\n"):
-            src += "\n"
-    return src
-
-
-def pick_device():
-    first = None
-    for p in cl.get_platforms():
-        for d in p.get_devices():
-            if d.type & cl.device_type.CPU:
-                return d
-            first = first or d
-    if first is None:
-        raise RuntimeError("no OpenCL device")
-    return first
 
 
 def pow2_at_least(n):

@@ -750,15 +750,15 @@ cl::Program Device::build(const std::string& source, const std::string& options)
     // write its cache shows as a build failure without a compiler message.
     if (const char* env = std::getenv("SIMDVOL_CL_OPTIONS"); env && *env)
       log += "\n(the options include SIMDVOL_CL_OPTIONS from the environment)";
-    if (err == CL_BUILD_PROGRAM_FAILURE && log.find("error") == std::string::npos)
+    if (const std::optional<unsigned long long> limit = file_size_limit();
+        err == CL_BUILD_PROGRAM_FAILURE && log.find("error") == std::string::npos)
       log +=
           "\n(no compiler error in the log: PoCL fails so where it cannot write its cache "
           "directory, " +
           pocl_cache_place() +
-          (file_size_limit()
-               ? ", or where the file-size limit (ulimit -f, " +
-                     std::to_string(*file_size_limit()) + " bytes) cuts its files short"
-               : std::string()) +
+          (limit ? ", or where the file-size limit (ulimit -f, " + std::to_string(*limit) +
+                       " bytes) cuts its files short"
+                 : std::string()) +
           "; POCL_DEBUG=all shows more)";
     throw BuildError(err, opts, log);
   }

@@ -7,6 +7,7 @@
 
 #include <array>
 #include <atomic>
+#include <cerrno>
 #include <csignal>
 #include <cstring>
 #include <string>
@@ -42,6 +43,15 @@ extern "C" void remove_temporary_files_and_end(int sig) {
   errno = saved;
 }
 
+// Whether `sig` would end the process as it is (its default action, no
+// handler): a signal the program ignores (nohup's SIGHUP) or handles itself
+// is left so.
+bool at_default(int sig) {
+  struct sigaction old {};
+  return ::sigaction(sig, nullptr, &old) == 0 && !(old.sa_flags & SA_SIGINFO) &&
+         old.sa_handler == SIG_DFL;
+}
+
 }  // namespace
 
 TempFileMark::TempFileMark(const std::filesystem::path& path) noexcept {
@@ -63,11 +73,7 @@ TempFileMark::~TempFileMark() {
 
 void remove_temporary_files_on_signals() {
   for (int sig : kEndingSignals) {
-    struct sigaction old {};
-    if (::sigaction(sig, nullptr, &old) != 0) continue;
-    // Only where the signal would end the process as it is: a signal the
-    // program ignores (nohup's SIGHUP) or handles itself stays so.
-    if ((old.sa_flags & SA_SIGINFO) || old.sa_handler != SIG_DFL) continue;
+    if (!at_default(sig)) continue;
     struct sigaction sa {};
     sa.sa_handler = remove_temporary_files_and_end;
     sigemptyset(&sa.sa_mask);
@@ -78,10 +84,7 @@ void remove_temporary_files_on_signals() {
   // A write past the file-size limit (ulimit -f) fails with EFBIG, and the
   // writer's FileError says so, instead of SIGXFSZ ending the process with
   // the temporary file cut short.
-  struct sigaction old {};
-  if (::sigaction(SIGXFSZ, nullptr, &old) == 0 && !(old.sa_flags & SA_SIGINFO) &&
-      old.sa_handler == SIG_DFL)
-    std::signal(SIGXFSZ, SIG_IGN);
+  if (at_default(SIGXFSZ)) std::signal(SIGXFSZ, SIG_IGN);
 }
 
 std::optional<unsigned long long> file_size_limit() {

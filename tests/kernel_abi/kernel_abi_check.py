@@ -73,6 +73,9 @@ import numpy as np  # noqa: E402
 import pyopencl as cl  # noqa: E402
 import pyopencl.cltypes  # noqa: E402,F401
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts"))
+from cl_program import pick_device, program_source  # noqa: E402
+
 LAYOUTS = ("cut-and-stack", "hierarchical")
 FUSED_MAX = 7  # simdvol_swap_stages: 1 <= m <= 7 stages a launch
 FUSED_FIXED_LOCAL = 7168  # section 5: the host budgets la + lb + 7,168 bytes of local memory
@@ -162,29 +165,6 @@ def show(v):
 
 
 # ---------------------------------------------------------------- programs, buffers, launches
-def program_source(kdir, stage, defines, more=()):
-    """Section 1: the #define lines, then simdvol_shared.h, common.cl, the
-    stage's file and the further files, each after a #line directive."""
-    src = "".join(f"#define {n} {v}\n" for n, v in defines)
-    for name in ("simdvol_shared.h", "common.cl", stage + ".cl") + tuple(f + ".cl" for f in more):
-        text = (kdir / name).read_text()
-        src += f'#line 1 "{name}"\n' + text + ("" if text.endswith("\n") else "\n")
-    return src
-
-
-def pick_device():
-    """The first CPU device, else the first device (as examples/embed picks)."""
-    first = None
-    for p in cl.get_platforms():
-        for d in p.get_devices():
-            if d.type & cl.device_type.CPU:
-                return d
-            first = first or d
-    if first is None:
-        raise RuntimeError("no OpenCL device")
-    return first
-
-
 class Host:
     def __init__(self, kdir):
         self.kdir = kdir
