@@ -15,9 +15,12 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <optional>
 #include <sstream>
 #include <thread>
 
+#include "../core/file_checks.hpp"
 #include "../core/temp_files.hpp"
 #include "env_switch.hpp"
 #include "kernel_files.hpp"
@@ -162,12 +165,7 @@ void check_pocl_environment() {
     throw ArgumentError("POCL_CACHE_DIR",
                         "is set but empty (PoCL stops on it): unset it or name a directory");
   if (const char* n = std::getenv("POCL_MAX_PTHREAD_COUNT"); n && *n) {
-    std::string_view v(n);
-    while (!v.empty() && (v.front() == ' ' || v.front() == '\t')) v.remove_prefix(1);
-    while (!v.empty() && (v.back() == ' ' || v.back() == '\t')) v.remove_suffix(1);
-    const bool digits =
-        !v.empty() && v.size() <= 5 && v.find_first_not_of("0123456789") == std::string_view::npos;
-    if (!digits || std::stoi(std::string(v)) > 65536)
+    if (!detail::whole_number(n, 65536))
       throw ArgumentError("POCL_MAX_PTHREAD_COUNT",
                           std::string("\"") + n +
                               "\" is not a thread count 0 .. 65536 (PoCL stops on some such "
@@ -281,19 +279,11 @@ int choose_device(const std::vector<DeviceInfo>& devices, std::optional<int> req
   };
   if (requested) return check(*requested, "--device");
   if (const char* env = std::getenv("SIMDVOL_DEVICE"); env && *env) {
-    char* end = nullptr;
-    errno = 0;
-    long i = std::strtol(env, &end, 10);
-    // (Past long's range strtol gives LONG_MAX and ERANGE: "device
-    // 9223372036854775807" named a number nobody gave.)
-    // Blanks after the number as before it (strtol skips those: " 0" was
-    // taken, "0 " refused).
-    const bool number = end != env;
-    while (*end == ' ' || *end == '\t') ++end;
-    if (!number || *end != '\0' || errno == ERANGE)
+    const std::optional<long> i = detail::whole_number(env, std::numeric_limits<int>::max());
+    if (!i)
       throw ArgumentError("SIMDVOL_DEVICE", std::string("\"") + env +
                                                 "\" is not a device index (see `simdvol devices`)");
-    return check(i, "SIMDVOL_DEVICE");
+    return check(*i, "SIMDVOL_DEVICE");
   }
   for (const auto& d : devices)
     if (d.is_cpu) return d.index;
@@ -547,9 +537,7 @@ void Device::read_fail_allocation() {
   std::string spec = env;
   int at = 1;
   if (const std::size_t colon = spec.rfind(':'); colon != std::string::npos) {
-    const std::string n = spec.substr(colon + 1);
-    const bool digits = !n.empty() && n.size() <= 6 && n.find_first_not_of("0123456789") == n.npos;
-    at = digits ? std::stoi(n) : 0;
+    at = static_cast<int>(detail::whole_number(spec.substr(colon + 1), 999999).value_or(0));
     if (at < 1)
       throw ArgumentError("SIMDVOL_FAIL_ALLOCATION",
                           "'" + spec + "' is not WHAT or WHAT:N with N a positive integer");

@@ -98,12 +98,14 @@ TEST(ChooseDevice, DefaultIsFirstCpuAndOverrides) {
   setenv("SIMDVOL_DEVICE", "one", 1);
   EXPECT_THROW(choose_device(devs), ArgumentError);
   // Blanks either side of the number (strtol took " 2", "2 " was refused);
-  // blanks alone are no number; past long's range is refused as given.
+  // blanks alone are no number; past long's range is refused as given; a
+  // sign is no index (detail::whole_number, the rule of the environment's
+  // counts).
   for (const char* blanks : {" 2", "2 ", "\t2\t"}) {
     setenv("SIMDVOL_DEVICE", blanks, 1);
     EXPECT_EQ(choose_device(devs), 2) << "'" << blanks << "'";
   }
-  for (const char* bad : {"  ", "99999999999999999999", "2x"}) {
+  for (const char* bad : {"  ", "99999999999999999999", "2x", "-1", "+2", "2 2"}) {
     setenv("SIMDVOL_DEVICE", bad, 1);
     EXPECT_THROW(choose_device(devs), ArgumentError) << "'" << bad << "'";
   }
