@@ -258,6 +258,42 @@ void progress(int done, int total) {
   std::fflush(stderr);
 }
 
+// render --times: one line a frame on stderr.
+std::string opencl_times_line(int f, const PeGrid& pes, const EngineTimes& t,
+                              const EngineStats& st) {
+  std::ostringstream os;
+  os << "frame " << f << " (opencl, " << pes.width << "x" << pes.height << " PEs): layout "
+     << t.layout_ms << " ms, shade " << t.shade_ms << " ms, classify " << t.classify_ms
+     << " ms, match " << t.match_ms << " ms, balance " << t.balance_ms << " ms, resample+local "
+     << t.resample_local_ms << " ms (brick occupancy " << t.occupancy_ms << " ms), offsets "
+     << t.offsets_ms << " ms, ray lists " << t.rays_ms << " ms, walks " << t.walk_ms << " ms, plan "
+     << t.plan_ms << " ms (host), swap " << t.swap_ms << " ms (";
+  for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
+    os << (k ? " " : "") << t.swap_stage_ms[k];
+  const auto busy =
+      std::count_if(st.loads.begin(), st.loads.end(), [](int64_t l) { return l > 0; });
+  os << "), display " << t.display_ms << " ms, warp " << t.warp_ms << " ms; frame wall "
+     << t.device_wall_ms << " ms; kernels " << t.kernels_ms << " ms in a " << t.span_ms
+     << " ms span";
+  if (t.longest_wait_ms > 0)
+    os << " (longest wait " << t.longest_wait_ms << " ms, before " << t.longest_wait_before << ")";
+  os << "; " << st.samples << " samples on " << busy << " of " << st.loads.size()
+     << " PEs, utilisation " << st.utilisation();
+  if (st.unshaded_pes > 0) os << ", shade left out " << st.unshaded_pes << " PEs";
+  if (st.classification_kept) os << ", classification kept";
+  if (st.classification_let_go) os << ", classification let go (memory ran out)";
+  os << "\n";
+  return os.str();
+}
+
+std::string reference_times_line(int f, const RenderTimes& t) {
+  std::ostringstream os;
+  os << "frame " << f << " (reference): shade " << t.shade_ms << " ms, classify " << t.classify_ms
+     << " ms, resample+composite " << t.resample_composite_ms << " ms, warp " << t.warp_ms
+     << " ms\n";
+  return os.str();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -706,42 +742,13 @@ int main(int argc, char** argv) {
             EngineStats st;
             img = gpu->render(vol, opt, &t, show_times ? &st : nullptr);
             if (!trace.empty()) traced.push_back(std::move(t.kernels));
-            if (show_times) {
-              std::ostringstream os;
-              os << "frame " << f << " (opencl, " << pes.width << "x" << pes.height
-                 << " PEs): layout " << t.layout_ms << " ms, shade " << t.shade_ms
-                 << " ms, classify " << t.classify_ms << " ms, match " << t.match_ms
-                 << " ms, balance " << t.balance_ms << " ms, resample+local " << t.resample_local_ms
-                 << " ms (brick occupancy " << t.occupancy_ms << " ms), offsets " << t.offsets_ms
-                 << " ms, ray lists " << t.rays_ms << " ms, walks " << t.walk_ms << " ms, plan "
-                 << t.plan_ms << " ms (host), swap " << t.swap_ms << " ms (";
-              for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
-                os << (k ? " " : "") << t.swap_stage_ms[k];
-              const auto busy =
-                  std::count_if(st.loads.begin(), st.loads.end(), [](int64_t l) { return l > 0; });
-              os << "), display " << t.display_ms << " ms, warp " << t.warp_ms << " ms; frame wall "
-                 << t.device_wall_ms << " ms; kernels " << t.kernels_ms << " ms in a " << t.span_ms
-                 << " ms span";
-              if (t.longest_wait_ms > 0)
-                os << " (longest wait " << t.longest_wait_ms << " ms, before "
-                   << t.longest_wait_before << ")";
-              os << "; " << st.samples << " samples on " << busy << " of " << st.loads.size()
-                 << " PEs, utilisation " << st.utilisation();
-              if (st.unshaded_pes > 0) os << ", shade left out " << st.unshaded_pes << " PEs";
-              if (st.classification_kept) os << ", classification kept";
-              if (st.classification_let_go) os << ", classification let go (memory ran out)";
-              os << "\n";
-              std::cerr << os.str();
-            }
+            if (show_times) std::cerr << opencl_times_line(f, pes, t, st);
           } else {
             RenderTimes t;
             img = eo.mc_scope == McScope::subray
                       ? render_subray_reference(vol, opt, eo.pes, eo.balance_sweeps, allocate, &t)
                       : render_reference(vol, opt, &t);
-            if (show_times)
-              std::cerr << "frame " << f << " (reference): shade " << t.shade_ms << " ms, classify "
-                        << t.classify_ms << " ms, resample+composite " << t.resample_composite_ms
-                        << " ms, warp " << t.warp_ms << " ms\n";
+            if (show_times) std::cerr << reference_times_line(f, t);
           }
           if (writing.valid()) {
             writing.get();
