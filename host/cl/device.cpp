@@ -632,31 +632,21 @@ std::vector<unsigned char> load_binary(const fs::path& file, std::uint64_t check
 // leaves the program uncached.
 void store_binary(const fs::path& file, std::uint64_t check,
                   const std::vector<unsigned char>& bin) {
-  static std::atomic<unsigned> counter{0};
   std::error_code ec;
   fs::create_directories(file.parent_path(), ec);
   if (ec) return;
-  const fs::path tmp =
-      file.parent_path() / (file.filename().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
-                            std::to_string(counter.fetch_add(1)));
   std::string data(kBinaryMagic, 8);
   put_u64(data, check);
   put_u64(data, bin.size());
   put_u64(data, fnv1a(std::string_view(reinterpret_cast<const char*>(bin.data()), bin.size()),
                       kFnvOffset));
   data.append(bin.begin(), bin.end());
-  const TempFileMark mark(tmp);
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out.write(data.data(), static_cast<std::streamsize>(data.size()));
-    out.close();
-    if (!out) {
-      fs::remove(tmp, ec);
-      return;
-    }
+  try {
+    TempFile tmp(file, file);
+    if (!write_fully(tmp.fd(), data.data(), data.size())) tmp.fail("write failed");
+    tmp.commit();
+  } catch (const FileError&) {
   }
-  fs::rename(tmp, file, ec);
-  if (ec) fs::remove(tmp, ec);
 }
 
 }  // namespace

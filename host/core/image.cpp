@@ -7,7 +7,6 @@
 #include <png.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -15,7 +14,6 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
-#include <random>
 #include <string>
 #include <system_error>
 
@@ -34,27 +32,6 @@ enum class Format { png, exr, tiff };
 std::string lower(std::string s) {
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return s;
-}
-
-// A name beside `path` that keeps its extension, e.g. "out.tmp-3f2a-1.png",
-// after at most the first 64 bytes of its stem: a name near the file
-// system's limit (255 bytes) still has room for the tag.
-fs::path temp_path_for(const fs::path& path) {
-  static std::atomic<unsigned> counter{0};
-  static const unsigned salt = std::random_device{}();
-  const unsigned n = counter.fetch_add(1);
-  char tag[40];
-  std::snprintf(tag, sizeof tag, ".tmp-%08x-%u", salt, n);
-  // Shorter still where the directory's path is long: the whole path within
-  // Linux's 4,095 bytes (a turntable frame within 20 bytes of it failed as
-  // "File name too long" where the frame's own name fits).
-  const std::size_t around =
-      path.parent_path().string().size() + 1 + std::strlen(tag) + path.extension().string().size();
-  const std::size_t room = around < 4095 ? 4095 - around : 0;
-  fs::path name = path.stem().string().substr(0, std::min<std::size_t>(64, room));
-  name += tag;
-  name += path.extension();
-  return path.parent_path() / name;
 }
 
 // ------------------------------------------------------------ the module
@@ -315,23 +292,16 @@ void write_image(const Image& img, const fs::path& path) {
   if (!fs::is_directory(dir, ec))
     throw FileError(path, "output directory '" + dir.string() + "' does not exist");
 
-  const fs::path tmp = temp_path_for(target);
-  const TempFileMark mark(tmp);
+  TempFile tmp(target, path);
+  tmp.close();  // the writers (libpng, OpenImageIO) open it by its name
   std::string problem;
   try {
-    problem = write_file(img, tmp, format);
+    problem = write_file(img, tmp.path(), format);
   } catch (const std::exception& e) {
     problem = e.what();
   }
-  if (problem.empty()) {
-    fs::rename(tmp, target, ec);
-    if (ec) problem = "cannot rename temporary file into place: " + ec.message();
-  }
-  if (!problem.empty()) {
-    std::error_code ignored;
-    fs::remove(tmp, ignored);
-    throw FileError(path, problem + file_size_limit_note());
-  }
+  if (!problem.empty()) tmp.fail(problem);
+  tmp.commit();
 }
 
 Image read_image(const fs::path& path) {

@@ -4,8 +4,6 @@
 // are allocated, so a header that claims huge dims fails early.
 #include "simdvol/io.hpp"
 
-#include <fcntl.h>
-#include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -1592,48 +1590,16 @@ bool has_suffix(std::string_view name, std::initializer_list<std::string_view> s
 // ================================================================ writer
 
 void write_file_atomically(const fs::path& path, std::initializer_list<std::string_view> parts) {
-  // A temporary file in the same directory as the file replaced (path, or
-  // its symbolic link's target: so the rename is atomic and keeps the
-  // link), named after at most the first 64 bytes of its name: a name near
-  // the file system's limit (255 bytes) still has room for the suffix.
-  const fs::path target = write_target(path);
-  const fs::path dir = target.parent_path().empty() ? fs::path(".") : target.parent_path();
-  const std::string name = target.filename().string();
-  // (Shorter still where the directory's path is long: within 4,095 bytes.)
-  const std::size_t around = dir.string().size() + 1 + std::strlen(".tmp-XXXXXX");
-  const std::size_t room = around < 4095 ? 4095 - around : 0;
-  std::string tmpl =
-      (dir / (name.substr(0, std::min<std::size_t>(64, room)) + ".tmp-XXXXXX")).string();
-  std::vector<char> tbuf(tmpl.begin(), tmpl.end());
-  tbuf.push_back('\0');
-  const int fd = ::mkstemp(tbuf.data());
-  if (fd < 0)
-    throw FileError(path,
-                    "cannot create a temporary file in " + dir.string() + ": " + errno_text(errno));
-  const fs::path tmp(tbuf.data());
-  const TempFileMark mark(tmp);
-  auto fail = [&](const std::string& problem) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
-    throw FileError(path, problem + file_size_limit_note());
-  };
-  ::fchmod(fd, 0644);
+  // Beside the file replaced (path, or its symbolic link's target: so the
+  // rename is atomic and keeps the link).
+  TempFile tmp(write_target(path), path);
   bool ok = true;
-  for (std::string_view part : parts) ok = ok && write_fully(fd, part.data(), part.size());
-  const int write_errno = errno;
+  for (std::string_view part : parts) ok = ok && write_fully(tmp.fd(), part.data(), part.size());
   if (!ok) {
-    ::close(fd);
-    fail("write failed: " + errno_text(write_errno));
-  }
-  if (::fsync(fd) != 0 && errno != EINVAL) {
     const int e = errno;
-    ::close(fd);
-    fail("fsync failed: " + errno_text(e));
+    tmp.fail("write failed: " + errno_text(e));
   }
-  if (::close(fd) != 0) fail("close failed: " + errno_text(errno));
-  std::error_code ec;
-  fs::rename(tmp, target, ec);
-  if (ec) fail("cannot rename the temporary file into place: " + ec.message());
+  tmp.commit();
 }
 
 void save_nrrd(const Volume& vol, const std::filesystem::path& path) {

@@ -2,7 +2,9 @@
 // remove them (remove_temporary_files_on_signals, simdvol/io.hpp).
 #include "temp_files.hpp"
 
+#include <fcntl.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <array>
@@ -10,8 +12,12 @@
 #include <cerrno>
 #include <csignal>
 #include <cstring>
+#include <fstream>
 #include <string>
+#include <system_error>
+#include <vector>
 
+#include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
 
 namespace simdvol {
@@ -52,7 +58,79 @@ bool at_default(int sig) {
          old.sa_handler == SIG_DFL;
 }
 
+std::string errno_text(int e) {
+  return std::generic_category().message(e);
+}
+
+// The process's umask, read where it cannot change it (umask(2) sets it to
+// read it, which another thread's file creation could see): Linux's
+// /proc/self/status, else the usual 022.
+mode_t current_umask() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line))
+    if (line.rfind("Umask:", 0) == 0)
+      return static_cast<mode_t>(std::stoul(line.substr(6), nullptr, 8));
+  return 022;
+}
+
 }  // namespace
+
+TempFile::TempFile(const std::filesystem::path& target, const std::filesystem::path& named)
+    : target_(target), named_(named) {
+  const std::filesystem::path dir =
+      target.parent_path().empty() ? std::filesystem::path(".") : target.parent_path();
+  const std::string ext = target.extension().string(), tag = ".tmp-XXXXXX";
+  // Shorter where the directory's path is long: the whole path within 4,095
+  // bytes (a frame within 20 bytes of it failed as "File name too long"
+  // where its own name fits).
+  const std::size_t around = dir.string().size() + 1 + tag.size() + ext.size();
+  const std::size_t room = around < 4095 ? 4095 - around : 0;
+  const std::string stem = target.stem().string().substr(0, std::min<std::size_t>(64, room));
+  const std::string name = (dir / (stem + tag + ext)).string();
+  std::vector<char> buf(name.begin(), name.end());
+  buf.push_back('\0');
+  fd_ = ::mkstemps(buf.data(), static_cast<int>(ext.size()));
+  if (fd_ < 0)
+    throw FileError(named_, "cannot create a temporary file in " + dir.string() + ": " +
+                                errno_text(errno) + file_size_limit_note());
+  path_ = buf.data();
+  mark_.emplace(path_);
+  ::fchmod(fd_, 0666 & ~current_umask());  // mkstemps makes it 0600
+}
+
+TempFile::~TempFile() {
+  if (fd_ >= 0) ::close(fd_);
+  if (!done_) ::unlink(path_.c_str());
+}
+
+void TempFile::close() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+void TempFile::fail(const std::string& problem) {
+  close();
+  ::unlink(path_.c_str());
+  done_ = true;
+  throw FileError(named_, problem + file_size_limit_note());
+}
+
+void TempFile::commit() {
+  if (fd_ < 0) fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);  // fsync needs a descriptor
+  if (fd_ < 0) fail("cannot reopen the temporary file: " + errno_text(errno));
+  if (::fsync(fd_) != 0 && errno != EINVAL) {
+    const int e = errno;
+    fail("fsync failed: " + errno_text(e));
+  }
+  const int closed = ::close(fd_), e = errno;
+  fd_ = -1;
+  if (closed != 0) fail("close failed: " + errno_text(e));
+  std::error_code ec;
+  std::filesystem::rename(path_, target_, ec);
+  if (ec) fail("cannot rename the temporary file into place: " + ec.message());
+  done_ = true;
+}
 
 TempFileMark::TempFileMark(const std::filesystem::path& path) noexcept {
   const std::string& p = path.native();

@@ -25,6 +25,43 @@ class TempFileMark {
   int slot_ = -1;
 };
 
+/// The temporary file of a write that replaces a file at once: a new file
+/// beside `target` (in its directory, so that the rename is atomic), made
+/// exclusively (mkstemps: never someone's existing file), named after at
+/// most the first 64 bytes of target's stem, then ".tmp-XXXXXX" and
+/// target's extension (a writer that picks its format by the name sees the
+/// target's), the whole path within Linux's 4,095 bytes; its mode a new
+/// file's, 0666 less the umask; marked (TempFileMark) while it exists.
+/// Removed by the destructor unless commit() put it in place. The errors
+/// are FileError naming `named` (the path the user gave, where target is
+/// its symbolic link's end), each ending in file_size_limit_note().
+class TempFile {
+ public:
+  /// FileError "cannot create a temporary file in DIR: ..." when it cannot
+  /// be made.
+  TempFile(const std::filesystem::path& target, const std::filesystem::path& named);
+  ~TempFile();
+  TempFile(const TempFile&) = delete;
+  TempFile& operator=(const TempFile&) = delete;
+
+  const std::filesystem::path& path() const { return path_; }
+  /// Open for writing; -1 after close() (for a writer that opens path()
+  /// itself).
+  int fd() const { return fd_; }
+  void close();
+  /// To disk (fsync, the file reopened where closed), closed, renamed over
+  /// the target; on a failure removed, and FileError.
+  void commit();
+  /// Removes the file and throws FileError(named, problem + the note).
+  [[noreturn]] void fail(const std::string& problem);
+
+ private:
+  std::filesystem::path target_, named_, path_;
+  int fd_ = -1;
+  bool done_ = false;
+  std::optional<TempFileMark> mark_;
+};
+
 /// The process's file-size limit (ulimit -f) in bytes, if it has one.
 std::optional<unsigned long long> file_size_limit();
 

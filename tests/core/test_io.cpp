@@ -6,6 +6,7 @@
 #include <zlib.h>
 
 #include <sys/resource.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <array>
@@ -31,6 +32,7 @@
 #include "../../host/core/temp_files.hpp"
 #include "dicom_testing.hpp"
 #include "simdvol/error.hpp"
+#include "simdvol/image.hpp"
 #include "simdvol/io.hpp"
 #include "simdvol/volume.hpp"
 #include "testing.hpp"
@@ -739,6 +741,46 @@ TEST_F(IoTest, SaveNrrdIsAtomicAndLeavesNoTemporaries) {
   // An empty volume has nothing to save.
   expect_file_error([&] { simdvol::save_nrrd(Volume{}, file("e.nrrd")); }, file("e.nrrd"),
                     {"empty"});
+}
+
+// The writers' files take a new file's mode, 0666 less the umask, as any
+// program's output: the atomic writer's temporary (mkstemp, 0600) was made
+// 0644 whatever the umask, so with umask 077 a CSV or NRRD came out
+// readable by everyone. Their temporary files are made by one rule
+// (TempFile: exclusive, beside the target, its extension kept).
+TEST_F(IoTest, WrittenFilesTakeTheUmask) {
+  const auto mode = [](const fs::path& p) {
+    struct stat st {};
+    EXPECT_EQ(::stat(p.c_str(), &st), 0) << p;
+    return st.st_mode & 0777;
+  };
+  Volume a(kDims, VoxelType::u8);
+  a.data() = test_values(VoxelType::u8, kN);
+  const simdvol::Image img(2, 2);
+  for (const mode_t mask : {mode_t{077}, mode_t{022}, mode_t{002}}) {
+    const mode_t old = ::umask(mask);
+    const std::string tag = std::to_string(mask);
+    simdvol::write_file_atomically(file(tag + ".csv"), {"a\n"});
+    simdvol::save_nrrd(a, file(tag + ".nrrd"));
+    simdvol::write_image(img, file(tag + ".png"));
+    ::umask(old);
+    for (const char* ext : {".csv", ".nrrd", ".png"})
+      EXPECT_EQ(mode(file(tag + ext)), 0666 & ~mask) << tag << ext;
+  }
+  // A temporary file's name: the target's stem, ".tmp-", six characters,
+  // the target's extension; made anew, removed unless committed.
+  fs::path made;
+  {
+    simdvol::TempFile t(file("out.png"), file("out.png"));
+    made = t.path();
+    EXPECT_EQ(made.parent_path(), dir_);
+    EXPECT_EQ(made.extension(), ".png");
+    EXPECT_EQ(made.stem().string().substr(0, 8), "out.tmp-");
+    EXPECT_EQ(made.stem().string().size(), 14u);
+    EXPECT_TRUE(fs::exists(made));
+  }
+  EXPECT_FALSE(fs::exists(made));
+  EXPECT_FALSE(fs::exists(file("out.png")));
 }
 
 TEST_F(IoTest, WritersWriteThroughSymbolicLinks) {
