@@ -210,10 +210,11 @@ int whole_frames(int64_t pes, int order, int runs, const std::string& brain) {
               [](const auto& a, const auto& b) { return a.first < b.first; });
     const double w = median(warm), o = median(one);
     std::printf(
-        "%s: reference %.1f ms, one-shot render_opencl %.1f ms, RenderEngine (warm) %.1f "
-        "ms; ratio reference/warm %.2f, one-shot/warm %.2f; PSNR vs reference %.1f dB\n"
+        "%s: reference %.1f ms (phi 30), one-shot render_opencl %.1f ms, RenderEngine (warm) "
+        "%.1f ms (phi 30 .. %d, a turntable); ratio reference/warm %.2f, one-shot/warm %.2f; "
+        "PSNR vs reference %.1f dB (phi 30)\n"
         "  warm stages (ms): %s\n",
-        c.name.c_str(), ref_ms, o, w, ref_ms / w, o / w, psnr_db,
+        c.name.c_str(), ref_ms, o, w, 30 + runs - 1, ref_ms / w, o / w, psnr_db,
         stages(warm_times[warm_times.size() / 2].second).c_str());
   }
   return 0;

@@ -81,7 +81,7 @@ void communication(const Frame& f, int64_t pes, SwapLayout layout) {
   std::printf(
       "bound (ch. 6.2): cell %lldx%lldx%lld voxels, step %.3f: S = (a^2+b^2+c^2)/2 = %.1f px; "
       "M = %d x swaps, N = %d y swaps: (M+N) S = %.0f px, printed M x N x S = %.0f px; "
-      "measured/(M+N)S = %.3f\n",
+      "most sent by one PE / (M+N) S = %.3f\n",
       static_cast<long long>(split.cell[0]), static_cast<long long>(split.cell[1]),
       static_cast<long long>(split.cell[2]), view.step, c.cell_section, c.swaps_x, c.swaps_y,
       c.bound_sum(), c.bound_printed(), double(c.max_pe_sent) / c.bound_sum());
