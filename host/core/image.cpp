@@ -305,6 +305,10 @@ void write_image(const Image& img, const fs::path& path) {
 }
 
 Image read_image(const fs::path& path) {
+  return read_image(path, nullptr);
+}
+
+Image read_image(const fs::path& path, bool* has_alpha) {
   std::error_code ec;
   refuse_non_regular_file(path, "an image file");
   if (!fs::is_regular_file(path, ec))
@@ -315,7 +319,8 @@ Image read_image(const fs::path& path) {
   if (!m.problem.empty()) throw FileError(path, m.problem);
   int w = 0, h = 0;
   float* rgba = nullptr;
-  const std::string problem = take_message(m.read(path.c_str(), &w, &h, &rgba));
+  int alpha = 0;
+  const std::string problem = take_message(m.read(path.c_str(), &w, &h, &rgba, &alpha));
   if (!problem.empty()) throw FileError(path, problem);
   struct Free {
     const OiioModule& m;
@@ -327,6 +332,7 @@ Image read_image(const fs::path& path) {
   std::vector<Rgba>& px = img.pixels();
   for (std::size_t i = 0; i < px.size(); ++i)
     px[i] = Rgba{rgba[4 * i], rgba[4 * i + 1], rgba[4 * i + 2], rgba[4 * i + 3]};
+  if (has_alpha) *has_alpha = alpha != 0;
   return img;
 }
 

@@ -11,7 +11,7 @@
 
 /// Bumped whenever a signature below changes; the loader refuses a module
 /// of another version.
-#define SIMDVOL_OIIO_ABI 1
+#define SIMDVOL_OIIO_ABI 2
 
 extern "C" {
 /// SIMDVOL_OIIO_ABI of the module.
@@ -24,8 +24,9 @@ typedef char* (*simdvol_oiio_write_fn)(const char* path, int format, int w, int 
 /// Reads the first subimage of `path` as float RGBA (*rgba: w * h * 4
 /// floats, to free with simdvol_oiio_free): 1 channel is grey, 2 grey and
 /// alpha, 3 RGB, 4 or more RGBA (alpha where the file says, else the fourth
-/// channel); a missing alpha is 1. Returns 0 on success, else an error
-/// message to free with simdvol_oiio_free.
-typedef char* (*simdvol_oiio_read_fn)(const char* path, int* w, int* h, float** rgba);
+/// channel); a missing alpha is 1 (*has_alpha 0, else 1). Returns 0 on
+/// success, else an error message to free with simdvol_oiio_free.
+typedef char* (*simdvol_oiio_read_fn)(const char* path, int* w, int* h, float** rgba,
+                                      int* has_alpha);
 typedef void (*simdvol_oiio_free_fn)(void* p);
 }

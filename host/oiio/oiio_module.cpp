@@ -42,7 +42,7 @@ std::string write_image(const char* path, int format, int w, int h, const float*
   return msg.empty() ? "OpenImageIO could not write the image" : msg;
 }
 
-std::string read_image(const char* path, int* w_out, int* h_out, float** rgba_out) {
+std::string read_image(const char* path, int* w_out, int* h_out, float** rgba_out, int* has_alpha) {
   auto in = OIIO::ImageInput::open(path);
   if (!in) {
     const std::string msg = OIIO::geterror();
@@ -99,6 +99,7 @@ std::string read_image(const char* path, int* w_out, int* h_out, float** rgba_ou
   *w_out = w;
   *h_out = h;
   *rgba_out = px;
+  *has_alpha = alpha >= 0;
   return "";
 }
 
@@ -126,9 +127,9 @@ __attribute__((visibility("default"))) char* simdvol_oiio_write(const char* path
   return guarded([&] { return write_image(path, format, w, h, rgba); });
 }
 __attribute__((visibility("default"))) char* simdvol_oiio_read(const char* path, int* w, int* h,
-                                                               float** rgba) {
+                                                               float** rgba, int* has_alpha) {
   *rgba = nullptr;
-  return guarded([&] { return read_image(path, w, h, rgba); });
+  return guarded([&] { return read_image(path, w, h, rgba, has_alpha); });
 }
 __attribute__((visibility("default"))) void simdvol_oiio_free(void* p) {
   if (p != kOutOfMemory) std::free(p);

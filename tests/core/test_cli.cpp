@@ -1744,6 +1744,49 @@ TEST_F(Cli, CompareCountsPixelsOverATolerance) {
   }
 }
 
+// A PNG (RGB over black, no alpha) against the same frame as TIFF (float
+// premultiplied RGBA): the PNG's alpha reads as 1, so max_abs_diff is the
+// alpha's difference (1 where the TIFF is transparent). compare says so on
+// stderr, with the largest difference over RGB alone (8-bit rounding
+// here), and stdout is as before.
+TEST_F(Cli, CompareSaysWhenOneImageHasNoAlpha) {
+  ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("a.png")).code, 0);
+  ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("a.tif")).code, 0);
+  bool png_alpha = true, tif_alpha = false;
+  const simdvol::Image png = simdvol::read_image(path("a.png"), &png_alpha),
+                       tif = simdvol::read_image(path("a.tif"), &tif_alpha);
+  EXPECT_FALSE(png_alpha);
+  EXPECT_TRUE(tif_alpha);
+  float rgb = 0;
+  for (std::size_t i = 0; i < png.pixels().size(); ++i) {
+    const simdvol::Rgba p = png.pixels()[i], q = tif.pixels()[i];
+    rgb = std::max({rgb, std::fabs(p.r - q.r), std::fabs(p.g - q.g), std::fabs(p.b - q.b)});
+  }
+  ASSERT_GT(rgb, 0.0f);
+  ASSERT_LE(rgb, 0.5f / 255.0f + 1e-6f);  // the PNG's rounding
+  for (const bool png_first : {true, false}) {
+    const std::string a = path(png_first ? "a.png" : "a.tif"),
+                      b = path(png_first ? "a.tif" : "a.png");
+    const Result r = run("compare " + a + " " + b);
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("max_abs_diff 1\n"), std::string::npos) << r.output;
+    std::ostringstream want;
+    want << "note: " << path("a.png")
+         << " has no alpha channel (it reads as opaque, alpha 1) where " << path("a.tif")
+         << " has one";
+    EXPECT_NE(r.output.find(want.str()), std::string::npos) << r.output;
+    std::ostringstream largest;
+    largest << "over RGB alone the largest difference is " << rgb << " ";
+    EXPECT_NE(r.output.find(largest.str()), std::string::npos) << r.output << " want " << rgb;
+  }
+  // Both with alpha, or both without: no note.
+  for (const char* same : {"a.png", "a.tif"}) {
+    const Result r = run(std::string("compare ") + path(same) + " " + path(same));
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(r.output.find("note:"), std::string::npos) << r.output;
+  }
+}
+
 TEST_F(Cli, FailedRenderLeavesExistingOutputUntouched) {
   ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("keep.png")).code, 0);
   std::ifstream in(path("keep.png"), std::ios::binary);
