@@ -1787,6 +1787,31 @@ TEST_F(Cli, CompareSaysWhenOneImageHasNoAlpha) {
   }
 }
 
+// --sampling pixel at an image much larger than the volume: a note before
+// the first frame with the samples a frame takes (the grid's points inside
+// the volume: 64^3 voxels at 32 samples a voxel length, 2^33), and voxel
+// sampling's. The device asked for does not exist, so the run stops after
+// the note, before the 18 s frame.
+TEST_F(Cli, PixelSamplingOfALargeImageIsNoted) {
+  const std::string args = "render --phantom-size 64 -o " + path("p.png");
+  Result r = run(args + " --sampling pixel --size 2048x2048", "SIMDVOL_DEVICE=4096");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("note: --sampling pixel at 2048x2048 takes about 8.6e+09 samples a "
+                          "frame (--sampling voxel: about 2.6e+05)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("SIMDVOL_DEVICE: no OpenCL device 4096"), std::string::npos) << r.output;
+  for (const char* quiet :
+       {" --sampling pixel --size 512x512", " --sampling voxel --size 2048x2048"}) {
+    r = run(args + quiet, "SIMDVOL_DEVICE=4096");
+    EXPECT_NE(r.output.find("SIMDVOL_DEVICE: no OpenCL device 4096"), std::string::npos)
+        << quiet << "\n"
+        << r.output;
+    EXPECT_EQ(r.output.find("note: --sampling"), std::string::npos) << quiet << "\n" << r.output;
+  }
+  EXPECT_FALSE(fs::exists(path("p.png")));
+}
+
 TEST_F(Cli, FailedRenderLeavesExistingOutputUntouched) {
   ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("keep.png")).code, 0);
   std::ifstream in(path("keep.png"), std::ios::binary);
