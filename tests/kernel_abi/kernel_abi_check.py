@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The direct frame's, swap, Monte Carlo, adaptive and warp kernels from docs/KERNELS.md alone.
+"""A frame's kernels (match, balance, ... warp), Monte Carlo and adaptive from KERNELS.md alone.
 
 Keeps KERNELS.md honest for a host in another language (its section 7).
 Builds the programs from the INSTALLED kernel sources as section 1 assembles
@@ -53,7 +53,22 @@ share computed here from sections 3 and 5 and compared with the library's:
               zeroed by simdvol_zero_uncovered alone (on the rows of
               simdvol_match_rows_nolinks, geo and stepc made here), the
               lanes' order with PEs and skipping, and _ilc (order 1, cell
-              bits): bit for bit the plain one.
+              bits): bit for bit the plain one;
+and the match and balance stages (section 4, 4-5; section 5 match.cl, balance.cl), the host's
+tables (geo, stepc, koff, the pair list, capacity, H) made here:
+  match       simdvol_match_active from a brick reach: match_active_reference; rows, pe,
+              scan, fill with and without links (_nolinks: --balance-sweeps 0), saved
+              columns and stepped, wide and narrow link lists, 16-bit bounds or none, on
+              row tables of junk (the rows of inactive PEs are not written), every
+              placeholder a guarded 16-byte buffer: match_reference's seg_offset,
+              segments, rects, loads (and counts, petot), the link lists, lofs and lbase
+              of balance_links(); simdvol_zero_uncovered on NaN footprints: the page's
+              rule;
+  balance     simdvol_balance_round(16)(n) per sweep, axis and parity (the pairs in order
+              and shuffled) on the fill's 16-bit bounds or 32-bit ones packed, then the
+              unpack: balance_reference's bounds (before the unpack: the direct frame's
+              deferred one), segments and loads, and the moves flags: the sweeps after
+              which balance_reference changed.
 Prints one line per stage (with the largest difference where a tolerance
 applies); a disagreement names the case, the check and the first differing
 value.
@@ -1036,6 +1051,313 @@ def check_direct(host, tally, d):
                            channels=4)
 
 
+# ---------------------------------------------------------------- match, balance (sections 3-5)
+GUARD = 4096  # a placeholder's guard: the bytes after its 16 must stay as they were
+
+
+class Guarded:
+    """Section 5's "one-element placeholders" (kscr without save, bounds without fill_bounds,
+    llist without links, lbase without narrow): 16-byte sub-buffers at the start of buffers of
+    a known pattern, so that a kernel that writes past the element it was given is caught
+    (intact: the bytes after the first 16 unchanged)."""
+
+    def __init__(self, host):
+        self.host, self.bufs = host, []
+
+    def __call__(self):
+        whole = self.host.buf(np.full(GUARD, 0xA5, np.uint8))
+        self.bufs.append(whole)
+        return whole.get_sub_region(0, 16)
+
+    def intact(self):
+        return all((self.host.read(b, np.uint8, GUARD)[16:] == 0xA5).all() for b in self.bufs)
+
+
+def ceil_to(n, m):
+    return -(-int(n) // m) * m
+
+
+def balance_pairs(g):
+    """Section 5 balance.cl `pair_list`: per (axis a, parity par) the int2 (the PE of cell
+    index c, the PE of c + 1) along a for every c = 2 m + par with c + 1 inside; pair_first[2 a
+    + par] .. pair_first[2 a + par + 1] - 1 (7 ints)."""
+    pairs, first, s = [], [0], g.splits
+    for a in range(3):
+        for par in (0, 1):
+            ci = g.cidx[:, a]
+            lo = np.flatnonzero((ci % 2 == par) & (ci + 1 < s[a]))
+            nxt = g.cidx[lo].copy()
+            nxt[:, a] += 1
+            hi = g.pe_of_cell[(nxt[:, 2] * s[1] + nxt[:, 1]) * s[0] + nxt[:, 0]]
+            pairs.append(np.stack([lo, hi], 1))
+            first.append(first[-1] + len(lo))
+    return np.concatenate(pairs).astype(np.int32), first
+
+
+def link_lists(links, seg_off, P):
+    """Section 5 match.cl: llist holds every PE's list of links along x, then every PE's along
+    y, then along z, each PE's list in the order of its segments; lofs[p] = (seg_offset[p],
+    where PE p's x, y, z lists start), lofs[P] = (the segments, where the lists end). From
+    balance_links()'s format (linked * 4 + axis per segment, -1: none). Returns the wide
+    entries (segment, linked), the narrow ones (indices within the two PEs), lofs and petot."""
+    nseg = len(links)
+    pe = np.searchsorted(seg_off, np.arange(nseg), side="right") - 1
+    has = links >= 0
+    axis, linked = np.where(has, links & 3, 3), np.where(has, links >> 2, 0)
+    wide, narrow = [], []
+    count = np.zeros((3, P), np.int64)
+    for a in range(3):
+        s = np.flatnonzero(axis == a)  # in segment order, so by PE, then the PE's order
+        count[a] = np.bincount(pe[s], minlength=P)
+        wide.append(np.stack([s, linked[s]], 1))
+        t = linked[s]
+        narrow.append(((s - seg_off[pe[s]]) | ((t - seg_off[pe[t]]) << 16)).astype(np.uint32))
+    lofs = np.zeros((P + 1, 4), np.int64)
+    lofs[:, 0] = seg_off
+    base = 0
+    for a in range(3):
+        lofs[:, a + 1] = base + np.r_[0, np.cumsum(count[a])]
+        base += count[a].sum()
+    petot = np.c_[np.diff(seg_off), count.T]
+    return (np.concatenate(wide).astype(np.int32), np.concatenate(narrow), lofs.astype(np.int32),
+            petot.astype(np.int32))
+
+
+def uncovered(segs, seg_off, rects, rect_off):
+    """simdvol_zero_uncovered's rule (section 5): per PE and row of its rectangle, the pixels left
+    of the row's first and right of its last segment zeroed, the whole row where it has none or
+    a gap. Returns the footprints as NaN-filled ones look after it: +0 there, NaN elsewhere."""
+    out = np.full((int(rect_off[-1]), 4), NAN)
+    for p in range(len(rects)):
+        i0, j0, w, h = (int(v) for v in rects[p])
+        if w * h == 0:
+            continue
+        fp = out[rect_off[p]:rect_off[p + 1]].reshape(h, w, 4)
+        s = segs[seg_off[p]:seg_off[p + 1]]
+        keep = np.zeros((h, w), bool)
+        rows = s["j"] - j0
+        for r in np.unique(rows):
+            i = s["i"][rows == r] - i0
+            if i.max() - i.min() + 1 == i.size:
+                keep[r, i.min():i.max() + 1] = True
+        fp[~keep] = 0
+    return out
+
+
+def check_match(host, tally, d):
+    """Section 5 match.cl and balance.cl from the page: the PE mask (simdvol_match_active), the
+    matching (rows, pe, scan, fill; with and without links, saved columns or stepped, wide and
+    narrow link lists, the balance's 16-bit bounds or none), zero_uncovered on its rows, and the
+    balance rounds on 16- and 32-bit bounds with wide and narrow lists, unpacked or deferred."""
+    M, case = read_meta(d), d.name
+    P, dims, sweeps = int(M["pes"]), [int(x) for x in M["dims"].split()], int(M["sweeps"])
+    g, L = Cells(dims, P), host.layout_group()
+    view, cand = load(d, "view.bin", np.int64), load(d, "cand.bin", np.int32).reshape(P, 4)
+    segs, seg_off = load(d, "segs.bin", SEG), load(d, "seg_offset.i32")
+    rects, loads = load(d, "rects.bin", np.int32).reshape(P, 4), load(d, "loads.i64")
+    links, nseg = load(d, "links.i32"), int(M["nseg"])
+    wide, narrow, lofs, petot = link_lists(links, seg_off, P)
+    guard = Guarded(host)
+    b_view, b_cand, b_cidx = host.buf(view), host.buf(cand), host.buf(g.cidx4)
+    b_poc, cell0, splits = host.buf(g.pe_of_cell), g.args("cell0"), g.args("splits")
+
+    # The PE mask: simdvol_match_active (cidx, cell, dims, pes, reach, bricks, active), P / 64;
+    # all 1 without one.
+    active = np.ones(P, np.uint8)
+    if int(M["skip"]):
+        nb, active = [int(x) for x in M["bricks"].split()], load(d, "active.u8", np.uint8)
+        b_active = host.empty(P)
+        host.run(L.simdvol_match_active, P, 64, b_cidx, cell0, g.args("dims"), np.int32(P),
+                 host.buf(load(d, "reach.u8", np.uint8)), int4(*nb), b_active)
+        tally.same("match", case, "simdvol_match_active: match_active_reference",
+                   host.read(b_active, np.uint8, P), active)
+    else:
+        b_active = host.buf(np.ones(P, np.uint8))
+
+    # Host tables: H, geo, stepc; koff[p] = the sum of ceil8(h) w over the PEs before p;
+    # capacity = the candidates' w h, at least 1.
+    H = max(8, ceil_to(cand[:, 3].max(), 8))
+    geo, stepc = match_geo(view, g.cell)
+    b_geo, b_stepc = host.buf(geo), host.buf(stepc)
+    area = cand[:, 2].astype(np.int64) * cand[:, 3]
+    cap = max(1, int(area.sum()))
+    koff = np.r_[0, np.cumsum([ceil_to(h, 8) * w for w, h in cand[:, 2:4].astype(np.int64)])]
+    b_koff = host.buf(koff[:P].astype(np.int32))
+    can_narrow = bool(area.max() <= 65536)
+    rect_off = np.r_[0, np.cumsum(rects[:, 2].astype(np.int64) * rects[:, 3])]
+    junk = np.int32(0x7A5A5A5A)  # the pooled buffers' leftovers in the rows of inactive PEs
+
+    def match(links_on, save, narrow_on, bounds_on):
+        """rows (P H / 8), pe (P), scan (64, work-item 0), fill (P H / 8), each / 64; the
+        placeholders guarded. Returns the buffers and what they hold."""
+        sfx = "" if links_on else "_nolinks"
+        rowsum, rowlk, rowoff = (host.buf(np.full(4 * P * H, junk)) for _ in range(3))
+        kscr = host.buf(np.full(int(koff[-1]), junk)) if save else guard()
+        # (view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum, rowlk,
+        # kscr, koff, save)
+        head = (b_view, b_geo, b_stepc, b_cand, b_cidx, cell0, splits, b_poc, b_active,
+                *i32(P, H))
+        host.run(getattr(L, "simdvol_match_rows" + sfx), P * H // 8, 64, *head, rowsum, rowlk,
+                 kscr, b_koff, np.int32(save))
+        # (cand, active, pes, H, rowsum, rowlk, rowoff, petot, counts, rects, loads)
+        b = {k: host.empty(n) for k, n in (("petot", 16 * P), ("counts", 4 * P),
+                                          ("rects", 16 * P), ("loads", 4 * P),
+                                          ("seg_offset", 4 * (P + 1)), ("lofs", 16 * (P + 1)),
+                                          ("segments", 16 * cap))}
+        host.run(L.simdvol_match_pe, P, 64, b_cand, b_active, *i32(P, H), rowsum, rowlk, rowoff,
+                 b["petot"], b["counts"], b["rects"], b["loads"])
+        host.run(L.simdvol_match_scan, 64, 64, b["petot"], np.int32(P), b["seg_offset"],
+                 b["lofs"])
+        b["bounds"] = host.empty(4 * cap) if bounds_on else guard()
+        b["llist"] = host.empty((4 if narrow_on else 8) * cap) if links_on else guard()
+        b["lbase"] = host.empty(16 * P) if narrow_on else guard()
+        # (view .. H, rowsum, rowlk, rowoff, seg_offset, lofs, segments, bounds, fill_bounds,
+        # llist, narrow, lbase, kscr, koff, saved)
+        host.run(getattr(L, "simdvol_match_fill" + sfx), P * H // 8, 64, *head, rowsum, rowlk,
+                 rowoff, b["seg_offset"], b["lofs"], b["segments"], b["bounds"],
+                 np.int32(bounds_on), b["llist"], np.int32(narrow_on), b["lbase"], kscr, b_koff,
+                 np.int32(save))
+        b["rowsum"] = rowsum
+        return b
+
+    def check_matching(b, what, links_on, narrow_on, bounds_on):
+        tally.same("match", case, f"{what}: seg_offset", host.read(b["seg_offset"], np.int32,
+                                                                   P + 1), seg_off)
+        got = host.read(b["segments"], np.int32, 4 * nseg)
+        tally.same("match", case, f"{what}: segments", got, segs.view(np.int32))
+        tally.same("match", case, f"{what}: rects", host.read(b["rects"], np.int32, 4 * P),
+                   rects.ravel())
+        tally.same("match", case, f"{what}: loads", host.read(b["loads"], np.int32, P), loads)
+        tally.same("match", case, f"{what}: counts", host.read(b["counts"], np.int32, P),
+                   np.diff(seg_off))
+        # petot (segments, links along x, y, z) and lofs; without links rowlk is 0: no links.
+        pt, lo = (petot, lofs) if links_on else (petot * [1, 0, 0, 0], lofs * [1, 0, 0, 0])
+        tally.same("match", case, f"{what}: petot", host.read(b["petot"], np.int32, 4 * P),
+                   pt.ravel())
+        tally.same("match", case, f"{what}: lofs", host.read(b["lofs"], np.int32, 4 * (P + 1)),
+                   lo.ravel())
+        if links_on:
+            if narrow_on:
+                tally.same("match", case, f"{what}: narrow link list",
+                           host.read(b["llist"], np.uint32, len(narrow)), narrow)
+            else:
+                tally.same("match", case, f"{what}: wide link list",
+                           host.read(b["llist"], np.int32, 2 * len(wide)), wide.ravel())
+        if narrow_on:
+            tally.same("match", case, f"{what}: lbase", host.read(b["lbase"], np.int32, 4 * P),
+                       link_base(g, view, seg_off, active).ravel())
+        if bounds_on:
+            tally.same("match", case, f"{what}: bounds", host.read(b["bounds"], np.int16,
+                                                                   2 * nseg),
+                       np.stack([segs["k0"], segs["k1"]], 1).astype(np.int16).ravel())
+        tally.same("match", case, f"{what}: placeholders not overrun", [guard.intact()], [True])
+
+    def zero_uncovered(b, what):
+        """(cand, rects, rowsum, pes, H, rect_off, foot), P H / 8 / 64, on NaN footprints sized
+        by the device's rectangles (as a host sizes them: section 4, 6)."""
+        r = host.read(b["rects"], np.int32, 4 * P).reshape(P, 4)
+        off = np.r_[0, np.cumsum(r[:, 2].astype(np.int64) * r[:, 3])]
+        fp = host.buf(np.full(4 * max(int(off[-1]), 1), NAN))
+        host.run(L.simdvol_zero_uncovered, P * H // 8, 64, b_cand, b["rects"], b["rowsum"],
+                 *i32(P, H), host.buf(off[:P].astype(np.int32)), fp)
+        tally.same("match", case, f"zero_uncovered on the {what} rows",
+                   host.read(fp, np.float32, 4 * int(off[-1])), want_fp, channels=4)
+
+    # Without links (sweeps 0), saved columns and stepped; zero_uncovered on the first one's rows.
+    want_fp = uncovered(segs, seg_off, rects, rect_off)
+    for save in (1, 0):
+        b = match(False, save, False, False)
+        check_matching(b, f"nolinks save {save}", False, False, False)
+        if save:
+            zero_uncovered(b, "nolinks")
+
+    # With links, then the balance on each: (save, narrow, bounds16).
+    variants = [(1, 1, 1), (0, 0, 1), (1, 0, 0), (0, 1, 0)]
+    bal_axes = [a for a in range(3) if view[4 + 4 * a + 2] != 0 and g.splits[a] >= 2]
+    pairs, pfirst = balance_pairs(g)
+    # The page gives no order of a round's pairs (they share no PE): the stepped variants take
+    # each round's pairs shuffled.
+    shuffled = pairs.copy()
+    rng = np.random.default_rng(P)
+    for a in range(6):
+        shuffled[pfirst[a]:pfirst[a + 1]] = rng.permutation(pairs[pfirst[a]:pfirst[a + 1]])
+    b_pairs = {1: host.buf(pairs), 0: host.buf(shuffled)}
+    stride, per = (shared_define(host.kdir, n) for n in ("SV_BAL_MOVES_STRIDE", "SV_BAL_PES"))
+    if sweeps:
+        bal = load(d, "bal_segs.bin", SEG)
+        bal_kk = np.stack([bal["k0"], bal["k1"]], 1).ravel()
+    for save, nar, b16 in variants:
+        if nar and not can_narrow:
+            continue
+        what = f"links save {save} narrow {nar} fill_bounds {b16}"
+        b = match(True, save, nar, b16)
+        check_matching(b, what, True, nar, b16)
+        if save and nar == can_narrow:
+            zero_uncovered(b, "linked")
+        if not sweeps:
+            continue
+        if not bal_axes:  # no round, so no pack or unpack: the matching is the balanced one
+            tally.same("balance", case, f"{what}: no round: balance_reference's segments",
+                       host.read(b["segments"], np.int32, 4 * nseg), bal.view(np.int32))
+            continue
+        # Balance: 16-bit bounds as the fill wrote them, or 32-bit ones packed from the
+        # segments (seg_offset, pes, segments, kk), capacity / 64.
+        w = "16" if b16 else ""
+        bname = (f"balance {'16' if b16 else '32'}-bit, {'narrow' if nar else 'wide'} lists"
+                 + ("" if save else ", pairs shuffled"))
+        kk = b["bounds"]
+        if not b16:
+            kk = host.empty(8 * cap)
+            host.run(L.simdvol_balance_pack, cap, 64, b["seg_offset"], np.int32(P),
+                     b["segments"], kk)
+        # The rounds: per sweep, balanced axis and parity (pair_list, first, npairs, axis, dir,
+        # lofs, llist, kk, loads, moves, sweep), ceil(npairs / SV_BAL_PES) / 64; moves
+        # int[sweeps * SV_BAL_MOVES_STRIDE] zeroed first.
+        moves = host.zeros(4 * sweeps * stride)
+        rnd = getattr(L, f"simdvol_balance_round{w}" + ("n" if nar else ""))
+        for s in range(sweeps):
+            for a in bal_axes:
+                dr = 1 if view[4 + 4 * a + 2] > 0 else -1
+                for par in (0, 1):
+                    first, n = pfirst[2 * a + par], pfirst[2 * a + par + 1] - pfirst[2 * a + par]
+                    if n == 0:  # (a global size of 0 is CL_INVALID_GLOBAL_WORK_SIZE)
+                        continue
+                    host.run(rnd, -(-n // per), 64, b_pairs[save], *i32(first, n, a, dr),
+                             b["lofs"], b["llist"], kk, b["loads"], moves, np.int32(s))
+        tally.same("balance", case, f"{bname}: loads", host.read(b["loads"], np.int32, P),
+                   load(d, "bal_loads.i64"))
+        tally.same("balance", case, f"{bname}: moves flags",
+                   host.read(moves, np.int32, sweeps * stride)[::stride],
+                   load(d, "sweep_changed.i32"))
+        got = host.read(kk, np.int16 if b16 else np.int32, 2 * nseg)
+        tally.same("balance", case, f"{bname}: bounds" + (" (deferred unpack)" if b16 else ""),
+                   got, bal_kk)
+        # Unpack (seg_offset, pes, kk, segments), capacity / 64.
+        host.run(getattr(L, f"simdvol_balance_unpack{w}"), cap, 64, b["seg_offset"],
+                 np.int32(P), kk, b["segments"])
+        tally.same("balance", case, f"{bname}: unpacked segments",
+                   host.read(b["segments"], np.int32, 4 * nseg), bal.view(np.int32))
+
+
+def link_base(g, view, seg_off, active):
+    """Section 5 match.cl lbase[p] (narrow lists): (the first segment of p's link target along
+    x, y, z; p's first segment). The target along a is the PE of p's cell index + 1 along a where
+    view.step[a][2] > 0, - 1 otherwise (also where it is 0: no links then); -1 where that cell is
+    outside the split or its PE inactive. Written for inactive PEs too."""
+    P, s = g.P, g.splits
+    out = np.full((P, 4), -1, np.int64)
+    out[:, 3] = seg_off[:P]
+    for a in range(3):
+        nxt = g.cidx.copy()
+        nxt[:, a] += 1 if int(view[4 + 4 * a + 2]) > 0 else -1
+        ok = (nxt[:, a] >= 0) & (nxt[:, a] < s[a])
+        t = np.full(P, -1)
+        t[ok] = g.pe_of_cell[((nxt[:, 2] * s[1] + nxt[:, 1]) * s[0] + nxt[:, 0])[ok]]
+        ok &= active[np.maximum(t, 0)] != 0
+        out[ok, a] = seg_off[t[ok]]
+    return out.astype(np.int32)
+
+
 # ---------------------------------------------------------------- main
 SUMMARY = (
     ("plan", "swap plan", "bit_axis, front, pixel bits, rectangles, offsets, xpe, ype: plan_swap"),
@@ -1059,6 +1381,8 @@ SUMMARY = (
     ("local", "local", "simdvol_local against footprints_reference (1e-5)"),
     ("fused", "fused", "resample_local_v8 against footprints_reference (1e-5); _il (kb, "
      "zero_uncovered, lanes, skip), _ilc bit for bit"),
+    ("match", "match", "mask, segments, offsets, rects, loads, link lists, bounds: the library's"),
+    ("balance", "balance", "rounds, unpack: balance_reference's bounds, loads; moves flags"),
 )
 
 
@@ -1077,12 +1401,12 @@ def main():
     print(f"kernel-abi-check: pyopencl {cl.VERSION_TEXT} on {host.dev.name.strip()}, "
           f"kernels from {args.kernels}")
     kinds = [read_meta(d)["kind"] for d in cases]
-    checks = {"swap": check_swap, "mc": check_mc, "direct": check_direct}
+    checks = {"swap": check_swap, "mc": check_mc, "direct": check_direct, "match": check_match}
     for d, kind in zip(cases, kinds):
         checks[kind](host, tally, d)
     print(f"kernel-abi-check: {kinds.count('swap')} swap cases (2 layouts each), "
-          f"{kinds.count('mc')} Monte Carlo cases, {kinds.count('direct')} direct-frame cases; "
-          "bit for bit unless a tolerance is named:")
+          f"{kinds.count('mc')} Monte Carlo cases, {kinds.count('direct')} direct-frame cases, "
+          f"{kinds.count('match')} match cases; bit for bit unless a tolerance is named:")
     for key, stage, text in SUMMARY:
         big = f" (largest difference {tally.largest[key]:.2g})" if key in tally.largest else ""
         print(f"kernel-abi-check: {stage:10s} {tally.ok.get(key, 0):4d} equal  {text}{big}")

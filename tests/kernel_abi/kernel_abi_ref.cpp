@@ -23,7 +23,11 @@
 //     (planar, interleaved), resample_pair_table, resample_cell_bits, the
 //     matching's candidates, segments, offsets and rectangles, the balanced
 //     segments, and per order 0-3 resample_reference's samples and
-//     footprints_reference(local_reference)'s footprints.
+//     footprints_reference(local_reference)'s footprints;
+//   match-*: a view, match_candidates, (with a PE mask) a brick reach and
+//     match_active_reference's mask, match_reference's segments, offsets,
+//     rectangles and loads, balance_links, and (with sweeps) the balanced
+//     segments and loads with, per sweep, whether it changed the bounds.
 // Nothing here runs a kernel: the Python host does, from KERNELS.md.
 //
 // Usage: kernel-abi-ref DIR. Exit status 0, or 2 on an error.
@@ -404,6 +408,94 @@ void write_direct_case(const fs::path& dir, const DirectCase& c) {
   }
 }
 
+// ---------------------------------------------------------------- match, balance
+struct MatchCase {
+  const char* name;
+  struct {
+    Dims3 dims;
+    std::array<double, 3> spacing;
+  } volume;
+  struct {
+    ViewAngles angles;
+    int out_width, out_height;
+    Sampling sampling;
+  } view;
+  struct {
+    int64_t pes;
+    int sweeps;  // balance_reference's (0: the matching alone, as --balance-sweeps 0)
+    bool skip;   // a PE mask from a brick reach (skip_pes)
+  } run;
+};
+
+void write_match_case(const fs::path& dir, const MatchCase& c) {
+  fs::create_directories(dir);
+  const Dims3& dims = c.volume.dims;
+  const ViewGeometry view = make_view(dims, c.volume.spacing, c.view.angles, c.view.out_width,
+                                      c.view.out_height, c.view.sampling);
+  const KdSplit split = kd_split(dims, c.run.pes);
+  Meta meta(dir);
+  meta("kind", "match");
+  meta("pes", c.run.pes);
+  meta("dims", words(dims));
+  meta("sweeps", c.run.sweeps);
+  meta("skip", int(c.run.skip));
+  meta("sampling", c.view.sampling == Sampling::voxel ? "voxel" : "pixel");
+  put(dir / "view.bin", std::vector<sv_view>{view.grid});
+  put(dir / "cand.bin", match_candidates(view, split));
+  std::vector<uint8_t> active;
+  if (c.run.skip) {
+    // A brick reach (a byte per brick of 2^SV_BRICK_LOG2 voxels, x fastest): a ball of
+    // bricks off centre, so that some PEs meet none, every 211th brick, and the far corner's
+    // (past the volume where a dim is not a multiple of 4, and there meeting cells that lie
+    // wholly past the volume: match-P16-pad).
+    const int64_t b = int64_t(1) << SV_BRICK_LOG2;
+    const Dims3 nb{(dims[0] + b - 1) / b, (dims[1] + b - 1) / b, (dims[2] + b - 1) / b};
+    std::vector<uint8_t> reach;
+    for (int64_t z = 0; z < nb[2]; ++z)
+      for (int64_t y = 0; y < nb[1]; ++y)
+        for (int64_t x = 0; x < nb[0]; ++x) {
+          const double dx = (x + 0.5) / nb[0] - 0.25, dy = (y + 0.5) / nb[1] - 0.72,
+                       dz = (z + 0.5) / nb[2] - 0.3;
+          const int64_t e = (z * nb[1] + y) * nb[0] + x;
+          const bool last = x == nb[0] - 1 && y == nb[1] - 1 && z == nb[2] - 1;
+          reach.push_back(dx * dx + dy * dy + dz * dz < 0.04 || e % 211 == 5 || last ? 1 : 0);
+        }
+    active = match_active_reference(split, reach);
+    meta("bricks", words(nb));
+    put(dir / "reach.u8", reach);
+    put(dir / "active.u8", active);
+  }
+  const Matching m = match_reference(view, split, active);
+  meta("nseg", m.segments.size());
+  meta("active_pes", active.empty() ? c.run.pes : std::count(active.begin(), active.end(), 1));
+  put(dir / "segs.bin", m.segments);
+  put(dir / "seg_offset.i32", to32(m.seg_offset));
+  put(dir / "rects.bin", m.rects);
+  put(dir / "loads.i64", m.loads);
+  put(dir / "links.i32", balance_links(m, view, split));
+  if (c.run.sweeps > 0) {
+    // The balanced matching, and per sweep s whether it changed the bounds (the rounds'
+    // `moves` flag of sweep s: some pair moved samples; a sweep whose moves all cancelled
+    // would set its flag and read 0 here, which none of these cases has). Each from the
+    // matching: its links are the matching's, not a balanced one's.
+    const Matching b = balance_reference(m, view, split, c.run.sweeps);
+    std::vector<int32_t> changed;
+    Matching before = m;
+    for (int s = 1; s <= c.run.sweeps; ++s) {
+      const Matching after = balance_reference(m, view, split, s);
+      bool differ = false;
+      for (std::size_t e = 0; e < after.segments.size(); ++e)
+        differ = differ || after.segments[e].k0 != before.segments[e].k0 ||
+                 after.segments[e].k1 != before.segments[e].k1;
+      changed.push_back(differ ? 1 : 0);
+      before = after;
+    }
+    put(dir / "bal_segs.bin", b.segments);
+    put(dir / "bal_loads.i64", b.loads);
+    put(dir / "sweep_changed.i32", changed);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) try {
@@ -472,9 +564,61 @@ int main(int argc, char** argv) try {
        {64, "mri", 2}},
   };
   for (const DirectCase& c : directs) write_direct_case(out / c.name, c);
+  // Match and balance: P 1 .. 8192 (16: cells wholly past the volume, x 26 = 13 cells of 2);
+  // axis-aligned, 30 deg, 45 deg and oblique views (negative
+  // depth steps among them); voxel and pixel sampling; a PE mask or none; balance sweeps 0
+  // (the matching alone) and 8 (the default).
+  const MatchCase matches[] = {
+      {"match-P1",
+       {{20, 17, 9}, {1, 1, 1}},
+       {{30, 20, 10}, 24, 20, Sampling::voxel},
+       {1, 8, false}},
+      {"match-P16-pad-skip",
+       {{26, 4, 4}, {1, 1, 1}},
+       {{20, 35, 10}, 30, 30, Sampling::pixel},
+       {16, 8, true}},
+      {"match-P8-axis",
+       {{32, 30, 27}, {1, 1, 1}},
+       {{0, 0, 0}, 40, 40, Sampling::voxel},
+       {8, 8, false}},
+      {"match-P8-oblique-skip",
+       {{32, 28, 24}, {1, 1, 1}},
+       {{-50, 200, 35}, 36, 44, Sampling::pixel},
+       {8, 8, true}},
+      {"match-P64-30",
+       {{40, 32, 36}, {1, 1.25, 0.8}},
+       {{0, 30, 0}, 48, 40, Sampling::voxel},
+       {64, 8, false}},
+      {"match-P64-axis-skip",
+       {{27, 19, 13}, {1, 1, 1}},
+       {{0, 0, 90}, 33, 29, Sampling::pixel},
+       {64, 0, true}},
+      {"match-P512-45-skip",
+       {{48, 48, 48}, {1, 1, 1}},
+       {{0, 45, 0}, 64, 64, Sampling::voxel},
+       {512, 8, true}},
+      {"match-P512-oblique",
+       {{40, 33, 17}, {1, 1, 1}},
+       {{30, 20, 10}, 61, 45, Sampling::pixel},
+       {512, 0, false}},
+      {"match-P8192-45",
+       {{64, 64, 64}, {1, 1, 1}},
+       {{45, 45, 0}, 64, 64, Sampling::voxel},
+       {8192, 8, false}},
+      {"match-P8192-oblique-skip",
+       {{64, 48, 80}, {1, 1, 1}},
+       {{-100, 250, 10}, 72, 56, Sampling::pixel},
+       {8192, 8, true}},
+      {"match-P8192-30",
+       {{64, 64, 64}, {1, 1, 1}},
+       {{30, 0, 0}, 64, 64, Sampling::pixel},
+       {8192, 0, false}},
+  };
+  for (const MatchCase& c : matches) write_match_case(out / c.name, c);
   std::printf(
-      "kernel-abi-ref: %zu swap, %zu Monte Carlo and %zu direct-frame cases written to %s\n",
-      std::size(swaps), std::size(mcs), std::size(directs), out.c_str());
+      "kernel-abi-ref: %zu swap, %zu Monte Carlo, %zu direct-frame and %zu match cases written "
+      "to %s\n",
+      std::size(swaps), std::size(mcs), std::size(directs), std::size(matches), out.c_str());
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "kernel-abi-ref: %s\n", e.what());
