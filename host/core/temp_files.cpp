@@ -80,13 +80,18 @@ TempFile::TempFile(const std::filesystem::path& target, const std::filesystem::p
     : target_(target), named_(named) {
   const std::filesystem::path dir =
       target.parent_path().empty() ? std::filesystem::path(".") : target.parent_path();
-  const std::string ext = target.extension().string(), tag = ".tmp-XXXXXX";
+  // The extension kept where it is short (an image's); a long one (a name
+  // "a.<250 bytes>") is cut with the rest, so that the name stays within
+  // the file system's 255 bytes.
+  const bool keep_ext = target.extension().string().size() <= 16;
+  const std::string ext = keep_ext ? target.extension().string() : "", tag = ".tmp-XXXXXX";
+  const std::string base = keep_ext ? target.stem().string() : target.filename().string();
   // Shorter where the directory's path is long: the whole path within 4,095
   // bytes (a frame within 20 bytes of it failed as "File name too long"
   // where its own name fits).
   const std::size_t around = dir.string().size() + 1 + tag.size() + ext.size();
   const std::size_t room = around < 4095 ? 4095 - around : 0;
-  const std::string stem = target.stem().string().substr(0, std::min<std::size_t>(64, room));
+  const std::string stem = base.substr(0, std::min<std::size_t>(64, room));
   const std::string name = (dir / (stem + tag + ext)).string();
   std::vector<char> buf(name.begin(), name.end());
   buf.push_back('\0');

@@ -781,6 +781,11 @@ TEST_F(IoTest, WrittenFilesTakeTheUmask) {
   }
   EXPECT_FALSE(fs::exists(made));
   EXPECT_FALSE(fs::exists(file("out.png")));
+  // A name of 255 bytes that is nearly all extension: its temporary file's
+  // name is cut too (stem, tag and extension made 262 bytes).
+  const std::string long_ext = "a." + std::string(253, 'e');
+  simdvol::write_file_atomically(file(long_ext), {"x"});
+  EXPECT_EQ(read_file(file(long_ext)).size(), 1u);
 }
 
 TEST_F(IoTest, WritersWriteThroughSymbolicLinks) {
