@@ -29,8 +29,9 @@ class TempFileMark {
 /// beside `target` (in its directory, so that the rename is atomic), made
 /// exclusively (mkstemps: never someone's existing file), named after at
 /// most the first 64 bytes of target's stem, then ".tmp-XXXXXX" and
-/// target's extension (a writer that picks its format by the name sees the
-/// target's), the whole path within Linux's 4,095 bytes; its mode a new
+/// target's extension where it is 16 bytes or less (a writer that picks
+/// its format by the name sees the target's; a longer one is cut with the
+/// name), the whole path within Linux's 4,095 bytes; its mode a new
 /// file's, 0666 less the umask; marked (TempFileMark) while it exists.
 /// Removed by the destructor unless commit() put it in place. The errors
 /// are FileError naming `named` (the path the user gave, where target is
