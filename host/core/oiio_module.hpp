@@ -11,15 +11,17 @@
 
 /// Bumped whenever a signature below changes; the loader refuses a module
 /// of another version.
-#define SIMDVOL_OIIO_ABI 2
+#define SIMDVOL_OIIO_ABI 3
 
 extern "C" {
 /// SIMDVOL_OIIO_ABI of the module.
 typedef int (*simdvol_oiio_abi_fn)(void);
-/// Writes w x h premultiplied float RGBA pixels (rows top to bottom) to
-/// `path`: format 1 = OpenEXR (half RGBA), 2 = TIFF (float RGBA, zip).
-/// Returns 0 on success, else an error message to free with simdvol_oiio_free.
-typedef char* (*simdvol_oiio_write_fn)(const char* path, int format, int w, int h,
+/// Writes w x h premultiplied float RGBA pixels (rows top to bottom) to the
+/// open file `fd` (left open; written through a duplicate), `path` naming
+/// it in OpenImageIO's messages: format 1 = OpenEXR (half RGBA), 2 = TIFF
+/// (float RGBA, zip). Returns 0 on success, else an error message to free
+/// with simdvol_oiio_free.
+typedef char* (*simdvol_oiio_write_fn)(const char* path, int fd, int format, int w, int h,
                                        const float* rgba);
 /// Reads the first subimage of `path` as float RGBA (*rgba: w * h * 4
 /// floats, to free with simdvol_oiio_free): 1 channel is grey, 2 grey and

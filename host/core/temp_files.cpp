@@ -4,18 +4,17 @@
 
 #include <fcntl.h>
 #include <sys/resource.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <array>
 #include <atomic>
 #include <cerrno>
 #include <csignal>
+#include <cstdint>
 #include <cstring>
-#include <fstream>
+#include <random>
 #include <string>
 #include <system_error>
-#include <vector>
 
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
@@ -62,16 +61,22 @@ std::string errno_text(int e) {
   return std::generic_category().message(e);
 }
 
-// The process's umask, read where it cannot change it (umask(2) sets it to
-// read it, which another thread's file creation could see): Linux's
-// /proc/self/status, else the usual 022.
-mode_t current_umask() {
-  std::ifstream status("/proc/self/status");
-  std::string line;
-  while (std::getline(status, line))
-    if (line.rfind("Umask:", 0) == 0)
-      return static_cast<mode_t>(std::stoul(line.substr(6), nullptr, 8));
-  return 022;
+// Six characters for a temporary file's name, different in each call
+// (a counter from a random start, mixed: splitmix64) and thread-safe.
+std::string random_tag() {
+  static std::atomic<std::uint64_t> counter{(std::uint64_t{std::random_device{}()} << 32) ^
+                                            static_cast<std::uint64_t>(::getpid())};
+  std::uint64_t x = counter.fetch_add(0x9E3779B97F4A7C15ULL) + 0x9E3779B97F4A7C15ULL;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+  x ^= x >> 31;
+  static constexpr char kChars[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789";
+  std::string tag(6, ' ');
+  for (char& c : tag) {
+    c = kChars[x % 62];
+    x /= 62;
+  }
+  return tag;
 }
 
 }  // namespace
@@ -80,28 +85,30 @@ TempFile::TempFile(const std::filesystem::path& target, const std::filesystem::p
     : target_(target), named_(named) {
   const std::filesystem::path dir =
       target.parent_path().empty() ? std::filesystem::path(".") : target.parent_path();
-  // The extension kept where it is short (an image's); a long one (a name
-  // "a.<250 bytes>") is cut with the rest, so that the name stays within
-  // the file system's 255 bytes.
-  const bool keep_ext = target.extension().string().size() <= 16;
-  const std::string ext = keep_ext ? target.extension().string() : "", tag = ".tmp-XXXXXX";
-  const std::string base = keep_ext ? target.stem().string() : target.filename().string();
-  // Shorter where the directory's path is long: the whole path within 4,095
-  // bytes (a frame within 20 bytes of it failed as "File name too long"
-  // where its own name fits).
-  const std::size_t around = dir.string().size() + 1 + tag.size() + ext.size();
+  // At most the first 64 bytes of the name, so that a name near the file
+  // system's 255 bytes has room for the tag; shorter where the directory's
+  // path is long: the whole path within 4,095 bytes (a frame within 20
+  // bytes of it failed as "File name too long" where its own name fits).
+  const std::size_t around = dir.string().size() + 1 + std::strlen(".tmp-XXXXXX");
   const std::size_t room = around < 4095 ? 4095 - around : 0;
-  const std::string stem = base.substr(0, std::min<std::size_t>(64, room));
-  const std::string name = (dir / (stem + tag + ext)).string();
-  std::vector<char> buf(name.begin(), name.end());
-  buf.push_back('\0');
-  fd_ = ::mkstemps(buf.data(), static_cast<int>(ext.size()));
-  if (fd_ < 0)
-    throw FileError(named_, "cannot create a temporary file in " + dir.string() + ": " +
-                                errno_text(errno) + file_size_limit_note());
-  path_ = buf.data();
-  mark_.emplace(path_);
-  ::fchmod(fd_, 0666 & ~current_umask());  // mkstemps makes it 0600
+  const std::string stem = target.filename().string().substr(0, std::min<std::size_t>(64, room));
+  // Made here with O_EXCL and mode 0666, so that the kernel gives it what a
+  // new file gets (the umask, a directory's default ACL); mkstemp's 0600
+  // and a chmod could not. Everything that can throw is done before the
+  // open: after it, only the mark (noexcept) and moves.
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    std::filesystem::path candidate = dir / (stem + ".tmp-" + random_tag());
+    fd_ = ::open(candidate.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd_ >= 0) {
+      path_ = std::move(candidate);
+      mark_.emplace(path_);
+      return;
+    }
+    if (errno != EEXIST) break;
+  }
+  const int e = errno;
+  throw FileError(named_, "cannot create a temporary file in " + dir.string() + ": " +
+                              errno_text(e) + file_size_limit_note());
 }
 
 TempFile::~TempFile() {
@@ -109,21 +116,15 @@ TempFile::~TempFile() {
   if (!done_) ::unlink(path_.c_str());
 }
 
-void TempFile::close() {
+void TempFile::fail(const std::string& problem) {
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;
-}
-
-void TempFile::fail(const std::string& problem) {
-  close();
   ::unlink(path_.c_str());
   done_ = true;
   throw FileError(named_, problem + file_size_limit_note());
 }
 
 void TempFile::commit() {
-  if (fd_ < 0) fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);  // fsync needs a descriptor
-  if (fd_ < 0) fail("cannot reopen the temporary file: " + errno_text(errno));
   if (::fsync(fd_) != 0 && errno != EINVAL) {
     const int e = errno;
     fail("fsync failed: " + errno_text(e));

@@ -27,15 +27,16 @@ class TempFileMark {
 
 /// The temporary file of a write that replaces a file at once: a new file
 /// beside `target` (in its directory, so that the rename is atomic), made
-/// exclusively (mkstemps: never someone's existing file), named after at
-/// most the first 64 bytes of target's stem, then ".tmp-XXXXXX" and
-/// target's extension where it is 16 bytes or less (a writer that picks
-/// its format by the name sees the target's; a longer one is cut with the
-/// name), the whole path within Linux's 4,095 bytes; its mode a new
-/// file's, 0666 less the umask; marked (TempFileMark) while it exists.
-/// Removed by the destructor unless commit() put it in place. The errors
-/// are FileError naming `named` (the path the user gave, where target is
-/// its symbolic link's end), each ending in file_size_limit_note().
+/// exclusively (O_EXCL: never someone's existing file) with mode 0666, so
+/// that it gets what any new file gets there (the umask, a default ACL),
+/// named after at most the first 64 bytes of target's name, then
+/// ".tmp-" and six random characters, the whole path within Linux's 4,095
+/// bytes; marked (TempFileMark) while it exists. Written through fd() (the
+/// image writers take it too: a file reopened by its name can be closed to
+/// its owner by a umask such as 0222). Removed by the destructor unless
+/// commit() put it in place. The errors are FileError naming `named` (the
+/// path the user gave, where target is its symbolic link's end), each
+/// ending in file_size_limit_note().
 class TempFile {
  public:
   /// FileError "cannot create a temporary file in DIR: ..." when it cannot
@@ -46,12 +47,10 @@ class TempFile {
   TempFile& operator=(const TempFile&) = delete;
 
   const std::filesystem::path& path() const { return path_; }
-  /// Open for writing; -1 after close() (for a writer that opens path()
-  /// itself).
+  /// Open for reading and writing until commit() or fail().
   int fd() const { return fd_; }
-  void close();
-  /// To disk (fsync, the file reopened where closed), closed, renamed over
-  /// the target; on a failure removed, and FileError.
+  /// To disk (fsync), closed, renamed over the target; on a failure
+  /// removed, and FileError.
   void commit();
   /// Removes the file and throws FileError(named, problem + the note).
   [[noreturn]] void fail(const std::string& problem);

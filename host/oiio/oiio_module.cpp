@@ -3,8 +3,12 @@
 // interface and the reason are in host/core/oiio_module.hpp).
 #include "oiio_module.hpp"
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
+#include <unistd.h>
 
+#include <cerrno>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <exception>
@@ -26,20 +30,46 @@ char* message(const std::string& s) {
   return m;
 }
 
-std::string write_image(const char* path, int format, int w, int h, const float* rgba) {
+// Through an IOProxy on a stream of a duplicate of `fd`: the caller made
+// the file (exclusively, with the mode a new file gets) and keeps it open;
+// reopened by its name, it could be closed to its owner (umask 0222).
+std::string write_image(const char* path, int fd, int format, int w, int h, const float* rgba) {
   if (format != 1 && format != 2) return "unknown image format code " + std::to_string(format);
   if (w <= 0 || h <= 0 || !rgba) return "cannot write an empty image";
   const char* name = format == 1 ? "openexr" : "tiff";
   auto out = OIIO::ImageOutput::create(name);
   if (!out) return "OpenImageIO has no " + std::string(name) + " writer: " + OIIO::geterror();
+  if (!out->supports("ioproxy"))
+    return "OpenImageIO's " + std::string(name) + " writer takes no stream";
+  const int dup_fd = ::dup(fd);
+  FILE* f = dup_fd >= 0 ? ::fdopen(dup_fd, "wb") : nullptr;
+  if (!f) {
+    const std::string e = std::strerror(errno);
+    if (dup_fd >= 0) ::close(dup_fd);
+    return "cannot write it: " + e;
+  }
   OIIO::ImageSpec spec(w, h, 4, format == 1 ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
   spec.alpha_channel = 3;
   spec.attribute("oiio:UnassociatedAlpha", 0);  // colour is premultiplied
   if (format == 2) spec.attribute("compression", "zip");
-  if (out->open(path, spec) && out->write_image(OIIO::TypeDesc::FLOAT, rgba) && out->close())
-    return "";
-  const std::string msg = out->geterror();
-  return msg.empty() ? "OpenImageIO could not write the image" : msg;
+  std::string problem;
+  {
+    OIIO::Filesystem::IOFile proxy(f, OIIO::Filesystem::IOProxy::Write);
+    if (!(out->set_ioproxy(&proxy) && out->open(path, spec) &&
+          out->write_image(OIIO::TypeDesc::FLOAT, rgba) && out->close())) {
+      const std::string msg = out->geterror();
+      problem = msg.empty() ? "OpenImageIO could not write the image" : msg;
+    }
+    out.reset();  // done with the proxy before it goes
+  }
+  // The stream's buffer, its errors (a full disk, the file-size limit).
+  if (std::fflush(f) != 0 || std::ferror(f)) {
+    const int e = errno;
+    if (problem.empty()) problem = "cannot write it: " + std::string(std::strerror(e));
+  }
+  if (std::fclose(f) != 0 && problem.empty())
+    problem = "cannot close it: " + std::string(std::strerror(errno));
+  return problem;
 }
 
 std::string read_image(const char* path, int* w_out, int* h_out, float** rgba_out, int* has_alpha) {
@@ -122,9 +152,10 @@ extern "C" {
 __attribute__((visibility("default"))) int simdvol_oiio_abi(void) {
   return SIMDVOL_OIIO_ABI;
 }
-__attribute__((visibility("default"))) char* simdvol_oiio_write(const char* path, int format, int w,
-                                                                int h, const float* rgba) {
-  return guarded([&] { return write_image(path, format, w, h, rgba); });
+__attribute__((visibility("default"))) char* simdvol_oiio_write(const char* path, int fd,
+                                                                int format, int w, int h,
+                                                                const float* rgba) {
+  return guarded([&] { return write_image(path, fd, format, w, h, rgba); });
 }
 __attribute__((visibility("default"))) char* simdvol_oiio_read(const char* path, int* w, int* h,
                                                                float** rgba, int* has_alpha) {

@@ -757,27 +757,32 @@ TEST_F(IoTest, WrittenFilesTakeTheUmask) {
   Volume a(kDims, VoxelType::u8);
   a.data() = test_values(VoxelType::u8, kN);
   const simdvol::Image img(2, 2);
-  for (const mode_t mask : {mode_t{077}, mode_t{022}, mode_t{002}}) {
+  // 0222 and 0400 take the owner's write or read bit away: the writers
+  // write through the descriptor that made the file (reopened by its name
+  // the file was closed to a user who is not root).
+  for (const mode_t mask : {mode_t{077}, mode_t{022}, mode_t{002}, mode_t{0222}, mode_t{0400}}) {
     const mode_t old = ::umask(mask);
     const std::string tag = std::to_string(mask);
     simdvol::write_file_atomically(file(tag + ".csv"), {"a\n"});
     simdvol::save_nrrd(a, file(tag + ".nrrd"));
     simdvol::write_image(img, file(tag + ".png"));
+    simdvol::write_image(img, file(tag + ".tif"));
     ::umask(old);
-    for (const char* ext : {".csv", ".nrrd", ".png"})
+    for (const char* ext : {".csv", ".nrrd", ".png", ".tif"})
       EXPECT_EQ(mode(file(tag + ext)), 0666 & ~mask) << tag << ext;
   }
-  // A temporary file's name: the target's stem, ".tmp-", six characters,
-  // the target's extension; made anew, removed unless committed.
+  // A temporary file's name: the target's name, ".tmp-", six characters;
+  // made anew (mode 0666 less the umask, as above), removed unless
+  // committed.
   fs::path made;
   {
     simdvol::TempFile t(file("out.png"), file("out.png"));
     made = t.path();
     EXPECT_EQ(made.parent_path(), dir_);
-    EXPECT_EQ(made.extension(), ".png");
-    EXPECT_EQ(made.stem().string().substr(0, 8), "out.tmp-");
-    EXPECT_EQ(made.stem().string().size(), 14u);
+    EXPECT_EQ(made.filename().string().substr(0, 12), "out.png.tmp-");
+    EXPECT_EQ(made.filename().string().size(), 18u);
     EXPECT_TRUE(fs::exists(made));
+    EXPECT_GE(t.fd(), 0);
   }
   EXPECT_FALSE(fs::exists(made));
   EXPECT_FALSE(fs::exists(file("out.png")));
@@ -786,6 +791,57 @@ TEST_F(IoTest, WrittenFilesTakeTheUmask) {
   const std::string long_ext = "a." + std::string(253, 'e');
   simdvol::write_file_atomically(file(long_ext), {"x"});
   EXPECT_EQ(read_file(file(long_ext)).size(), 1u);
+}
+
+// Under a umask that takes the owner's write bit (0222) or read bit (0400),
+// the image writers still write: they write through the descriptor that
+// made the temporary file. Reopened by its name (libpng's fopen,
+// OpenImageIO's open) the file was closed to a user who is not root:
+// "cannot create it: Permission denied". Root reads and writes past the
+// mode, so as root the writes run in a child that has become nobody.
+TEST_F(IoTest, ImageWritersWriteUnderAUmaskThatClosesTheFile) {
+  const auto write_all = [&]() -> bool {
+    const simdvol::Image img(3, 2);
+    bool ok = true;
+    for (const mode_t mask : {mode_t{0222}, mode_t{0400}}) {
+      ::umask(mask);
+      for (const char* ext : {".png", ".tif", ".exr"}) {
+        try {
+          simdvol::write_image(img, file(std::to_string(mask) + ext));
+        } catch (const std::exception& e) {
+          std::fprintf(stderr, "%s\n", e.what());
+          ok = false;
+        }
+      }
+    }
+    return ok;
+  };
+  if (::geteuid() != 0) {
+    const mode_t old = ::umask(022);
+    EXPECT_TRUE(write_all());
+    ::umask(old);
+  } else {
+    fs::permissions(dir_, fs::perms::all);
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      if (::setgid(65534) != 0 || ::setuid(65534) != 0) ::_exit(2);
+      ::_exit(write_all() ? 0 : 1);
+    }
+    int status = 0;
+    ASSERT_EQ(::waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFEXITED(status)) << status;
+    ASSERT_NE(WEXITSTATUS(status), 2) << "could not become nobody";
+    EXPECT_EQ(WEXITSTATUS(status), 0);
+  }
+  for (const char* name : {"146.png", "146.tif", "146.exr", "256.png", "256.tif", "256.exr"}) {
+    struct stat st {};
+    ASSERT_EQ(::stat(file(name).c_str(), &st), 0) << name;
+    EXPECT_EQ(st.st_mode & 0777, name[0] == '1' ? 0444u : 0266u) << name;
+  }
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names.size(), 6u);  // no temporary file left
 }
 
 TEST_F(IoTest, WritersWriteThroughSymbolicLinks) {
