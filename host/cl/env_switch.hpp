@@ -27,7 +27,8 @@ inline std::optional<bool> env_switch(const char* name) {
 // A whole number 0 .. max written in decimal digits, blanks (space, tab)
 // either side allowed; nullopt for anything else (a sign, other characters,
 // no digits, past max: strtol's "-1", "2x" and LONG_MAX for
-// 99999999999999999999 are all refused here).
+// 99999999999999999999 are all refused here). max at most LONG_MAX / 10 - 9,
+// so that the value does not overflow before the test.
 inline std::optional<long> whole_number(std::string_view text, long max) {
   while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
   while (!text.empty() && (text.back() == ' ' || text.back() == '\t')) text.remove_suffix(1);

@@ -832,7 +832,8 @@ int main(int argc, char** argv) {
         throw ArgumentError(
             "--tolerance", "must be a number, 0 or more (got " + std::to_string(compare_tol) + ")");
       bool alpha_a = true, alpha_b = true;
-      const Image a = read_image(img_a, &alpha_a), b = read_image(img_b, &alpha_b);
+      const Image a = read_image_with_alpha(img_a, &alpha_a),
+                  b = read_image_with_alpha(img_b, &alpha_b);
       if (a.width() != b.width() || a.height() != b.height())
         throw ArgumentError(img_a + " and " + img_b,
                             "image sizes differ: " + std::to_string(a.width()) + "x" +

@@ -309,10 +309,10 @@ void write_image(const Image& img, const fs::path& path) {
 }
 
 Image read_image(const fs::path& path) {
-  return read_image(path, nullptr);
+  return read_image_with_alpha(path, nullptr);
 }
 
-Image read_image(const fs::path& path, bool* has_alpha) {
+Image read_image_with_alpha(const fs::path& path, bool* has_alpha) {
   std::error_code ec;
   refuse_non_regular_file(path, "an image file");
   if (!fs::is_regular_file(path, ec))

@@ -1753,8 +1753,8 @@ TEST_F(Cli, CompareSaysWhenOneImageHasNoAlpha) {
   ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("a.png")).code, 0);
   ASSERT_EQ(run("render --phantom-size 16 --size 16x16 -o " + path("a.tif")).code, 0);
   bool png_alpha = true, tif_alpha = false;
-  const simdvol::Image png = simdvol::read_image(path("a.png"), &png_alpha),
-                       tif = simdvol::read_image(path("a.tif"), &tif_alpha);
+  const simdvol::Image png = simdvol::read_image_with_alpha(path("a.png"), &png_alpha),
+                       tif = simdvol::read_image_with_alpha(path("a.tif"), &tif_alpha);
   EXPECT_FALSE(png_alpha);
   EXPECT_TRUE(tif_alpha);
   float rgb = 0;

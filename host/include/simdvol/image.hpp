@@ -59,7 +59,7 @@ void check_image_extension(const std::filesystem::path& path);
 Image read_image(const std::filesystem::path& path);
 /// The same, and whether the file has an alpha channel (a PNG that
 /// write_image wrote, RGB over black, has none: its alpha reads as 1).
-Image read_image(const std::filesystem::path& path, bool* has_alpha);
+Image read_image_with_alpha(const std::filesystem::path& path, bool* has_alpha);
 
 /// Peak signal-to-noise ratio in dB over the RGB channels, peak 1.0.
 /// Returns +infinity for identical images. Throws ArgumentError on size mismatch.
