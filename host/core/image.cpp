@@ -4,6 +4,7 @@
 #include "simdvol/image.hpp"
 
 #include <dlfcn.h>
+#include <fcntl.h>
 #include <png.h>
 #include <unistd.h>
 
@@ -182,7 +183,7 @@ void png_warn(png_structp, png_const_charp) {}
 // libpng's errors longjmp back to the setjmp below. Returns false with
 // `err` set on failure.
 bool write_png(int fd, const unsigned char* rgb, int w, int h, PngError* err) {
-  const int dup_fd = ::dup(fd);
+  const int dup_fd = ::fcntl(fd, F_DUPFD_CLOEXEC, 0);  // (PoCL runs the linker meanwhile)
   FILE* f = dup_fd >= 0 ? ::fdopen(dup_fd, "wb") : nullptr;
   if (!f) {
     std::snprintf(err->message, sizeof err->message, "cannot write it: %s", std::strerror(errno));

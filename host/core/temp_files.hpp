@@ -12,7 +12,7 @@ namespace simdvol {
 /// the mark lives: a signal that remove_temporary_files_on_signals() handles
 /// removes the file before the process ends. Best effort: a path longer
 /// than 4,095 bytes, or one beyond the 64 marks kept at once, is not
-/// marked. Mark before the file is made (or at once after mkstemp), and
+/// marked. Mark before the file is made, and
 /// let the mark go after the file is renamed into place or removed.
 class TempFileMark {
  public:

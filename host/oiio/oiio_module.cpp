@@ -5,6 +5,7 @@
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -37,36 +38,46 @@ std::string write_image(const char* path, int fd, int format, int w, int h, cons
   if (format != 1 && format != 2) return "unknown image format code " + std::to_string(format);
   if (w <= 0 || h <= 0 || !rgba) return "cannot write an empty image";
   const char* name = format == 1 ? "openexr" : "tiff";
-  auto out = OIIO::ImageOutput::create(name);
-  if (!out) return "OpenImageIO has no " + std::string(name) + " writer: " + OIIO::geterror();
-  if (!out->supports("ioproxy"))
-    return "OpenImageIO's " + std::string(name) + " writer takes no stream";
-  const int dup_fd = ::dup(fd);
-  FILE* f = dup_fd >= 0 ? ::fdopen(dup_fd, "wb") : nullptr;
-  if (!f) {
+  // The stream, then the proxy on it, then the writer: destroyed in the
+  // other order on every path, an exception's included (the writer's
+  // destructor closes the file through the proxy). Close-on-exec, as the
+  // caller's descriptor: PoCL runs the linker while a turntable writes.
+  const int dup_fd = ::fcntl(fd, F_DUPFD_CLOEXEC, 0);
+  struct Stream {
+    FILE* f = nullptr;
+    ~Stream() {
+      if (f) std::fclose(f);
+    }
+  } stream;
+  stream.f = dup_fd >= 0 ? ::fdopen(dup_fd, "wb") : nullptr;
+  if (!stream.f) {
     const std::string e = std::strerror(errno);
     if (dup_fd >= 0) ::close(dup_fd);
     return "cannot write it: " + e;
   }
+  OIIO::Filesystem::IOFile proxy(stream.f, OIIO::Filesystem::IOProxy::Write);
+  auto out = OIIO::ImageOutput::create(name);
+  if (!out) return "OpenImageIO has no " + std::string(name) + " writer: " + OIIO::geterror();
+  if (!out->supports("ioproxy"))
+    return "OpenImageIO's " + std::string(name) + " writer takes no stream";
   OIIO::ImageSpec spec(w, h, 4, format == 1 ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
   spec.alpha_channel = 3;
   spec.attribute("oiio:UnassociatedAlpha", 0);  // colour is premultiplied
   if (format == 2) spec.attribute("compression", "zip");
   std::string problem;
-  {
-    OIIO::Filesystem::IOFile proxy(f, OIIO::Filesystem::IOProxy::Write);
-    if (!(out->set_ioproxy(&proxy) && out->open(path, spec) &&
-          out->write_image(OIIO::TypeDesc::FLOAT, rgba) && out->close())) {
-      const std::string msg = out->geterror();
-      problem = msg.empty() ? "OpenImageIO could not write the image" : msg;
-    }
-    out.reset();  // done with the proxy before it goes
+  if (!(out->set_ioproxy(&proxy) && out->open(path, spec) &&
+        out->write_image(OIIO::TypeDesc::FLOAT, rgba) && out->close())) {
+    const std::string msg = out->geterror();
+    problem = msg.empty() ? "OpenImageIO could not write the image" : msg;
   }
+  out.reset();  // done with the proxy
   // The stream's buffer, its errors (a full disk, the file-size limit).
-  if (std::fflush(f) != 0 || std::ferror(f)) {
+  if (std::fflush(stream.f) != 0 || std::ferror(stream.f)) {
     const int e = errno;
     if (problem.empty()) problem = "cannot write it: " + std::string(std::strerror(e));
   }
+  FILE* f = stream.f;
+  stream.f = nullptr;
   if (std::fclose(f) != 0 && problem.empty())
     problem = "cannot close it: " + std::string(std::strerror(errno));
   return problem;

@@ -747,7 +747,7 @@ TEST_F(IoTest, SaveNrrdIsAtomicAndLeavesNoTemporaries) {
 // program's output: the atomic writer's temporary (mkstemp, 0600) was made
 // 0644 whatever the umask, so with umask 077 a CSV or NRRD came out
 // readable by everyone. Their temporary files are made by one rule
-// (TempFile: exclusive, beside the target, its extension kept).
+// (TempFile: exclusive, beside the target, made with mode 0666).
 TEST_F(IoTest, WrittenFilesTakeTheUmask) {
   const auto mode = [](const fs::path& p) {
     struct stat st {};
@@ -787,7 +787,7 @@ TEST_F(IoTest, WrittenFilesTakeTheUmask) {
   EXPECT_FALSE(fs::exists(made));
   EXPECT_FALSE(fs::exists(file("out.png")));
   // A name of 255 bytes that is nearly all extension: its temporary file's
-  // name is cut too (stem, tag and extension made 262 bytes).
+  // name is cut to its first 64 bytes (the first form kept the extension whole: 262 bytes).
   const std::string long_ext = "a." + std::string(253, 'e');
   simdvol::write_file_atomically(file(long_ext), {"x"});
   EXPECT_EQ(read_file(file(long_ext)).size(), 1u);
@@ -937,6 +937,41 @@ int raise_in_child(int sig, const fs::path& marked, const fs::path& kept, void (
 }
 
 }  // namespace
+
+// A signal that arrives while the temporary file is being made: taken as
+// the open returns, it found the file made but not yet marked, and left
+// it (a review's stress test: 522 of 2000 writes ended by SIGTERM on
+// tmpfs; on a disk file system about 1 in 200). The file is now marked
+// before the open. Here 300 writes in a loop, each ended by SIGTERM after
+// 1-4 ms, on tmpfs where there is one: none may leave a temporary file.
+TEST_F(IoTest, ASignalWhileTheTemporaryFileIsMadeLeavesNothing) {
+  std::error_code ec;
+  const fs::path base = fs::is_directory("/dev/shm", ec) ? fs::path("/dev/shm") : dir_;
+  const fs::path d = base / ("simdvol_signal_" + std::to_string(::getpid()));
+  fs::create_directories(d);
+  std::mt19937 g(7);
+  int left = 0;
+  for (int round = 0; round < 300; ++round) {
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      simdvol::remove_temporary_files_on_signals();
+      for (;;) simdvol::write_file_atomically(d / "out.csv", {"a,b\n"});
+    }
+    ::usleep(1000 + g() % 3000);
+    ::kill(child, SIGTERM);
+    int status = 0;
+    ASSERT_EQ(::waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << status;
+    for (const auto& e : fs::directory_iterator(d))
+      if (e.path().filename().string().find(".tmp-") != std::string::npos) {
+        ++left;
+        fs::remove(e.path());
+      }
+  }
+  fs::remove_all(d, ec);
+  EXPECT_EQ(left, 0) << "temporary files left by 300 writes ended by SIGTERM";
+}
 
 TEST_F(IoTest, EndingSignalsRemoveTheTemporaryFiles) {
   for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) {
