@@ -16,6 +16,7 @@
 
 #include "file_checks.hpp"
 #include "simdvol/error.hpp"
+#include "temp_files.hpp"
 
 namespace simdvol {
 namespace {
@@ -111,6 +112,9 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
     throw FileError(path,
                     std::string("cannot start a process to read it: ") + std::strerror(errno));
   if (pid == 0) {
+    // The parent's temporary files are its own: a signal that ends this
+    // child alone (SIGTERM to its pid) must not remove them.
+    forget_temporary_files();
     if (f.log) ::dup2(::fileno(f.log), 2);
     child(read, f.mem);
   }

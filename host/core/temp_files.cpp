@@ -158,6 +158,10 @@ TempFileMark::TempFileMark(const std::filesystem::path& path) noexcept {
   }
 }
 
+void forget_temporary_files() noexcept {
+  for (Slot& s : g_slots) s.state.store(0, std::memory_order_release);
+}
+
 TempFileMark::~TempFileMark() {
   if (slot_ >= 0) g_slots[slot_].state.store(0, std::memory_order_release);
 }

@@ -62,6 +62,12 @@ class TempFile {
   std::optional<TempFileMark> mark_;
 };
 
+/// Lets go of every mark, without removing the files: for a forked child
+/// (read_in_child), whose copy of the marks names its parent's files. A
+/// signal that ends the child alone then leaves them to the parent.
+/// Async-signal-safe.
+void forget_temporary_files() noexcept;
+
 /// The process's file-size limit (ulimit -f) in bytes, if it has one.
 std::optional<unsigned long long> file_size_limit();
 

@@ -29,6 +29,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "../../host/core/child_read.hpp"
 #include "../../host/core/temp_files.hpp"
 #include "dicom_testing.hpp"
 #include "simdvol/error.hpp"
@@ -971,6 +972,43 @@ TEST_F(IoTest, ASignalWhileTheTemporaryFileIsMadeLeavesNothing) {
   }
   fs::remove_all(d, ec);
   EXPECT_EQ(left, 0) << "temporary files left by 300 writes ended by SIGTERM";
+}
+
+// The loaders that read in a child process (read_in_child: DICOM, MINC)
+// fork with the program's marks of its temporary files: a SIGTERM sent to
+// the child alone ran the handler there and removed the parent's file
+// (which the parent then failed to rename into place). The child now lets
+// go of the marks first. Here, in a process of its own with the handlers,
+// a marked file survives a read whose child ends by SIGTERM, and the read
+// is the FileError naming the signal.
+TEST_F(IoTest, AReadingChildEndedBySigtermLeavesTheParentsFiles) {
+  const fs::path marked = file("frame.tmp-abcdef");
+  write_file(marked, std::string("half a frame"));
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    simdvol::remove_temporary_files_on_signals();
+    const simdvol::TempFileMark mark(marked);
+    bool named = false;
+    try {
+      simdvol::read_in_child(
+          file("x.dcm"), "a library",
+          [](int64_t*) -> Volume {
+            ::raise(SIGTERM);
+            return Volume{};
+          },
+          nullptr);
+    } catch (const simdvol::FileError& e) {
+      named = std::string(e.what()).find("signal 15") != std::string::npos;
+    }
+    ::_exit(!named ? 2 : fs::exists(marked) ? 0 : 1);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status)) << status;
+  EXPECT_NE(WEXITSTATUS(status), 2) << "the read was not a FileError naming signal 15";
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "the child removed the parent's marked file";
+  EXPECT_TRUE(fs::exists(marked));
 }
 
 TEST_F(IoTest, EndingSignalsRemoveTheTemporaryFiles) {
