@@ -1,6 +1,7 @@
 """What the Python hosts of simdvol's kernels share (scripts/pyopencl-check.py,
 tests/kernel_abi/kernel_abi_check.py): a stage's program assembled as
-docs/KERNELS.md section 1 says, and the device examples/embed picks."""
+docs/KERNELS.md section 1 says, the device examples/embed picks, and the
+rounding up that the sizes take."""
 import pyopencl as cl
 
 
@@ -12,6 +13,12 @@ def program_source(kdir, stage, defines, more=()):
         text = (kdir / name).read_text()
         src += f'#line 1 "{name}"\n' + text + ("" if text.endswith("\n") else "\n")
     return src
+
+
+def round_up(n, m):
+    """n rounded up to a multiple of m (a global size to its local size, a
+    stride to 16, a height to 8)."""
+    return -(-int(n) // m) * m
 
 
 def pick_device():

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 import pyopencl as cl  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cl_program import pick_device, program_source  # noqa: E402
+from cl_program import pick_device, program_source, round_up  # noqa: E402
 
 TOL = 1e-6
 CHUNK_WGS = 64  # chunks of 16 voxels per work-group (host/cl/chunk_ranges.hpp)
@@ -48,10 +48,6 @@ def pow2_at_least(n):
     while p < n:
         p *= 2
     return p
-
-
-def round_up(n, m):
-    return (n + m - 1) // m * m
 
 
 def main():

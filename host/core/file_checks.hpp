@@ -29,6 +29,9 @@ void refuse_non_regular_file(const std::filesystem::path& path, const char* noun
 /// FileError after 40 links (a loop).
 std::filesystem::path write_target(const std::filesystem::path& path);
 
+/// errno's text ("No space left on device"), for the messages.
+std::string errno_text(int e);
+
 /// Writes all `n` bytes to `fd` (retrying short writes and EINTR); false
 /// on an error, errno set.
 bool write_fully(int fd, const void* p, std::size_t n);

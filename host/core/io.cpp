@@ -45,10 +45,6 @@ std::string lower(std::string s) {
   return s;
 }
 
-std::string errno_text(int e) {
-  return std::generic_category().message(e);
-}
-
 /// A directory named where a volume file is expected: FileError.
 void refuse_directory(const fs::path& path) {
   std::error_code ec;
@@ -56,6 +52,10 @@ void refuse_directory(const fs::path& path) {
 }
 
 }  // namespace
+
+std::string errno_text(int e) {
+  return std::generic_category().message(e);
+}
 
 // (declared in file_checks.hpp, shared with the other loaders)
 uint64_t require_regular_file(const fs::path& path) {

@@ -16,6 +16,7 @@
 #include <string>
 #include <system_error>
 
+#include "file_checks.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
 
@@ -55,10 +56,6 @@ bool at_default(int sig) {
   struct sigaction old {};
   return ::sigaction(sig, nullptr, &old) == 0 && !(old.sa_flags & SA_SIGINFO) &&
          old.sa_handler == SIG_DFL;
-}
-
-std::string errno_text(int e) {
-  return std::generic_category().message(e);
 }
 
 // Six characters for a temporary file's name, different in each call

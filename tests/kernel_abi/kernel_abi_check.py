@@ -89,7 +89,7 @@ import pyopencl as cl  # noqa: E402
 import pyopencl.cltypes  # noqa: E402,F401
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts"))
-from cl_program import pick_device, program_source  # noqa: E402
+from cl_program import pick_device, program_source, round_up  # noqa: E402
 
 LAYOUTS = ("cut-and-stack", "hierarchical")
 FUSED_MAX = 7  # simdvol_swap_stages: 1 <= m <= 7 stages a launch
@@ -227,7 +227,7 @@ class Host:
         """Section 1: an explicit local size, each global size rounded up to it."""
         g, l = (g, l) if isinstance(g, tuple) else ((g,), (l,))
         kernel.set_args(*args)
-        rounded = tuple(-(-max(a, 1) // b) * b for a, b in zip(g, l))
+        rounded = tuple(round_up(max(a, 1), b) for a, b in zip(g, l))
         cl.enqueue_nd_range_kernel(self.q, kernel, rounded, l)
 
     def read(self, b, dtype, n):
@@ -551,8 +551,8 @@ class Cells:
         self.splits = np.array([1 << len(p) for p in self.pos])
         self.cell = -(-self.dims // self.splits)
         self.block = self.cell + 2 * halo
-        self.stride = -(-int(np.prod(self.block)) // 16) * 16  # bx by bz rounded up to 16
-        self.vstride = -(-int(np.prod(self.cell)) // 16) * 16  # cx cy cz rounded up to 16
+        self.stride = round_up(np.prod(self.block), 16)  # bx by bz rounded up to 16
+        self.vstride = round_up(np.prod(self.cell), 16)  # cx cy cz rounded up to 16
         pe = np.arange(P)
         self.cidx = np.stack([self.pe_bits(a, pe, inverse=True) for a in range(3)], 1)
         self.origins = self.cidx * self.cell
@@ -956,7 +956,7 @@ def check_direct(host, tally, d):
 
     # zero_uncovered on the rows of simdvol_match_rows_nolinks (section 5 match.cl: H = the
     # largest candidate height rounded up to 8, at least 8; P H / 8 work-items; save 0).
-    H = max(8, -(-int(cand[:, 3].max()) // 8) * 8)
+    H = match_rows(cand)
     geo, stepc = match_geo(view, g.cell)
     rowsum = host.empty(16 * P * H)
     # (view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum, rowlk, kscr,
@@ -1073,8 +1073,9 @@ class Guarded:
         return all((self.host.read(b, np.uint8, GUARD)[16:] == 0xA5).all() for b in self.bufs)
 
 
-def ceil_to(n, m):
-    return -(-int(n) // m) * m
+def match_rows(cand):
+    """Section 5 match.cl: H = the largest candidate height rounded up to 8, at least 8."""
+    return max(8, round_up(cand[:, 3].max(), 8))
 
 
 def balance_pairs(g):
@@ -1176,12 +1177,12 @@ def check_match(host, tally, d):
 
     # Host tables: H, geo, stepc; koff[p] = the sum of ceil8(h) w over the PEs before p;
     # capacity = the candidates' w h, at least 1.
-    H = max(8, ceil_to(cand[:, 3].max(), 8))
+    H = match_rows(cand)
     geo, stepc = match_geo(view, g.cell)
     b_geo, b_stepc = host.buf(geo), host.buf(stepc)
     area = cand[:, 2].astype(np.int64) * cand[:, 3]
     cap = max(1, int(area.sum()))
-    koff = np.r_[0, np.cumsum([ceil_to(h, 8) * w for w, h in cand[:, 2:4].astype(np.int64)])]
+    koff = np.r_[0, np.cumsum([round_up(h, 8) * w for w, h in cand[:, 2:4].astype(np.int64)])]
     b_koff = host.buf(koff[:P].astype(np.int32))
     can_narrow = bool(area.max() <= 65536)
     rect_off = np.r_[0, np.cumsum(rects[:, 2].astype(np.int64) * rects[:, 3])]
