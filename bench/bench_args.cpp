@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "../host/core/output_checks.hpp"
 #include "simdvol/pe_array.hpp"
 
 namespace simdvol::bench {
@@ -97,23 +98,16 @@ void check_output_file(const std::filesystem::path& file, const std::string& opt
                        const std::vector<std::filesystem::path>& inputs) {
   namespace fs = std::filesystem;
   if (file.empty()) throw ArgumentError(option, "needs a name, not an empty one");
-  std::error_code ec;
-  if (fs::is_directory(file, ec))
-    throw ArgumentError(option, "'" + file.string() + "' is a directory");
-  const fs::path dir = file.has_parent_path() ? file.parent_path() : ".";
-  if (!fs::is_directory(dir, ec))
-    throw ArgumentError(
-        option, "directory '" + dir.string() + "' of '" + file.string() + "' does not exist");
+  // simdvol render's rule for its outputs: a directory, a FIFO, a missing
+  // directory, or one in which no file can be made (found after every case
+  // had run) refused now.
+  check_output_path(file, option.c_str());
+  std::vector<fs::path> read;
   for (const fs::path& in : inputs) {
-    std::vector<fs::path> read{in};
+    read.push_back(in);
     if (in.extension() == ".hdr") read.push_back(fs::path(in).replace_extension(".img"));
-    for (const fs::path& r : read)
-      if (fs::equivalent(file, r, ec))
-        throw ArgumentError(
-            option, "'" + file.string() + "' is " +
-                        (r == in ? "a volume" : "the voxels of volume '" + in.string() + "'") +
-                        " this run reads: give another name");
   }
+  check_not_an_input(file, read, {}, option.c_str());
 }
 
 void check_output_dir(const std::filesystem::path& dir, const std::string& option) {
@@ -131,6 +125,7 @@ void make_output_dir(const std::filesystem::path& dir, const std::string& option
   if (ec)
     throw ArgumentError(option,
                         "cannot make the directory '" + dir.string() + "': " + ec.message());
+  check_can_make_files_in(dir, option.c_str());
 }
 
 bool Args::next() {

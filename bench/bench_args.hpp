@@ -39,10 +39,11 @@ std::vector<double> parse_double_list(const std::string& s, const std::string& o
 /// A PE count: an integer that pe_grid accepts (a power of two in 1..kMaxPes).
 int64_t parse_pes(const std::string& s, const std::string& option);
 /// A file to be written later, checked now, not after minutes of frames
-/// (ArgumentError naming the option): a name (not empty), not a directory,
-/// in a directory that exists; and none of `inputs` (the volumes the run
-/// reads: --json naming one replaced it with JSON), nor an Analyze .hdr's
-/// .img.
+/// (ArgumentError naming the option), by `simdvol render`'s rule for its
+/// outputs (check_output_path: a name, not a directory or FIFO, in a
+/// directory that exists and in which a file can be made); and none of
+/// `inputs` (the files the run reads, through symbolic links: --json naming
+/// one replaced it with JSON), nor an Analyze .hdr's .img.
 void check_output_file(const std::filesystem::path& file, const std::string& option,
                        const std::vector<std::filesystem::path>& inputs = {});
 /// A directory to be written into later (made if missing): a name, and
@@ -51,7 +52,7 @@ void check_output_dir(const std::filesystem::path& dir, const std::string& optio
 /// check_output_dir, then the directory made (with its parents) if missing:
 /// ArgumentError naming the option and the system's reason where it cannot
 /// be (a file in the way of a parent, no permission), not a bare
-/// "filesystem error".
+/// "filesystem error", or where no file can be made in it.
 void make_output_dir(const std::filesystem::path& dir, const std::string& option);
 
 /// Walks a tool's argv: next() moves to each argument in turn, option() is

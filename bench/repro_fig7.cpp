@@ -372,7 +372,6 @@ int main(int argc, char** argv) try {
     csv << r.dataset << ',' << r.v->scope << ',' << r.v->name << ',' << streams_name(r.v->streams)
         << ',' << r.n << ',' << r.psnr << ',' << r.walks_per_ray << ',' << r.draws_per_ray << ','
         << r.fallbacks << '\n';
-  write_file_atomically(out / "fig7.csv", {csv.str()});
   for (const std::string& dn : names) {
     std::printf("\n%s: PSNR (dB) vs n  [walks per ray at n = 8]\n%-6s %-11s %-8s", dn.c_str(),
                 "scope", "variant", "streams");
@@ -389,6 +388,8 @@ int main(int argc, char** argv) try {
       std::printf("  %7.1f\n", w8);
     }
   }
+  // The tables first: a CSV that could not be written took them with it.
+  write_file_atomically(out / "fig7.csv", {csv.str()});
   plot(rows, names, out / "fig7.png");
   std::printf(
       "\nn: walks per ray (whole), per sub-ray (sub plain/exact, as fig 7.3), per-ray budget "

@@ -74,54 +74,6 @@ std::array<double, 3> parse_angles(const std::string& s, const std::string& arg)
   return {a[0], a[1], a[2]};
 }
 
-void check_not_an_input(const fs::path& out, const std::vector<fs::path>& inputs,
-                        const fs::path& dicom_dir, const char* arg) {
-  // Through symbolic links: "-o out.png" with out.png a link to the volume
-  // wrote the image over the volume.
-  const fs::path target = write_target(out);
-  std::error_code ec;
-  if (!fs::exists(target, ec)) return;  // nothing there to replace
-  for (const fs::path& in : inputs)
-    if (!in.empty() && fs::equivalent(target, in, ec))
-      throw ArgumentError(arg, "writing " + out.string() + " would replace " + in.string() +
-                                   ", which this command reads");
-  // A DICOM slice is told by its contents, under any name (slice.tif), and
-  // the series is read from its whole directory.
-  if (dicom_dir.empty() || volume_file_kind(target) != VolumeFileKind::dicom) return;
-  for (fs::path d = fs::absolute(target, ec).parent_path(); !d.empty(); d = d.parent_path()) {
-    if (fs::equivalent(d, dicom_dir, ec))
-      throw ArgumentError(arg, "writing " + out.string() +
-                                   " would replace a DICOM file of the series being read (in " +
-                                   dicom_dir.string() + ")");
-    if (d == d.parent_path()) break;
-  }
-}
-
-void check_output_path(const fs::path& p, const char* arg) {
-  if (p.empty()) throw ArgumentError(arg, "empty output path");
-  // Where the write goes: through symbolic links (a dangling link into a
-  // missing directory failed only after the render).
-  const fs::path t = write_target(p);
-  // Error codes, not exceptions: a name too long for the file system (or
-  // any other failure to look it up) is the argument's problem.
-  std::error_code ec;
-  const fs::file_status st = fs::status(t, ec);
-  if (ec && st.type() != fs::file_type::not_found)
-    throw ArgumentError(arg, p.string() + ": " + ec.message());
-  if (fs::is_directory(st)) throw ArgumentError(arg, p.string() + " is a directory");
-  // A FIFO, socket or device was replaced by a regular file, not written.
-  if (fs::exists(st) && !fs::is_regular_file(st))
-    throw ArgumentError(arg, p.string() +
-                                 " is not a regular file (a FIFO, socket or device): the output "
-                                 "is written to a new file put in its place");
-  const fs::path dir = t.has_parent_path() ? t.parent_path() : fs::path(".");
-  if (!fs::is_directory(dir, ec))
-    throw ArgumentError(
-        arg, (fs::exists(dir, ec)
-                  ? dir.string() + ", the directory of " + p.string() + ", is not a directory"
-                  : "directory " + dir.string() + " of " + p.string() + " does not exist"));
-}
-
 namespace {
 
 /// "left, front, top" for "LAS".

@@ -41,20 +41,6 @@ std::vector<double> parse_numbers(const std::string& s, std::size_t n, const std
 /// tools' bounds: 1e300 degrees is no angle anyone means).
 std::array<double, 3> parse_angles(const std::string& s, const std::string& arg);
 
-/// Throws ArgumentError (naming `arg`) where writing the output `out` would
-/// replace a file the command reads: one of `inputs` (a volume, an Analyze
-/// .hdr's .img, a classifier file), followed through symbolic links; and,
-/// where `dicom_dir` is not empty (a DICOM volume: its series is every
-/// slice in that directory and below), an existing DICOM file there.
-void check_not_an_input(const std::filesystem::path& out,
-                        const std::vector<std::filesystem::path>& inputs,
-                        const std::filesystem::path& dicom_dir, const char* arg);
-
-/// Throws ArgumentError (naming `arg`) if the output's directory is missing,
-/// the path is a directory, or it cannot be looked up (e.g. a name too long
-/// for the file system), before any work is done.
-void check_output_path(const std::filesystem::path& p, const char* arg);
-
 /// `render --trace`: the frames' kernels as a Chrome trace (the JSON object
 /// format of chrome://tracing and ui.perfetto.dev): one complete event
 /// ("ph": "X") per kernel, microseconds from the first frame's first kernel

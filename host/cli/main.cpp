@@ -18,6 +18,7 @@
 #include <string_view>
 #include <vector>
 
+#include "../core/output_checks.hpp"
 #include "cli_commands.hpp"
 #include "mismatch_cmd.hpp"
 #include "simdvol/device.hpp"
@@ -709,8 +710,7 @@ int main(int argc, char** argv) {
         if (!rv.path.empty()) {
           const fs::path vp = rv.path;
           inputs.push_back(vp);
-          if (rv.kind() == VolumeFileKind::dicom)
-            dicom_dir = fs::is_directory(vp) ? vp : fs::absolute(vp).parent_path();
+          if (rv.kind() == VolumeFileKind::dicom) dicom_dir = dicom_series_dir(vp);
         }
         if (std::error_code ec; fs::is_regular_file(classify, ec)) inputs.push_back(classify);
         for (int f = 0; f < frames; ++f)

@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "../core/file_checks.hpp"
+#include "../core/output_checks.hpp"
 #include "cli_commands.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/image.hpp"
