@@ -42,6 +42,9 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
+#include "../host/core/output_checks.hpp"
 #include "bench_args.hpp"
 #include "bench_common.hpp"
 #include "simdvol/device.hpp"
@@ -83,19 +86,10 @@ double min_of(const std::vector<double>& v) {
   return v.empty() ? std::nan("") : *std::min_element(v.begin(), v.end());
 }
 
-std::string json_num(double x) {
-  if (!std::isfinite(x)) return "null";
-  char b[64];
-  std::snprintf(b, sizeof b, "%.6g", x);
-  return b;
-}
-std::string json_str(const std::string& s) {
-  std::string o = "\"";
-  for (char c : s) {
-    if (c == '"' || c == '\\') o += '\\';
-    o += c;
-  }
-  return o + "\"";
+using Json = nlohmann::json;
+// A figure, or null where there is none (NaN is not JSON).
+Json json_num(double x) {
+  return std::isfinite(x) ? Json(x) : Json(nullptr);
 }
 
 constexpr const char* kUsage =
@@ -133,6 +127,9 @@ int main(int argc, char** argv) try {
   bool opencl = true, brute = true, matched = true;
   double pixel_centre = 0.0;
   std::optional<std::filesystem::path> json, images;
+  bool quick = false;
+  std::optional<std::vector<int>> sizes_given;
+  std::optional<int> runs_given, ref_runs_given, bf_runs_given;
   try {
     Args args(argc, argv);
     while (args.next()) {
@@ -144,14 +141,14 @@ int main(int argc, char** argv) try {
         if (!std::filesystem::exists(data))
           throw ArgumentError(args.option(), "'" + data.string() + "' does not exist");
       } else if (args.is("--sizes")) {
-        sizes.clear();
-        for (int64_t v : args.int_list(8, 4096)) sizes.push_back(static_cast<int>(v));
+        sizes_given.emplace();
+        for (int64_t v : args.int_list(8, 4096)) sizes_given->push_back(static_cast<int>(v));
       } else if (args.is("--runs")) {
-        runs = static_cast<int>(args.integer(0, 1000));
+        runs_given = static_cast<int>(args.integer(0, 1000));
       } else if (args.is("--ref-runs")) {
-        ref_runs = static_cast<int>(args.integer(0, 1000));
+        ref_runs_given = static_cast<int>(args.integer(0, 1000));
       } else if (args.is("--bf-runs")) {
-        bf_runs = static_cast<int>(args.integer(0, 1000));
+        bf_runs_given = static_cast<int>(args.integer(0, 1000));
       } else if (args.is("--turntable")) {
         frames = static_cast<int>(args.integer(1, 720));
       } else if (args.is("--order")) {
@@ -175,14 +172,18 @@ int main(int argc, char** argv) try {
         images = args.name();
         check_output_dir(*images, args.option());
       } else if (args.is("--quick")) {
-        sizes = {256};
-        runs = 2;
-        ref_runs = 1;
-        bf_runs = 1;
+        quick = true;
       } else {
         args.unknown();
       }
     }
+    // --quick's values, then the ones given, whatever their order (--sizes
+    // 16 --quick rendered 256 x 256).
+    if (quick) sizes = {256}, runs = 2, ref_runs = 1, bf_runs = 1;
+    if (sizes_given) sizes = *sizes_given;
+    if (runs_given) runs = *runs_given;
+    if (ref_runs_given) ref_runs = *ref_runs_given;
+    if (bf_runs_given) bf_runs = *bf_runs_given;
     if (json) check_output_file(*json, "--json", {data});
     if (images) make_output_dir(*images, "--write-images");
   } catch (const ArgumentError& e) {
@@ -190,6 +191,17 @@ int main(int argc, char** argv) try {
   }
 
   const Volume vol = load_volume(data);
+  // Nor the files read beside it (--json x.raw replaced the voxels of the
+  // x.nhdr given as --data).
+  if (json) {
+    std::vector<std::filesystem::path> inputs = vol.companion_files();
+    inputs.push_back(data);
+    try {
+      simdvol::check_not_an_input(*json, inputs, simdvol::dicom_series_dir(data), "--json");
+    } catch (const ArgumentError& e) {
+      return argument_error("simdvol-bench-volpack", e, kUsage);
+    }
+  }
   std::printf("volume %s: %lldx%lldx%lld\n", data.filename().string().c_str(),
               static_cast<long long>(vol.nx()), static_cast<long long>(vol.ny()),
               static_cast<long long>(vol.nz()));
@@ -232,8 +244,8 @@ int main(int argc, char** argv) try {
       vp::Example::rotate_x, vp::Example::rotate_y, frames > 1 ? ", then Ry(5 k) per frame" : "",
       a0.theta, a0.phi, a0.varphi);
 
-  std::string json_cases;
-  std::string json_view;
+  Json json_cases = Json::array();
+  Json json_view;
   for (const int size : sizes) {
     Row bf, raw, cls, ref, ocl;
     bf.name = "VolPack brute force";
@@ -349,17 +361,20 @@ int main(int argc, char** argv) try {
       const Summary t = summarize(row->ms);
       std::printf("%-26s %10.2f %10.2f %10.2f %10.2f %11.2f %10s %12s\n", row->name.c_str(),
                   t.median, t.min, t.max, row->first_ms, t.median / base, p, pm);
-      json_cases +=
-          std::string(json_cases.empty() ? "" : ",\n") + "    {\"size\": " + std::to_string(size) +
-          ", \"frames\": " + std::to_string(frames) + ", \"renderer\": " + json_str(row->name) +
-          ", \"ms_median\": " + json_num(t.median) + ", \"ms_min\": " + json_num(t.min) +
-          ", \"ms_max\": " + json_num(t.max) + ", \"ms_first\": " + json_num(row->first_ms) +
-          ", \"timed_renders\": " + std::to_string(row->ms.size()) +
-          ", \"ratio_to_volpack_classified\": " + json_num(t.median / base) +
-          ", \"psnr_db\": " + (is_ref ? "null" : json_num(mean(row->psnr))) +
-          ", \"psnr_min_db\": " + (is_ref ? "null" : json_num(min_of(row->psnr))) +
-          ", \"psnr_matched_db\": " +
-          (row->psnr_matched.empty() ? "null" : json_num(row->psnr_matched[0])) + "}";
+      json_cases.push_back(
+          {{"size", size},
+           {"frames", frames},
+           {"renderer", row->name},
+           {"ms_median", json_num(t.median)},
+           {"ms_min", json_num(t.min)},
+           {"ms_max", json_num(t.max)},
+           {"ms_first", json_num(row->first_ms)},
+           {"timed_renders", row->ms.size()},
+           {"ratio_to_volpack_classified", json_num(t.median / base)},
+           {"psnr_db", is_ref ? Json(nullptr) : json_num(mean(row->psnr))},
+           {"psnr_min_db", is_ref ? Json(nullptr) : json_num(min_of(row->psnr))},
+           {"psnr_matched_db",
+            row->psnr_matched.empty() ? Json(nullptr) : json_num(row->psnr_matched[0])}});
     }
     if (frames > 1) {
       std::printf("PSNR over the %d frames, min (frame):", frames);
@@ -375,13 +390,15 @@ int main(int argc, char** argv) try {
         "orientation check (frame 0): VolPack classified against the reference mirrored "
         "left-right %.2f dB, top-bottom %.2f dB (against the reference itself: %.2f dB)\n",
         mirror_psnr_x, mirror_psnr_y, cls.psnr[0]);
-    if (json_view.empty())
-      json_view = "{\"theta\": " + json_num(a0.theta) + ", \"phi\": " + json_num(a0.phi) +
-                  ", \"varphi\": " + json_num(a0.varphi) + ", \"cue_k1\": " + json_num(cue_fit[0]) +
-                  ", \"cue_k2\": " + json_num(cue_fit[1]) +
-                  ", \"cue_max_rel_error\": " + json_num(cue_fit[2]) +
-                  ", \"mirror_x_psnr_db\": " + json_num(mirror_psnr_x) +
-                  ", \"mirror_y_psnr_db\": " + json_num(mirror_psnr_y) + "}";
+    if (json_view.is_null())
+      json_view = {{"theta", json_num(a0.theta)},
+                   {"phi", json_num(a0.phi)},
+                   {"varphi", json_num(a0.varphi)},
+                   {"cue_k1", json_num(cue_fit[0])},
+                   {"cue_k2", json_num(cue_fit[1])},
+                   {"cue_max_rel_error", json_num(cue_fit[2])},
+                   {"mirror_x_psnr_db", json_num(mirror_psnr_x)},
+                   {"mirror_y_psnr_db", json_num(mirror_psnr_y)}};
   }
 
   std::printf("\nnot matched exactly between VolPack and simdvol:\n");
@@ -393,23 +410,29 @@ int main(int argc, char** argv) try {
       order);
 
   if (json) {
-    std::ostringstream o;
-    o << "{\n  \"volume\": " << json_str(data.filename().string()) << ",\n  \"dims\": [" << vol.nx()
-      << ", " << vol.ny() << ", " << vol.nz() << "],\n  \"volpack\": {\"version\": "
-      << "\"1.0b3\", \"normals_ms\": " << json_num(example.normals_ms())
-      << ", \"classify_ms\": " << json_num(classify_ms) << "},\n";
+    // (Written by hand, the JSON took a file name's tab or a byte that is
+    // not UTF-8 as it was: not JSON. nlohmann escapes them and makes such
+    // bytes U+FFFD, as simdvol-bench's JSON does.)
+    Json root = {{"volume", data.filename().string()},
+                 {"dims", {vol.nx(), vol.ny(), vol.nz()}},
+                 {"volpack",
+                  {{"version", "1.0b3"},
+                   {"normals_ms", json_num(example.normals_ms())},
+                   {"classify_ms", json_num(classify_ms)}}}};
     if (device)
-      o << "  \"opencl\": {\"device\": " << json_str(device->info().name)
-        << ", \"compute_units\": " << device->info().compute_units << ", \"pes\": " << pes
-        << ", \"order\": " << cl_order << "},\n";
-    o << "  \"reference_order\": " << order << ",\n  \"runs\": " << runs
-      << ", \"ref_runs\": " << ref_runs << ", \"bf_runs\": " << bf_runs
-      << ",\n  \"view\": " << json_view << ",\n  \"cases\": [\n"
-      << json_cases << "\n  ],\n  \"unmatched\": [";
-    const auto un = vp::unmatched();
-    for (std::size_t i = 0; i < un.size(); ++i) o << (i ? ",\n    " : "\n    ") << json_str(un[i]);
-    o << "\n  ]\n}\n";
-    write_file_atomically(*json, {o.str()});
+      root["opencl"] = {{"device", device->info().name},
+                        {"compute_units", device->info().compute_units},
+                        {"pes", pes},
+                        {"order", cl_order}};
+    root["reference_order"] = order;
+    root["runs"] = runs;
+    root["ref_runs"] = ref_runs;
+    root["bf_runs"] = bf_runs;
+    root["view"] = json_view;
+    root["cases"] = json_cases;
+    root["unmatched"] = vp::unmatched();
+    const std::string text = root.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
+    write_file_atomically(*json, {text});
     std::printf("wrote %s\n", json->string().c_str());
   }
   return 0;

@@ -129,6 +129,17 @@ expect_bad(FIG7 --out --out ${scratch}/fig)
 # bare "filesystem error" after the arguments were taken.
 expect_bad(FIG7 --out --out ${scratch}/afile/sub)
 expect_bad(VOLPACK --write-images --write-images ${scratch}/afile/sub)
+# A directory in which no file can be made (/proc: access(2) says yes to
+# root there), found only as the JSON or the CSV was written, after every
+# case had run; --turntable 1 (it timed no frame and printed 0 ms); one
+# phantom or compositing twice under two names (two cases of one id).
+expect_bad(BENCH --json --json /proc/simdvol-bench.json)
+expect_bad(VOLPACK --json --json /proc/simdvol-bench.json)
+expect_bad(FIG7 --out --out /proc)
+expect_bad(TABLES --markdown --markdown /proc/tables.md)
+expect_bad(BENCH --turntable --turntable 1)
+expect_bad(BENCH --volumes --volumes phantom16,phantom016)
+expect_bad(BENCH --compositing --compositing mc16,mc016)
 function(expect_empty_refused tool option)
   if(NOT DEFINED ${tool})
     return()

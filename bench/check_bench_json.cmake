@@ -239,6 +239,99 @@ if(DEFINED SIMDVOL)
   if(NOT rc EQUAL 1 OR NOT err MATCHES "no-such.nii.gz: file not found")
     message(FATAL_ERROR "a missing volume file: exit ${rc}, stderr ${err}")
   endif()
-  file(REMOVE ${vol} ${OUT})
+  # Two files of one name in two directories: each named by its directory,
+  # each compared with its own reference image (the second was compared
+  # with the first's, 18.3 dB, under the first's id).
+  file(MAKE_DIRECTORY ${OUT}.s1 ${OUT}.s2)
+  execute_process(COMMAND ${SIMDVOL} phantom shepp-logan --size 20 -o ${OUT}.s1/v.nrrd
+                  RESULT_VARIABLE rc1)
+  execute_process(COMMAND ${SIMDVOL} phantom shepp-logan --size 28 -o ${OUT}.s2/v.nrrd
+                  RESULT_VARIABLE rc2)
+  if(NOT rc1 EQUAL 0 OR NOT rc2 EQUAL 0)
+    message(FATAL_ERROR "simdvol phantom: exit ${rc1}, ${rc2}")
+  endif()
+  file(REMOVE ${OUT})
+  execute_process(COMMAND ${BENCH} --volumes ${OUT}.s1/v.nrrd,${OUT}.s2/v.nrrd --sizes 32
+                          --pes 64 --compositing direct --repeat 1 --turntable 0 --no-volpack
+                          --json ${OUT}
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "two volumes of one name: exit ${rc}:\n${out}\n${err}")
+  endif()
+  file(READ ${OUT} text)
+  get_filename_component(d1 ${OUT}.s1 NAME)
+  get_filename_component(d2 ${OUT}.s2 NAME)
+  foreach(k 0 1)
+    math(EXPR n "${k} + 1")
+    get(id cases ${k} id)
+    get(psnr cases ${k} reference psnr_db)
+    get(identical cases ${k} reference identical)
+    if(NOT id STREQUAL "${d${n}}/v.nrrd/32/o1/direct/P64"
+       OR (NOT identical AND (psnr STREQUAL "null" OR psnr LESS 80)))
+      message(FATAL_ERROR "two volumes of one name: case ${k} ${id}, PSNR ${psnr} dB")
+    endif()
+  endforeach()
+  # One volume by two paths: refused as a case given twice.
+  execute_process(COMMAND ${BENCH} --volumes ${OUT}.s1/v.nrrd,${OUT}.s1/../${d1}/v.nrrd
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 2 OR NOT err MATCHES "--volumes: .* again: give each volume once")
+    message(FATAL_ERROR "one volume by two paths: exit ${rc}, stderr ${err}")
+  endif()
+  # --json naming the voxels of a detached header (known only once the
+  # header is read): refused before any frame, the voxels kept (the JSON
+  # replaced them).
+  string(REPEAT "A" 4096 voxels)
+  file(WRITE ${OUT}.x.raw "${voxels}")
+  get_filename_component(raw ${OUT}.x.raw NAME)
+  file(WRITE ${OUT}.x.nhdr "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 16 16 16\n"
+                            "encoding: raw\ndata file: ${raw}\n\n")
+  execute_process(COMMAND ${BENCH} --volumes ${OUT}.x.nhdr --sizes 32 --no-volpack
+                          --json ${OUT}.x.raw
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  file(READ ${OUT}.x.raw kept)
+  if(NOT rc EQUAL 2 OR NOT err MATCHES "--json: writing .* would replace"
+     OR NOT kept STREQUAL voxels OR NOT out STREQUAL "")
+    message(FATAL_ERROR "--json over a detached header's voxels: exit ${rc}, stderr ${err}")
+  endif()
+  # --scaling beside --reference-runs and --volpack-runs (its children were
+  # given those with --no-reference and --no-volpack, and refused them
+  # after every case had run).
+  file(REMOVE ${OUT})
+  execute_process(COMMAND ${BENCH} --volumes ${vol} --sizes 32 --pes 64 --compositing direct
+                          --repeat 1 --turntable 0 --reference-runs 1 --volpack-runs 1
+                          --scaling 1,2 --json ${OUT}
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "--scaling with --reference-runs: exit ${rc}:\n${out}\n${err}")
+  endif()
+  file(READ ${OUT} text)
+  get(t2 scaling 0 stages wall t2)
+  file(REMOVE_RECURSE ${vol} ${OUT} ${OUT}.s1 ${OUT}.s2 ${OUT}.x.raw ${OUT}.x.nhdr)
+endif()
+# simdvol-bench-volpack's JSON: a volume's name with a tab and a byte that
+# is not UTF-8 (written as they were, the file was not JSON); --quick before
+# --sizes or after it, the sizes given kept (--sizes 16 --quick rendered
+# 256 x 256).
+if(DEFINED VOLPACK AND EXISTS "${BRAINSMALL}")
+  string(ASCII 9 tab)
+  string(ASCII 255 notutf8)
+  set(link "${OUT}.brain${tab}small${notutf8}.den")
+  file(CREATE_LINK "${BRAINSMALL}" "${link}" SYMBOLIC)
+  foreach(order "--sizes;16;--quick" "--quick;--sizes;16")
+    file(REMOVE ${OUT})
+    execute_process(COMMAND ${VOLPACK} --data ${link} ${order} --runs 0 --ref-runs 0 --bf-runs 0
+                            --no-opencl --no-matched --no-brute-force --json ${OUT}
+                    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+    if(NOT rc EQUAL 0)
+      message(FATAL_ERROR "simdvol-bench-volpack ${order}: exit ${rc}:\n${out}\n${err}")
+    endif()
+    file(READ ${OUT} text)
+    get(volume volume)
+    get(size cases 0 size)
+    if(NOT volume MATCHES "^.*brain\tsmall.*\\.den$" OR NOT size EQUAL 16)
+      message(FATAL_ERROR "simdvol-bench-volpack ${order}: volume '${volume}', size ${size}")
+    endif()
+  endforeach()
+  file(REMOVE ${link} ${OUT})
 endif()
 message(STATUS "simdvol-bench harness: ${ncases} cases checked")

@@ -94,6 +94,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "../host/core/output_checks.hpp"
 #include "bench_common.hpp"
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
@@ -196,6 +197,10 @@ Comp parse_comp(const std::string& s) {
     if (walks < 1 || walks > 4096)
       throw ArgumentError("--compositing", "'" + s + "': walks must lie in 1..4096");
     c.params.samples = static_cast<int>(walks);
+    // Named as written plainly (mc016 is mc16: the same case, once)
+    c.name = "mc" + std::to_string(walks) +
+             (c.params.exact_opacity ? (c.params.stratified ? "s" : "x") : "") +
+             (c.scope == McScope::subray ? "sub" : "");
     return c;
   }
   throw ArgumentError("--compositing",
@@ -223,7 +228,8 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data,
                           "'" + s + "': give the phantom's size, phantomN (N in 8..1024)");
     const int64_t n = parse_int(s.substr(7), "--volumes");
     if (n < 8 || n > 1024) throw ArgumentError("--volumes", "'" + s + "': N must lie in 8..1024");
-    return {s, "ct", {}, static_cast<int>(n)};
+    // (named by its size: phantom016 is phantom16)
+    return {"phantom" + std::to_string(n), "ct", {}, static_cast<int>(n)};
   }
   if (s == "brainsmall") return {s, "volpack", data / "brainsmall.den", 0};
   if (s == "ch2") return {s, "mri", data / "ch2.nii.gz", 0};
@@ -241,6 +247,75 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data,
                                        "(.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .mha, .mhd, .mgh, "
                                        ".mgz, .mnc, .den, "
                                        "DICOM)");
+}
+
+// Where a volume file lies (absolute, normal, without a trailing
+// separator: a DICOM directory given as "ct/").
+std::filesystem::path volume_place(const std::filesystem::path& file) {
+  std::error_code ec;
+  std::filesystem::path p = std::filesystem::absolute(file, ec).lexically_normal();
+  if (p.filename().empty() && p.has_parent_path()) p = p.parent_path();
+  return p;
+}
+
+// The volumes of --volumes, each once, named so that no two share a name.
+// A case's id begins with the name, and the reference images are kept by
+// it: sub1/T1.nii.gz and sub2/T1.nii.gz were both "T1.nii.gz", two cases
+// had one id, and the second volume's frames were compared with the first
+// one's reference images (18.3 dB where 165.5 was due). Files of one name
+// are named by as many of their directories as tell them apart
+// ("sub1/T1.nii.gz"); one volume given twice (phantom16 and phantom016,
+// brainsmall and the path of its file, a file by two paths or a link) is
+// refused, as a case given twice is.
+std::vector<VolumeSpec> volume_specs(const Options& o) {
+  namespace fs = std::filesystem;
+  std::vector<VolumeSpec> specs;
+  std::vector<fs::path> places;
+  for (const std::string& v : o.volumes) {
+    specs.push_back(parse_volume(v, o.data, o.volume_index));
+    places.push_back(specs.back().file.empty() ? fs::path() : volume_place(specs.back().file));
+  }
+  for (std::size_t i = 0; i < specs.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j) {
+      std::error_code ec;
+      const bool same = specs[i].phantom > 0 ? specs[i].phantom == specs[j].phantom
+                                             : !places[i].empty() && !places[j].empty() &&
+                                                   (places[i] == places[j] ||
+                                                    fs::equivalent(places[i], places[j], ec));
+      if (same)
+        throw ArgumentError("--volumes", "'" + o.volumes[i] + "' is '" + o.volumes[j] +
+                                             "' again: give each volume once");
+    }
+  // Each given file's name: its last `depth` path components, one more
+  // for every file whose name is another's, until none is.
+  std::vector<std::vector<std::string>> parts(specs.size());
+  std::vector<std::size_t> depth(specs.size(), 1);
+  for (std::size_t i = 0; i < specs.size(); ++i)
+    if (specs[i].given)
+      for (const fs::path& part : places[i])
+        if (part != part.root_path() && part != "/") parts[i].push_back(part.string());
+  const auto name = [&](std::size_t i) {
+    if (!specs[i].given || parts[i].empty()) return specs[i].name;
+    std::string n;
+    for (std::size_t k = parts[i].size() - std::min(depth[i], parts[i].size()); k < parts[i].size();
+         ++k)
+      n += (n.empty() ? "" : "/") + parts[i][k];
+    return specs[i].index ? n + "@" + std::to_string(*specs[i].index) : n;
+  };
+  for (bool longer = true; longer;) {
+    longer = false;
+    std::vector<std::string> names;
+    for (std::size_t i = 0; i < specs.size(); ++i) names.push_back(name(i));
+    for (std::size_t i = 0; i < specs.size(); ++i)
+      for (std::size_t j = 0; j < specs.size(); ++j)
+        if (i != j && names[i] == names[j] && specs[i].given && depth[i] < parts[i].size()) {
+          ++depth[i];
+          longer = true;
+          break;
+        }
+  }
+  for (std::size_t i = 0; i < specs.size(); ++i) specs[i].name = name(i);
+  return specs;
 }
 
 Options parse_args(int argc, char** argv) {
@@ -264,7 +339,7 @@ Options parse_args(int argc, char** argv) {
       orders = parse_int_list(next(), a, 0, 3);
     } else if (a == "--compositing") {
       comps = split_list(next(), a);
-      for (const auto& c : *comps) parse_comp(c);
+      for (std::string& c : *comps) c = parse_comp(c).name;
     } else if (a == "--pes") {
       o.pes = parse_int_list(next(), a, 1, int64_t(1) << 20);
       for (int64_t p : o.pes) pe_grid(p, "--pes");
@@ -302,6 +377,10 @@ Options parse_args(int argc, char** argv) {
       repeat = static_cast<int>(parse_int(next(), a, 1, 1000));
     } else if (a == "--turntable") {
       turntable = static_cast<int>(parse_int(next(), a, 0, 720));
+      // (frame 0 is the warm-up: one frame timed none, and 0 ms/frame was
+      // printed)
+      if (*turntable == 1)
+        throw ArgumentError(a, "1 frame times none (the first is the warm-up): give 0 or 2..720");
     } else if (a == "--no-reference") {
       o.reference = false;
     } else if (a == "--reference-runs") {
@@ -340,7 +419,7 @@ Options parse_args(int argc, char** argv) {
     o.compositing = {"direct", "adaptive", "mc8"};
     o.repeat = 3;
     o.turntable = 36;
-    o.volpack_runs = 1;
+    if (!volpack_runs_given) o.volpack_runs = 1;  // (it overrode --volpack-runs 5)
   }
   if (vols) o.volumes = *vols, o.volumes_explicit = true;
   // A case twice (--sizes 256,256) made two cases of one id in the JSON.
@@ -377,8 +456,7 @@ Options parse_args(int argc, char** argv) {
   if (turntable) o.turntable = *turntable;
   bool given = false;
   std::vector<std::filesystem::path> inputs;
-  for (const auto& v : o.volumes) {
-    const VolumeSpec spec = parse_volume(v, o.data, o.volume_index);
+  for (const VolumeSpec& spec : volume_specs(o)) {
     given = spec.given || given;
     if (!spec.file.empty()) inputs.push_back(spec.file);
   }
@@ -422,6 +500,20 @@ json psnr_json(double p) {
   return std::isfinite(p) ? json(p) : json(nullptr);
 }
 
+// A figure of the table in as many digits as it needs (a 0.4 ms reference
+// was "0", beside a speed-up of 0.1), "-" where it was not measured
+// (--no-reference: "nan").
+std::string fmt_figure(double v) {
+  if (std::isnan(v)) return "-";
+  char b[32];
+  std::snprintf(b, sizeof b,
+                std::fabs(v) >= 100  ? "%.0f"
+                : std::fabs(v) >= 10 ? "%.1f"
+                                     : "%.2f",
+                v);
+  return b;
+}
+
 std::string fmt_psnr(double p) {
   if (std::isinf(p)) return "inf";
   if (std::isnan(p)) return "-";
@@ -447,16 +539,18 @@ class RefCache {
   /// the estimator a case mcNsub runs; 0: render_reference.
   const RefResult& get(const std::string& volume, const Volume& vol, const RenderOptions& opt,
                        Use use = Use::timed, int64_t subray_pes = 0, int subray_sweeps = 0) {
-    char key[360];
+    // (A fixed buffer cut the key of a long volume name, and frames of other
+    // views or options shared a reference image.)
     const CompositeParams& c = opt.composite;
-    std::snprintf(
-        key, sizeof key, "%s|%d|%d|%d|%.6f,%.6f,%.6f|%d|%d|%.4f|%llu|%d|%d%d%d%d|%.4f,%.4f",
-        volume.c_str(), opt.width, opt.height, opt.order, opt.view.theta, opt.view.phi,
-        opt.view.varphi, static_cast<int>(opt.sampling), static_cast<int>(c.mode), c.threshold,
-        static_cast<unsigned long long>(c.seed), c.samples, static_cast<int>(c.streams),
-        c.exact_opacity, c.stratified, c.drop_transparent, opt.shade.k1, opt.shade.k2);
-    const std::string k = std::string(key) + "|sub" + std::to_string(subray_pes) + "/" +
-                          std::to_string(subray_sweeps);
+    char numbers[320];
+    std::snprintf(numbers, sizeof numbers,
+                  "|%d|%d|%d|%.6f,%.6f,%.6f|%d|%d|%.4f|%llu|%d|%d%d%d%d|%.4f,%.4f|sub%lld/%d",
+                  opt.width, opt.height, opt.order, opt.view.theta, opt.view.phi, opt.view.varphi,
+                  static_cast<int>(opt.sampling), static_cast<int>(c.mode), c.threshold,
+                  static_cast<unsigned long long>(c.seed), c.samples, static_cast<int>(c.streams),
+                  c.exact_opacity, c.stratified, c.drop_transparent, opt.shade.k1, opt.shade.k2,
+                  static_cast<long long>(subray_pes), subray_sweeps);
+    const std::string k = volume + numbers;
     const auto render = [&] {
       return subray_pes > 0 ? render_subray_reference(vol, opt, subray_pes, subray_sweeps, false)
                             : render_reference(vol, opt);
@@ -688,14 +782,14 @@ struct Harness {
       auto med = [&](const char* n) { return median(stage[n]); };
       std::printf(
           "%-34s %8.1f %8.2f %8.2f %8.2f %6.2f %8.2f | %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f "
-          "%6.2f %6.2f %6.2f | %5.3f %7.2f | %8.0f %7.1f %6s\n",
+          "%6.2f %6.2f %6.2f | %5.3f %7.2f | %8s %7s %6s\n",
           id.c_str(), first, w.median, w.min, w.max, 1000.0 / w.median,
           double(st.samples) / (w.median * 1e-3) * 1e-6,
           o.layout_once ? r.first_layout : med("layout"), med("shade") + med("classify"),
           med("match"), med("balance"), med("resample_local"), med("offsets") + med("rays"),
           med("walk"), med("plan"), med("swap"), med("display") + med("warp"), st.utilisation(),
-          double(st.swap.moved * st.swap.bytes_per_pixel) / 1e6, ref_ms, ref_ms / w.median,
-          fmt_psnr(q).c_str());
+          double(st.swap.moved * st.swap.bytes_per_pixel) / 1e6, fmt_figure(ref_ms).c_str(),
+          fmt_figure(ref_ms / w.median).c_str(), fmt_psnr(q).c_str());
     } catch (const std::exception& e) {
       std::printf("%-34s skipped: %s\n", id.c_str(), e.what());
       j["skipped"] = e.what();
@@ -971,7 +1065,9 @@ json run_child(int argc, char** argv, int threads, const std::filesystem::path& 
   std::vector<std::string> args{"/proc/self/exe"};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--scaling" || a == "--json") {
+    // (--reference-runs and --volpack-runs, refused beside the child's
+    // --no-reference and --no-volpack, failed the whole run after its cases)
+    if (a == "--scaling" || a == "--json" || a == "--reference-runs" || a == "--volpack-runs") {
       ++i;
       continue;
     }
@@ -1018,6 +1114,14 @@ json scaling(int argc, char** argv, const Options& o) {
   char tmpl[] = "/tmp/simdvol-bench-XXXXXX";
   if (!mkdtemp(tmpl)) throw Error(std::string("mkdtemp: ") + std::strerror(errno));
   const std::filesystem::path dir = tmpl;
+  // Removed also where a child fails (its log's end is in the error).
+  struct RemoveDir {
+    std::filesystem::path dir;
+    ~RemoveDir() {
+      std::error_code ec;
+      std::filesystem::remove_all(dir, ec);
+    }
+  } remove_dir{dir};
   std::map<int64_t, json> runs;
   for (const int64_t n : o.scaling) {
     std::printf("\nscaling: running the cases with POCL_MAX_PTHREAD_COUNT=%lld ...\n",
@@ -1027,7 +1131,6 @@ json scaling(int argc, char** argv, const Options& o) {
     std::printf("  the device reported %s compute units\n",
                 runs[n]["device"]["compute_units"].dump().c_str());
   }
-  std::filesystem::remove_all(dir);
   const int64_t n1 = o.scaling.front();
   json out = json::array();
   std::printf(
@@ -1101,9 +1204,10 @@ int main(int argc, char** argv) {
     // Volumes: missing files skip their cases (or fail when asked for).
     std::vector<Loaded> vols;
     json jv = json::array();
-    for (const auto& name : o.volumes) {
+    for (const VolumeSpec& spec : volume_specs(o)) {
       Loaded L;
-      L.spec = parse_volume(name, o.data, o.volume_index);
+      L.spec = spec;
+      const std::string& name = L.spec.name;
       const auto t0 = Clock::now();
       if (L.spec.phantom) {
         L.vol = std::make_unique<Volume>(shepp_logan(L.spec.phantom, 4));
@@ -1123,6 +1227,14 @@ int main(int argc, char** argv) {
         L.vol = std::make_unique<Volume>(load_volume(L.spec.file));
       }
       const double ms = ms_since(t0);
+      // Nor the files read beside it (a detached header's data, a pair's
+      // other half, a DICOM series' slices): --json x.raw replaced the voxels
+      // of the x.nhdr the run read with its JSON.
+      if (o.json) {
+        std::vector<std::filesystem::path> inputs = L.vol->companion_files();
+        inputs.push_back(L.spec.file);
+        check_not_an_input(*o.json, inputs, dicom_series_dir(L.spec.file), "--json");
+      }
       std::printf("volume %-12s %lldx%lldx%lld, classifier %s (%.0f ms to %s)\n", name.c_str(),
                   static_cast<long long>(L.vol->nx()), static_cast<long long>(L.vol->ny()),
                   static_cast<long long>(L.vol->nz()), L.spec.classifier.c_str(), ms,
