@@ -49,6 +49,11 @@ double triad_gbs(std::size_t bytes) {
   return 3.0 * static_cast<double>(bytes) / (best * 1e-3) / 1e9;
 }
 
+std::filesystem::path data_dir() {
+  if (const char* d = std::getenv("SIMDVOL_DATA_DIR"); d && *d) return d;
+  return SIMDVOL_BENCH_DATA_DIR;
+}
+
 HostInfo host_info(const Device& device) {
   HostInfo h;
   h.cpu_model = "unknown";

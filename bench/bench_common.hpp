@@ -1,12 +1,14 @@
 // Pieces the benchmark tools share: wall-clock timing, median / min / max
 // over repeats, the host's triad bandwidth, what the machine is (CPU model,
-// OpenCL platform version, POCL_MAX_PTHREAD_COUNT) and, from bench_args.hpp,
-// strict parsing of option values (ArgumentError naming the option), and
-// the serial reference timed warm (KeepHeap, time_warm).
+// OpenCL platform version, POCL_MAX_PTHREAD_COUNT), where the data files
+// are (data_dir) and, from bench_args.hpp, strict parsing of option values
+// (ArgumentError naming the option), and the serial reference timed warm
+// (KeepHeap, time_warm).
 #pragma once
 
 #include <chrono>
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -34,6 +36,13 @@ double median(std::vector<double> v);
 /// per hardware thread, best of 3 runs after one that touches the pages;
 /// GB/s counting 3 arrays (write-allocate traffic not counted).
 double triad_gbs(std::size_t bytes);
+
+/// Where the fetched real volumes (brainsmall.den, ch2.nii.gz) are looked
+/// for: $SIMDVOL_DATA_DIR where set and not empty (as the tests and
+/// scripts/fetch-data take it; a relative one from the working directory),
+/// else the source tree's data/ (compiled in), so that a tool finds them
+/// from any working directory.
+std::filesystem::path data_dir();
 
 /// The machine a benchmark ran on.
 struct HostInfo {

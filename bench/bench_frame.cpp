@@ -21,7 +21,9 @@
 //   simdvol-bench-frame --whole [--pes P] [--order K] [--runs R] [--brain PATH]
 //
 // Whole frames (issue 5): the 256^3 phantom (preset ct) to 256^2 and 512^2
-// and brainsmall.den (preset volpack) to 256^2, direct compositing, voxel
+// and brainsmall.den (preset volpack; --brain PATH, else in
+// $SIMDVOL_DATA_DIR where set, else in the source tree's data/, from any
+// working directory; skipped where absent) to 256^2, direct compositing, voxel
 // sampling, view (0, 30, 0): the serial reference (one frame after a
 // warm-up, its freed memory kept: bench_common.hpp's time_warm), one-shot
 // render_opencl (fresh buffers each frame) and a warm RenderEngine (buffers
@@ -59,6 +61,7 @@ using namespace simdvol;
 using simdvol::bench::Args;
 using simdvol::bench::argument_error;
 using simdvol::bench::Clock;
+using simdvol::bench::data_dir;
 using simdvol::bench::ms_since;
 using simdvol::bench::time_warm;
 
@@ -85,7 +88,8 @@ constexpr const char* kUsage =
     "                           [--no-reference] [--kernels]\n"
     "       simdvol-bench-frame --whole [--pes P] [--order K] [--runs R] [--brain PATH]\n"
     "  N: 8..1024 (the N^3 phantom to N x N); P: a power of two in 1..1048576; K: 0..3;\n"
-    "  R: 1..1000; views: angles phi in -360..360 (degrees)\n";
+    "  R: 1..1000; views: angles phi in -360..360 (degrees); PATH: brainsmall.den (default:\n"
+    "  in $SIMDVOL_DATA_DIR where set, else in the source tree's data/)\n";
 
 struct Options {
   bool whole = false;
@@ -93,7 +97,7 @@ struct Options {
   int64_t pes = 8192;
   bool reference = true, kernels = false;
   std::vector<double> views{0, 30, 45};
-  std::string brain = "data/brainsmall.den";
+  std::string brain;  // --brain; else brainsmall.den in bench::data_dir()
 };
 
 Options parse_args(int argc, char** argv) {
@@ -146,7 +150,7 @@ std::string stages(const EngineTimes& t) {
   return buf;
 }
 
-int whole_frames(int64_t pes, int order, int runs, const std::string& brain) {
+int whole_frames(int64_t pes, int order, int runs, std::string brain) {
   Device device;
   std::printf(
       "device: %s (%u compute units); whole frames, order %d, %lld PEs, direct, voxel "
@@ -163,11 +167,15 @@ int whole_frames(int64_t pes, int order, int runs, const std::string& brain) {
   std::optional<Volume> brainvol;
   std::vector<Case> cases{{"phantom 256^3 -> 256^2", &phantom, classifier_preset("ct"), 256},
                           {"phantom 256^3 -> 512^2", &phantom, classifier_preset("ct"), 512}};
+  if (brain.empty()) brain = (data_dir() / "brainsmall.den").string();
   if (std::filesystem::exists(brain)) {
     brainvol = load_volume(brain);
     cases.push_back({"brainsmall -> 256^2", &*brainvol, classifier_preset("volpack"), 256});
   } else {
-    std::printf("(%s not found: brainsmall skipped)\n", brain.c_str());
+    std::printf(
+        "(%s not found: brainsmall skipped; scripts/fetch-data fetches it, into "
+        "$SIMDVOL_DATA_DIR where set; --brain PATH names another)\n",
+        brain.c_str());
   }
   for (const Case& c : cases) {
     RenderOptions opt;
@@ -452,21 +460,27 @@ int main(int argc, char** argv) try {
     const double M = order + 1;
     const double loads = static_cast<double>(nsamples) * M * M * M * 4;
     const double fused = median(t_fused) + median(t_zero);
+    // With --no-reference: "-", not 0.0, where nothing was measured.
+    char ref_rl_text[32] = "-", ref_dev_text[32] = "-";
+    if (reference) {
+      std::snprintf(ref_rl_text, sizeof ref_rl_text, "%.1f", ref_rl);
+      std::snprintf(ref_dev_text, sizeof ref_dev_text, "%.1f", ref_rl / fused);
+    }
     std::printf(
         "%5.0f %9lld %9lld %7.3f | %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f "
         "%8.2f | "
         "%9.1f "
-        "%9.1f %9.1f "
+        "%9s %9s "
         "%7.2f "
         "| "
         "%8.3g %8lld | %7.2f %7.3f %8.2f %8.2f %8.2f | %8.1f %8.1f\n",
         phi, static_cast<long long>(nsamples), static_cast<long long>(m.segments.size()),
         m.utilisation(), median(t_match), median(t_bal), median(t_res), median(t_loc),
         median(t_zero), median(t_fused), median(t_fused1), median(t_occ), median(t_skip),
-        median(t_ord), median(t_ord4), ref_match + ref_balance, ref_rl,
-        reference ? ref_rl / fused : 0.0, loads / (median(t_fused) * 1e6),
-        static_cast<double>(x.total_reads()), static_cast<long long>(x.max_voxels()),
-        median(t_occ2), active, median(t_match2), median(t_bal2), median(t_rl2),
+        median(t_ord), median(t_ord4), ref_match + ref_balance, ref_rl_text, ref_dev_text,
+        loads / (median(t_fused) * 1e6), static_cast<double>(x.total_reads()),
+        static_cast<long long>(x.max_voxels()), median(t_occ2), active, median(t_match2),
+        median(t_bal2), median(t_rl2),
         median(t_match) + median(t_bal) + median(t_occ2) + median(t_ord4) + median(t_zero),
         median(t_match2) + median(t_bal2) + median(t_rl2));
     if (o.kernels) {
@@ -489,8 +503,9 @@ int main(int argc, char** argv) try {
       "\nms from profiling events; match/balance: device stages (enqueue_match, enqueue_balance, "
       "all their kernels); ref m+b: "
       "match_reference + balance_reference. ref r+l: serial local_reference (resample + sub-ray "
-      "composite); ref/dev: against fused + zero. fused: 8 segments per work-item in float8 lanes "
-      "without skipping; fused1: one segment per work-item; occ: the brick occupancy by a scan "
+      "composite); ref/dev: against fused + zero (both - with --no-reference). fused: 8 segments "
+      "per work-item in float8 lanes without skipping; fused1: one segment per work-item; occ: the "
+      "brick occupancy by a scan "
       "of the voxels (simdvol_occupancy); skip: fused "
       "skipping samples of empty bricks; ordered: skip with the lanes' segment order (the frame "
       "path until the cells were interleaved: simdvol_segment_order + the fused kernel; the same "

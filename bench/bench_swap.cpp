@@ -9,12 +9,13 @@
 //
 // Frames: the N^3 Shepp-Logan CT phantom (shepp_logan(N, 4), default 256,
 // preset ct) to 256^2 and 512^2 (voxel sampling; 512^2 also with pixel
-// sampling), and brainsmall.den (preset volpack) to 256^2, view (0, 30, 0)
-// and (20, 35, 10). Per frame: a warm-up call, then R calls (default 5):
-// median wall time of the whole call and median device time of each stage
-// (profiling events); the serial reference (render_reference) once after a
-// warm-up (bench_common.hpp's time_warm), its time, and PSNR / max abs
-// difference of the frames.
+// sampling), and brainsmall.den (preset volpack; --brain PATH, else in
+// $SIMDVOL_DATA_DIR where set, else in the source tree's data/; skipped
+// where absent) to 256^2, view (0, 30, 0) and (20, 35, 10). Per frame: a
+// warm-up call, then R calls (default 5): median wall time of the whole call
+// and median device time of each stage (profiling events); the serial
+// reference (render_reference) once after a warm-up (bench_common.hpp's
+// time_warm), its time, and PSNR / max abs difference of the frames.
 // Communication (per frame): per swap stage the pixels and bytes moved
 // (float4, 16 bytes per pixel), the most one PE sends, holds before the
 // stage and composites (keeps), the X-Net distance of the partners; totals
@@ -179,7 +180,9 @@ constexpr const char* kUsage =
     "usage: simdvol-bench-swap [--size N] [--pes P] [--order K] [--runs R]\n"
     "                          [--layout cut-and-stack|hierarchical] [--brain PATH]\n"
     "                          [--no-reference] [--comm-only] [--swap-only]\n"
-    "  N: 8..1024 (the N^3 phantom); P: a power of two in 1..1048576; K: 0..3; R: 1..1000\n";
+    "  N: 8..1024 (the N^3 phantom); P: a power of two in 1..1048576; K: 0..3; R: 1..1000;\n"
+    "  PATH: brainsmall.den (default: in $SIMDVOL_DATA_DIR where set, else in the source\n"
+    "  tree's data/)\n";
 
 }  // namespace
 
@@ -188,7 +191,7 @@ int main(int argc, char** argv) {
   int64_t pes = 8192;
   bool reference = true, comm_only = false, swap_only = false;
   SwapLayout layout = SwapLayout::cut_and_stack;
-  std::string brain = std::string(SIMDVOL_BENCH_DATA_DIR) + "/brainsmall.den";
+  std::string brain = (data_dir() / "brainsmall.den").string();
   try {
     Args args(argc, argv);
     while (args.next()) {
@@ -229,7 +232,13 @@ int main(int argc, char** argv) {
     std::printf("shepp_logan(%d, 4): %.0f ms\n", size, ms_since(tv));
     Volume brainvol;
     const bool have_brain = std::filesystem::exists(brain);
-    if (have_brain) brainvol = load_volume(brain);
+    if (have_brain)
+      brainvol = load_volume(brain);
+    else
+      std::printf(
+          "(%s not found: brainsmall skipped; scripts/fetch-data fetches it, into "
+          "$SIMDVOL_DATA_DIR where set; --brain PATH names another)\n",
+          brain.c_str());
     std::vector<Frame> frames;
     const std::string ctname = "ct-phantom-" + std::to_string(size);
     frames.push_back({ctname, &ct, classifier_preset("ct"), 256, Sampling::voxel, {0, 30, 0}});
@@ -282,21 +291,21 @@ int main(int argc, char** argv) {
         for (std::size_t k = 0; k < t.swap_stage_ms.size(); ++k)
           stages[k].push_back(t.swap_stage_ms[k]);
       }
-      double ref_ms = 0, q = 0, diff = 0;
+      // With --no-reference: "-", not 0, where nothing was measured.
+      char ref_text[96] = "       -       -         -";
       if (reference) {
-        // warm, as the engine's frames (bench_common.hpp)
+        double ref_ms = 0;  // warm, as the engine's frames (bench_common.hpp)
         const Image ref = time_warm(
             1, [&] { return render_reference(*f.vol, opt); }, ref_ms);
-        q = psnr(ref, img);
-        diff = max_abs_diff(ref, img);
+        std::snprintf(ref_text, sizeof ref_text, "%8.0f %7.1f %9.1f  (max diff %.2g)", ref_ms,
+                      ref_ms / median(wall), psnr(ref, img), max_abs_diff(ref, img));
       }
       std::printf(
           "%-16s %4d %5s | %8.1f %8.1f | %6.1f %6.1f %6.1f %6.1f %6.1f %6.2f %6.2f %6.2f %6.2f | "
-          "%8.0f %7.1f %9.1f  (max diff %.2g)\n",
+          "%s\n",
           f.name.c_str(), f.size, f.sampling == Sampling::voxel ? "voxel" : "pixel", median(wall),
           median(devsum), median(lay), median(cls), median(mat), median(bal), median(rl),
-          median(plan), median(swp), median(dsp), median(wrp), ref_ms,
-          reference ? ref_ms / median(wall) : 0.0, q, diff);
+          median(plan), median(swp), median(dsp), median(wrp), ref_text);
       std::printf("    swap stages (ms):");
       for (const auto& s : stages) std::printf(" %.2f", median(s));
       std::printf("\n");

@@ -1,0 +1,32 @@
+# ctest simdvol_bench_swap_report: what simdvol-bench-swap (-DSWAP=...)
+# prints for the 16^3 phantom on 64 PEs, run in ${WORK} with
+# $SIMDVOL_DATA_DIR an empty directory.
+# - With --no-reference the serial figures not measured (ref_ms, ratio,
+#   PSNR) are "-", not 0.
+# - A brainsmall.den not found is said (naming the file looked for in
+#   $SIMDVOL_DATA_DIR), not skipped silently.
+set(empty ${WORK}/no-data)
+file(REMOVE_RECURSE ${empty})
+file(MAKE_DIRECTORY ${empty})
+execute_process(COMMAND ${CMAKE_COMMAND} -E env SIMDVOL_DATA_DIR=${empty} ${SWAP} --size 16
+                        --runs 1 --pes 64 --no-reference
+                WORKING_DIRECTORY ${WORK} RESULT_VARIABLE rc OUTPUT_VARIABLE o ERROR_VARIABLE e
+                TIMEOUT 250)
+if(NOT rc STREQUAL "0")
+  message(FATAL_ERROR "simdvol-bench-swap: exit ${rc}\nstdout: ${o}\nstderr: ${e}")
+endif()
+string(FIND "${o}" "(${empty}/brainsmall.den not found: brainsmall skipped" at)
+if(at LESS 0)
+  message(FATAL_ERROR "no skip naming ${empty}/brainsmall.den:\n${o}")
+endif()
+# Four frames of the phantom.
+string(REGEX MATCHALL "\nct-phantom-16 [^\n]*" rows "${o}")
+list(LENGTH rows nrows)
+if(NOT nrows EQUAL 4)
+  message(FATAL_ERROR "not 4 frames:\n${o}")
+endif()
+foreach(row IN LISTS rows)
+  if(NOT row MATCHES "\\| +- +- +-$")
+    message(FATAL_ERROR "--no-reference: ref_ms, ratio and PSNR are not '-':\n${row}")
+  endif()
+endforeach()
