@@ -139,14 +139,16 @@ Options parse_args(int argc, char** argv) {
 
 }  // namespace
 
-std::string stages(const EngineTimes& t) {
+// `swap_stages`: the binary swap's stages (log2 P); EngineTimes has one
+// time per launch, and a launch runs up to kSwapFusedStages of them.
+std::string stages(const EngineTimes& t, int swap_stages) {
   char buf[512];
   std::snprintf(buf, sizeof buf,
                 "layout %.2f, shade+classify %.2f, match %.2f, balance %.2f, resample+local %.2f, "
-                "plan %.2f (host), swap %.2f (%zu stages), display %.2f, warp %.2f",
+                "plan %.2f (host), swap %.2f (%zu launch%s, %d stages), display %.2f, warp %.2f",
                 t.layout_ms, t.shade_ms + t.classify_ms, t.match_ms, t.balance_ms,
-                t.resample_local_ms, t.plan_ms, t.swap_ms, t.swap_stage_ms.size(), t.display_ms,
-                t.warp_ms);
+                t.resample_local_ms, t.plan_ms, t.swap_ms, t.swap_stage_ms.size(),
+                t.swap_stage_ms.size() == 1 ? "" : "es", swap_stages, t.display_ms, t.warp_ms);
   return buf;
 }
 
@@ -223,7 +225,8 @@ int whole_frames(int64_t pes, int order, int runs, std::string brain) {
         "PSNR vs reference %.1f dB (phi 30)\n"
         "  warm stages (ms): %s\n",
         c.name.c_str(), ref_ms, o, w, 30 + runs - 1, ref_ms / w, o / w, psnr_db,
-        stages(warm_times[warm_times.size() / 2].second).c_str());
+        stages(warm_times[warm_times.size() / 2].second, kd_split(c.vol->dims(), pes).bits)
+            .c_str());
   }
   return 0;
 }

@@ -13,7 +13,8 @@
 // $SIMDVOL_DATA_DIR where set, else in the source tree's data/; skipped
 // where absent) to 256^2, view (0, 30, 0) and (20, 35, 10). Per frame: a
 // warm-up call, then R calls (default 5): median wall time of the whole call
-// and median device time of each stage (profiling events); the serial
+// and median device time of each stage (profiling events; the swap's also
+// per launch, a launch running up to kSwapFusedStages stages); the serial
 // reference (render_reference) once after a warm-up (bench_common.hpp's
 // time_warm), its time, and PSNR / max abs difference of the frames.
 // Communication (per frame): per swap stage the pixels and bytes moved
@@ -306,7 +307,9 @@ int main(int argc, char** argv) {
           f.name.c_str(), f.size, f.sampling == Sampling::voxel ? "voxel" : "pixel", median(wall),
           median(devsum), median(lay), median(cls), median(mat), median(bal), median(rl),
           median(plan), median(swp), median(dsp), median(wrp), ref_text);
-      std::printf("    swap stages (ms):");
+      // One time per launch: a launch runs up to kSwapFusedStages stages.
+      std::printf("    swap launches (ms; %zu launch%s for %d stages):", stages.size(),
+                  stages.size() == 1 ? "" : "es", kd_split(f.vol->dims(), pes).bits);
       for (const auto& s : stages) std::printf(" %.2f", median(s));
       std::printf("\n");
     }

@@ -8,6 +8,8 @@
 #   else in the source tree's data/ (-DDATA=...; the case is rendered where
 #   scripts/fetch-data has fetched it, else the message names that file).
 #   It looked for data/brainsmall.den under the working directory.
+# - The swap's times are per launch: "N launch(es), 6 stages" for 64 PEs
+#   (it said "N stages" of the launches).
 
 # run_frame(OUT ENV-ARG ARG...): runs the tool under `cmake -E env ENV-ARG`
 # in ${WORK}, fails on a non-zero exit, stdout in OUT.
@@ -45,6 +47,11 @@ run_frame(o SIMDVOL_DATA_DIR=${empty} --whole --runs 1 --pes 64)
 string(FIND "${o}" "(${empty}/brainsmall.den not found: brainsmall skipped" at)
 if(at LESS 0)
   message(FATAL_ERROR "--whole, SIMDVOL_DATA_DIR=${empty}: no skip naming its file:\n${o}")
+endif()
+string(REGEX MATCHALL "swap [0-9.]+ \\([0-9]+ launch(es)?, 6 stages\\)" swaps "${o}")
+list(LENGTH swaps n)
+if(NOT n EQUAL 2)
+  message(FATAL_ERROR "--whole --pes 64: not two 'swap T (N launches, 6 stages)':\n${o}")
 endif()
 
 # --whole without it, from ${WORK}: the source tree's data/.
