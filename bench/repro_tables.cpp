@@ -4,12 +4,16 @@
 // 0, 30 and 45 degrees, checked against the thesis's claim of 2-3 frames per
 // second (ch. 1).
 //
-//   simdvol-repro-tables [--size N] [--image N] [--pes P] [--order K]
-//                        [--sweeps S] [--views A,B,...] [--markdown FILE]
+//   simdvol-repro-tables [--size N] [--pes P] [--order K] [--sweeps S]
+//                        [--views A,B,...] [--markdown FILE]
 //
 // Prints the tables on stdout; with --markdown writes the same as a
 // markdown fragment (the file is written only when everything succeeded).
-// No OpenCL: everything is counted by the core functions.
+// No OpenCL: everything is counted by the core functions. The model
+// samples as the thesis does, on the rotated volume grid (voxel sampling:
+// the viewing grid follows from the volume and the view), and does not
+// count the 2-D warp to an output image, so no output size is taken:
+// --image (it only relabelled the text) is refused as doing nothing.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -107,18 +111,19 @@ std::string mark(int64_t computed, int64_t printed) {
 }
 
 constexpr const char* kUsage =
-    "usage: simdvol-repro-tables [--size N] [--image N] [--pes P] [--order K] [--sweeps S]\n"
+    "usage: simdvol-repro-tables [--size N] [--pes P] [--order K] [--sweeps S]\n"
     "                            [--views A,B,...] [--markdown FILE]\n"
-    "  size: 1..1024 (N^3 volume); image: 1..4096 (N x N); P: a power of two in\n"
-    "  1..1048576; K: 0..1 (the orders the cost model counts); S: 0..64 (balance sweeps);\n"
-    "  views: angles phi in -360..360 (degrees)\n";
+    "  size: 1..1024 (N^3 volume); P: a power of two in 1..1048576; K: 0..1 (the orders\n"
+    "  the cost model counts); S: 0..64 (balance sweeps); views: angles phi in -360..360\n"
+    "  (degrees). Voxel sampling, as the thesis: the viewing grid follows from the volume\n"
+    "  and the view, so no image size is taken.\n";
 static_assert(kMaxBalanceSweeps == 64, "kUsage gives S: 0..64");
 
 }  // namespace
 
 int main(int argc, char** argv) try {
   simdvol::remove_temporary_files_on_signals();
-  int size = 256, image = 256, order = 1, sweeps = kBalanceSweeps;
+  int size = 256, order = 1, sweeps = kBalanceSweeps;
   int64_t pes = 8192;
   std::vector<double> views{0, 30, 45};
   std::string markdown;
@@ -132,7 +137,12 @@ int main(int argc, char** argv) try {
       } else if (args.is("--size")) {
         size = static_cast<int>(args.integer(1, 1024));
       } else if (args.is("--image")) {
-        image = static_cast<int>(args.integer(1, 4096));
+        // It set FrameConfig::width/height, which voxel sampling uses only
+        // for the warp to the output, not counted: every figure was the same.
+        throw ArgumentError(args.option(),
+                            "does nothing: the cost model samples on the volume's grid (voxel "
+                            "sampling, as the thesis) and does not count the warp to an output "
+                            "image, so no figure depends on the image size");
       } else if (args.is("--pes")) {
         pes = args.pes();
       } else if (args.is("--order")) {
@@ -229,7 +239,6 @@ int main(int argc, char** argv) try {
       FrameConfig c;
       c.dims = {size, size, size};
       c.view = ViewAngles{0, v, 0};
-      c.width = c.height = image;
       c.order = order;
       c.pes = pes;
       c.sweeps = sweeps;
@@ -239,11 +248,11 @@ int main(int argc, char** argv) try {
       if (variant == 0) {
         doc.para("**View (0, " + fixed(v, 0) + ", 0)**, " + std::to_string(size) +
                  "^3 volume (CT "
-                 "phantom shepp_logan: the counts depend only on its dims), " +
-                 std::to_string(image) + "^2 image, order " + std::to_string(order) + ", " +
-                 std::to_string(f.grid.width) + "x" + std::to_string(f.grid.height) +
-                 " PEs, cells " + std::to_string(f.cell[0]) + "x" + std::to_string(f.cell[1]) +
-                 "x" + std::to_string(f.cell[2]) + ", viewing grid " +
+                 "phantom shepp_logan: the counts depend only on its dims), voxel sampling, "
+                 "order " +
+                 std::to_string(order) + ", " + std::to_string(f.grid.width) + "x" +
+                 std::to_string(f.grid.height) + " PEs, cells " + std::to_string(f.cell[0]) + "x" +
+                 std::to_string(f.cell[1]) + "x" + std::to_string(f.cell[2]) + ", viewing grid " +
                  std::to_string(f.image_width) + "x" + std::to_string(f.image_height) + "x" +
                  std::to_string(f.depth) + ", " + grouped(f.samples) + " samples; busiest PE " +
                  grouped(f.max_load_matched) + " samples after matching, " +
