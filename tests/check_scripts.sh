@@ -2,7 +2,8 @@
 # The scripts' own arguments (test simdvol_scripts_arguments): --help prints
 # the script's header and does nothing else; an argument a script does not
 # take is refused with exit 2, naming it, before it installs, downloads or
-# builds anything. Runs in well under a second.
+# builds anything. Also bench-ab's summary on stand-ins for the binaries it
+# compares. Runs in well under a second.
 set -uo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 fail=0
@@ -28,6 +29,26 @@ check 0 "scripts/demo [render options]" "$root/scripts/demo" -h
 check 0 "scripts/reproduce [--no-build]" "$root/scripts/reproduce" --help
 check 2 "unknown argument '--bogus'" "$root/scripts/reproduce" --bogus
 check 2 "fuzz: unknown argument '--bogus'" "$root/scripts/fuzz" --bogus
+check 0 "$(sed -n '2s/^# //p' "$root/scripts/bench-ab")" "$root/scripts/bench-ab" --help
+check 2 "bench-ab: need two simdvol-bench-options binaries" "$root/scripts/bench-ab"
+check 2 "bench-ab: --bogus: unknown argument" "$root/scripts/bench-ab" /bin/true /bin/true --bogus
+# bench-ab on stand-ins for simdvol-bench-options that print its table: a
+# column that is 0.00 in every run of A has no ratio (it printed -nan, exit
+# 0); a column the output lacks is an error.
+stubs=$(mktemp -d)
+trap 'rm -rf "$stubs"' EXIT
+stub() {  # stub <file> <header> <row>
+  printf '#!/usr/bin/env bash\necho "%s"\necho "%s"\n' "$2" "$3" >"$1"
+  chmod +x "$1"
+}
+stub "$stubs/zero" "variant shcls match bal rs+loc swap wall" "(none) 1.00 2.00 0.00 4.00 5.00 6.00"
+stub "$stubs/nobal" "variant shcls match rs+loc swap wall" "(none) 1.00 2.00 4.00 5.00 6.00"
+check 0 "bal: median A 0.00 ms, B 0.00 ms; median B / A undefined: A's bal is 0.00 ms in every pair" \
+  "$root/scripts/bench-ab" "$stubs/zero" "$stubs/zero" --pairs 2 --column bal
+check 0 "rs+loc: median A 4.00 ms, B 4.00 ms; median B / A over 2 pairs 1.000" \
+  "$root/scripts/bench-ab" "$stubs/zero" "$stubs/zero" --pairs 2
+check 1 "bench-ab: $stubs/nobal: no 'bal' figure in its output" \
+  "$root/scripts/bench-ab" "$stubs/zero" "$stubs/nobal" --pairs 2 --column bal
 # help ends before the script's code
 if "$root/scripts/reproduce" --help | grep -q 'set -euo'; then
   echo "FAIL: scripts/reproduce --help prints its code" >&2
