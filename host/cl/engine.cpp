@@ -107,20 +107,24 @@ struct LiveCells {
 };
 
 // Which volume something on the device was made from, while reuse_layout
-// promises that volume unchanged between frames: the object, its voxels'
-// storage and its dims (a volume resized in place has other dims at the
-// same address). The layout's and the relative classification's range each
+// promises that volume unchanged between frames: the object, its serial,
+// its voxels' storage and its dims (a volume resized in place has other
+// dims at the same address; one made where an earlier one was destroyed
+// has its address and storage, and another serial: a time series loaded
+// frame by frame in one loop variable was rendered from its first frames'
+// layout). The layout's and the relative classification's range each
 // keep one: the range is needed before the layout decision, and survives
 // frames that need no range while the layout's key moves on.
 namespace {
 struct KeptVolume {
   const Volume* volume = nullptr;
+  std::uint64_t serial = 0;
   const float* data = nullptr;
   Dims3 dims{0, 0, 0};
   bool is(const Volume& v) const {
-    return volume == &v && data == v.data().data() && dims == v.dims();
+    return volume == &v && serial == v.serial() && data == v.data().data() && dims == v.dims();
   }
-  void keep(const Volume& v) { *this = {&v, v.data().data(), v.dims()}; }
+  void keep(const Volume& v) { *this = {&v, v.serial(), v.data().data(), v.dims()}; }
   void clear() { *this = {}; }
 };
 }  // namespace
@@ -250,6 +254,7 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   const EngineOptions& eo = S.eo;
   validate(eo, opt);
   if (vol.voxel_count() == 0) throw ArgumentError("volume", "is empty");
+  vol.check_voxel_count();
   const PeGrid grid = S.array->grid();
   const ViewGeometry view =
       make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);

@@ -128,6 +128,7 @@ CellBuffer PeArray::layout(const float* data, const Dims3& dims, int halo, Layou
 
 CellBuffer PeArray::layout(const Volume& volume, int halo, LayoutKernel variant,
                            cl::Event* event) const {
+  volume.check_voxel_count();  // (the buffer wraps dims' worth of its voxels)
   return layout(volume.data().data(), volume.dims(), halo, variant, event);
 }
 

@@ -294,6 +294,7 @@ float classify_voxel(const Classifier& c, const ValueRange& range, float value, 
 
 std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& shading,
                            const Classifier& c, double opacity_step) {
+  vol.check_voxel_count();
   if (shading.size() != vol.voxel_count())
     throw ArgumentError("shading", "has " + std::to_string(shading.size()) +
                                        " samples for a volume of " +

@@ -81,6 +81,7 @@ Image render_classified(const std::vector<Rgba>& voxels, const Volume& vol,
                         const ViewGeometry& view, const RenderOptions& opt, RenderTimes* times,
                         Image* intermediate) {
   validate(opt);
+  vol.check_voxel_count();
   if (voxels.size() != vol.voxel_count())
     throw ArgumentError("voxels", "classified voxel count does not match the volume");
   // (A view of another volume rendered, its positions clamped.)

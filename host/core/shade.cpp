@@ -145,12 +145,14 @@ Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& gr
 
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p) {
   validate(p);  // before the range's pass over the voxels
+  vol.check_voxel_count();
   return make_shade_frame(vol, view, p, vol.range());
 }
 
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p,
                             const ValueRange& range) {
   validate(p);
+  vol.check_voxel_count();
   if (!(view.radius > 0) || !std::isfinite(view.radius))
     throw ArgumentError("view.radius",
                         "must be positive (got " + std::to_string(view.radius) + ")");

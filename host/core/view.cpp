@@ -130,6 +130,7 @@ Mat3 inverse_viewing_map(const ViewGeometry& view, Vec3& origin) {
 
 ViewGeometry make_view(const Volume& vol, ViewAngles angles, int out_width, int out_height,
                        Sampling sampling, Framing framing) {
+  vol.check_voxel_count();
   return make_view(vol.dims(), vol.spacing(), angles, out_width, out_height, sampling, framing);
 }
 

@@ -1,9 +1,11 @@
 #include "simdvol/volume.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 
+#include "number_text.hpp"
 #include "simdvol/error.hpp"
 
 namespace simdvol {
@@ -71,10 +73,28 @@ Volume::Volume(std::array<int64_t, 3> dims, VoxelType type, std::array<double, 3
   data_.assign(n, 0.0f);
 }
 
+std::uint64_t Volume::Serial::next() noexcept {
+  static std::atomic<std::uint64_t> last{0};
+  return last.fetch_add(1, std::memory_order_relaxed) + 1;
+}
+
+void Volume::check_voxel_count(const std::string& argument) const {
+  const std::size_t need = static_cast<std::size_t>(std::max<int64_t>(dims_[0], 0)) *
+                           static_cast<std::size_t>(std::max<int64_t>(dims_[1], 0)) *
+                           static_cast<std::size_t>(std::max<int64_t>(dims_[2], 0));
+  if (data_.size() != need)
+    throw ArgumentError(argument, "holds " + std::to_string(data_.size()) +
+                                      " voxels, but its dims " + std::to_string(dims_[0]) + " x " +
+                                      std::to_string(dims_[1]) + " x " + std::to_string(dims_[2]) +
+                                      " need " + std::to_string(need) +
+                                      " (its data() was resized apart from its dims)");
+}
+
 void Volume::set_spacing(std::array<double, 3> s) {
   for (int a = 0; a < 3; ++a)
     if (!(s[a] > 0.0) || !std::isfinite(s[a]))
-      throw ArgumentError("spacing", "voxel spacing " + std::to_string(s[a]) + " along axis " +
+      // (%g: -1e-10 was "-0.000000")
+      throw ArgumentError("spacing", "voxel spacing " + detail::number_text(s[a]) + " along axis " +
                                          std::to_string(a) + " must be positive and finite");
   spacing_ = s;
 }
@@ -167,6 +187,7 @@ void Volume::set_orientation(std::string code) {
 }
 
 Volume reorient(const Volume& v, std::string_view to, const std::string& argument) {
+  v.check_voxel_count();
   if (!valid_orientation(to))
     throw ArgumentError(argument, "'" + std::string(to) +
                                       "' is not an orientation (three letters, one each of R/L, "

@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -567,6 +568,20 @@ TEST(RenderEngine, RelativeClassificationTakesEachVolumesRange) {
       std::vector<float> d = scaled.data();
       v.data().swap(d);
       EXPECT_TRUE(same_bits(engine.render(v, opt), render_opencl(dev, scaled, opt, eo)));
+      // Another volume at the same address in the same storage (its data
+      // assigned over v's, as a loop's variable takes the next volume of a
+      // series, or made where v was destroyed): its own layout (it was
+      // rendered from v's).
+      v = scaled;
+      EXPECT_TRUE(same_bits(engine.render(v, opt), render_opencl(dev, scaled, opt, eo)));
+      std::optional<Volume> slot(vol);
+      EXPECT_TRUE(same_bits(engine.render(*slot, opt), one));
+      slot.reset();
+      slot.emplace(scaled);
+      EXPECT_TRUE(same_bits(engine.render(*slot, opt), render_opencl(dev, scaled, opt, eo)));
+      // A volume resized apart from its dims: refused, not read past its end.
+      v.data().resize(100);
+      EXPECT_THROW(engine.render(v, opt), ArgumentError);
     } else {
       // The same object changed in place (allowed without reuse_layout).
       Volume v = vol;

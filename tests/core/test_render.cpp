@@ -4,12 +4,19 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <functional>
 #include <numeric>
+#include <string>
+#include <vector>
 
+#include "simdvol/classify.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/match.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
+#include "simdvol/shade.hpp"
+#include "simdvol/view.hpp"
 
 using namespace simdvol;
 
@@ -91,6 +98,60 @@ TEST(Render, ClassifiedRejectsTheViewOfAnotherVolume) {
   EXPECT_NO_THROW(render_classified(voxels, vol, mine, o));
   const ViewGeometry other = make_view(shepp_logan(32), {}, 16, 16, Sampling::voxel);
   EXPECT_THROW(render_classified(voxels, vol, other, o), ArgumentError);
+}
+
+// A volume whose data() its caller resized apart from its dims: refused by
+// name wherever the voxels are read by their dims (render_reference read
+// past the vector's end and stopped on SIGSEGV).
+TEST(Render, VolumeResizedApartFromItsDimsIsRefused) {
+  Volume vol = shepp_logan(16, 2);
+  vol.data().resize(1000);
+  vol.data().shrink_to_fit();
+  RenderOptions opt;
+  opt.width = opt.height = 16;
+  opt.classifier = classifier_preset("ct");
+  const auto refused = [](const std::function<void()>& f) {
+    try {
+      f();
+    } catch (const ArgumentError& e) {
+      return std::string(e.what()) ==
+             "volume: holds 1000 voxels, but its dims 16 x 16 x 16 need 4096 (its data() was "
+             "resized apart from its dims)";
+    }
+    return false;
+  };
+  EXPECT_TRUE(refused([&] { render_reference(vol, opt); }));
+  EXPECT_TRUE(refused([&] { make_view(vol, opt.view, 16, 16, Sampling::voxel); }));
+  const ViewGeometry view = make_view(shepp_logan(16, 2), opt.view, 16, 16, Sampling::voxel);
+  EXPECT_TRUE(refused([&] { shade(vol, view, ShadeParams{}); }));
+  EXPECT_TRUE(refused([&] { make_shade_frame(vol, view, ShadeParams{}, ValueRange{0, 1}); }));
+  EXPECT_TRUE(refused(
+      [&] { classify(vol, std::vector<ShadeSample>(1000), classifier_preset("ct"), 1.0); }));
+  vol.set_orientation("RAS");
+  EXPECT_TRUE(refused([&] { reorient(vol, "LPS"); }));
+  vol.data().resize(4096);
+  EXPECT_NO_THROW(render_reference(vol, opt));
+}
+
+// serial(): what tells a RenderEngine's kept layout one volume from another.
+TEST(Render, VolumeSerialIsNewForEveryVolumeAndCopy) {
+  Volume a = shepp_logan(8, 2);
+  const std::uint64_t sa = a.serial();
+  Volume b = a;  // a copy: its own
+  EXPECT_NE(b.serial(), sa);
+  EXPECT_EQ(a.serial(), sa);
+  const std::uint64_t sb = b.serial();
+  b = a;  // assigned a copy: a new one
+  EXPECT_NE(b.serial(), sb);
+  EXPECT_NE(b.serial(), sa);
+  Volume c = std::move(a);  // moved: the serial goes with the voxels
+  EXPECT_EQ(c.serial(), sa);
+  EXPECT_NE(a.serial(), sa);
+  Volume d;
+  d = std::move(c);
+  EXPECT_EQ(d.serial(), sa);
+  EXPECT_NE(c.serial(), sa);
+  EXPECT_NE(Volume().serial(), Volume().serial());
 }
 
 TEST(Render, OpaqueVolumeShowsItsOwnColour) {

@@ -53,6 +53,21 @@ class Volume {
 
   const std::vector<float>& data() const { return data_; }
   std::vector<float>& data() { return data_; }
+  /// Throws ArgumentError (naming `argument`: "holds 1000 voxels, but its
+  /// dims 64 x 64 x 64 need 262144") where data() no longer holds
+  /// nx * ny * nz values: a vector resized by its caller was read past its
+  /// end. The renderers (make_view, render_reference, RenderEngine), shade,
+  /// classify, the layout and save_nrrd check it.
+  void check_voxel_count(const std::string& argument = "volume") const;
+
+  /// The volume's identity for the kept layout of a RenderEngine
+  /// (EngineOptions::reuse_layout): a number no other volume of the process
+  /// has had, new for every volume made or copied (a copy may be changed
+  /// apart from its original) and for one assigned a copy; a volume moved
+  /// from keeps it in its new place and takes a new one. A volume made
+  /// where an earlier one was destroyed (at its address, its voxels in the
+  /// same storage) is thus not taken for it.
+  std::uint64_t serial() const { return serial_.value(); }
 
   /// Smallest and largest finite value (computed on demand).
   ValueRange range() const;
@@ -81,6 +96,30 @@ class Volume {
   void add_companion_file(std::filesystem::path p) { companions_.push_back(std::move(p)); }
 
  private:
+  // serial(): new on every construction and copy, carried by a move.
+  class Serial {
+   public:
+    Serial() noexcept : value_(next()) {}
+    Serial(const Serial&) noexcept : value_(next()) {}
+    Serial(Serial&& o) noexcept : value_(o.value_) { o.value_ = next(); }
+    Serial& operator=(const Serial&) noexcept {
+      value_ = next();
+      return *this;
+    }
+    Serial& operator=(Serial&& o) noexcept {
+      if (this != &o) {
+        value_ = o.value_;
+        o.value_ = next();
+      }
+      return *this;
+    }
+    std::uint64_t value() const noexcept { return value_; }
+
+   private:
+    static std::uint64_t next() noexcept;
+    std::uint64_t value_;
+  };
+
   std::array<int64_t, 3> dims_{0, 0, 0};
   std::array<double, 3> spacing_{1.0, 1.0, 1.0};
   VoxelType type_ = VoxelType::f32;
@@ -88,6 +127,7 @@ class Volume {
   std::string orientation_;
   std::vector<std::string> notes_;
   std::vector<std::filesystem::path> companions_;
+  Serial serial_;
 };
 
 /// Whether `code` names each of the axes R/L, A/P, S/I once, in upper case
