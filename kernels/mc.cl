@@ -436,6 +436,11 @@ __kernel void simdvol_mc_alpha(__global const sv_segment* segs, const int nseg,
   walks[s] = 0;
 }
 
+/* allocation_weight (mc.hpp): an opacity in 256 steps, at least 1 */
+inline int sv_alloc_weight(const float a) {
+  return a > 0.0f ? (int)ceil(fmin(a, 1.0f) * 256.0f) : 0;
+}
+
 __kernel void simdvol_mc_allocate(__global const int* ray_off, __global const int* ray_items,
                                   const int npx, __global const float* alpha, const int budget,
                                   __global int* walks) {
@@ -443,12 +448,12 @@ __kernel void simdvol_mc_allocate(__global const int* ray_off, __global const in
   if (q >= npx) return;
   const int b = ray_off[q], e = ray_off[q + 1];
   int c = 0;
-  float A = 0.0f;
+  long W = 0;
   for (int t = b; t < e; ++t) {
     const float a = alpha[ray_items[t]];
     if (a > 0.0f) {
       ++c;
-      A += a;
+      W += sv_alloc_weight(a);
     }
   }
   if (c == 0) return; /* walks stay 0 */
@@ -456,36 +461,25 @@ __kernel void simdvol_mc_allocate(__global const int* ray_off, __global const in
     for (int t = b; t < e; ++t) walks[ray_items[t]] = alpha[ray_items[t]] > 0.0f ? 1 : 0;
     return;
   }
-  const int r = budget - c;
-  /* floors first (into walks), then the back-to-front correction, then ranks */
+  /* integers throughout (allocate_walks): floors into walks, then one more
+   * to the L largest remainders (ties: the front one) */
+  const long r = budget - c;
   long sum_f = 0;
   for (int t = b; t < e; ++t) {
-    const float a = alpha[ray_items[t]];
-    int f = 0;
-    if (a > 0.0f) f = (int)floor((float)r * a / A);
-    walks[ray_items[t]] = f;
+    const long f = r * sv_alloc_weight(alpha[ray_items[t]]) / W;
+    walks[ray_items[t]] = (int)f;
     sum_f += f;
   }
-  for (int t = e - 1; t >= b && sum_f > r; --t) {
-    const int f = walks[ray_items[t]];
-    const long d = min((long)f, sum_f - r);
-    walks[ray_items[t]] = f - (int)d;
-    sum_f -= d;
-  }
   const long L = r - sum_f;
-  /* remainders are recomputed from q (the floors above may have been lowered
-   * only when sum_f > r, in which case L == 0 and remainders are unused) */
   for (int t = b; t < e; ++t) {
     const float a = alpha[ray_items[t]];
     if (!(a > 0.0f)) continue;
-    const float qs = (float)r * a / A;
-    const float rs = qs - (float)(int)floor(qs);
+    const long rs = r * sv_alloc_weight(a) % W;
     long rank = 0;
     for (int u = b; u < e; ++u) {
       const float au = alpha[ray_items[u]];
       if (!(au > 0.0f)) continue;
-      const float qu = (float)r * au / A;
-      const float ru = qu - (float)(int)floor(qu);
+      const long ru = r * sv_alloc_weight(au) % W;
       if (ru > rs || (ru == rs && u < t)) ++rank;
     }
     walks[ray_items[t]] = 1 + walks[ray_items[t]] + (rank < L ? 1 : 0);

@@ -61,6 +61,10 @@ RaySegments ray_segments(const Matching& m, int width, int height) {
   return r;
 }
 
+int32_t allocation_weight(float alpha) {
+  return alpha > 0.0f ? static_cast<int32_t>(std::ceil(std::min(alpha, 1.0f) * 256.0f)) : 0;
+}
+
 std::vector<int32_t> allocate_walks(std::span<const float> alphas, int budget) {
   if (budget < 0) throw ArgumentError("budget", "must not be negative");
   // Opacities (an infinite or huge one gave negative walk counts, a NaN an
@@ -72,39 +76,38 @@ std::vector<int32_t> allocate_walks(std::span<const float> alphas, int budget) {
                                         std::to_string(s) + " is not a number of at most 1");
   const std::size_t S = alphas.size();
   std::vector<int32_t> n(S, 0);
+  // Integer weights (allocation_weight): exact sums, floors and remainders,
+  // the same on the device. The floats' q_s = r alpha_s / A made a last-bit
+  // difference between the device's opacities and the serial reference's a
+  // different allocation wherever sub-rays tie (a piecewise-constant
+  // phantom has many), 0.3 apart in a pixel's alpha.
   int c = 0;
-  float A = 0.0f;
+  int64_t W = 0;
   for (float a : alphas)
     if (a > 0.0f) {
       ++c;
-      A += a;
+      W += allocation_weight(a);
     }
   if (c == 0) return n;
   for (std::size_t s = 0; s < S; ++s) n[s] = alphas[s] > 0.0f ? 1 : 0;
   if (budget <= c) return n;
-  const int r = budget - c;
-  std::vector<int32_t> f(S, 0);
-  std::vector<float> rem(S, -1.0f);
+  const int64_t r = budget - c;
+  std::vector<int64_t> f(S, 0), rem(S, -1);
   int64_t sum_f = 0;
   for (std::size_t s = 0; s < S; ++s) {
     if (!(alphas[s] > 0.0f)) continue;
-    const float q = static_cast<float>(r) * alphas[s] / A;
-    f[s] = static_cast<int32_t>(std::floor(q));
-    rem[s] = q - static_cast<float>(f[s]);
+    const int64_t rw = r * allocation_weight(alphas[s]);
+    f[s] = rw / W;
+    rem[s] = rw % W;
     sum_f += f[s];
   }
-  for (std::size_t s = S; s-- > 0 && sum_f > r;) {
-    const int64_t d = std::min<int64_t>(f[s], sum_f - r);
-    f[s] -= static_cast<int32_t>(d);
-    sum_f -= d;
-  }
-  const int64_t L = r - sum_f;
+  const int64_t L = r - sum_f;  // 0 <= L < c
   for (std::size_t s = 0; s < S; ++s) {
     if (!(alphas[s] > 0.0f)) continue;
     int64_t rank = 0;  // sub-rays ahead of s: larger remainder, or equal and in front
     for (std::size_t t = 0; t < S; ++t)
       if (alphas[t] > 0.0f && (rem[t] > rem[s] || (rem[t] == rem[s] && t < s))) ++rank;
-    n[s] = 1 + f[s] + (rank < L ? 1 : 0);
+    n[s] = static_cast<int32_t>(1 + f[s] + (rank < L ? 1 : 0));
   }
   return n;
 }

@@ -25,13 +25,19 @@
 //   c == 0: every n_s = 0 (nothing can stop a walk);
 //   n <= c: n_s = 1 for s in P (then the ray takes c > n walks when n < c:
 //           the "at least one" rule wins over the budget);
-//   n >  c: r = n - c extra walks. A = sum of alpha_s over P (float, depth
-//           order), q_s = float(r) * alpha_s / A (float), f_s = floor(q_s);
-//           L = r - sum f_s walks go one each to the L sub-rays with the
-//           largest remainder q_s - f_s (ties: the front one first);
-//           n_s = 1 + f_s (+1). Sum over the ray = n exactly. (Float
-//           rounding could make sum f_s exceed r: then f_s is decreased from
-//           the back until it does not; L >= 0 always.)
+//   n >  c: r = n - c extra walks, shared by integer weights
+//           w_s = allocation_weight(alpha_s) = ceil(256 min(alpha_s, 1)), the
+//           opacity in 256 steps: W = sum of w_s over P, f_s = floor(r w_s /
+//           W), L = r - sum f_s walks go one each to the L sub-rays with the
+//           largest remainder (r w_s mod W; ties: the front one first);
+//           n_s = 1 + f_s (+1). Sum over the ray = n exactly. In integers,
+//           the device's allocation equals the reference's wherever their
+//           opacities fall in the same step: with float shares
+//           r alpha_s / A, a last-bit difference between the two engines'
+//           opacities moved walks between tied sub-rays (a
+//           piecewise-constant volume has many), 0.3 apart in a pixel's
+//           alpha. A difference across a step's edge still moves them
+//           (rarely: about 256 times the difference, per sub-ray).
 //   alpha_s <= 0: n_s = 0.
 #pragma once
 
@@ -54,6 +60,10 @@ struct RaySegments {
 };
 /// Throws ArgumentError if a non-empty segment lies outside the image.
 RaySegments ray_segments(const Matching& m, int width, int height);
+
+/// A sub-ray's weight in the allocation: its opacity in 256 steps,
+/// ceil(256 min(alpha, 1)), 1..256 for alpha > 0; 0 for alpha <= 0.
+int32_t allocation_weight(float alpha);
 
 /// The walk allocation rule of the file comment for one ray.
 std::vector<int32_t> allocate_walks(std::span<const float> alphas, int budget);
