@@ -55,10 +55,12 @@ struct Scratch {
 void validate(const EngineOptions& eo, const RenderOptions& opt) {
   validate(opt);
   pe_grid(eo.pes, "--pe");
-  if (eo.mc_allocate && eo.mc_scope != McScope::subray)
-    throw ArgumentError("--allocate", "allocates walks to sub-rays: needs --mc-scope subray");
+  // (the mode first: --composite direct --allocate asked for --mc-scope
+  // subray, which was then refused without --composite mc)
   if (eo.mc_allocate && opt.composite.mode != CompositeMode::mc)
     throw ArgumentError("--allocate", "needs --composite mc");
+  if (eo.mc_allocate && eo.mc_scope != McScope::subray)
+    throw ArgumentError("--allocate", "allocates walks to sub-rays: needs --mc-scope subray");
   if (eo.balance_sweeps < 0 || eo.balance_sweeps > kMaxBalanceSweeps)
     throw ArgumentError("--balance-sweeps", std::to_string(eo.balance_sweeps) + " is outside 0.." +
                                                 std::to_string(kMaxBalanceSweeps));

@@ -372,7 +372,10 @@ int main(int argc, char** argv) {
       ->check(decimal_integer())
       ->capture_default_str();
   render->add_option("--composite", composite, "direct, adaptive or mc")->capture_default_str();
-  render->add_option("--samples", samples, "Monte Carlo walks per ray")
+  render
+      ->add_option("--samples", samples,
+                   "Monte Carlo walks per ray (--mc-scope subray: per sub-ray, or with "
+                   "--allocate the ray's budget shared by its sub-rays)")
       ->check(decimal_integer())
       ->capture_default_str();
   render->add_option("--seed", seed, "Monte Carlo seed")
@@ -439,7 +442,8 @@ int main(int argc, char** argv) {
                    "opencl engine (and the reference's --mc-scope subray): load-balancing "
                    "sweeps after the matching (ch. 5; 0: none). "
                    "The thesis's SIMD PEs wait for the busiest; PoCL's work-items do not, so 0 "
-                   "is faster on a CPU (the same image to float rounding)")
+                   "is faster on a CPU (the same image to float rounding, but for per sub-ray "
+                   "Monte Carlo, whose sub-rays the balance cuts)")
       ->check(decimal_integer())
       ->capture_default_str();
   render->add_option("--engine", engine, "reference (serial CPU) or opencl (the PE array)")
@@ -634,9 +638,10 @@ int main(int argc, char** argv) {
           if (!applies && render->count(name) > 0)
             throw ArgumentError(name, std::string("applies only to ") + where);
       };
-      refuse_unless(opt.composite.mode == CompositeMode::mc,
-                    {"--samples", "--seed", "--streams", "--exact-opacity", "--mc-scope"},
-                    "--composite mc");
+      refuse_unless(
+          opt.composite.mode == CompositeMode::mc,
+          {"--samples", "--seed", "--streams", "--exact-opacity", "--mc-stratified", "--mc-scope"},
+          "--composite mc");
       refuse_unless(opt.composite.mode == CompositeMode::adaptive, {"--threshold"},
                     "--composite adaptive");
       // The reference's per sub-ray Monte Carlo cuts the rays at the PE

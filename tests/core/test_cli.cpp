@@ -1064,6 +1064,13 @@ TEST_F(Cli, BadArgumentsFailClearly) {
       {"render --engine reference --trace " + path("t.json") + " -o " + path("x.png"), "--trace"},
       {"render --trace " + path("no/t.json") + " -o " + path("x.png"), "--trace"},
       {"render --composite mc --mc-stratified -o " + path("x.png"), "--mc-stratified"},
+      // (with direct or adaptive compositing it was taken and did nothing)
+      {"render --exact-opacity --mc-stratified -o " + path("x.png"),
+       "--exact-opacity: applies only to --composite mc"},
+      {"render --composite adaptive --mc-stratified -o " + path("x.png"),
+       "--mc-stratified: applies only to --composite mc"},
+      {"render --composite direct --allocate -o " + path("x.png"),
+       "--allocate: needs --composite mc"},
       {"render --engine reference --composite mc --mc-scope subray --layout hierarchical -o " +
            path("x.png"),
        "--layout: applies only to --engine opencl"},
