@@ -98,7 +98,8 @@ constexpr const char* kUsage =
     "                             [--pes P] [--no-opencl] [--no-brute-force] [--no-matched]\n"
     "                             [--pixel-centre C] [--json FILE] [--write-images DIR] [--quick]\n"
     "  sizes: 8..4096; runs: 0..1000 (0: the warm-up render only); F: 1..720 frames;\n"
-    "  K: 0..3; P: a power of two in 1..1048576; C: 0..1 (pixels)\n";
+    "  K: 0..3; P: a power of two in 1..1048576; C: 0..1 (pixels); FILE: brainsmall.den\n"
+    "  (default: in $SIMDVOL_DATA_DIR where set, else in the source tree's data/)\n";
 
 // Times `render` (returning an image): one warm-up call (its time kept as
 // the cold time, its image returned), then `runs` timed calls.
@@ -120,7 +121,7 @@ Image timed(Row& row, int runs, const std::function<Image()>& render) {
 
 int main(int argc, char** argv) try {
   simdvol::remove_temporary_files_on_signals();
-  std::filesystem::path data = std::filesystem::path(SIMDVOL_DATA_DIR) / "brainsmall.den";
+  std::filesystem::path data = simdvol::bench::data_dir() / "brainsmall.den";
   std::vector<int> sizes{256, 512};
   int runs = 5, ref_runs = 3, bf_runs = 2, frames = 1, order = 3, cl_order = 1;
   int64_t pes = 8192;

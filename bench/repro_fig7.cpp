@@ -39,6 +39,7 @@
 #include <vector>
 
 #include "bench_args.hpp"
+#include "bench_common.hpp"
 #include "simdvol/classify.hpp"
 #include "simdvol/device.hpp"
 #include "simdvol/io.hpp"
@@ -53,10 +54,6 @@
 #include "simdvol/shade.hpp"
 #include "simdvol/stages.hpp"
 #include "simdvol/view.hpp"
-
-#ifndef SIMDVOL_DATA_DIR
-#define SIMDVOL_DATA_DIR "data"
-#endif
 
 using namespace simdvol;
 using simdvol::bench::Args;
@@ -178,13 +175,14 @@ constexpr const char* kUsage =
     "usage: simdvol-repro-fig7 --out DIR [--brain PATH] [--pes P] [--size N]\n"
     "                          [--view theta,phi,varphi] [--seed S] [--order K]\n"
     "  P: a power of two in 1..1048576; N: 8..1024 (the N^3 phantom); view: three angles\n"
-    "  in -360..360 (degrees); S: 0..18446744073709551615; K: 0..3\n";
+    "  in -360..360 (degrees); S: 0..18446744073709551615; K: 0..3; PATH: brainsmall.den\n"
+    "  (default: in $SIMDVOL_DATA_DIR where set, else in the source tree's data/)\n";
 
 }  // namespace
 
 int main(int argc, char** argv) try {
   simdvol::remove_temporary_files_on_signals();
-  std::filesystem::path out, brain = std::filesystem::path(SIMDVOL_DATA_DIR) / "brainsmall.den";
+  std::filesystem::path out, brain = simdvol::bench::data_dir() / "brainsmall.den";
   int64_t pes = 8192;
   int size = 256, order = 1;
   uint64_t seed = 1;

@@ -136,7 +136,8 @@ constexpr const char* kUsage =
     "auto`:\n"
     "    ct for Hounsfield data, mri otherwise); --volume-index N: volume N of each 4-D file\n"
     "    given (NIfTI, NRRD, MetaImage, MGH, MINC, a DICOM series of time points), its cases\n"
-    "    named FILE@N\n"
+    "    named FILE@N (files of one name by their directories too); brainsmall and ch2 are\n"
+    "    looked for in --data DIR, else $SIMDVOL_DATA_DIR where set, else the source tree's data/\n"
     "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNx (exact opacity), mcNs (exact\n"
     "    opacity, stratified picks), each with sub for per sub-ray (mcNsub, mcNxsub, mcNssub)\n";
 
@@ -158,7 +159,7 @@ struct Options {
   int volpack_runs = 2;    // brute-force renders (slow)
   int reference_runs = 2;  // timed after a warm-up (time_warm)
   std::vector<int64_t> scaling;
-  std::filesystem::path data = SIMDVOL_BENCH_DATA_DIR;
+  std::filesystem::path data = data_dir();  // $SIMDVOL_DATA_DIR, else the source tree's data/
   std::optional<std::filesystem::path> json;
   std::optional<int64_t> volume_index;  // of the volume files given (4-D)
   bool child = false;                   // a --scaling child: no peers, no triad
