@@ -195,10 +195,9 @@ int main(int argc, char** argv) try {
   // Nor the files read beside it (--json x.raw replaced the voxels of the
   // x.nhdr given as --data).
   if (json) {
-    std::vector<std::filesystem::path> inputs = vol.companion_files();
-    inputs.push_back(data);
+    const simdvol::ReadFiles read = simdvol::read_files(vol, data);
     try {
-      simdvol::check_not_an_input(*json, inputs, simdvol::dicom_series_dir(data), "--json");
+      simdvol::check_not_an_input(*json, read.files, read.dicom_dir, "--json");
     } catch (const ArgumentError& e) {
       return argument_error("simdvol-bench-volpack", e, kUsage);
     }

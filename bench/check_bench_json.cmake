@@ -297,12 +297,19 @@ if(DEFINED SIMDVOL)
   # given those with --no-reference and --no-volpack, and refused them
   # after every case had run).
   file(REMOVE ${OUT})
+  file(GLOB scratch_before LIST_DIRECTORIES true /tmp/simdvol-bench-*)
   execute_process(COMMAND ${BENCH} --volumes ${vol} --sizes 32 --pes 64 --compositing direct
                           --repeat 1 --turntable 0 --reference-runs 1 --volpack-runs 1
                           --scaling 1,2 --json ${OUT}
                   RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
   if(NOT rc EQUAL 0)
     message(FATAL_ERROR "--scaling with --reference-runs: exit ${rc}:\n${out}\n${err}")
+  endif()
+  # The children's directory removed (it was left where a child failed).
+  file(GLOB scratch_after LIST_DIRECTORIES true /tmp/simdvol-bench-*)
+  list(REMOVE_ITEM scratch_after ${scratch_before} "")
+  if(scratch_after)
+    message(FATAL_ERROR "--scaling left its children's directory: ${scratch_after}")
   endif()
   file(READ ${OUT} text)
   get(t2 scaling 0 stages wall t2)

@@ -1233,9 +1233,8 @@ int main(int argc, char** argv) {
       // other half, a DICOM series' slices): --json x.raw replaced the voxels
       // of the x.nhdr the run read with its JSON.
       if (o.json) {
-        std::vector<std::filesystem::path> inputs = L.vol->companion_files();
-        inputs.push_back(L.spec.file);
-        check_not_an_input(*o.json, inputs, dicom_series_dir(L.spec.file), "--json");
+        const ReadFiles read = read_files(*L.vol, L.spec.file);
+        check_not_an_input(*o.json, read.files, read.dicom_dir, "--json");
       }
       std::printf("volume %-12s %lldx%lldx%lld, classifier %s (%.0f ms to %s)\n", name.c_str(),
                   static_cast<long long>(L.vol->nx()), static_cast<long long>(L.vol->ny()),

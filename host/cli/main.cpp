@@ -676,8 +676,12 @@ int main(int argc, char** argv) {
       // A turntable writes the numbered names, not -o's: each is checked
       // before the first frame, so that none is replaced before one that
       // cannot be written stops the run.
-      for (int f = 0; f < frames; ++f) check_output_path(numbered(outp, f, frames), "-o");
       check_image_extension(outp);
+      {
+        std::vector<fs::path> outputs;
+        for (int f = 0; f < frames; ++f) outputs.push_back(numbered(outp, f, frames));
+        check_output_paths(outputs, "-o");
+      }
       const fs::path tracep = trace;
       if (render->count("--trace") > 0) {
         check_output_path(tracep, "--trace");
@@ -710,17 +714,12 @@ int main(int argc, char** argv) {
       // series), the files its loader read beside it (a pair's other half,
       // a detached header's data files), or the --classify file.
       {
-        std::vector<fs::path> inputs = vol.companion_files();
-        fs::path dicom_dir;
-        if (!rv.path.empty()) {
-          const fs::path vp = rv.path;
-          inputs.push_back(vp);
-          if (rv.kind() == VolumeFileKind::dicom) dicom_dir = dicom_series_dir(vp);
-        }
-        if (std::error_code ec; fs::is_regular_file(classify, ec)) inputs.push_back(classify);
+        ReadFiles read = read_files(vol, rv.path);
+        if (std::error_code ec; fs::is_regular_file(classify, ec)) read.files.push_back(classify);
         for (int f = 0; f < frames; ++f)
-          check_not_an_input(numbered(outp, f, frames), inputs, dicom_dir, "-o");
-        if (render->count("--trace") > 0) check_not_an_input(tracep, inputs, dicom_dir, "--trace");
+          check_not_an_input(numbered(outp, f, frames), read.files, read.dicom_dir, "-o");
+        if (render->count("--trace") > 0)
+          check_not_an_input(tracep, read.files, read.dicom_dir, "--trace");
       }
       if (classify == "auto") classify = vol.range().min < -500.0f ? "ct" : "mri";
       // A preset's name is the preset, even where a file of that name lies

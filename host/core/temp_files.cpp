@@ -128,6 +128,13 @@ void TempFile::fail(const std::string& problem) {
   throw FileError(named_, problem + file_size_limit_note());
 }
 
+int TempFile::remove() noexcept {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  done_ = true;
+  return ::unlink(path_.c_str()) == 0 ? 0 : errno;
+}
+
 void TempFile::commit() {
   if (::fsync(fd_) != 0 && errno != EINVAL) {
     const int e = errno;

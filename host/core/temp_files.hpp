@@ -54,6 +54,10 @@ class TempFile {
   void commit();
   /// Removes the file and throws FileError(named, problem + the note).
   [[noreturn]] void fail(const std::string& problem);
+  /// Closes and removes the file (a probe's: output_checks); 0, or the
+  /// errno of the failed unlink (the file then stays: a directory made
+  /// append-only, chattr +a).
+  int remove() noexcept;
 
  private:
   std::filesystem::path target_, named_, path_;

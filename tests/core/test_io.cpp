@@ -5,6 +5,9 @@
 #include <metaImage.h>
 #include <zlib.h>
 
+#include <fcntl.h>
+#include <linux/fs.h>
+#include <sys/ioctl.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
 
@@ -30,6 +33,7 @@
 #include <unistd.h>
 
 #include "../../host/core/child_read.hpp"
+#include "../../host/core/output_checks.hpp"
 #include "../../host/core/temp_files.hpp"
 #include "dicom_testing.hpp"
 #include "simdvol/error.hpp"
@@ -843,6 +847,85 @@ TEST_F(IoTest, ImageWritersWriteUnderAUmaskThatClosesTheFile) {
   std::set<std::string> names;
   for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
   EXPECT_EQ(names.size(), 6u);  // no temporary file left
+}
+
+// The output rule (host/core/output_checks.hpp) refuses before the work
+// what the write would fail on after it: a directory no file can be made
+// in, one whose files cannot be replaced (append-only), a file a rename
+// cannot replace (immutable, another user's in a sticky directory); and
+// its probe leaves nothing behind. Each of these ran a whole render and
+// then failed at the rename (append-only: leaving the probe's file and the
+// render's temporary file behind).
+TEST_F(IoTest, OutputChecksRefuseWhatTheWriteCouldNotReplace) {
+  const auto problem = [](const fs::path& p) -> std::string {
+    try {
+      simdvol::check_output_path(p, "-o");
+    } catch (const simdvol::ArgumentError& e) {
+      return e.what();
+    }
+    return std::string();
+  };
+  const auto entries = [](const fs::path& d) {
+    std::set<std::string> names;
+    for (const auto& e : fs::directory_iterator(d)) names.insert(e.path().filename().string());
+    return names;
+  };
+  // A good directory: accepted, nothing left; a missing one named.
+  EXPECT_EQ(problem(file("out.png")), "");
+  EXPECT_TRUE(entries(dir_).empty());
+  EXPECT_NE(problem(file("no/out.png")).find("does not exist"), std::string::npos);
+  // /proc: access(2) says yes to root, but no file can be made there.
+  EXPECT_NE(problem("/proc/simdvol-out.png").find("cannot create a temporary file in /proc"),
+            std::string::npos);
+  // Inode flags (chattr; root with CAP_LINUX_IMMUTABLE, on a file system
+  // that keeps them: each part runs where the flag could be set).
+  const auto set_flags = [](const fs::path& p, long flags, bool directory) {
+    const int fd = ::open(p.c_str(), O_RDONLY | (directory ? O_DIRECTORY : 0));
+    if (fd < 0) return false;
+    long old = 0;
+    const bool ok = ::ioctl(fd, FS_IOC_GETFLAGS, &old) == 0 &&
+                    ::ioctl(fd, FS_IOC_SETFLAGS,
+                            &(old = (old & ~(FS_APPEND_FL | FS_IMMUTABLE_FL)) | flags)) == 0;
+    ::close(fd);
+    return ok;
+  };
+  fs::create_directory(file("appendonly"));
+  int flagged = 0;
+  if (set_flags(file("appendonly"), FS_APPEND_FL, true)) {
+    ++flagged;
+    EXPECT_NE(problem(file("appendonly/out.png")).find("is append-only"), std::string::npos);
+    EXPECT_TRUE(entries(file("appendonly")).empty());  // no probe left
+    set_flags(file("appendonly"), 0, true);
+  }
+  std::ofstream(file("immutable.png")) << "keep";
+  if (set_flags(file("immutable.png"), FS_IMMUTABLE_FL, false)) {
+    ++flagged;
+    EXPECT_NE(problem(file("immutable.png")).find("immutable"), std::string::npos);
+    set_flags(file("immutable.png"), 0, false);
+  }
+  if (::geteuid() == 0) {
+    EXPECT_EQ(flagged, 2) << "chattr's flags could not be set here: those parts did not run";
+    // Root's file in a sticky directory, for nobody: the rename would be
+    // refused (EPERM); nobody's own name there is fine.
+    fs::create_directory(file("sticky"));
+    fs::permissions(dir_, fs::perms::all);
+    ::chmod(file("sticky").c_str(), 01777);
+    std::ofstream(file("sticky/root.png")) << "keep";
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      if (::setgid(65534) != 0 || ::setuid(65534) != 0) ::_exit(2);
+      const bool refused = problem(file("sticky/root.png")).find("sticky") != std::string::npos;
+      const bool mine = problem(file("sticky/mine.png")).empty();
+      ::_exit(refused && mine ? 0 : 1);
+    }
+    int status = 0;
+    ASSERT_EQ(::waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFEXITED(status)) << status;
+    ASSERT_NE(WEXITSTATUS(status), 2) << "could not become nobody";
+    EXPECT_EQ(WEXITSTATUS(status), 0);
+    EXPECT_EQ(entries(file("sticky")), std::set<std::string>{"root.png"});
+  }
 }
 
 TEST_F(IoTest, WritersWriteThroughSymbolicLinks) {

@@ -161,8 +161,9 @@ TEST(Mc, DroppingTransparentSamplesChangesNothingButTheDraws) {
 TEST(Allocation, KnownCases) {
   EXPECT_EQ(allocate_walks(std::vector<float>{0.5f, 0.0f, 0.25f, 0.25f}, 7),
             (std::vector<int32_t>{3, 0, 2, 2}));
-  // q = 7 * {0.1, 0.2, 0.3} / 0.6 = {1.17, 2.33, 3.5}: floors 1, 2, 3; one
-  // more to the largest remainder (0.5).
+  // Weights ceil(256 alpha) = {26, 52, 77}, W = 155; r = 7: 7 w / W =
+  // {1.17, 2.35, 3.48}, floors 1, 2, 3, remainders 7 w mod W = {27, 54, 74};
+  // one more to the largest.
   EXPECT_EQ(allocate_walks(std::vector<float>{0.1f, 0.2f, 0.3f}, 10),
             (std::vector<int32_t>{2, 3, 5}));
   // Equal remainders: the front one first.
