@@ -64,9 +64,12 @@ void communication(const Frame& f, int64_t pes, SwapLayout layout) {
   const PeGrid grid = pe_grid(pes);
   const SwapPlan plan = plan_swap(m.rects, split, view, grid, layout);
   const SwapCost c = swap_cost(plan, split, view, grid);
-  std::printf("\ncommunication: %s -> %dx%d (%s sampling, intermediate %dx%d), %lld PEs, %s\n",
-              f.name.c_str(), f.size, f.size, f.sampling == Sampling::voxel ? "voxel" : "pixel",
-              view.width(), view.height(), static_cast<long long>(pes), swap_layout_name(layout));
+  std::printf(
+      "\ncommunication: %s -> %dx%d (%s sampling, intermediate %dx%d), view (%g, %g, %g), %lld "
+      "PEs, %s\n",
+      f.name.c_str(), f.size, f.size, f.sampling == Sampling::voxel ? "voxel" : "pixel",
+      view.width(), view.height(), f.view.theta, f.view.phi, f.view.varphi,
+      static_cast<long long>(pes), swap_layout_name(layout));
   std::printf("stage bit  dist  moved_px   moved_MB  max_sent  max_held  max_kept  mean_held\n");
   for (int k = 0; k < plan.stages(); ++k) {
     const SwapStageCost& s = c.stages[static_cast<std::size_t>(k)];
@@ -87,6 +90,24 @@ void communication(const Frame& f, int64_t pes, SwapLayout layout) {
       static_cast<long long>(split.cell[0]), static_cast<long long>(split.cell[1]),
       static_cast<long long>(split.cell[2]), view.step, c.cell_section, c.swaps_x, c.swaps_y,
       c.bound_sum(), c.bound_printed(), double(c.max_pe_sent) / c.bound_sum());
+  // The thesis's other claim: S "may be used to estimate the maximum number
+  // of data a processor could ever have". S is the cell's largest cross
+  // section; what a PE holds is its cell's projection (at most
+  // sqrt(a^2 b^2 + b^2 c^2 + c^2 a^2), the largest shadow of an a x b x c
+  // box) in a bounding rectangle: at an oblique view it can pass S.
+  int64_t held = 0;
+  int at = 0;
+  for (int k = 0; k < plan.stages(); ++k)
+    if (c.stages[static_cast<std::size_t>(k)].max_held > held)
+      held = c.stages[static_cast<std::size_t>(k)].max_held, at = k;
+  const double a = double(split.cell[0]), b = double(split.cell[1]), d = double(split.cell[2]);
+  const double shadow =
+      std::sqrt(a * a * b * b + b * b * d * d + d * d * a * a) / (view.step * view.step);
+  std::printf(
+      "held: the most one PE holds is %lld px (stage %d) = %.2f S: the estimate S %s at this "
+      "view; the cell's largest projection is %.1f px = %.2f S\n",
+      static_cast<long long>(held), at, double(held) / c.cell_section,
+      double(held) <= c.cell_section ? "holds" : "does NOT hold", shadow, shadow / c.cell_section);
 }
 
 // The swap stages alone with level buffers allocated once (no first-touch
@@ -253,9 +274,10 @@ int main(int argc, char** argv) {
                         256,
                         Sampling::voxel,
                         {0, 30, 0}});
+    // (the oblique view too: the estimate S of what a PE holds, which holds
+    // at (0, 30, 0), does not there)
     for (const Frame& f : frames)
-      if (f.view.theta == 0 && !(f.size == 512 && f.sampling == Sampling::voxel))
-        communication(f, pes, layout);
+      if (!(f.size == 512 && f.sampling == Sampling::voxel)) communication(f, pes, layout);
     if (comm_only) return 0;
 
     Device dev;
