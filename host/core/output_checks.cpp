@@ -65,12 +65,12 @@ std::string dir_problem(const fs::path& dir) {
 // (even root's rename fails), or another user's file in a sticky directory
 // such as /tmp (only its owner, the directory's or root may replace it).
 std::string target_problem(const fs::path& target, const fs::path& dir) {
-  struct stat d {
-  }, t{};
+  struct stat t = {};
   if (::stat(target.c_str(), &t) != 0) return std::string();
   if (inode_flags(target, false) & (FS_IMMUTABLE_FL | FS_APPEND_FL))
     return "it is immutable or append-only (chattr): it cannot be replaced";
   const uid_t me = ::geteuid();
+  struct stat d = {};
   if (::stat(dir.c_str(), &d) == 0 && (d.st_mode & S_ISVTX) && me != 0 && d.st_uid != me &&
       t.st_uid != me)
     return "it belongs to another user in the sticky directory " + dir.string() +
