@@ -61,7 +61,8 @@ void print_report(std::ostream& os, const MismatchReport& r) {
   print_stats(os, r.shear);
   print_stats(os, r.floor);
   print_stats(os, r.nearest);
-  if (r.nearest.max > 0 && r.nearest.mean > 0)
+  // (not a ratio of rounding noise: at 90 degrees both are about 1e-16)
+  if (r.nearest.max > 1e-9 && r.nearest.mean > 1e-9)
     os << "  shear max / nearest max = " << fmt("%.3f", r.shear.max / r.nearest.max)
        << ", shear mean / nearest mean = " << fmt("%.3f", r.shear.mean / r.nearest.mean) << "\n";
 }
