@@ -162,10 +162,13 @@ void print_info(std::ostream& os, const fs::path& path, const Volume& vol) {
     std::size_t from = 0;
     for (double q : {0.01, 0.5, 0.99}) {
       const auto k = static_cast<std::size_t>(q * static_cast<double>(sorted.size() - 1));
-      std::nth_element(sorted.begin() + static_cast<std::ptrdiff_t>(from),
-                       sorted.begin() + static_cast<std::ptrdiff_t>(k), sorted.end());
+      // (a rank already selected, as 1 of 3 values gives twice, is in place:
+      // nth_element with its nth before its first was undefined)
+      if (k >= from)
+        std::nth_element(sorted.begin() + static_cast<std::ptrdiff_t>(from),
+                         sorted.begin() + static_cast<std::ptrdiff_t>(k), sorted.end());
       os << " p" << static_cast<int>(q * 100) << "=" << sorted[k];
-      from = k + 1;
+      from = std::max(from, k + 1);
     }
     os << "\n";
   }

@@ -956,6 +956,16 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
     // A multi-frame file that gives no frame positions: its frames as
     // stored, its z spacing GDCM's.
     for (const Frame& f : frames) chosen.push_back(&f);
+    // One slice: its thickness along z, as a mosaic's (GDCM gives 1 where
+    // the file has no Spacing Between Slices, and `info` printed that 1
+    // for a CT slice 5 mm thick).
+    if (frames.size() == 1 && slices.size() == 1) {
+      const gdcm::DataSet& ds = slices.front().reader->GetFile().GetDataSet();
+      std::vector<double> dz = numbers(ds, kSpacingBetweenSlices);
+      if (dz.size() != 1 || !(dz[0] > 0) || !std::isfinite(dz[0]))
+        dz = numbers(ds, kSliceThickness);
+      if (dz.size() == 1 && dz[0] > 0 && std::isfinite(dz[0])) spacing[2] = dz[0];
+    }
   } else {
     std::vector<const Frame*> order;
     for (const Frame& f : frames) order.push_back(&f);

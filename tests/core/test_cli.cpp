@@ -897,6 +897,11 @@ TEST_F(Cli, SingleFrameKeepsNoClassification) {
   const std::vector<FrameNote> n = frame_notes(r.output);
   ASSERT_EQ(n.size(), 1u) << r.output;
   EXPECT_FALSE(n[0].kept || n[0].let_go) << r.output;
+  // The engine fuses shade and classify: one figure, not "shade 0 ms"; a
+  // direct frame lists its swap's launches.
+  EXPECT_NE(r.output.find("shade + classify (one kernel) "), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("shade 0 ms"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(" ms ("), std::string::npos) << r.output;
 }
 
 // Out of memory is an error naming the buffer, with exit code 1 and no
@@ -1792,6 +1797,26 @@ TEST_F(Cli, CompareSaysWhenOneImageHasNoAlpha) {
     EXPECT_EQ(r.code, 0) << r.output;
     EXPECT_EQ(r.output.find("note:"), std::string::npos) << r.output;
   }
+}
+
+// psnr_db is over RGB and max_abs_diff over RGBA: two images that differ in
+// alpha alone printed "psnr_db inf" beside a difference, with no word.
+TEST_F(Cli, CompareSaysWhenOnlyAlphaDiffers) {
+  simdvol::Image a(4, 3), b(4, 3);
+  for (simdvol::Rgba& p : a.pixels()) p = {0.2f, 0.1f, 0.05f, 0.5f};
+  b = a;
+  b.pixels()[5].a = 0.75f;
+  simdvol::write_image(a, path("c.tif"));
+  simdvol::write_image(b, path("d.tif"));
+  const Result r = run("compare " + path("c.tif") + " " + path("d.tif"));
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("psnr_db inf\nmax_abs_diff 0.25\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("note: the colours are equal (psnr_db, over RGB, is inf); the images "
+                          "differ in alpha alone, by up to 0.25"),
+            std::string::npos)
+      << r.output;
+  const Result same = run("compare " + path("c.tif") + " " + path("c.tif"));
+  EXPECT_EQ(same.output.find("note:"), std::string::npos) << same.output;
 }
 
 // --sampling pixel at an image much larger than the volume: a note before

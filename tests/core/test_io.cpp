@@ -2368,6 +2368,15 @@ TEST(IoReal, DicomPydicomFiles) {
     EXPECT_EQ(v.at(61, 63, 0), 1369.0f);  // arr[-1, -3:] == (1369, 1129, 862)
     EXPECT_EQ(v.at(62, 63, 0), 1129.0f);
     EXPECT_EQ(v.at(63, 63, 0), 862.0f);
+    // One slice: its Slice Thickness (0018,0050) 0.8 along z, not GDCM's 1.
+    EXPECT_NEAR(v.spacing()[2], 0.8, 1e-6);
+  }
+  {
+    SIMDVOL_REQUIRE_FILE(d / "ct/CT_small.dcm");
+    const Volume ct = simdvol::load_volume(d / "ct");
+    ASSERT_EQ(ct.dims(), (std::array<int64_t, 3>{128, 128, 1}));
+    EXPECT_NEAR(ct.spacing()[0], 0.661468, 1e-6);
+    EXPECT_EQ(ct.spacing()[2], 5.0);  // pydicom: ds.SliceThickness == 5.0
   }
   SIMDVOL_REQUIRE_FILE(d / "rtdose/rtdose.dcm");
   const Volume r = simdvol::load_volume(d / "rtdose/rtdose.dcm");
