@@ -54,6 +54,13 @@ std::filesystem::path data_dir() {
   return SIMDVOL_BENCH_DATA_DIR;
 }
 
+void note_brainsmall_missing(const std::string& path) {
+  std::printf(
+      "(%s not found: brainsmall skipped; scripts/fetch-data fetches it, into "
+      "$SIMDVOL_DATA_DIR where set; --brain PATH names another)\n",
+      path.c_str());
+}
+
 HostInfo host_info(const Device& device) {
   HostInfo h;
   h.cpu_model = "unknown";

@@ -43,6 +43,8 @@ double triad_gbs(std::size_t bytes);
 /// else the source tree's data/ (compiled in), so that a tool finds them
 /// from any working directory.
 std::filesystem::path data_dir();
+/// "(PATH not found: brainsmall skipped; ...)" on stdout: how to get it.
+void note_brainsmall_missing(const std::string& path);
 
 /// The machine a benchmark ran on.
 struct HostInfo {

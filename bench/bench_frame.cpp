@@ -63,6 +63,7 @@ using simdvol::bench::argument_error;
 using simdvol::bench::Clock;
 using simdvol::bench::data_dir;
 using simdvol::bench::ms_since;
+using simdvol::bench::note_brainsmall_missing;
 using simdvol::bench::time_warm;
 
 namespace {
@@ -174,10 +175,7 @@ int whole_frames(int64_t pes, int order, int runs, std::string brain) {
     brainvol = load_volume(brain);
     cases.push_back({"brainsmall -> 256^2", &*brainvol, classifier_preset("volpack"), 256});
   } else {
-    std::printf(
-        "(%s not found: brainsmall skipped; scripts/fetch-data fetches it, into "
-        "$SIMDVOL_DATA_DIR where set; --brain PATH names another)\n",
-        brain.c_str());
+    note_brainsmall_missing(brain);
   }
   for (const Case& c : cases) {
     RenderOptions opt;

@@ -257,10 +257,7 @@ int main(int argc, char** argv) {
     if (have_brain)
       brainvol = load_volume(brain);
     else
-      std::printf(
-          "(%s not found: brainsmall skipped; scripts/fetch-data fetches it, into "
-          "$SIMDVOL_DATA_DIR where set; --brain PATH names another)\n",
-          brain.c_str());
+      note_brainsmall_missing(brain);
     std::vector<Frame> frames;
     const std::string ctname = "ct-phantom-" + std::to_string(size);
     frames.push_back({ctname, &ct, classifier_preset("ct"), 256, Sampling::voxel, {0, 30, 0}});

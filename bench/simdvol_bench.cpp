@@ -142,6 +142,16 @@ constexpr const char* kUsage =
     "  compositing: direct, adaptive, mcN (N walks, whole ray), mcNx (exact opacity), mcNs (exact\n"
     "    opacity, stratified picks), each with sub for per sub-ray (mcNsub, mcNxsub, mcNssub)\n";
 
+// A volume by name, loaded once.
+struct VolumeSpec {
+  std::string name;
+  std::string classifier;      // a preset; "auto" for a file given: ct or mri once loaded
+  std::filesystem::path file;  // empty for phantoms
+  int phantom = 0;
+  bool given = false;  // a volume file named on the command line (not brainsmall or ch2)
+  std::optional<int64_t> index = std::nullopt;  // its volume, of a 4-D file (--volume-index)
+};
+
 struct Options {
   std::vector<std::string> volumes{"phantom128", "phantom256", "brainsmall", "ch2"};
   bool volumes_explicit = false;
@@ -163,6 +173,7 @@ struct Options {
   std::filesystem::path data = data_dir();  // $SIMDVOL_DATA_DIR, else the source tree's data/
   std::optional<std::filesystem::path> json;
   std::optional<int64_t> volume_index;  // of the volume files given (4-D)
+  std::vector<VolumeSpec> specs;        // the volumes, named apart (volume_specs)
   bool child = false;                   // a --scaling child: no peers, no triad
 };
 
@@ -210,16 +221,6 @@ Comp parse_comp(const std::string& s) {
                           "' is not direct, adaptive or mcN[x|s][sub] (e.g. mc16, mc16s, mc16sub: "
                           "x exact opacity, s stratified, sub per sub-ray)");
 }
-
-// A volume by name, loaded once.
-struct VolumeSpec {
-  std::string name;
-  std::string classifier;      // a preset; "auto" for a file given: ct or mri once loaded
-  std::filesystem::path file;  // empty for phantoms
-  int phantom = 0;
-  bool given = false;  // a volume file named on the command line (not brainsmall or ch2)
-  std::optional<int64_t> index = std::nullopt;  // its volume, of a 4-D file (--volume-index)
-};
 
 VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data,
                         std::optional<int64_t> index = std::nullopt) {
@@ -458,7 +459,8 @@ Options parse_args(int argc, char** argv) {
   if (turntable) o.turntable = *turntable;
   bool given = false;
   std::vector<std::filesystem::path> inputs;
-  for (const VolumeSpec& spec : volume_specs(o)) {
+  o.specs = volume_specs(o);
+  for (const VolumeSpec& spec : o.specs) {
     given = spec.given || given;
     if (!spec.file.empty()) inputs.push_back(spec.file);
   }
@@ -1206,7 +1208,7 @@ int main(int argc, char** argv) {
     // Volumes: missing files skip their cases (or fail when asked for).
     std::vector<Loaded> vols;
     json jv = json::array();
-    for (const VolumeSpec& spec : volume_specs(o)) {
+    for (const VolumeSpec& spec : o.specs) {
       Loaded L;
       L.spec = spec;
       const std::string& name = L.spec.name;

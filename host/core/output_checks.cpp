@@ -78,8 +78,13 @@ std::string target_problem(const fs::path& target, const fs::path& dir) {
   return std::string();
 }
 
-// check_output_path without the probe; returns the directory written to.
-fs::path check_output_name(const fs::path& p, const char* arg) {
+// Where an output goes: the end of its symbolic links, and its directory.
+struct Destination {
+  fs::path target, dir;
+};
+
+// check_output_path without the probe.
+Destination check_output_name(const fs::path& p, const char* arg) {
   if (p.empty()) throw ArgumentError(arg, "empty output path");
   // Where the write goes: through symbolic links (a dangling link into a
   // missing directory failed only after the render).
@@ -102,7 +107,7 @@ fs::path check_output_name(const fs::path& p, const char* arg) {
         arg, (fs::exists(dir, ec)
                   ? dir.string() + ", the directory of " + p.string() + ", is not a directory"
                   : "directory " + dir.string() + " of " + p.string() + " does not exist"));
-  return dir;
+  return {t, dir};
 }
 
 }  // namespace
@@ -116,11 +121,11 @@ void check_output_paths(const std::vector<fs::path>& paths, const char* arg) {
   // one), the rest for every name.
   std::vector<fs::path> probed;
   for (const fs::path& p : paths) {
-    const fs::path dir = check_output_name(p, arg);
-    std::string problem = target_problem(write_target(p), dir);
-    if (problem.empty() && std::find(probed.begin(), probed.end(), dir) == probed.end()) {
-      problem = dir_problem(dir);
-      probed.push_back(dir);
+    const Destination d = check_output_name(p, arg);
+    std::string problem = target_problem(d.target, d.dir);
+    if (problem.empty() && std::find(probed.begin(), probed.end(), d.dir) == probed.end()) {
+      problem = dir_problem(d.dir);
+      probed.push_back(d.dir);
     }
     if (!problem.empty()) throw ArgumentError(arg, p.string() + ": " + problem);
   }
