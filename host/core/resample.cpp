@@ -213,6 +213,7 @@ float aitken_1d(const std::vector<float>& values, double x, int order) {
 }
 
 float resample_scalar(const Volume& vol, const std::array<int64_t, 3>& fixed_pos, int order) {
+  vol.check_voxel_count();  // (a data() resized apart from its dims was read past its end)
   if (vol.voxel_count() == 0) throw ArgumentError("volume", "volume is empty");
   switch (order) {
     case 0:

@@ -125,7 +125,10 @@ void validate(const ShadeParams& p) {
                             number_text(light) + ", beyond 1e30 (float arithmetic overflows)");
 }
 
-Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& grad_scale) {
+namespace {
+
+// gradient() without its checks: shade() walks the volume's own voxels.
+Vec3 gradient_at(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& grad_scale) {
   const std::array<int64_t, 3> i{x, y, z};
   Vec3 g{};
   for (int a = 0; a < 3; ++a) {
@@ -141,6 +144,20 @@ Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& gr
     g[a] = 0.5 * diff * grad_scale[a];
   }
   return g;
+}
+
+}  // namespace
+
+Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& grad_scale) {
+  vol.check_voxel_count();
+  const std::array<int64_t, 3> i{x, y, z};
+  for (int a = 0; a < 3; ++a)
+    if (i[a] < 0 || i[a] >= vol.dims()[a])
+      // (a voxel outside was read from outside the volume's data)
+      throw ArgumentError("xyz"[a] + std::string(), "voxel " + std::to_string(i[a]) +
+                                                        " lies outside the volume's 0 .. " +
+                                                        std::to_string(vol.dims()[a] - 1));
+  return gradient_at(vol, x, y, z, grad_scale);
 }
 
 ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const ShadeParams& p) {
@@ -212,7 +229,7 @@ std::vector<ShadeSample> shade(const Volume& vol, const ViewGeometry& view, cons
   for (int64_t z = 0; z < vol.nz(); ++z)
     for (int64_t y = 0; y < vol.ny(); ++y)
       for (int64_t x = 0; x < vol.nx(); ++x) {
-        const Vec3 g = gradient(vol, x, y, z, f.grad_scale);
+        const Vec3 g = gradient_at(vol, x, y, z, f.grad_scale);
         double g2 = dot3(g, g);
         if (!std::isfinite(g2)) g2 = 0.0;  // a NaN/inf neighbour: no surface
         const double mag = std::sqrt(g2);

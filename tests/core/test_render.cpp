@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -15,6 +16,7 @@
 #include "simdvol/match.hpp"
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
+#include "simdvol/resample.hpp"
 #include "simdvol/shade.hpp"
 #include "simdvol/view.hpp"
 
@@ -129,7 +131,14 @@ TEST(Render, VolumeResizedApartFromItsDimsIsRefused) {
       [&] { classify(vol, std::vector<ShadeSample>(1000), classifier_preset("ct"), 1.0); }));
   vol.set_orientation("RAS");
   EXPECT_TRUE(refused([&] { reorient(vol, "LPS"); }));
+  // The single-sample functions: the far corner lies past the 1000 voxels.
+  EXPECT_TRUE(refused([&] { resample_scalar_at(vol, 15.0, 15.0, 15.0, 1); }));
+  EXPECT_TRUE(refused([&] { gradient(vol, 15, 15, 15, {1, 1, 1}); }));
   vol.data().resize(4096);
+  // gradient() takes only the volume's own voxels.
+  for (const std::array<int64_t, 3>& p : {std::array<int64_t, 3>{16, 0, 0}, {0, -1, 0}, {0, 0, 16}})
+    EXPECT_THROW(gradient(vol, p[0], p[1], p[2], {1, 1, 1}), ArgumentError);
+  EXPECT_NO_THROW(gradient(vol, 15, 15, 15, {1, 1, 1}));
   EXPECT_NO_THROW(render_reference(vol, opt));
 }
 
