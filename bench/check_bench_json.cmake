@@ -341,4 +341,24 @@ if(DEFINED VOLPACK AND EXISTS "${BRAINSMALL}")
   endforeach()
   file(REMOVE ${link} ${OUT})
 endif()
+# A case that fails (an allocation failure injected into the first case's
+# cell buffer) is skipped, saying why, and the run, its JSON written, exits
+# 1 naming it (it exited 0, the run's figures looking whole).
+file(REMOVE ${OUT})
+execute_process(
+  COMMAND ${CMAKE_COMMAND} -E env "SIMDVOL_FAIL_ALLOCATION=cell buffer"
+          ${BENCH} --volumes phantom16 --sizes 32 --compositing direct --pes 64,8 --turntable 0
+          --reference-runs 1 --no-volpack --json ${OUT}
+  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL 1 OR NOT err MATCHES "1 case failed .*: phantom16/32/o1/direct/P64\n$"
+   OR NOT EXISTS ${OUT})
+  message(FATAL_ERROR "a failed case: exit ${rc}, JSON written: ${OUT}\n${out}\n${err}")
+endif()
+file(READ ${OUT} text)
+get(skip0 cases 0 skipped)
+string(JSON skip1 ERROR_VARIABLE jerr GET "${text}" cases 1 skipped)
+if(NOT skip0 MATCHES "injected by SIMDVOL_FAIL_ALLOCATION" OR NOT jerr)
+  message(FATAL_ERROR "a failed case: case 0 skipped '${skip0}', case 1 '${skip1}'")
+endif()
+file(REMOVE ${OUT})
 message(STATUS "simdvol-bench harness: ${ncases} cases checked")

@@ -68,7 +68,9 @@
 // turntable (a few minutes on 2 cores). --quick: phantom128 and brainsmall
 // to 256^2, order 1, direct, adaptive and mc8, 3 repeats (under a minute).
 // Errors: a bad option value exits 2 naming the option; a missing data file
-// skips its cases with a message, or exits 1 when --volumes named it.
+// skips its cases with a message, or exits 1 when --volumes named it. A case
+// that fails (an engine error, memory) is skipped, saying why on its line and
+// in the JSON, and the run, its JSON written, then exits 1.
 #include <fcntl.h>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -586,6 +588,7 @@ struct Harness {
   RefCache refs{2};
   json cases = json::array();
   json turntables = json::array();
+  std::vector<std::string> failed;  // cases and turntables that threw (skipped, saying why)
 
   RenderOptions render_options(const VolumeSpec& spec, int size, int order, const Comp& c,
                                ViewAngles view) const {
@@ -797,6 +800,7 @@ struct Harness {
     } catch (const std::exception& e) {
       std::printf("%-34s skipped: %s\n", id.c_str(), e.what());
       j["skipped"] = e.what();
+      failed.push_back(id);
     }
     std::fflush(stdout);
     cases.push_back(j);
@@ -867,6 +871,7 @@ struct Harness {
     } catch (const std::exception& e) {
       std::printf("turntable %s skipped: %s\n", L.spec.name.c_str(), e.what());
       j["skipped"] = e.what();
+      failed.push_back("turntable " + L.spec.name);
     }
     std::fflush(stdout);
     turntables.push_back(j);
@@ -1380,6 +1385,15 @@ int main(int argc, char** argv) {
       write_file_atomically(
           *o.json, {root.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), "\n"});
       std::printf("wrote %s\n", o.json->string().c_str());
+    }
+    // A case that threw is a failure, not a figure: a run of such cases
+    // exited 0 (a missing data file, which skips its volume, is not one).
+    if (!h.failed.empty()) {
+      std::string list;
+      for (const std::string& id : h.failed) list += (list.empty() ? "" : ", ") + id;
+      std::fprintf(stderr, "simdvol-bench: %zu case%s failed (skipped above, saying why): %s\n",
+                   h.failed.size(), h.failed.size() == 1 ? "" : "s", list.c_str());
+      return 1;
     }
   } catch (const ArgumentError& e) {
     std::fprintf(stderr, "simdvol-bench: %s\n", e.what());
