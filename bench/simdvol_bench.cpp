@@ -344,7 +344,14 @@ Options parse_args(int argc, char** argv) {
       orders = parse_int_list(next(), a, 0, 3);
     } else if (a == "--compositing") {
       comps = split_list(next(), a);
-      for (std::string& c : *comps) c = parse_comp(c).name;
+      for (std::size_t i = 0; i < comps->size(); ++i) {
+        const std::string given = (*comps)[i];
+        (*comps)[i] = parse_comp(given).name;
+        for (std::size_t k = 0; k < i; ++k)  // (mc16,mc016: "'mc16' is given twice")
+          if ((*comps)[k] == (*comps)[i] && given != (*comps)[i])
+            throw ArgumentError(
+                a, "'" + given + "' is '" + (*comps)[i] + "' again: give each compositing once");
+      }
     } else if (a == "--pes") {
       o.pes = parse_int_list(next(), a, 1, int64_t(1) << 20);
       for (int64_t p : o.pes) pe_grid(p, "--pes");
