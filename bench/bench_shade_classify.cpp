@@ -161,7 +161,7 @@ int main(int argc, char** argv) {
     const sv_shade_params sp = shade_params(make_shade_frame(vol, view, shp), shp);
     const bool relative = cls.kind == Classifier::Kind::mixture && cls.mixture.relative;
     const sv_classify_params cp =
-        classify_params(cls, relative ? vol.range() : ValueRange{}, view.step);
+        classify_params(cls, relative ? mixture_range(vol, cls.mixture) : ValueRange{}, view.step);
 
     const double triad = triad_gbs(std::size_t(256) << 20);
     std::printf("triad bandwidth (host, %u threads, 3 x 256 MiB): %.1f GB/s\n\n",

@@ -262,7 +262,9 @@ int main(int argc, char** argv) try {
     const bool need_range = d.cls.kind == Classifier::Kind::mixture && d.cls.mixture.relative;
     enqueue_shade_classify(
         device, cells, shade_params(make_shade_frame(vol, view, shp), shp),
-        classify_params(d.cls, need_range ? vol.range() : ValueRange{}, view.step), rgba);
+        classify_params(d.cls, need_range ? mixture_range(vol, d.cls.mixture) : ValueRange{},
+                        view.step),
+        rgba);
     const KdSplit& split = cells.layout().split;
     DeviceMatching dm = enqueue_match(device, view, split);
     enqueue_balance(device, dm, view, split);

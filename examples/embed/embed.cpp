@@ -168,7 +168,8 @@ int run(const std::string& dump_dir) {
     VoxelBuffer shading(VL, shade_mem.wrap());
     VoxelBuffer rgba(VL, rgba_mem.wrap());
     const sv_shade_params shade_p = shade_params(make_shade_frame(vol, view, sp), sp);
-    const sv_classify_params class_p = classify_params(cls, vol.range(), view.step);
+    const sv_classify_params class_p =
+        classify_params(cls, mixture_range(vol, cls.mixture), view.step);
     array.enqueue_layout(flat.wrap(), cells);
     enqueue_shade(device, cells, shade_p, shading);
     enqueue_classify(device, shading, class_p, rgba);

@@ -129,6 +129,9 @@ void validate(const Classifier& c) {
   }
   const auto& m = c.mixture.materials;
   if (m.empty()) throw ArgumentError("classifier", "the material mixture has no materials");
+  if (!(c.mixture.top_percentile > 0.0f && c.mixture.top_percentile <= 100.0f))
+    throw ArgumentError("classifier.top_percentile",
+                        "must lie in (0, 100] (got " + number_text(c.mixture.top_percentile) + ")");
   for (std::size_t i = 0; i < m.size(); ++i) {
     const Material& mat = m[i];
     const std::string what = "classifier.material '" + mat.name + "'";
@@ -272,6 +275,68 @@ MixturePair mixture_pair(const Material& lo, const Material& hi) {
   return q;
 }
 
+ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix) {
+  return mixture_range(vol, mix, vol.range());
+}
+
+ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix, const ValueRange& full) {
+  if (!mix.relative || !(mix.top_percentile < 100.0f)) return full;
+  if (!(mix.top_percentile > 0.0f))
+    throw ArgumentError("classifier.top_percentile",
+                        "must lie in (0, 100] (got " + number_text(mix.top_percentile) + ")");
+  vol.check_voxel_count();
+  // The foreground: finite voxels above a tenth of the range (a head's
+  // background, zeros and noise, is half of ch2 and most of brainsmall).
+  const double floor = static_cast<double>(full.min) +
+                       (static_cast<double>(full.max) - static_cast<double>(full.min)) / 10.0;
+  const auto above = [floor](float v) {
+    return std::isfinite(v) && static_cast<double>(v) > floor;
+  };
+  const double q = static_cast<double>(mix.top_percentile) / 100.0;
+  float top = full.max;
+  // Integer voxels (u8, u16, i16 files unscaled) are counted, exactly, in
+  // one pass; other values (or a count that meets a fraction) are selected.
+  bool counted = false;
+  if (full.min >= -65536.0f && full.max <= 65536.0f) {
+    const auto lo = static_cast<int64_t>(std::floor(full.min));
+    std::vector<std::size_t> count(
+        static_cast<std::size_t>(static_cast<int64_t>(std::floor(full.max)) - lo + 1), 0);
+    std::size_t n = 0;
+    counted = true;
+    for (float v : vol.data()) {
+      if (!above(v)) continue;
+      if (v != std::floor(v)) {
+        counted = false;
+        break;
+      }
+      ++count[static_cast<std::size_t>(static_cast<int64_t>(v) - lo)];
+      ++n;
+    }
+    if (counted && n > 0) {
+      const auto k = static_cast<std::size_t>(q * static_cast<double>(n - 1));
+      std::size_t seen = 0;
+      for (std::size_t b = 0; b < count.size(); ++b) {
+        seen += count[b];
+        if (seen > k) {
+          top = static_cast<float>(lo + static_cast<int64_t>(b));
+          break;
+        }
+      }
+    }
+  }
+  if (!counted) {
+    std::vector<float> fg;
+    for (float v : vol.data())
+      if (above(v)) fg.push_back(v);
+    if (!fg.empty()) {
+      const auto k = static_cast<std::size_t>(q * static_cast<double>(fg.size() - 1));
+      std::nth_element(fg.begin(), fg.begin() + static_cast<std::ptrdiff_t>(k), fg.end());
+      top = fg[k];
+    }
+  }
+  return top > full.min ? ValueRange{full.min, top} : full;
+}
+
 float mixture_range_scale(const ValueRange& range) {
   const double span = static_cast<double>(range.max) - static_cast<double>(range.min);
   return span > 0.0 ? static_cast<float>(1.0 / span) : 0.0f;
@@ -304,7 +369,7 @@ std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& sh
                         "must be positive and finite (got " + number_text(opacity_step) + ")");
   validate(c);
   const bool need_range = c.kind == Classifier::Kind::mixture && c.mixture.relative;
-  const ValueRange range = need_range ? vol.range() : ValueRange{};
+  const ValueRange range = need_range ? mixture_range(vol, c.mixture) : ValueRange{};
 
   const double step = static_cast<float>(opacity_step);
   std::vector<Rgba> out(vol.voxel_count());
@@ -361,13 +426,16 @@ Classifier classifier_preset(std::string_view name) {
                       false);
   }
   if (name == "mri") {
-    // T1-weighted head, intensities relative to the volume's range.
-    return mixture_of({{"background", 0.0f, 0.05f, 0.0f, 0.0f, 0.0f, 0.0f},
-                       {"csf", 0.15f, 0.05f, 0.3f, 0.4f, 0.8f, 0.0f},
-                       {"grey matter", 0.45f, 0.07f, 0.8f, 0.6f, 0.55f, 0.01f},
-                       {"white matter", 0.6f, 0.06f, 0.95f, 0.9f, 0.85f, 0.02f},
-                       {"fat/skin", 0.85f, 0.1f, 1.0f, 0.8f, 0.65f, 0.15f}},
-                      true);
+    // T1-weighted head, intensities relative to the volume's range, from
+    // its minimum to the 99th percentile of its foreground.
+    Classifier c = mixture_of({{"background", 0.0f, 0.05f, 0.0f, 0.0f, 0.0f, 0.0f},
+                               {"csf", 0.15f, 0.05f, 0.3f, 0.4f, 0.8f, 0.0f},
+                               {"grey matter", 0.45f, 0.07f, 0.8f, 0.6f, 0.55f, 0.01f},
+                               {"white matter", 0.6f, 0.06f, 0.95f, 0.9f, 0.85f, 0.02f},
+                               {"fat/skin", 0.85f, 0.1f, 1.0f, 0.8f, 0.65f, 0.15f}},
+                              true);
+    c.mixture.top_percentile = 99.0f;  // (the maximum left ch2 and brainsmall a dark haze)
+    return c;
   }
   if (name == "volpack") {
     // VolPack's examples/classifyvolume.c for brainsmall.den (u8 densities,
@@ -395,7 +463,10 @@ Classifier classifier_preset(std::string_view name) {
 //   gradient x y [x y ...]          opacity factor of |grad| (transfer function)
 //   color    x r g b [x r g b ...]  colour of the value (transfer function)
 //   material NAME MEAN SIGMA R G B OPACITY     (mixture; any order, sorted by mean)
-//   relative                        mixture means/sigmas are fractions of the range
+//   relative [P]                    mixture means/sigmas are fractions of the range
+//                                   (from the minimum to the P-th percentile of the
+//                                   foreground, MaterialMixture::top_percentile;
+//                                   without P the maximum)
 // A ramp directive may be repeated: its points are appended, x strictly
 // ascending across the lines. Ramp values, colours and opacities lie in
 // [0, 1]; sigma > 0; material means are distinct. Material lines and ramp
@@ -507,8 +578,14 @@ Classifier load_classifier(const std::filesystem::path& path) {
       material_lines.push_back(ps.line);
       any_material = true;
     } else if (d == "relative") {
-      if (nv != 0) ps.fail("relative takes no values");
+      if (nv > 1) ps.fail("relative takes at most one value (the top's percentile)");
       if (any_transfer) ps.fail("relative applies only to material lines");
+      if (nv == 1) {
+        const float pct = ps.number(tok[1]);
+        if (!(pct > 0.0f && pct <= 100.0f))
+          ps.fail("relative's percentile " + tok[1] + " must lie in (0, 100]");
+        c.mixture.top_percentile = pct;
+      }
       relative_line = ps.line;
     } else {
       ps.fail("unknown directive '" + d +

@@ -111,11 +111,17 @@ Classifier by_name(const std::string& name) {
   if (name == "far9") return far_pair(0x1p30f);
   if (name == "far18") return far_pair(0x1p60f);
   if (name.rfind("mix", 0) == 0) return mixture_of(std::stoi(name.substr(3)));
+  if (name == "mri-max") {  // the preset's fractions of the whole range
+    Classifier c = classifier_preset("mri");
+    c.mixture.top_percentile = 100.0f;
+    return c;
+  }
   return name == "knots" ? many_knots() : classifier_preset(name);
 }
 
 ValueRange range_for(const Classifier& c, const Volume& vol) {
-  return c.kind == Classifier::Kind::mixture && c.mixture.relative ? vol.range() : ValueRange{};
+  return c.kind == Classifier::Kind::mixture && c.mixture.relative ? mixture_range(vol, c.mixture)
+                                                                   : ValueRange{};
 }
 
 struct Case {
@@ -343,7 +349,8 @@ TEST(ClassifyKernel, OpacityStepWithinFourUlpOfTheReference) {
 }
 
 // Integer volumes holding every value of their range once (in a shuffled
-// order), with the "mri" preset's relative means (0.15, 0.45, 0.6, 0.85):
+// order), with the "mri" preset's relative means (0.15, 0.45, 0.6, 0.85) of
+// the whole range ("mri-max"; the preset's own, of its 99th percentile, too):
 // for the ranges 0 .. 255 (value 153 = 0.6), 0 .. 100 (45 = 0.45),
 // 0 .. 1000, -1000 .. 1000 and 0 .. 4095 some value lands exactly on a mean,
 // where the mixture jumps (the bracketing pair changes); a reference that
@@ -367,7 +374,8 @@ TEST(ClassifyKernel, RelativeMixtureAtTheMaterialMeans) {
     ASSERT_EQ(vol.range().max, static_cast<float>(r[1]));
     ShadeParams unlit;
     unlit.enabled = false;
-    for (int64_t pes : {1, 512}) check_case({&vol, "mri", kViews[1], pes, 1.0, unlit});
+    for (int64_t pes : {1, 512}) check_case({&vol, "mri-max", kViews[1], pes, 1.0, unlit});
+    check_case({&vol, "mri-max", kViews[2], 8});
     check_case({&vol, "mri", kViews[2], 8});
   }
 }

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <string>
 
@@ -13,6 +14,7 @@
 
 #include "simdvol/classify.hpp"
 #include "simdvol/error.hpp"
+#include "simdvol/volume.hpp"
 
 using namespace simdvol;
 
@@ -459,6 +461,60 @@ TEST(Presets, CtMaterials) {
   EXPECT_LT(classify_voxel(bone_only, {}, 40.0f, 0.0f, col), 2e-4f);
   EXPECT_EQ(classify_voxel(bone_only, {}, -100.0f, 0.0f, col), 0.0f);
   EXPECT_TRUE(classifier_preset("mri").mixture.relative);
+  EXPECT_EQ(classifier_preset("mri").mixture.top_percentile, 99.0f);
+}
+
+// mixture_range: the minimum to the top_percentile-th percentile (the lower
+// rank) of the foreground, the finite voxels above min + (max - min) / 10.
+TEST(MixtureRange, PercentileOfTheForeground) {
+  // 1000 voxels at 0, one each of 1 .. 100, one at 255: range 0 .. 255, the
+  // foreground above 25.5 is 26 .. 100 and 255 (76 voxels); the 99th
+  // percentile is rank floor(0.99 x 75) = 74 of them, 100.
+  Volume vol({1102, 1, 1}, VoxelType::u8);
+  for (int k = 1; k <= 100; ++k) vol.data()[static_cast<std::size_t>(k - 1)] = float(k);
+  vol.data()[1100] = 255.0f;
+  MaterialMixture mix;
+  mix.relative = true;
+  mix.top_percentile = 99.0f;
+  EXPECT_EQ(mixture_range(vol, mix).min, 0.0f);
+  EXPECT_EQ(mixture_range(vol, mix).max, 100.0f);
+  mix.top_percentile = 50.0f;  // rank floor(0.5 x 75) = 37: 63
+  EXPECT_EQ(mixture_range(vol, mix).max, 63.0f);
+  mix.top_percentile = 100.0f;  // the maximum
+  EXPECT_EQ(mixture_range(vol, mix).max, 255.0f);
+  mix.top_percentile = 99.0f;
+  // The same values in a float volume (selected, not counted), and with a
+  // fraction (selected): the same rank.
+  Volume f = vol;
+  f.data()[5] = 6.5f;  // below the foreground: the ranks stay
+  EXPECT_EQ(mixture_range(f, mix).max, 100.0f);
+  f.data()[60] = 60.5f;  // in it, below the rank
+  EXPECT_EQ(mixture_range(f, mix).max, 100.0f);
+  f.data()[99] = 99.5f;  // the rank's own voxel: 100 -> 99.5
+  EXPECT_EQ(mixture_range(f, mix).max, 99.5f);
+  // NaN and infinities are not voxels of the foreground.
+  f.data()[1101] = std::numeric_limits<float>::quiet_NaN();
+  f.data()[1099] = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(mixture_range(f, mix).max, 99.5f);
+  // Negative integers (i16) counted from the minimum.
+  Volume h({2001, 1, 1}, VoxelType::i16);
+  for (int k = 0; k <= 2000; ++k) h.data()[static_cast<std::size_t>(k)] = float(k - 1000);
+  // foreground above -800: -799 .. 1000 (1800), rank floor(0.99 x 1799) = 1781: 982
+  EXPECT_EQ(mixture_range(h, mix).min, -1000.0f);
+  EXPECT_EQ(mixture_range(h, mix).max, 982.0f);
+  // No foreground, or not relative: the whole range.
+  Volume flat({4, 4, 4}, VoxelType::u8);
+  std::fill(flat.data().begin(), flat.data().end(), 7.0f);
+  EXPECT_EQ(mixture_range(flat, mix).max, 7.0f);
+  mix.relative = false;
+  EXPECT_EQ(mixture_range(vol, mix).max, 255.0f);
+  mix.relative = true;
+  mix.top_percentile = 0.0f;
+  EXPECT_THROW(mixture_range(vol, mix), ArgumentError);
+  Classifier c = classifier_preset("mri");
+  c.mixture.top_percentile = 101.0f;
+  float col[3];
+  EXPECT_THROW(classify_voxel(c, {0, 1}, 0.5f, 0.0f, col), ArgumentError);
 }
 
 // -------------------------------------------------------------- file format
@@ -549,7 +605,11 @@ TEST_F(ClassifierFile, RejectsEachMalformedCaseWithItsLine) {
   // to [0, 1], the means and sigmas are not scaled): checked as well.
   expect_error("relative\nmaterial a 0 1e-30 1 1 1 0.5\nmaterial b 1 0.1 1 1 1 0.5\n",
                {"line 2", "sigma 1e-30 of 'a' is too small for float arithmetic"});
-  expect_error("relative 1\n", {"line 1", "no values"});
+  expect_error("relative 99 1\nmaterial a 0 1 1 1 1 0.5\n", {"line 1", "at most one value"});
+  expect_error("relative 0\nmaterial a 0 1 1 1 1 0.5\n",
+               {"line 1", "percentile 0 must lie in (0, 100]"});
+  expect_error("relative 100.5\nmaterial a 0 1 1 1 1 0.5\n", {"line 1", "(0, 100]"});
+  expect_error("relative x\nmaterial a 0 1 1 1 1 0.5\n", {"line 1", "'x' is not a number"});
   expect_error("relative\ndensity 0 0 1 1\n", {"line 1", "relative"});
   expect_error("density 0 nan\n", {"line 1", "nan"});
   expect_error("# only a comment\n\n", {"no directives"});

@@ -164,6 +164,7 @@ class Material:
 class Mixture:
     materials: list
     relative: bool = False
+    percentile: float = 100.0   # 'relative P': the top, a percentile of the foreground
 
 
 @dataclass
@@ -182,7 +183,7 @@ class Ramps:
 def load_classifier(path):
     """DOC README: 'material NAME MEAN SIGMA R G B OPACITY', 'relative', or
     'density x y ...', 'gradient x y ...', 'color x r g b ...'; '#'."""
-    mats, rel, ramps = [], False, Ramps()
+    mats, rel, pct, ramps = [], False, 100.0, Ramps()
     for line in open(path):
         line = line.split('#', 1)[0].split()
         if not line:
@@ -192,6 +193,8 @@ def load_classifier(path):
             mats.append(Material(n, float(m), float(s), (float(r), float(g), float(b)), float(a)))
         elif line[0] == 'relative':
             rel = True
+            if len(line) > 1:
+                pct = float(line[1])
         elif line[0] in ('density', 'gradient'):
             v = [float(x) for x in line[1:]]
             getattr(ramps, line[0]).extend(zip(v[0::2], v[1::2]))
@@ -202,7 +205,7 @@ def load_classifier(path):
             raise ValueError(line)
     if mats:
         mats.sort(key=lambda m: m.mean)
-        return Mixture(mats, rel)
+        return Mixture(mats, rel, pct)
     return ramps
 
 
@@ -236,6 +239,14 @@ def classify(vol, mix, gmag=None, ends='held'):
         return alpha, C
     if mix.relative:
         lo, hi = v.min(), v.max()
+        if mix.percentile < 100:
+            # DOC README "Transfer-function files": 'relative P' takes the
+            # range from the minimum to the P-th percentile (the lower rank)
+            # of the foreground, the finite voxels above min + (max - min) / 10
+            fg = np.sort(v[np.isfinite(v) & (v > lo + (hi - lo) / 10.0)])
+            if fg.size:
+                top = fg[int(mix.percentile / 100.0 * (fg.size - 1))]
+                hi = top if top > lo else hi
         I = (v - lo) / (hi - lo) if hi > lo else np.zeros_like(v)
     else:
         I = v

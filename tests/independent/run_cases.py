@@ -229,6 +229,10 @@ material white      0.6  0.06  0.95 0.9 0.85 0.04
 material skin       0.85 0.1   1 0.8 0.65  0.2
 """
 
+# the same materials of the range up to the 99th percentile of the
+# foreground (the "mri" preset's rule; 'relative 99')
+MAT_BRAIN99 = MAT_BRAIN.replace('relative\n', 'relative 99\n', 1)
+
 # README "Transfer-function files": VolPack's example, verbatim
 TF_BRAIN = """# VolPack's example: opacity = density ramp x gradient ramp, white
 density  0 0   24 1   255 1
@@ -261,13 +265,15 @@ def write_inputs():
     b.astype('<i2').tofile(os.path.join(WORK, 'b.raw'))
     c.astype('<u2').tofile(os.path.join(WORK, 'c.raw'))
     for name, text in (('a.mat', MAT_A), ('a.tf', TF_A), ('b.mat', MAT_B), ('c.mat', MAT_C),
-                       ('c.tf', TF_C), ('brain.mat', MAT_BRAIN), ('brain.tf', TF_BRAIN)):
+                       ('c.tf', TF_C), ('brain.mat', MAT_BRAIN), ('brain.tf', TF_BRAIN),
+                       ('brain99.mat', MAT_BRAIN99)):
         open(os.path.join(WORK, name), 'w').write(text)
     w = lambda n: os.path.join(WORK, n)  # noqa: E731
     raw = lambda n, d, t: [w(n), '--raw-dims', d, '--raw-type', t]  # noqa: E731
     vols = {
         'a': Vol(a, raw('a.raw', '32,32,32', 'u8'), {'mat': w('a.mat'), 'tf': w('a.tf')}, (32, 32)),
-        'b': Vol(b, raw('b.raw', '48,40,36', 'i16'), {'mat': w('b.mat')}, (48, 48)),
+        'b': Vol(b, raw('b.raw', '48,40,36', 'i16'), {'mat': w('b.mat'), 'mat99': w('brain99.mat')},
+                 (48, 48)),
         'c': Vol(c, raw('c.raw', '40,30,24', 'u16') + ['--raw-spacing', '%g,%g,%g' % SPACING_C],
                  {'mat': w('c.mat'), 'tf': w('c.tf')}, (48, 48), SPACING_C),
         # the same voxels, spacing the other way round (largest along x)
@@ -276,7 +282,8 @@ def write_inputs():
     }
     den = os.path.join(DATA, 'brainsmall.den')
     if os.path.exists(den):
-        vols['brain'] = Vol(load_den(den), [den], {'mat': w('brain.mat'), 'tf': w('brain.tf')},
+        vols['brain'] = Vol(load_den(den), [den], {'mat': w('brain.mat'), 'tf': w('brain.tf'),
+                                                   'mat99': w('brain99.mat')},
                             (128, 128))
     elif os.environ.get('SIMDVOL_REQUIRE_DATA') == '1':
         raise SystemExit('run_cases.py: %s missing (scripts/fetch-data) and SIMDVOL_REQUIRE_DATA=1'
@@ -397,6 +404,8 @@ def cases(quick):
     for view in ((0, 0, 0), (0, 90, 0)):
         for sh in ('noshade', 'phong'):
             add(Case('brain', 'brain', view, 1, sh))
+    add(Case('relative99', 'brain', (0, 0, 0), 1, 'phong', cls='mat99'))
+    add(Case('relative99', 'b', (20, 35, 10), 1, 'noshade', cls='mat99'))
     for sampling, sizes in (('voxel', SCALED), ('pixel', PIXEL)):
         for v in ('a', 'b'):
             for size in sizes[v][:1 if quick else None]:

@@ -337,11 +337,12 @@ void write_direct_case(const fs::path& dir, const DirectCase& c) {
   const KdSplit split = kd_split(dims, pes);
   const CellLayout cells = make_cell_layout(dims, pes, 1);
   const VoxelLayout planar = make_voxel_layout(cells), il = make_voxel_layout(cells, true);
-  const ValueRange range = vol.range();
   const ShadeParams sp{};
   const sv_shade_params shade_p = shade_params(make_shade_frame(vol, view, sp), sp);
   const Classifier classifier = classifier_preset(c.run.classifier);
-  const sv_classify_params classify_p = classify_params(classifier, range, view.step);
+  const ValueRange range = vol.range();  // (the shading's; the mixture's below)
+  const sv_classify_params classify_p =
+      classify_params(classifier, mixture_range(vol, classifier.mixture, range), view.step);
   const std::vector<ShadeSample> shading = shade(vol, view, sp);
   const std::vector<Rgba> rgba = classify(vol, shading, classifier, view.step);
   cl_int cs = 0, cs_il = 0;

@@ -32,9 +32,19 @@ struct Material {
 struct MaterialMixture {
   std::vector<Material> materials;
   /// When true, means and sigmas are fractions of the volume's value range
-  /// (I is mapped to (v - min) / (max - min) first): used by MRI presets,
-  /// whose units depend on the scanner.
+  /// (I is mapped to (v - min) / (top - min) first, mixture_range): used by
+  /// MRI presets, whose units depend on the scanner.
   bool relative = false;
+  /// A relative mixture's top: 100 takes the volume's maximum; below 100,
+  /// that percentile of the volume's foreground, its finite voxels above
+  /// min + (max - min) / 10 (the lower rank: the value at rank
+  /// floor(q (n - 1)) of the n sorted, q = top_percentile / 100), or the
+  /// maximum where there is no foreground. The "mri" preset takes 99: a few
+  /// bright voxels (vessels, fat, noise) no longer push the tissues to the
+  /// bottom of the range (ch2's maximum is 254 where 99 % of its head lies
+  /// below 177, and its white matter near 90 fell below the preset's grey
+  /// matter: a dark haze). In (0, 100].
+  float top_percentile = 100.0f;
 };
 
 /// A piecewise-linear function given by points (x ascending); constant
@@ -71,6 +81,16 @@ Classifier load_classifier(const std::filesystem::path& path);
 
 /// Looks `spec` up as a preset, else loads it as a file.
 Classifier classifier_from_spec(const std::string& spec);
+
+/// The range a mixture's fractions are of, to give classify_params and
+/// classify_voxel: the volume's range, or for a relative mixture whose
+/// top_percentile is below 100, from its minimum to that percentile of its
+/// foreground (MaterialMixture::top_percentile). `full` is vol.range()
+/// where the caller has it. classify() and the engines take it so; an
+/// embedder who passes vol.range() to classify_params with the "mri"
+/// preset classifies apart from them.
+ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix);
+ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix, const ValueRange& full);
 
 /// A relative mixture's scale 1 / (max - min) of `range` in float, 0 when
 /// max == min: what the kernels multiply by (sv_classify_params::range_scale).

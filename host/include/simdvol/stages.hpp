@@ -192,8 +192,10 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
 
 // --------------------------------------------------------------- classify
 
-/// The kernel parameters from a classifier, the volume's value range (used by
-/// relative mixtures only) and the opacity step. Throws ArgumentError for an
+/// The kernel parameters from a classifier, the range its relative mixture's
+/// fractions are of (used by relative mixtures only: pass
+/// mixture_range(vol, c.mixture), as the engine and the reference do; for
+/// the "mri" preset it is not vol.range()) and the opacity step. Throws ArgumentError for an
 /// invalid classifier (as the reference does), more than SV_MAX_MATERIALS
 /// materials or SV_MAX_KNOTS ramp points, or a step that is not positive.
 /// opacity_step: the distance between consecutive samples of a ray in units
