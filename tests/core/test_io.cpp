@@ -675,6 +675,70 @@ TEST_F(IoTest, NrrdMalformed) {
                     {"disagrees"});
 }
 
+// InVesalius's example CT of a head, from Debian's invesalius-examples
+// (Cranium.inv3, "ProMED CT 0051", a gzipped tar): its matrix.dat as
+// ct/cranium.raw (sha256
+// d87fd5e6aaf2c4fdf4f3fe28ee3335192fc2464ed8e9682fc78530cb837938da), its
+// main.plist as ct/cranium.plist, and the NRRD header scripts/fetch-data
+// writes for them (the plist's layout; no patient orientation).
+// Expected values computed independently of the loaders, with python3's
+// plistlib and numpy: main.plist: matrix shape [108, 256, 256] (z, y, x),
+// dtype int16, spacing [0.9570312, 0.9570312, 1.5], modality CT;
+//   a = numpy.fromfile('cranium.raw', '<i2'): len 7077888, sum -4147325847,
+//   min -1024, max 2986, FNV-1a-64 over the file's bytes 0x7cddd6bf41a5f58c;
+//   a.reshape(108, 256, 256)[z, y, x] at (x, y, z): (0, 0, 0) = -998 (air),
+//   (128, 128, 54) = 3 and (128, 60, 54) = 26 (brain), (128, 20, 54) = 1015
+//   (the occipital bone), (161, 178, 0) = 2986 (the largest);
+//   in Hounsfield units, 4144315 voxels <= -900 (air), 1727037 in -100 .. 100
+//   (water and soft tissue), 441114 >= 300 (bone).
+TEST(IoReal, InvesaliusCraniumCt) {
+  const fs::path dir = simdvol::testing::data_dir() / "ct";
+  SIMDVOL_REQUIRE_FILE(dir / "cranium.nhdr");
+  SIMDVOL_REQUIRE_FILE(dir / "cranium.raw");
+  const Volume v = simdvol::load_nrrd(dir / "cranium.nhdr");
+  ASSERT_EQ(v.dims(), (std::array<int64_t, 3>{256, 256, 108}));
+  EXPECT_EQ(v.type(), VoxelType::i16);
+  EXPECT_DOUBLE_EQ(v.spacing()[0], 0.9570312);
+  EXPECT_DOUBLE_EQ(v.spacing()[1], 0.9570312);
+  EXPECT_DOUBLE_EQ(v.spacing()[2], 1.5);
+  EXPECT_EQ(v.orientation(), "");  // the project file says only "axial"
+  // Sum and FNV-1a-64 over the voxels as the file's little-endian bytes.
+  int64_t sum = 0, air = 0, soft = 0, bone = 0;
+  Bytes b;
+  b.reserve(2 * v.voxel_count());
+  for (float f : v.data()) {
+    ASSERT_TRUE(f == std::floor(f) && f >= -32768.0f && f <= 32767.0f) << f;
+    const auto u = static_cast<uint16_t>(static_cast<int16_t>(f));
+    b.push_back(static_cast<unsigned char>(u & 0xff));
+    b.push_back(static_cast<unsigned char>(u >> 8));
+    sum += static_cast<int64_t>(f);
+    air += f <= -900.0f;
+    soft += f >= -100.0f && f <= 100.0f;
+    bone += f >= 300.0f;
+  }
+  EXPECT_EQ(sum, -4147325847);
+  EXPECT_EQ(fnv1a(b.data(), b.size()), 0x7cddd6bf41a5f58cull);
+  EXPECT_EQ(v.range().min, -1024.0f);
+  EXPECT_EQ(v.range().max, 2986.0f);
+  EXPECT_EQ(v.at(0, 0, 0), -998.0f);
+  EXPECT_EQ(v.at(128, 128, 54), 3.0f);
+  EXPECT_EQ(v.at(128, 60, 54), 26.0f);
+  EXPECT_EQ(v.at(128, 20, 54), 1015.0f);
+  EXPECT_EQ(v.at(161, 178, 0), 2986.0f);
+  EXPECT_EQ(air, 4144315);
+  EXPECT_EQ(soft, 1727037);
+  EXPECT_EQ(bone, 441114);
+  // The same voxels through the dispatcher, and read raw with the layout
+  // main.plist gives.
+  EXPECT_EQ(simdvol::load_volume(dir / "cranium.nhdr").data(), v.data());
+  RawLayout L;
+  L.dims = {256, 256, 108};
+  L.type = VoxelType::i16;
+  L.endian = Endian::little;
+  L.spacing = {0.9570312, 0.9570312, 1.5};
+  EXPECT_EQ(simdvol::load_raw(dir / "cranium.raw", L).data(), v.data());
+}
+
 // ------------------------------------------------------------- save_nrrd
 
 TEST_F(IoTest, SaveNrrdRoundTripEveryType) {
