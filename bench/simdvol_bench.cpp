@@ -63,7 +63,7 @@
 // (this executable, POCL_MAX_PTHREAD_COUNT=n, results through a temporary
 // JSON file), per stage the medians at each n and the parallel efficiency
 // t1 / (n tn).
-// Defaults: phantom128, phantom256, brainsmall, ch2 to 256^2 and 512^2,
+// Defaults: phantom128, phantom256, brainsmall, ch2, cranium to 256^2 and 512^2,
 // order 1, direct, adaptive and mc16, P = 8192, 5 repeats, a 36-frame
 // turntable (a few minutes on 2 cores). --quick: phantom128 and brainsmall
 // to 256^2, order 1, direct, adaptive and mc8, 3 repeats (under a minute).
@@ -131,7 +131,8 @@ constexpr const char* kUsage =
     "                     [--no-volpack] [--volpack-runs R]\n"
     "                     [--scaling LIST] [--data DIR] [--json FILE] [--quick]\n"
     "                     [--volume-index N]\n"
-    "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2, or a volume file\n"
+    "  volumes: phantomN (N^3 Shepp-Logan, 8..1024), brainsmall, ch2, cranium (InVesalius's\n"
+    "    head CT, data/ct/cranium.nhdr), or a volume file\n"
     "    (.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .mha, .mhd, .mgh, .mgz, .mnc, .den, a DICOM\n"
     "    series; classified as `simdvol "
     "render --classify "
@@ -155,7 +156,7 @@ struct VolumeSpec {
 };
 
 struct Options {
-  std::vector<std::string> volumes{"phantom128", "phantom256", "brainsmall", "ch2"};
+  std::vector<std::string> volumes{"phantom128", "phantom256", "brainsmall", "ch2", "cranium"};
   bool volumes_explicit = false;
   std::vector<int64_t> sizes{256, 512};
   std::vector<int64_t> orders{1};
@@ -238,6 +239,7 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data,
   }
   if (s == "brainsmall") return {s, "volpack", data / "brainsmall.den", 0};
   if (s == "ch2") return {s, "mri", data / "ch2.nii.gz", 0};
+  if (s == "cranium") return {s, "ct", data / "ct" / "cranium.nhdr", 0};  // a real head CT
   // A volume file of the user's: named in the cases by its file name.
   const std::filesystem::path p(s);
   const VolumeFileKind kind = volume_file_kind(p);
@@ -247,11 +249,12 @@ VolumeSpec parse_volume(const std::string& s, const std::filesystem::path& data,
         p.filename().empty() ? p.parent_path().filename().string() : p.filename().string();
     return {index ? name + "@" + std::to_string(*index) : name, "auto", p, 0, true, index};
   }
-  throw ArgumentError("--volumes", "'" + s +
-                                       "' is not phantomN, brainsmall, ch2 or a volume file "
-                                       "(.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .mha, .mhd, .mgh, "
-                                       ".mgz, .mnc, .den, "
-                                       "DICOM)");
+  throw ArgumentError("--volumes",
+                      "'" + s +
+                          "' is not phantomN, brainsmall, ch2, cranium or a volume file "
+                          "(.nrrd, .nhdr, .nii, .nii.gz, .hdr/.img, .mha, .mhd, .mgh, "
+                          ".mgz, .mnc, .den, "
+                          "DICOM)");
 }
 
 // Where a volume file lies (absolute, normal, without a trailing
@@ -457,10 +460,11 @@ Options parse_args(int argc, char** argv) {
   if (!o.volpack && volpack_runs_given)
     throw ArgumentError("--volpack-runs", "does nothing with --no-volpack");
   if (data_given && std::none_of(o.volumes.begin(), o.volumes.end(), [](const std::string& v) {
-        return v == "brainsmall" || v == "ch2";
+        return v == "brainsmall" || v == "ch2" || v == "cranium";
       }))
     throw ArgumentError("--data",
-                        "does nothing: it holds brainsmall and ch2, and --volumes names neither");
+                        "does nothing: it holds brainsmall, ch2 and cranium, and "
+                        "--volumes names none of them");
   if (sizes) o.sizes = *sizes;
   if (orders) o.orders = *orders;
   if (comps) o.compositing = *comps;
