@@ -151,6 +151,12 @@ DeviceInfo query_device(const cl::Device& d) {
       device_query<CL_DEVICE_MAX_MEM_ALLOC_SIZE, cl_ulong>(d, "CL_DEVICE_MAX_MEM_ALLOC_SIZE");
   info.max_work_group_size =
       device_query<CL_DEVICE_MAX_WORK_GROUP_SIZE, std::size_t>(d, "CL_DEVICE_MAX_WORK_GROUP_SIZE");
+  {  // (at least 3 entries: CL_DEVICE_MAX_WORK_ITEM_DIMENSIONS >= 3)
+    const auto sizes = device_query<CL_DEVICE_MAX_WORK_ITEM_SIZES, cl::vector<cl::size_type>>(
+        d, "CL_DEVICE_MAX_WORK_ITEM_SIZES");
+    for (std::size_t i = 0; i < 3; ++i)
+      info.max_work_item_sizes[i] = i < sizes.size() ? sizes[i] : 1;
+  }
   info.base_addr_align_bytes =  // (the query answers in bits)
       device_query<CL_DEVICE_MEM_BASE_ADDR_ALIGN, cl_uint>(d, "CL_DEVICE_MEM_BASE_ADDR_ALIGN") / 8;
   return info;
@@ -558,6 +564,72 @@ void Device::describe_self(int index, int platform_index, const std::string& pla
   info_.index = index;
   info_.platform_index = platform_index;
   info_.platform = platform;
+  wgs_ = fixed_group_size(info_);
+  wgs_defines_ = {{"WGS", std::to_string(wgs_)}};
+}
+
+// ------------------------------------------------------- work-group sizes
+
+bool work_group_fits(const std::array<std::size_t, 3>& local, unsigned dims,
+                     const WorkGroupLimits& limits) {
+  std::size_t product = 1;
+  for (unsigned d = 0; d < dims && d < 3; ++d) {
+    if (local[d] < 1 || local[d] > limits.per_dimension[d]) return false;
+    product *= local[d];
+  }
+  return product <= limits.total();
+}
+
+std::array<std::size_t, 3> fit_work_group(std::array<std::size_t, 3> wanted, unsigned dims,
+                                          const WorkGroupLimits& limits) {
+  dims = std::clamp(dims, 1u, 3u);
+  for (unsigned d = dims; d < 3; ++d) wanted[d] = 1;
+  if (work_group_fits(wanted, dims, limits)) return wanted;
+  auto halve = [](std::size_t& n) { n = (n + 1) / 2; };
+  for (unsigned d = 0; d < dims; ++d) {
+    wanted[d] = std::max<std::size_t>(wanted[d], 1);
+    while (wanted[d] > 1 && wanted[d] > limits.per_dimension[d]) halve(wanted[d]);
+  }
+  auto product = [&] { return wanted[0] * wanted[1] * wanted[2]; };
+  for (unsigned d = dims; d-- > 0;)
+    while (wanted[d] > 1 && product() > limits.total()) halve(wanted[d]);
+  return wanted;
+}
+
+std::size_t largest_pow2_group(std::size_t most, const WorkGroupLimits& limits) {
+  const std::size_t cap =
+      std::min({std::max<std::size_t>(most, 1), limits.per_dimension[0], limits.total()});
+  std::size_t p = 1;
+  while (p <= cap / 2) p <<= 1;
+  return p;
+}
+
+std::string describe_work_group_limits(const WorkGroupLimits& limits) {
+  const auto& s = limits.per_dimension;
+  return "CL_DEVICE_MAX_WORK_GROUP_SIZE " + std::to_string(limits.device_total) +
+         ", CL_DEVICE_MAX_WORK_ITEM_SIZES " + std::to_string(s[0]) + " x " + std::to_string(s[1]) +
+         " x " + std::to_string(s[2]) + ", the kernel's CL_KERNEL_WORK_GROUP_SIZE " +
+         std::to_string(limits.kernel_total);
+}
+
+std::size_t fixed_group_size(const DeviceInfo& info) {
+  WorkGroupLimits limits;
+  limits.per_dimension = info.max_work_item_sizes;
+  limits.device_total = limits.kernel_total = info.max_work_group_size;
+  return largest_pow2_group(64, limits);
+}
+
+WorkGroupLimits Device::work_group_limits(const cl::Kernel& kernel, const std::string& what) const {
+  WorkGroupLimits limits;
+  limits.per_dimension = info_.max_work_item_sizes;
+  limits.device_total = info_.max_work_group_size;
+  std::size_t kernel_total = 0;
+  const cl_int err = clGetKernelWorkGroupInfo(kernel(), device_(), CL_KERNEL_WORK_GROUP_SIZE,
+                                              sizeof kernel_total, &kernel_total, nullptr);
+  if (err != CL_SUCCESS)
+    throw CLError("clGetKernelWorkGroupInfo(" + what + ", CL_KERNEL_WORK_GROUP_SIZE)", err);
+  limits.kernel_total = kernel_total;
+  return limits;
 }
 
 std::string Device::build_options(const std::string& options) {
@@ -1035,20 +1107,42 @@ std::size_t Device::pooled_bytes() const {
 }
 
 cl::Event Device::run(const cl::Kernel& kernel, const std::string& what, const cl::NDRange& global,
-                      const cl::NDRange& local) {
+                      const cl::NDRange& local, LocalSize size) {
   if (global.dimensions() != local.dimensions() || global.dimensions() == 0)
     throw ArgumentError(what, "global and local ranges must have the same 1-3 dimensions");
+  const cl_uint dims = global.dimensions();
+  std::array<std::size_t, 3> l{1, 1, 1};
+  for (cl_uint d = 0; d < dims; ++d) {
+    l[d] = local.get()[d];
+    if (l[d] == 0) throw ArgumentError(what, "local size 0");
+  }
+  // The device's and the kernel's limits (one query, a few ns on PoCL): a
+  // local size they do not take fails the launch with
+  // CL_INVALID_WORK_GROUP_SIZE, which names neither the size nor the limit.
+  const WorkGroupLimits limits = work_group_limits(kernel, what);
+  if (!work_group_fits(l, dims, limits)) {
+    if (size == LocalSize::exact) {
+      std::string sz = std::to_string(l[0]);
+      for (cl_uint d = 1; d < dims; ++d) sz += " x " + std::to_string(l[d]);
+      throw ArgumentError(what, "needs work-groups of " + sz + " work-items (its local size), " +
+                                    "more than this device takes for it (" +
+                                    describe_work_group_limits(limits) + ")");
+    }
+    l = fit_work_group(l, dims, limits);
+  }
   std::size_t g[3] = {1, 1, 1};
-  for (cl_uint d = 0; d < global.dimensions(); ++d) {
-    if (local.get()[d] == 0) throw ArgumentError(what, "local size 0");
-    g[d] = round_up(global.get()[d], local.get()[d]);
+  for (cl_uint d = 0; d < dims; ++d) {
+    g[d] = round_up(global.get()[d], l[d]);
     if (g[d] == 0) throw ArgumentError(what, "empty global range");
   }
-  cl::NDRange rounded = global.dimensions() == 1   ? cl::NDRange(g[0])
-                        : global.dimensions() == 2 ? cl::NDRange(g[0], g[1])
-                                                   : cl::NDRange(g[0], g[1], g[2]);
+  const cl::NDRange rounded = dims == 1   ? cl::NDRange(g[0])
+                              : dims == 2 ? cl::NDRange(g[0], g[1])
+                                          : cl::NDRange(g[0], g[1], g[2]);
+  const cl::NDRange fitted = dims == 1   ? cl::NDRange(l[0])
+                             : dims == 2 ? cl::NDRange(l[0], l[1])
+                                         : cl::NDRange(l[0], l[1], l[2]);
   cl::Event event;
-  cl_int err = queue_.enqueueNDRangeKernel(kernel, cl::NullRange, rounded, local, nullptr, &event);
+  cl_int err = queue_.enqueueNDRangeKernel(kernel, cl::NullRange, rounded, fitted, nullptr, &event);
   if (err != CL_SUCCESS) throw CLError("clEnqueueNDRangeKernel(" + what + ")", err);
   if (logs_ && logs_->any.load(std::memory_order_relaxed)) {
     std::lock_guard<std::mutex> lock(logs_->mutex);

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -11,6 +12,8 @@
 #include <iostream>
 #include <sstream>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "simdvol/device.hpp"
 #include "stage_testing.hpp"
@@ -133,7 +136,8 @@ TEST(Devices, ListedWithTheirProperties) {
     EXPECT_GT(d.local_mem_bytes, 0u);
     EXPECT_GE(d.global_mem_bytes, d.max_alloc_bytes);
     EXPECT_GT(d.max_alloc_bytes, 0u);
-    EXPECT_GE(d.max_work_group_size, 64u);
+    EXPECT_GE(d.max_work_group_size, 1u);  // (PoCL's CPU device: 4096, or POCL_MAX_WORK_GROUP_SIZE)
+    for (const std::size_t n : d.max_work_item_sizes) EXPECT_GE(n, 1u);
   }
   std::string table = describe_devices(devs, 0);
   EXPECT_NE(table.find("* 0: " + devs[0].name), std::string::npos) << table;
@@ -478,6 +482,133 @@ TEST(DeviceTest, RunRoundsTheGlobalSizeUp) {
   for (int i = 0; i < 1000; ++i) ASSERT_EQ(v[i], 3 * i + 1) << i;
   EXPECT_EQ(v[1000], -1);  // untouched past n
   EXPECT_THROW(dev.run(cl::Kernel(), "k", cl::NDRange(8), cl::NDRange(8, 1)), ArgumentError);
+}
+
+// The local sizes the host takes where a device (a GPU's
+// CL_DEVICE_MAX_WORK_GROUP_SIZE of 256, POCL_MAX_WORK_GROUP_SIZE) or a kernel
+// (CL_KERNEL_WORK_GROUP_SIZE, lower for one of many registers) takes fewer
+// work-items than a launch asks for: fit_work_group gives up the last
+// dimensions first (the PEs or rows per group of the 2-D and 3-D ranges)
+// and keeps powers of two; fixed_group_size is the WGS of the frame's
+// program.
+TEST(WorkGroups, FitGivesUpTheLastDimensionsFirst) {
+  using A = std::array<std::size_t, 3>;
+  const auto limits = [](std::size_t per, std::size_t device, std::size_t kernel) {
+    WorkGroupLimits l;
+    l.per_dimension = {per, per, per};
+    l.device_total = device;
+    l.kernel_total = kernel;
+    return l;
+  };
+  const WorkGroupLimits pocl = limits(4096, 4096, 4096);
+  EXPECT_EQ(fit_work_group({64, 4, 1}, 2, pocl), (A{64, 4, 1}));  // fits: as asked
+  EXPECT_EQ(fit_work_group({64, 4, 9}, 2, pocl), (A{64, 4, 1}));  // (dimensions past dims: 1)
+  EXPECT_EQ(fit_work_group({64, 4, 1}, 2, limits(4096, 128, 4096)), (A{64, 2, 1}));
+  EXPECT_EQ(fit_work_group({64, 4, 1}, 2, limits(4096, 256, 64)), (A{64, 1, 1}));  // the kernel's
+  EXPECT_EQ(fit_work_group({64, 4, 1}, 2, limits(16, 16, 16)), (A{16, 1, 1}));
+  EXPECT_EQ(fit_work_group({64, 4, 1}, 2, limits(1, 1, 1)), (A{1, 1, 1}));
+  EXPECT_EQ(fit_work_group({8, 16, 2}, 3, limits(4096, 64, 4096)), (A{8, 8, 1}));
+  EXPECT_EQ(fit_work_group({8, 16, 2}, 3, limits(8, 4096, 4096)), (A{8, 8, 2}));  // per dimension
+  EXPECT_EQ(fit_work_group({128}, 1, limits(4096, 48, 4096)), (A{32, 1, 1}));
+  EXPECT_EQ(fit_work_group({128}, 1, limits(100, 4096, 4096)), (A{64, 1, 1}));
+  EXPECT_EQ(fit_work_group({64, 4, 1}, 2, limits(0, 0, 0)), (A{1, 1, 1}));  // never below 1
+  // Every power-of-two request under every limit: it fits, each dimension
+  // a power of two dividing the one asked for (a global size rounded up to
+  // the request stays a multiple), and a request that fits is kept.
+  for (std::size_t total = 1; total <= 512; ++total)
+    for (std::size_t a = 1; a <= 256; a *= 2)
+      for (std::size_t b = 1; b <= 64; b *= 2) {
+        const WorkGroupLimits l = limits(64, total, 4096);
+        const A got = fit_work_group({a, b, 2}, 3, l);
+        ASSERT_TRUE(work_group_fits(got, 3, l)) << total << " " << a << " " << b;
+        for (int d = 0; d < 3; ++d) {
+          const std::size_t want = d == 0 ? a : d == 1 ? b : 2;
+          ASSERT_EQ(want % got[static_cast<std::size_t>(d)], 0u) << total << " " << a << " " << b;
+        }
+        if (work_group_fits({a, b, 2}, 3, l)) {
+          ASSERT_EQ(got, (A{a, b, 2}));
+        }
+      }
+}
+
+TEST(WorkGroups, FitsAndTheLargestPowerOfTwo) {
+  WorkGroupLimits l;
+  l.per_dimension = {64, 8, 4};
+  l.device_total = 256;
+  l.kernel_total = 128;
+  EXPECT_EQ(l.total(), 128u);
+  EXPECT_TRUE(work_group_fits({64, 2, 1}, 2, l));
+  EXPECT_FALSE(work_group_fits({64, 4, 1}, 2, l));  // 256 > the kernel's 128
+  EXPECT_FALSE(work_group_fits({2, 16, 1}, 2, l));  // 16 > 8 along y
+  EXPECT_TRUE(work_group_fits({2, 8, 9}, 2, l));    // (past dims: not looked at)
+  EXPECT_FALSE(work_group_fits({0, 1, 1}, 1, l));
+  EXPECT_EQ(largest_pow2_group(128, l), 64u);  // along x
+  EXPECT_EQ(largest_pow2_group(16, l), 16u);
+  EXPECT_EQ(largest_pow2_group(0, l), 1u);
+  l.per_dimension[0] = 4096;
+  EXPECT_EQ(largest_pow2_group(1024, l), 128u);
+  l.kernel_total = 100;
+  EXPECT_EQ(largest_pow2_group(1024, l), 64u);
+  l.kernel_total = 0;
+  EXPECT_EQ(largest_pow2_group(1024, l), 1u);
+  EXPECT_EQ(describe_work_group_limits(l),
+            "CL_DEVICE_MAX_WORK_GROUP_SIZE 256, CL_DEVICE_MAX_WORK_ITEM_SIZES 4096 x 8 x 4, the "
+            "kernel's CL_KERNEL_WORK_GROUP_SIZE 0");
+  DeviceInfo info;
+  info.max_work_item_sizes = {4096, 4096, 4096};
+  for (const auto& [most, wgs] : std::vector<std::pair<std::size_t, std::size_t>>{
+           {4096, 64}, {256, 64}, {64, 64}, {48, 32}, {32, 32}, {16, 16}, {2, 2}, {1, 1}}) {
+    info.max_work_group_size = most;
+    EXPECT_EQ(fixed_group_size(info), wgs) << most;
+  }
+  info.max_work_group_size = 1024;
+  info.max_work_item_sizes = {8, 1024, 64};
+  EXPECT_EQ(fixed_group_size(info), 8u);
+}
+
+// Device::run against the device's and the kernel's limits (PoCL's CPU
+// device takes 4096 work-items, fewer with POCL_MAX_WORK_GROUP_SIZE): a
+// local size of twice that is refused before the launch where the kernel
+// needs it (LocalSize::exact, the default: an ArgumentError naming the
+// kernel, the size and the limits, where the queue would answer
+// CL_INVALID_WORK_GROUP_SIZE), and launched as the largest that fits where
+// it is a choice for speed (LocalSize::at_most): the same results.
+TEST(DeviceTest, RunTakesTheWorkGroupLimits) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device dev;
+  EXPECT_EQ(dev.wgs(), fixed_group_size(dev.info()));
+  EXPECT_EQ(dev.wgs_defines(), (Defines{{"WGS", std::to_string(dev.wgs())}}));
+  cl::Program p = dev.build(kIotaSource);
+  cl_int err = CL_SUCCESS;
+  cl::Kernel k(p, "iota", &err);
+  ASSERT_EQ(err, CL_SUCCESS);
+  const WorkGroupLimits limits = dev.work_group_limits(k, "iota");
+  EXPECT_EQ(limits.device_total, dev.info().max_work_group_size);
+  EXPECT_EQ(limits.per_dimension, dev.info().max_work_item_sizes);
+  EXPECT_GE(limits.kernel_total, 1u);
+  const std::size_t too_many = 2 * std::max(limits.total(), limits.per_dimension[0]);
+  const int n = static_cast<int>(too_many) + 5;
+  std::vector<cl_int> host(static_cast<std::size_t>(n) + 1, -1);
+  cl::Buffer out = dev.buffer(CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR,
+                              host.size() * sizeof(cl_int), host.data(), "out");
+  set_args(k, "iota", out, static_cast<cl_int>(n));
+  try {
+    dev.run(k, "iota", cl::NDRange(static_cast<std::size_t>(n)), cl::NDRange(too_many));
+    FAIL() << "a local size of " << too_many << " was launched";
+  } catch (const ArgumentError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(
+        what.rfind("iota: needs work-groups of " + std::to_string(too_many) + " work-items", 0), 0u)
+        << what;
+    EXPECT_NE(what.find(describe_work_group_limits(limits)), std::string::npos) << what;
+  }
+  dev.run(k, "iota", cl::NDRange(static_cast<std::size_t>(n)), cl::NDRange(too_many),
+          LocalSize::at_most);
+  cl_check(
+      dev.queue().enqueueReadBuffer(out, CL_TRUE, 0, host.size() * sizeof(cl_int), host.data()),
+      "read");
+  for (int i = 0; i < n; ++i) ASSERT_EQ(host[static_cast<std::size_t>(i)], 3 * i + 1) << i;
+  EXPECT_EQ(host.back(), -1);
 }
 
 TEST(DeviceTest, ErrorsNameTheCall) {

@@ -15,6 +15,12 @@
 //   4. device.run(k, "simdvol_shade", global, local) enqueues with an explicit
 //      local size (the global size is rounded up to a multiple of it, so the
 //      kernel must bounds-check its ids) and returns the profiling event.
+//      A kernel that reads only its global ids passes LocalSize::at_most, so
+//      that a device taking fewer work-items in a group (a GPU's 256, a
+//      kernel's CL_KERNEL_WORK_GROUP_SIZE) runs it in smaller groups; one
+//      whose local size is its contract (barriers, local memory,
+//      reqd_work_group_size) passes LocalSize::exact, the default, and is
+//      refused with an ArgumentError naming the limits where it does not fit.
 // Kernel files live in kernels/<stage>.cl. Each is valid OpenCL C on its own
 // (compile with -I kernels): it starts with
 //   #ifndef SIMDVOL_COMMON_CL
@@ -146,7 +152,71 @@ struct DeviceInfo {
   std::uint64_t global_mem_bytes = 0;
   std::uint64_t max_alloc_bytes = 0;
   std::size_t max_work_group_size = 0;
+  /// CL_DEVICE_MAX_WORK_ITEM_SIZES: the most work-items of a group along x, y, z
+  std::array<std::size_t, 3> max_work_item_sizes{};
   std::size_t base_addr_align_bytes = 0;  ///< CL_DEVICE_MEM_BASE_ADDR_ALIGN (in bytes)
+};
+
+/// The most work-items one launch of a kernel may put in a work-group: along
+/// each dimension (the device's CL_DEVICE_MAX_WORK_ITEM_SIZES) and in all
+/// (the smaller of the device's CL_DEVICE_MAX_WORK_GROUP_SIZE and the
+/// kernel's CL_KERNEL_WORK_GROUP_SIZE, which a GPU's compiler may set lower
+/// for a kernel of many registers). Device::work_group_limits queries them.
+struct WorkGroupLimits {
+  std::array<std::size_t, 3> per_dimension{};  ///< CL_DEVICE_MAX_WORK_ITEM_SIZES
+  std::size_t device_total = 0;                ///< CL_DEVICE_MAX_WORK_GROUP_SIZE
+  std::size_t kernel_total = 0;                ///< CL_KERNEL_WORK_GROUP_SIZE
+  /// The most work-items in all: min(device_total, kernel_total).
+  std::size_t total() const { return device_total < kernel_total ? device_total : kernel_total; }
+};
+
+/// Whether a work-group of `local` (its first `dims` entries, 1 .. 3) fits
+/// `limits`: each entry at least 1 and within its dimension's limit, their
+/// product within total().
+bool work_group_fits(const std::array<std::size_t, 3>& local, unsigned dims,
+                     const WorkGroupLimits& limits);
+
+/// The local size Device::run launches a LocalSize::at_most kernel with:
+/// `wanted` where it fits; else each dimension halved (rounding up) until it
+/// fits its own limit, then the last dimension above 1 halved, then the one
+/// before it, ..., until the product fits total() (the first dimension, the
+/// kernels' vector lanes and consecutive addresses, is kept longest; 2-D
+/// and 3-D ranges give up PEs or rows per group first). A power of two stays
+/// a power of two, so a global size rounded up to a multiple of `wanted`
+/// stays a multiple of the result. Never below 1 (also for limits of 0).
+std::array<std::size_t, 3> fit_work_group(std::array<std::size_t, 3> wanted, unsigned dims,
+                                          const WorkGroupLimits& limits);
+
+/// The largest power of two at most `most` (>= 1) that a 1-D work-group
+/// takes under `limits` (1 where `limits` take none).
+std::size_t largest_pow2_group(std::size_t most, const WorkGroupLimits& limits);
+
+/// "CL_DEVICE_MAX_WORK_GROUP_SIZE 64, CL_DEVICE_MAX_WORK_ITEM_SIZES 64 x 64
+/// x 64, the kernel's CL_KERNEL_WORK_GROUP_SIZE 64": the limits, for
+/// messages.
+std::string describe_work_group_limits(const WorkGroupLimits& limits);
+
+/// WGS, the work-group size of the kernels declared
+/// reqd_work_group_size(WGS, 1, 1) (layout.cl, match.cl, balance.cl: the
+/// frame's program of layout, match, balance and swap), on a device
+/// described by `info`: 64, or where the device takes fewer work-items in
+/// a group (CL_DEVICE_MAX_WORK_GROUP_SIZE) or along x
+/// (CL_DEVICE_MAX_WORK_ITEM_SIZES[0]), the largest power of two it takes.
+/// Those kernels read only their global ids, so any WGS gives the same
+/// results.
+std::size_t fixed_group_size(const DeviceInfo& info);
+
+/// What a launch's local size is to its kernel (Device::run).
+enum class LocalSize {
+  /// The kernel needs this size (barriers or local memory between its
+  /// work-items, or reqd_work_group_size): where the device or the kernel
+  /// takes fewer work-items, run() throws ArgumentError naming the kernel,
+  /// the size and the limits, before anything is enqueued.
+  exact,
+  /// A choice for speed alone (the kernel reads only its global ids and
+  /// bounds-checks them, so any local size gives the same results): where
+  /// it does not fit, run() launches with fit_work_group(local) instead.
+  at_most,
 };
 
 /// Every device of every platform, platforms in ICD order, indices 0, 1, ...
@@ -249,6 +319,16 @@ class Device {
   const cl::CommandQueue& queue() const { return queue_; }
   /// Whether the queue has CL_QUEUE_PROFILING_ENABLE (always for our own queues).
   bool profiling() const { return profiling_; }
+  /// fixed_group_size(info()): the WGS this device's frame program is built
+  /// with and its reqd_work_group_size kernels are launched with.
+  std::size_t wgs() const { return wgs_; }
+  /// The defines of the frame's program (stage_program_source of layout,
+  /// match, balance, swap): {{"WGS", wgs()}}. Every stage that takes a
+  /// kernel of that program passes them, so that a frame builds it once.
+  const Defines& wgs_defines() const { return wgs_defines_; }
+  /// The work-group limits of a launch of `kernel` on this device (one
+  /// clGetKernelWorkGroupInfo; CLError naming `what` if it fails).
+  WorkGroupLimits work_group_limits(const cl::Kernel& kernel, const std::string& what) const;
 
   /// The build options actually used: `options` plus SIMDVOL_CL_OPTIONS.
   static std::string build_options(const std::string& options);
@@ -340,9 +420,14 @@ class Device {
 
   /// Enqueues a 1-D, 2-D or 3-D range; each global size is rounded up to a
   /// multiple of the local size. Returns the event (profiling info available
-  /// when profiling()). `what` names the kernel in errors.
+  /// when profiling()). `what` names the kernel in errors. The local size is
+  /// checked against work_group_limits(kernel) first: with LocalSize::exact
+  /// (the default) one that does not fit is an ArgumentError naming `what`,
+  /// the size and the limits (not CL_INVALID_WORK_GROUP_SIZE from the
+  /// queue); with LocalSize::at_most the launch takes fit_work_group(local)
+  /// instead (and rounds the global size up to that).
   cl::Event run(const cl::Kernel& kernel, const std::string& what, const cl::NDRange& global,
-                const cl::NDRange& local);
+                const cl::NDRange& local, LocalSize size = LocalSize::exact);
   /// clFinish on the queue.
   void finish();
 
@@ -367,6 +452,8 @@ class Device {
                       void* host_ptr, const std::string& what);
 
   DeviceInfo info_;
+  std::size_t wgs_ = 64;
+  Defines wgs_defines_;
   cl::Context context_;
   cl::Device device_;
   cl::CommandQueue queue_;
