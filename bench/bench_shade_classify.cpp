@@ -285,7 +285,7 @@ int main(int argc, char** argv) {
     if (flat16_ok)
       variants.push_back({"flat shade+classify fused", 4.0 * voxels + flat4, [&] {
                             return std::vector{dev.run(k_flat_fused16, "flat fused float16", flat16,
-                                                       flat16_local)};
+                                                       flat16_local, LocalSize::at_most)};
                           }});
     if (sweep) {
       // The float16 kernels with every store non-temporal (SV_NT). By
@@ -318,9 +318,10 @@ int main(int argc, char** argv) {
                             return std::vector{enqueue_shade_classify(dev, cells, sp, cp, rgba,
                                                                       ShadeKernel::range3d)};
                           }});
-      variants.push_back(
-          {"flat shade+classify fused (scalar)", 4.0 * voxels + flat4,
-           [&] { return std::vector{dev.run(k_flat_fused, "flat fused", flat3, flat3_local)}; }});
+      variants.push_back({"flat shade+classify fused (scalar)", 4.0 * voxels + flat4, [&] {
+                            return std::vector{dev.run(k_flat_fused, "flat fused", flat3,
+                                                       flat3_local, LocalSize::at_most)};
+                          }});
       variants.push_back({"shade (1-D, divisions)", cells_bytes + vox_bytes, [&] {
                             return std::vector{
                                 enqueue_shade(dev, cells, sp, shading, ShadeKernel::voxel)};
@@ -336,7 +337,7 @@ int main(int argc, char** argv) {
       enqueue_shade_classify(dev, cells, sp, cp, rgba);
       std::vector<Rgba> pe(n), flat(n);
       gather_rgba(dev, rgba, pe.data());
-      dev.run(k_flat_fused16, "flat fused float16", flat16, flat16_local);
+      dev.run(k_flat_fused16, "flat fused float16", flat16, flat16_local, LocalSize::at_most);
       std::vector<float> planes(4 * n);
       cl_check(dev.queue().enqueueReadBuffer(flat_rgba, CL_TRUE, 0, n * 16, planes.data()),
                "clEnqueueReadBuffer(flat rgba)");

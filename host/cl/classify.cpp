@@ -149,7 +149,7 @@ cl::Event run_classify(Device& device, const sv_classify_params& params, Classif
   else
     set_args(k, name, out, stride, pes, pbuf);
   const detail::PlaneRange r = vec ? detail::chunk_range(V) : detail::plane_range(V);
-  return device.run(k, name, r.global, r.local);
+  return device.run(k, name, r.global, r.local, LocalSize::at_most);
 }
 
 }  // namespace
@@ -237,7 +237,7 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
         cl_int(live ? 1 : 0), kept ? kept->planes : cbuf,
         cl_int((kept ? (kept_read ? 2 : 1) | (kept->gradient ? 4 : 0) : 0) | (nt_out ? 8 : 0)));
     const detail::PlaneRange r = detail::chunk_range(V);
-    cl::Event e = device.run(k, name, r.global, r.local);
+    cl::Event e = device.run(k, name, r.global, r.local, LocalSize::at_most);
     if (kept) {
       kept->filled = true;
       kept->filled_gradient = kept->gradient;
@@ -245,7 +245,7 @@ cl::Event enqueue_shade_classify(Device& device, const CellBuffer& cells,
     return e;
   }
   const detail::CellRange r = detail::cell_range(V);
-  return device.run(k, name, r.global, r.local);
+  return device.run(k, name, r.global, r.local, LocalSize::at_most);
 }
 
 cl::Event enqueue_gather_voxels(Device& device, const VoxelBuffer& voxels, const cl::Buffer& flat) {
@@ -274,7 +274,7 @@ cl::Event enqueue_gather_voxels(Device& device, const VoxelBuffer& voxels, const
   set_args(k, name, voxels.buffer(), flat, obuf, dims, cell, static_cast<cl_int>(V.pes()),
            static_cast<cl_int>(V.stride));
   const detail::CellRange r = detail::cell_range(V);
-  return device.run(k, name, r.global, r.local);
+  return device.run(k, name, r.global, r.local, LocalSize::at_most);
 }
 
 void gather_rgba(Device& device, const VoxelBuffer& voxels, Rgba* out, cl::Event* event) {

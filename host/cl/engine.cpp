@@ -531,8 +531,8 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     {
       cl::Kernel k = device.kernel("adaptive", "simdvol_sample_pe_count");
       set_args(k, "simdvol_sample_pe_count", segs.segments, segs.seg_offset, cl_int(pes), pe_total);
-      offset_events.push_back(
-          {"pe count", device.run(k, "simdvol_sample_pe_count", range(pes), cl::NDRange(kWgs))});
+      offset_events.push_back({"pe count", device.run(k, "simdvol_sample_pe_count", range(pes),
+                                                      cl::NDRange(kWgs), LocalSize::at_most)});
       cl::Kernel ks = device.kernel("adaptive", "simdvol_sample_pe_scan");
       set_args(ks, "simdvol_sample_pe_scan", pe_total, cl_int(pes), total);
       offset_events.push_back(
@@ -540,8 +540,8 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
       cl::Kernel ko = device.kernel("adaptive", "simdvol_sample_offsets");
       set_args(ko, "simdvol_sample_offsets", segs.segments, segs.seg_offset, cl_int(pes), pe_total,
                soff);
-      offset_events.push_back(
-          {"offsets", device.run(ko, "simdvol_sample_offsets", range(pes), cl::NDRange(kWgs))});
+      offset_events.push_back({"offsets", device.run(ko, "simdvol_sample_offsets", range(pes),
+                                                     cl::NDRange(kWgs), LocalSize::at_most)});
     }
     cl_long nsamples = 0;
     cl_check(device.queue().enqueueReadBuffer(total, CL_TRUE, 0, sizeof nsamples, &nsamples),
@@ -588,8 +588,8 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
         cl::Kernel k = device.kernel("adaptive", "simdvol_adaptive_whole");
         set_args(k, "simdvol_adaptive_whole", segs.segments, soff, samples, rays->offset,
                  rays->items, cl_int(npx), cl_float(opt.composite.threshold), image);
-        walk_events.push_back(
-            {"adaptive", device.run(k, "simdvol_adaptive_whole", range(npx), cl::NDRange(kWgs))});
+        walk_events.push_back({"adaptive", device.run(k, "simdvol_adaptive_whole", range(npx),
+                                                      cl::NDRange(kWgs), LocalSize::at_most)});
       }
     }
     device.queue().finish();  // the ray lists and the allocation go out of scope

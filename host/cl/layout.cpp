@@ -8,13 +8,6 @@ namespace simdvol {
 
 namespace {
 
-constexpr std::size_t kWgs = 64;  // local size of the layout kernels (WGS in layout.cl)
-
-const Defines& layout_defines() {
-  static const Defines d{{"WGS", std::to_string(kWgs)}};
-  return d;
-}
-
 cl_int4 int4(int64_t x, int64_t y, int64_t z, int64_t w) {
   cl_int4 v;
   v.s[0] = static_cast<cl_int>(x);
@@ -155,7 +148,7 @@ cl::Event PeArray::enqueue_layout(const cl::Buffer& flat, CellBuffer& cells,
                                       std::to_string(n) + " floats");
   const bool rows = variant == LayoutKernel::rows;
   const std::string name = rows ? "simdvol_layout" : "simdvol_layout_voxel";
-  cl::Kernel k = device_->kernel("layout", name, layout_defines());
+  cl::Kernel k = device_->kernel("layout", name, device_->wgs_defines());
   if (rows)
     set_args(k, name, flat, cells.cells(), cells.origins(), cells.pe_of_cell(), cells.dims_arg(),
              cells.cell_arg(), cells.block_arg(), cells.splits_arg());
@@ -166,7 +159,7 @@ cl::Event PeArray::enqueue_layout(const cl::Buffer& flat, CellBuffer& cells,
   const Dims3 splits = L.split.splits();
   const std::size_t items = static_cast<std::size_t>(
       rows ? splits[1] * splits[2] * L.block[1] * L.block[2] : L.elements());
-  return device_->run(k, name, cl::NDRange(items), cl::NDRange(kWgs));
+  return device_->run(k, name, cl::NDRange(items), cl::NDRange(device_->wgs()));
 }
 
 void PeArray::gather(const CellBuffer& cells, float* out, LayoutKernel variant,
@@ -179,7 +172,7 @@ void PeArray::gather(const CellBuffer& cells, float* out, LayoutKernel variant,
                                    "volume (flat)");
   const bool rows = variant == LayoutKernel::rows;
   const std::string name = rows ? "simdvol_gather" : "simdvol_gather_voxel";
-  cl::Kernel k = device_->kernel("layout", name, layout_defines());
+  cl::Kernel k = device_->kernel("layout", name, device_->wgs_defines());
   std::size_t items;
   if (rows) {
     set_args(k, name, cells.cells(), vol, cells.origins(), cells.dims_arg(), cells.cell_arg(),
@@ -190,7 +183,7 @@ void PeArray::gather(const CellBuffer& cells, float* out, LayoutKernel variant,
              cells.cell_arg(), cells.block_arg(), cells.splits_arg());
     items = n;
   }
-  cl::Event e = device_->run(k, name, cl::NDRange(items), cl::NDRange(kWgs));
+  cl::Event e = device_->run(k, name, cl::NDRange(items), cl::NDRange(device_->wgs()));
   // Map/unmap makes the results visible in `out` as the spec requires for
   // CL_MEM_USE_HOST_PTR (no copy on PoCL).
   cl_int err = CL_SUCCESS;

@@ -419,7 +419,7 @@ cl::Event enqueue_zero_footprints(Device& device, DeviceFootprints& fp) {
   const cl_int n = static_cast<cl_int>(std::max<int64_t>(fp.size(), 1));
   set_args(k, name, fp.pixels, n);
   return device.run(k, name, cl::NDRange(round_up(static_cast<std::size_t>(n), 256)),
-                    cl::NDRange(256));
+                    cl::NDRange(256), LocalSize::at_most);
 }
 
 Footprints read_footprints(Device& device, const DeviceFootprints& fp) {
@@ -462,7 +462,7 @@ cl::Event enqueue_resample(Device& device, const LocalSegments& segs, const cl::
                   skip ? skip->bricks[1] : cl_int(0), cl_int(skip ? 1 : 0), segs.seg_offset,
                   static_cast<cl_int>(log2_exact(segs.pes)), pf.origins, pf.pe_cell, pairs);
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
-                    cl::NDRange(kSegmentWgs));
+                    cl::NDRange(kSegmentWgs), LocalSize::at_most);
 }
 
 cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buffer& sample_off,
@@ -476,7 +476,8 @@ cl::Event enqueue_local(Device& device, const LocalSegments& segs, const cl::Buf
   set_args(k, name, segs.segments, static_cast<cl_int>(segs.count), segs.seg_offset,
            static_cast<cl_int>(log2_exact(segs.pes)), sample_off, samples, segs.rects, fp.offsets,
            fp.pixels);
-  return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs));
+  return device.run(k, name, segment_range(segs.count), cl::NDRange(kSegmentWgs),
+                    LocalSize::at_most);
 }
 
 DeviceOccupancy make_occupancy(Device& device, const VoxelLayout& L, int order) {
@@ -507,8 +508,8 @@ void enqueue_occupancy_reach(Device& device, DeviceOccupancy& o) {
   // Stencil voxels f + p: p in 0..1 for orders 0 and 1, -1..2 for 2 and 3.
   set_args(r, name, o.occupied, o.bricks[0], o.bricks[1], o.bricks[2], cl_int(o.order >= 2 ? 1 : 0),
            cl_int(1), o.reach);
-  o.events.push_back(
-      device.run(r, name, cl::NDRange(round_up(n, kSegmentWgs)), cl::NDRange(kSegmentWgs)));
+  o.events.push_back(device.run(r, name, cl::NDRange(round_up(n, kSegmentWgs)),
+                                cl::NDRange(kSegmentWgs), LocalSize::at_most));
 }
 
 DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int order) {
@@ -536,7 +537,7 @@ DeviceOccupancy enqueue_occupancy(Device& device, const VoxelBuffer& voxels, int
   o.events.push_back(device.run(
       k, name,
       cl::NDRange(round_up(static_cast<std::size_t>(L.cell()[2]), wz), static_cast<std::size_t>(P)),
-      cl::NDRange(wz, 1)));
+      cl::NDRange(wz, 1), LocalSize::at_most));
   enqueue_occupancy_reach(device, o);
   return o;
 }
@@ -556,7 +557,8 @@ SegmentOrder enqueue_segment_order(Device& device, const LocalSegments& segs) {
            static_cast<cl_int>(log2_exact(segs.pes)), o.order, bounds_arg(segs),
            cl_int(segs.bounds_pending), cl_int(o.with_pe ? 1 : 0));
   const int64_t blocks = (segs.count + SV_ORDER_BLOCK - 1) / SV_ORDER_BLOCK;
-  o.event = device.run(k, name, segment_range(blocks), cl::NDRange(kSegmentWgs));
+  o.event =
+      device.run(k, name, segment_range(blocks), cl::NDRange(kSegmentWgs), LocalSize::at_most);
   return o;
 }
 
@@ -589,7 +591,7 @@ cl::Event enqueue_resample_local(Device& device, const LocalSegments& segs,
                   cl_int(skip ? 1 : 0), lanes ? lanes->order : tables.table, ordered_arg(lanes),
                   pf.origins, pf.pe_cell, pairs, bounds_arg(segs), cl_int(segs.bounds_pending));
   return device.run(k, name, segment_range(v8 ? (segs.count + 7) / 8 : segs.count),
-                    cl::NDRange(kSegmentWgs));
+                    cl::NDRange(kSegmentWgs), LocalSize::at_most);
 }
 
 }  // namespace simdvol

@@ -15,15 +15,11 @@ namespace simdvol {
 
 namespace {
 
-// Work-items loop (scalar code under PoCL); 64 per group keeps the group
+// Work-items loop (scalar code under PoCL); 64 per group (WGS,
+// Device::wgs(): fewer only where the device takes fewer) keeps the group
 // count (P x H / 64 for the row kernels, P / 64 for the others) in the
-// hundreds to thousands.
-constexpr std::size_t kWgs = 64;
-
-const Defines& match_defines() {
-  static const Defines d{{"WGS", std::to_string(kWgs)}};
-  return d;
-}
+// hundreds to thousands. The kernels are declared
+// reqd_work_group_size(WGS, 1, 1): launched with exactly that local size.
 
 cl_int4 int4(int64_t x, int64_t y, int64_t z, int64_t w) {
   cl_int4 v;
@@ -257,12 +253,12 @@ DeviceMatching enqueue_match_reach(Device& device, const ViewGeometry& view, con
   const cl_int4 cell = int4(split.cell[0], split.cell[1], split.cell[2], 0);
   const cl_int4 dims = int4(split.dims[0], split.dims[1], split.dims[2], 0);
   const cl_int4 nb = int4(reach.bricks[0], reach.bricks[1], reach.bricks[2], 0);
-  cl::Kernel k = device.kernel("match", "simdvol_match_active", match_defines());
+  cl::Kernel k = device.kernel("match", "simdvol_match_active", device.wgs_defines());
   set_args(k, "simdvol_match_active", m.cidx, cell, dims, static_cast<cl_int>(pes), *reach.reach,
            nb, m.active);
-  m.match_events.push_back(
-      {"match_active", device.run(k, "simdvol_match_active",
-                                  cl::NDRange(static_cast<std::size_t>(pes)), cl::NDRange(kWgs))});
+  m.match_events.push_back({"match_active", device.run(k, "simdvol_match_active",
+                                                       cl::NDRange(static_cast<std::size_t>(pes)),
+                                                       cl::NDRange(device.wgs()))});
   return enqueue_match_masked(device, view, split, std::move(m), links);
 }
 
@@ -351,28 +347,29 @@ DeviceMatching enqueue_match_masked(Device& device, const ViewGeometry& view, co
   const cl_int4 splits = int4(sp[0], sp[1], sp[2], 0);
   const cl_int npes = static_cast<cl_int>(pes), H = static_cast<cl_int>(rows);
 
-  cl::Kernel k_rows = device.kernel("match", rows_name, match_defines());
+  cl::Kernel k_rows = device.kernel("match", rows_name, device.wgs_defines());
   set_args(k_rows, rows_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
            m.pe_of, m.active, npes, H, m.rowsum, m.rowlinks, m.column_scratch, m.column_offsets,
            cl_int(m.columns_saved));
   m.match_events.push_back(
-      {"match_rows", device.run(k_rows, rows_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
-  cl::Kernel k_pe = device.kernel("match", "simdvol_match_pe", match_defines());
+      {"match_rows", device.run(k_rows, rows_name, cl::NDRange(R / 8), cl::NDRange(device.wgs()))});
+  cl::Kernel k_pe = device.kernel("match", "simdvol_match_pe", device.wgs_defines());
   set_args(k_pe, "simdvol_match_pe", m.candidates, m.active, npes, H, m.rowsum, m.rowlinks,
            m.rowoff, m.petot, m.counts, m.rects, m.loads);
-  m.match_events.push_back(
-      {"match_pe", device.run(k_pe, "simdvol_match_pe", cl::NDRange(P), cl::NDRange(kWgs))});
-  cl::Kernel k_scan = device.kernel("match", "simdvol_match_scan", match_defines());
+  m.match_events.push_back({"match_pe", device.run(k_pe, "simdvol_match_pe", cl::NDRange(P),
+                                                   cl::NDRange(device.wgs()))});
+  cl::Kernel k_scan = device.kernel("match", "simdvol_match_scan", device.wgs_defines());
   set_args(k_scan, "simdvol_match_scan", m.petot, npes, m.seg_offset, m.link_offset);
-  m.match_events.push_back({"match_scan", device.run(k_scan, "simdvol_match_scan",
-                                                     cl::NDRange(kWgs), cl::NDRange(kWgs))});
-  cl::Kernel k_fill = device.kernel("match", fill_name, match_defines());
+  m.match_events.push_back(
+      {"match_scan", device.run(k_scan, "simdvol_match_scan", cl::NDRange(device.wgs()),
+                                cl::NDRange(device.wgs()))});
+  cl::Kernel k_fill = device.kernel("match", fill_name, device.wgs_defines());
   set_args(k_fill, fill_name, m.view, m.geometry, m.steps, m.candidates, m.cidx, cell, splits,
            m.pe_of, m.active, npes, H, m.rowsum, m.rowlinks, m.rowoff, m.seg_offset, m.link_offset,
            m.segments, m.bounds, cl_int(m.bounds_filled), m.link_list, cl_int(m.links_narrow),
            m.link_base, m.column_scratch, m.column_offsets, cl_int(m.columns_saved));
   m.match_events.push_back(
-      {"match_fill", device.run(k_fill, fill_name, cl::NDRange(R / 8), cl::NDRange(kWgs))});
+      {"match_fill", device.run(k_fill, fill_name, cl::NDRange(R / 8), cl::NDRange(device.wgs()))});
   return m;
 }
 
@@ -383,11 +380,11 @@ cl::Event enqueue_zero_uncovered(Device& device, const DeviceMatching& m, Device
     throw ArgumentError("footprints", "made for another PE count than the matching");
   check_footprints(fp, m.pes);
   const std::string name = "simdvol_zero_uncovered";
-  cl::Kernel k = device.kernel("match", name, match_defines());
+  cl::Kernel k = device.kernel("match", name, device.wgs_defines());
   set_args(k, name, m.candidates, m.rects, m.rowsum, static_cast<cl_int>(m.pes),
            static_cast<cl_int>(m.rows), fp.offsets, fp.pixels);
   const std::size_t items = static_cast<std::size_t>(std::max<int64_t>(m.pes * m.rows / 8, 1));
-  return device.run(k, name, cl::NDRange(items), cl::NDRange(kWgs));  // (run rounds up)
+  return device.run(k, name, cl::NDRange(items), cl::NDRange(device.wgs()));  // (run rounds up)
 }
 
 bool balance_bounds16(int64_t depth) {
@@ -398,11 +395,11 @@ namespace {
 
 void enqueue_unpack(Device& device, DeviceMatching& m, const std::string& name,
                     const cl::Buffer& kk) {
-  cl::Kernel unpack = device.kernel("balance", name, match_defines());
+  cl::Kernel unpack = device.kernel("balance", name, device.wgs_defines());
   set_args(unpack, name, m.seg_offset, static_cast<cl_int>(m.pes), kk, m.segments);
   const std::size_t slots = static_cast<std::size_t>(m.capacity);  // Device::run rounds up
   m.balance_events.push_back(
-      {"balance_unpack", device.run(unpack, name, cl::NDRange(slots), cl::NDRange(kWgs))});
+      {"balance_unpack", device.run(unpack, name, cl::NDRange(slots), cl::NDRange(device.wgs()))});
 }
 
 }  // namespace
@@ -441,7 +438,7 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   if (rounds.empty()) return;
   // The rounds move the bounds (k0, k1) in a compact copy (balance.cl).
   // The frame's program (stage_program_source): both widths' kernels in it.
-  const Defines& defs = match_defines();
+  const Defines& defs = device.wgs_defines();
   const std::string sfx = narrow ? "16" : "";
   const std::string pack_name = "simdvol_balance_pack" + sfx,
                     round_name = "simdvol_balance_round" + sfx + (m.links_narrow ? "n" : ""),
@@ -461,8 +458,8 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
   if (!filled) {
     cl::Kernel pack = device.kernel("balance", pack_name, defs);
     set_args(pack, pack_name, m.seg_offset, npes, m.segments, kk);
-    m.balance_events.push_back(
-        {"balance_pack", device.run(pack, pack_name, cl::NDRange(slots), cl::NDRange(kWgs))});
+    m.balance_events.push_back({"balance_pack", device.run(pack, pack_name, cl::NDRange(slots),
+                                                           cl::NDRange(device.wgs()))});
   }
   // Which sweeps moved samples: the rounds of a sweep after one that moved
   // none return at once (balance.cl, SV_BAL_SETTLED).
@@ -483,7 +480,7 @@ void enqueue_balance(Device& device, DeviceMatching& m, const ViewGeometry& view
         {"balance_round",
          device.run(round, round_name,
                     cl::NDRange((static_cast<std::size_t>(npairs) + SV_BAL_PES - 1) / SV_BAL_PES),
-                    cl::NDRange(kWgs))});
+                    cl::NDRange(device.wgs()))});
   }
   // The fill's 16-bit copy may stay the only current one (deferred).
   if (filled && unpack == BalanceUnpack::deferred) {

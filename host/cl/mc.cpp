@@ -97,8 +97,8 @@ DeviceRayLists enqueue_ray_lists(Device& device, const LocalSegments& segs,
   cl::Kernel kc = device.kernel("mc", "simdvol_mc_ray_count", {}, kOptions);
   set_args(kc, "simdvol_mc_ray_count", segs.segments, nseg, cl_int(width), cl_int(height),
            r.counts);
-  r.events.push_back(
-      {"ray count", device.run(kc, "simdvol_mc_ray_count", range(nseg), cl::NDRange(kWgs))});
+  r.events.push_back({"ray count", device.run(kc, "simdvol_mc_ray_count", range(nseg),
+                                              cl::NDRange(kWgs), LocalSize::at_most)});
   cl::Kernel ks = device.kernel("mc", "simdvol_mc_ray_scan", {}, kOptions);
   set_args(ks, "simdvol_mc_ray_scan", r.counts, cl_int(npx), r.offset);
   r.events.push_back(
@@ -106,12 +106,12 @@ DeviceRayLists enqueue_ray_lists(Device& device, const LocalSegments& segs,
   cl::Kernel kf = device.kernel("mc", "simdvol_mc_ray_fill", {}, kOptions);
   set_args(kf, "simdvol_mc_ray_fill", segs.segments, nseg, cl_int(width), cl_int(height), r.offset,
            r.counts, r.items);
-  r.events.push_back(
-      {"ray fill", device.run(kf, "simdvol_mc_ray_fill", range(nseg), cl::NDRange(kWgs))});
+  r.events.push_back({"ray fill", device.run(kf, "simdvol_mc_ray_fill", range(nseg),
+                                             cl::NDRange(kWgs), LocalSize::at_most)});
   cl::Kernel kt = device.kernel("mc", "simdvol_mc_ray_sort", {}, kOptions);
   set_args(kt, "simdvol_mc_ray_sort", segs.segments, cl_int(npx), r.offset, r.items);
-  r.events.push_back(
-      {"ray sort", device.run(kt, "simdvol_mc_ray_sort", range(npx), cl::NDRange(kWgs))});
+  r.events.push_back({"ray sort", device.run(kt, "simdvol_mc_ray_sort", range(npx),
+                                             cl::NDRange(kWgs), LocalSize::at_most)});
   return r;
 }
 
@@ -169,7 +169,7 @@ cl::Event enqueue_mc_whole(Device& device, const LocalSegments& segs, const cl::
   cl::Kernel k = device.kernel("mc", name, mc_defines(p, false, stats != nullptr), kOptions);
   set_args(k, name, segs.segments, sample_off, samples, rays.offset, rays.items, cl_int(rays.width),
            cl_int(npx), cl_int(p.samples), cl_ulong(p.seed), image, stats ? stats->buffer : dummy);
-  return device.run(k, name, range(npx), cl::NDRange(kWgs));
+  return device.run(k, name, range(npx), cl::NDRange(kWgs), LocalSize::at_most);
 }
 
 DeviceAllocation enqueue_mc_allocation(Device& device, const LocalSegments& segs,
@@ -189,14 +189,14 @@ DeviceAllocation enqueue_mc_allocation(Device& device, const LocalSegments& segs
   cl::Kernel ka = device.kernel("mc", "simdvol_mc_alpha", {}, kOptions);
   set_args(ka, "simdvol_mc_alpha", segs.segments, cl_int(segs.count), sample_off, samples, a.alpha,
            a.walks);
-  a.events.push_back(
-      {"alpha", device.run(ka, "simdvol_mc_alpha", range(segs.count), cl::NDRange(kWgs))});
+  a.events.push_back({"alpha", device.run(ka, "simdvol_mc_alpha", range(segs.count),
+                                          cl::NDRange(kWgs), LocalSize::at_most)});
   const int npx = rays.width * rays.height;
   cl::Kernel kb = device.kernel("mc", "simdvol_mc_allocate", {}, kOptions);
   set_args(kb, "simdvol_mc_allocate", rays.offset, rays.items, cl_int(npx), a.alpha, cl_int(budget),
            a.walks);
-  a.events.push_back(
-      {"allocate", device.run(kb, "simdvol_mc_allocate", range(npx), cl::NDRange(kWgs))});
+  a.events.push_back({"allocate", device.run(kb, "simdvol_mc_allocate", range(npx),
+                                             cl::NDRange(kWgs), LocalSize::at_most)});
   return a;
 }
 
@@ -225,7 +225,7 @@ cl::Event enqueue_mc_local(Device& device, const LocalSegments& segs, const cl::
            cl_int(log2_exact(segs.pes)), sample_off, samples, cl_int(width), cl_int(p.samples),
            alloc ? alloc->walks : no_alloc, cl_ulong(p.seed), segs.rects, fp.offsets, fp.pixels,
            stats ? stats->buffer : dummy);
-  return device.run(k, name, range(segs.count), cl::NDRange(kWgs));
+  return device.run(k, name, range(segs.count), cl::NDRange(kWgs), LocalSize::at_most);
 }
 
 }  // namespace simdvol

@@ -150,7 +150,7 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
              cells.cell_arg(), cells.block_arg(), static_cast<cl_int>(C.pes()),
              static_cast<cl_int>(V.stride), pbuf);
     const detail::PlaneRange r = detail::chunk_range(V);
-    return device.run(k, name, r.global, r.local);
+    return device.run(k, name, r.global, r.local, LocalSize::at_most);
   }
   const char* name = variant == ShadeKernel::range3d ? "simdvol_shade"
                      : variant == ShadeKernel::voxel ? "simdvol_shade_voxel"
@@ -161,16 +161,17 @@ cl::Event enqueue_shade(Device& device, const CellBuffer& cells, const sv_shade_
            static_cast<cl_int>(V.stride), pbuf);
   if (variant == ShadeKernel::range3d) {
     const detail::CellRange r = detail::cell_range(V);
-    return device.run(k, name, r.global, r.local);
+    return device.run(k, name, r.global, r.local, LocalSize::at_most);
   }
   if (variant == ShadeKernel::voxel)
     return device.run(k, name, cl::NDRange(static_cast<std::size_t>(V.elements())),
-                      cl::NDRange(detail::voxel_wgs()));
+                      cl::NDRange(detail::voxel_wgs()), LocalSize::at_most);
   const std::size_t rows = static_cast<std::size_t>(V.cell()[1] * V.cell()[2]);
   const std::size_t lr = std::min<std::size_t>(64, detail::pow2_at_least(rows));
   return device.run(
       k, name, cl::NDRange(rows, static_cast<std::size_t>(V.pes())),
-      cl::NDRange(lr, std::max<std::size_t>(1, std::min<std::size_t>(64 / lr, V.pes()))));
+      cl::NDRange(lr, std::max<std::size_t>(1, std::min<std::size_t>(64 / lr, V.pes()))),
+      LocalSize::at_most);
 }
 
 }  // namespace simdvol

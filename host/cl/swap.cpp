@@ -17,7 +17,9 @@ static_assert(sizeof(Rgba) == 16, "Rgba must match float4");
 namespace {
 
 constexpr int64_t kInt32Max = std::numeric_limits<cl_int>::max();
-constexpr int64_t kBlock = 64;  // local size
+// simdvol_swap_stage's local size: one work-item per PE, reading global ids
+// only (LocalSize::at_most: fewer where the device takes fewer)
+constexpr int64_t kBlock = 64;
 // simdvol_swap_stages' own local arrays (size and start: 2 x (stages - 1)
 // levels x 2^stages ints, SV_SWAP_GROUP = 2^kSwapFusedStages), and 1 KiB
 // for the padding that aligns its four local blocks.
@@ -67,8 +69,7 @@ void check_local_bytes(int64_t local_bytes) {
 // layout.cl and match.cl (stage_program_source), whose callers define WGS:
 // the same defines here, so that a frame builds that program once.
 cl::Kernel swap_kernel(Device& device, const std::string& name) {
-  static const Defines d{{"WGS", "64"}};
-  return device.kernel("swap", name, d);
+  return device.kernel("swap", name, device.wgs_defines());
 }
 
 }  // namespace
@@ -251,7 +252,8 @@ cl::Event swap_stage(Device& device, const DeviceSwapPlan& d, int k, const cl::B
   const std::size_t pes = std::size_t(1) << d.plan.stages();
   set_args(kern, name, in, d.rects[kk], d.offsets[kk], out, d.rects[kk + 1], d.offsets[kk + 1],
            static_cast<cl_int>(pes), static_cast<cl_int>(k), static_cast<cl_int>(d.plan.front[kk]));
-  return device.run(kern, name, cl::NDRange(round_up(pes, kBlock)), cl::NDRange(kBlock));
+  return device.run(kern, name, cl::NDRange(round_up(pes, kBlock)), cl::NDRange(kBlock),
+                    LocalSize::at_most);
 }
 
 }  // namespace
@@ -300,19 +302,48 @@ int64_t local_budget(const Device& device, int64_t local_bytes) {
   return local_bytes > 0 ? local_bytes : static_cast<int64_t>(device.info().local_mem_bytes);
 }
 
-// All the local memory of a launch whose two buffers take `b` bytes.
-int64_t local_need(const std::array<int64_t, 2>& b) {
-  return b[0] + b[1] + kSwapStagesFixedLocal;
+// All the local memory of a launch whose two buffers take `b` bytes, the
+// kernel's own arrays and their alignment `own` (kSwapStagesFixedLocal, or
+// more where the device's compiler says so: StagesKernel).
+int64_t local_need(const std::array<int64_t, 2>& b, int64_t own = kSwapStagesFixedLocal) {
+  return b[0] + b[1] + own;
 }
 
-// enqueue_swap_stages with its local buffers' sizes (swap_stages_local_bytes
-// of the same k0, m) already computed and checked.
+// simdvol_swap_stages on this device: the kernel, the most stages one
+// launch may run (a work-group of 2^m work-items: its barriers and local
+// memory need exactly that many), and the local memory of its own arrays,
+// 6,144 bytes, plus 1 KiB for the alignment of its blocks (the kernel's
+// CL_KERNEL_LOCAL_MEM_SIZE before any local argument is set, where a
+// device reports more than those 6,144).
+struct StagesKernel {
+  cl::Kernel kernel;
+  int most_stages = 0;
+  int64_t own_local = kSwapStagesFixedLocal;
+  WorkGroupLimits limits;
+};
+
+StagesKernel stages_kernel(Device& device) {
+  const std::string name = "simdvol_swap_stages";
+  StagesKernel s;
+  s.kernel = swap_kernel(device, name);
+  s.limits = device.work_group_limits(s.kernel, name);
+  const std::size_t most = largest_pow2_group(std::size_t(1) << kSwapFusedStages, s.limits);
+  while ((std::size_t(1) << (s.most_stages + 1)) <= most) ++s.most_stages;
+  cl_ulong own = 0;
+  cl_check(clGetKernelWorkGroupInfo(s.kernel(), device.device()(), CL_KERNEL_LOCAL_MEM_SIZE,
+                                    sizeof own, &own, nullptr),
+           "clGetKernelWorkGroupInfo(simdvol_swap_stages, CL_KERNEL_LOCAL_MEM_SIZE)");
+  s.own_local = std::max<int64_t>(kSwapStagesFixedLocal, static_cast<int64_t>(own) + 1024);
+  return s;
+}
+
+// enqueue_swap_stages with its kernel made and its local buffers' sizes
+// (swap_stages_local_bytes of the same k0, m) already computed and checked.
 cl::Event enqueue_swap_stages_sized(Device& device, const DeviceSwapPlan& d, int k0, int m,
                                     const cl::Buffer& in, const cl::Buffer& out,
-                                    const std::array<int64_t, 2>& lbytes) {
+                                    const std::array<int64_t, 2>& lbytes, cl::Kernel& kern) {
   const int N = d.plan.stages();
   const std::string name = "simdvol_swap_stages";
-  cl::Kernel kern = swap_kernel(device, name);
   // Levels k0 .. k0 + m; the slots past them repeat the last (not read).
   std::array<const cl::Buffer*, 8> r{}, o{};
   for (int s = 0; s < 8; ++s) {
@@ -329,7 +360,8 @@ cl::Event enqueue_swap_stages_sized(Device& device, const DeviceSwapPlan& d, int
            *r[2], *r[3], *r[4], *r[5], *r[6], *r[7], *o[0], *o[1], *o[2], *o[3], *o[4], *o[5],
            *o[6], *o[7], static_cast<cl_int>(k0), static_cast<cl_int>(m), fronts);
   const std::size_t pes = std::size_t(1) << N;
-  return device.run(kern, name, cl::NDRange(pes), cl::NDRange(std::size_t(1) << m));
+  return device.run(kern, name, cl::NDRange(pes), cl::NDRange(std::size_t(1) << m),
+                    LocalSize::exact);
 }
 
 }  // namespace
@@ -350,17 +382,28 @@ cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, i
   check_level(d, k0, in, "in");
   check_level(d, k0 + m, out, "out");
   if (in() == out()) throw ArgumentError("out", "is `in`: the launch writes another buffer");
+  StagesKernel sk = stages_kernel(device);
+  if (m > sk.most_stages)
+    throw ArgumentError(
+        "stages",
+        "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
+            ": simdvol_swap_stages runs a work-group of 2^m = " + std::to_string(int64_t(1) << m) +
+            " work-items, more than this device takes for it (" +
+            describe_work_group_limits(sk.limits) + "): " +
+            (sk.most_stages >= 1
+                 ? "pass m <= " + std::to_string(sk.most_stages)
+                 : std::string("run the stages one launch each (enqueue_swap_stage)")));
   // PoCL checks a launch's local memory only with an assertion: too much
   // aborts the process, so it is checked here.
   const std::array<int64_t, 2> lbytes = swap_stages_local_bytes(d.plan, k0, m);
-  const int64_t need = local_need(lbytes);
+  const int64_t need = local_need(lbytes, sk.own_local);
   const int64_t have = local_budget(device, local_bytes);
   if (need > have)
     throw ArgumentError("stages", "k0 = " + std::to_string(k0) + ", m = " + std::to_string(m) +
                                       ": the levels between need " + std::to_string(need) +
                                       " bytes of local memory, more than the " +
                                       std::to_string(have) + " available");
-  return enqueue_swap_stages_sized(device, d, k0, m, in, out, lbytes);
+  return enqueue_swap_stages_sized(device, d, k0, m, in, out, lbytes, sk.kernel);
 }
 
 DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const DeviceFootprints& fp,
@@ -386,12 +429,19 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
   // L3 cache either way), and a group of PEs 2^6 apart reads a few hundred
   // scattered bytes per PE where the stage kernel streams consecutive PEs.
   // The launch's local buffers are sized once, here (their sums are a pass
-  // over the PEs per level).
+  // over the PEs per level). No more stages than the device takes 2^m
+  // work-items in a work-group of simdvol_swap_stages for (a GPU's 64 or
+  // 256, say; the levels are the same whatever m).
   int m0 = std::min(max_fused, N);
+  StagesKernel sk;
+  if (m0 >= kSwapFusedMin) {
+    sk = stages_kernel(device);
+    m0 = std::min(m0, sk.most_stages);
+  }
   std::array<int64_t, 2> lbytes{0, 0};
   for (; m0 >= kSwapFusedMin; --m0) {
     lbytes = swap_stages_local_bytes(d.plan, 0, m0);
-    if (local_need(lbytes) <= local_budget(device, local_bytes)) break;
+    if (local_need(lbytes, sk.own_local) <= local_budget(device, local_bytes)) break;
   }
   const int first = m0 >= kSwapFusedMin ? m0 : 1;  // the first level written to memory
   // Level L (first .. N) in slot (L - 1) mod S, S = 2 (ping and pong): a
@@ -415,7 +465,8 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
   cl::Buffer in = fp.pixels;
   int k = 0;
   if (m0 >= kSwapFusedMin) {
-    r.stages.push_back(enqueue_swap_stages_sized(device, d, 0, m0, in, slot(m0), lbytes));
+    r.stages.push_back(
+        enqueue_swap_stages_sized(device, d, 0, m0, in, slot(m0), lbytes, sk.kernel));
     r.first_stage.push_back(0);
     k = m0;
     in = slot(k);
@@ -445,7 +496,7 @@ cl::Event enqueue_display(Device& device, const DeviceSwapPlan& d, const cl::Buf
   return device.run(k, name,
                     cl::NDRange(round_up(static_cast<std::size_t>(w), 64),
                                 round_up(static_cast<std::size_t>(h), 4)),
-                    cl::NDRange(64, 4));
+                    cl::NDRange(64, 4), LocalSize::at_most);
 }
 
 cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
@@ -478,7 +529,7 @@ cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffe
   return device.run(k, name,
                     cl::NDRange(round_up(static_cast<std::size_t>(ow), 64),
                                 round_up(static_cast<std::size_t>(oh), 4)),
-                    cl::NDRange(64, 4));
+                    cl::NDRange(64, 4), LocalSize::at_most);
 }
 
 Image read_device_image(Device& device, const cl::Buffer& image, int width, int height) {

@@ -55,7 +55,10 @@ inline CellRange cell_range(const VoxelLayout& L) {
   const std::size_t lx =
       std::min<std::size_t>(std::clamp<std::size_t>(pow2_at_least(cx), 8, 64), wg);
   // At least 16 work-items per PE (the kernels zero a plane's tail of up to
-  // 15 floats with one work-item each).
+  // 15 floats with one work-item each, from get_global_size(0)): the range
+  // is rounded up to (LX, LY) here, so that where Device::run launches with
+  // a smaller local size (LocalSize::at_most: a device that takes fewer
+  // work-items) the range, and the work-items per PE, stay the same.
   const std::size_t ly = std::max<std::size_t>(std::max<std::size_t>(1, 16 / lx),
                                                std::min(wg / lx, pow2_at_least(rows)));
   const std::size_t lz = std::max<std::size_t>(1, std::min(wg / (lx * ly), pes));

@@ -109,11 +109,14 @@ struct DeviceSwapRun {
 /// Enqueues all N stages from the footprints `fp` (whose offsets must be the
 /// plan's level 0): the first m stages in one launch (enqueue_swap_stages),
 /// m the largest of min(max_fused, N), min(max_fused, N) - 1, ... whose
-/// levels between fit in `local_bytes` of local memory (0: the device's
-/// CL_DEVICE_LOCAL_MEM_SIZE; swap_stages_local_need) when it is at least
-/// kSwapFusedMin, the others one launch per stage. max_fused in 1 ..
-/// kSwapFusedStages. The levels are the same bit for bit whatever
-/// max_fused and local_bytes.
+/// 2^m work-items the device takes in a work-group of simdvol_swap_stages
+/// (CL_DEVICE_MAX_WORK_GROUP_SIZE, CL_DEVICE_MAX_WORK_ITEM_SIZES[0], the
+/// kernel's CL_KERNEL_WORK_GROUP_SIZE) and whose levels between fit in
+/// `local_bytes` of local memory (0: the device's CL_DEVICE_LOCAL_MEM_SIZE;
+/// swap_stages_local_need) when it is at least kSwapFusedMin, the others one
+/// launch per stage. max_fused in 1 .. kSwapFusedStages. The levels are the
+/// same bit for bit whatever max_fused, local_bytes and the device's
+/// limits.
 DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& plan, const DeviceFootprints& fp,
                            int max_fused = kSwapFusedStages, int64_t local_bytes = 0);
 /// Enqueues stage k alone: level k's buffer `in` -> level k + 1's `out`
@@ -128,7 +131,9 @@ cl::Event enqueue_swap_stage(Device& device, const DeviceSwapPlan& plan, int k,
 /// ArgumentError (here and in enqueue_swap).
 /// ArgumentError if they need more than `local_bytes` (0: the device's
 /// local memory size; swap_stages_local_need), since PoCL aborts on a
-/// launch with too much.
+/// launch with too much, and where the device takes fewer than 2^m
+/// work-items in a work-group of simdvol_swap_stages (the message names the
+/// limits and the largest m it takes).
 cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& plan, int k0, int m,
                               const cl::Buffer& in, const cl::Buffer& out, int64_t local_bytes = 0);
 /// The most pixels of level L that one work-group of enqueue_swap_stages
