@@ -570,9 +570,13 @@ TEST(CallerBuffers, ExactSizesAreTakenAByteLessRefused) {
   const int N = plan.plan.stages();
   std::vector<cl::Buffer> levels{fp1.pixels};
   for (int L = 1; L <= N; ++L) levels.push_back(Frame::sized(dev, plan.plan.level_size(L) * 16));
-  const int m = kSwapFusedMin;
-  EXPECT_NO_THROW(
-      enqueue_swap_stages(dev, plan, 0, m, levels[0], levels[static_cast<std::size_t>(m)]));
+  // (fewer stages in one launch, or none, where the device takes fewer than
+  // 2^4 work-items in a group: POCL_MAX_WORK_GROUP_SIZE)
+  const int m = std::min(kSwapFusedMin, testing::most_fused_stages(dev));
+  if (m > 0) {
+    EXPECT_NO_THROW(
+        enqueue_swap_stages(dev, plan, 0, m, levels[0], levels[static_cast<std::size_t>(m)]));
+  }
   for (int k = m; k < N; ++k)
     EXPECT_NO_THROW(enqueue_swap_stage(dev, plan, k, levels[static_cast<std::size_t>(k)],
                                        levels[static_cast<std::size_t>(k + 1)]));
@@ -596,8 +600,9 @@ TEST(CallerBuffers, ExactSizesAreTakenAByteLessRefused) {
   EXPECT_REFUSED("fp.pixels", enqueue_resample_local(dev, f.segs, f.tables, vb, 1, short_fp));
   EXPECT_REFUSED("image", enqueue_mc_whole(dev, f.segs, f.soff, f.samples, rays, p,
                                            less(int64_t(W) * H * 16)));
+  const int mo = std::max(m, 1);  // (the buffers are checked before the work-group's size)
   EXPECT_REFUSED(
-      "out", enqueue_swap_stages(dev, plan, 0, m, levels[0], less(plan.plan.level_size(m) * 16)));
+      "out", enqueue_swap_stages(dev, plan, 0, mo, levels[0], less(plan.plan.level_size(mo) * 16)));
   EXPECT_REFUSED("intermediate", enqueue_warp(dev, f.view, less(int64_t(W) * H * 16), out));
   dev.finish();
 }

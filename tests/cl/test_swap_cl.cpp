@@ -55,20 +55,6 @@ bool bitwise_equal(const std::vector<Rgba>& a, const std::vector<Rgba>& b) {
          (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Rgba)) == 0);
 }
 
-// The most stages one simdvol_swap_stages launch runs on this device (a
-// work-group of 2^m work-items): kSwapFusedStages, or fewer where the device
-// takes fewer work-items in a group (a GPU; POCL_MAX_WORK_GROUP_SIZE, as the
-// test simdvol_swap_work_groups_16 sets it).
-int most_fused_stages(Device& dev) {
-  const std::string name = "simdvol_swap_stages";
-  const cl::Kernel k = dev.kernel("swap", name, dev.wgs_defines());
-  const std::size_t most =
-      largest_pow2_group(std::size_t(1) << kSwapFusedStages, dev.work_group_limits(k, name));
-  int m = 0;
-  while ((std::size_t(1) << (m + 1)) <= most) ++m;
-  return m;
-}
-
 }  // namespace
 
 // swap_group_pixels: the largest sum of level L's pixel counts over a
@@ -128,7 +114,7 @@ TEST(SwapStagesLocal, GroupPixelsAndLocalBytes) {
 // stage, display and warp launches take smaller groups; the same bits.
 TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
   SIMDVOL_TEST_DEVICE(dev);
-  const int most = most_fused_stages(dev);
+  const int most = simdvol::testing::most_fused_stages(dev);
   const Dims3 d{29, 23, 17};
   int n = 0;
   // The engine's form: one DeviceSwapPlan planned into and uploaded without
@@ -643,7 +629,7 @@ TEST(RenderOpenClSwap, LargerFrame) {
     EXPECT_LE(max_abs_diff(ref, img), 1e-4f);
     // 13 stages: the first 7 in one launch (fewer where the device takes
     // fewer than 128 work-items in a group: 6 at 64), the rest one each
-    const int most = std::min(most_fused_stages(dev), kSwapFusedStages);
+    const int most = std::min(simdvol::testing::most_fused_stages(dev), kSwapFusedStages);
     EXPECT_EQ(t.swap_stage_ms.size(), most >= kSwapFusedMin ? 1u + (13u - unsigned(most)) : 13u);
   }
 }
