@@ -159,9 +159,7 @@ int main(int argc, char** argv) {
     const ViewGeometry view = make_view(vol, {30, 45, 10}, image, image, Sampling::voxel);
     const ShadeParams shp{};
     const sv_shade_params sp = shade_params(make_shade_frame(vol, view, shp), shp);
-    const bool relative = cls.kind == Classifier::Kind::mixture && cls.mixture.relative;
-    const sv_classify_params cp =
-        classify_params(cls, relative ? mixture_range(vol, cls.mixture) : ValueRange{}, view.step);
+    const sv_classify_params cp = classify_params(cls, classify_range(vol, cls), view.step);
 
     const double triad = triad_gbs(std::size_t(256) << 20);
     std::printf("triad bandwidth (host, %u threads, 3 x 256 MiB): %.1f GB/s\n\n",

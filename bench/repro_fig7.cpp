@@ -259,12 +259,8 @@ int main(int argc, char** argv) try {
     const VoxelLayout L = make_voxel_layout(cells.layout());
     VoxelBuffer rgba(device, L);
     const ShadeParams shp{};
-    const bool need_range = d.cls.kind == Classifier::Kind::mixture && d.cls.mixture.relative;
-    enqueue_shade_classify(
-        device, cells, shade_params(make_shade_frame(vol, view, shp), shp),
-        classify_params(d.cls, need_range ? mixture_range(vol, d.cls.mixture) : ValueRange{},
-                        view.step),
-        rgba);
+    enqueue_shade_classify(device, cells, shade_params(make_shade_frame(vol, view, shp), shp),
+                           classify_params(d.cls, classify_range(vol, d.cls), view.step), rgba);
     const KdSplit& split = cells.layout().split;
     DeviceMatching dm = enqueue_match(device, view, split);
     enqueue_balance(device, dm, view, split);

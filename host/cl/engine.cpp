@@ -283,18 +283,24 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   const sv_shade_params sp =
       shade_params(make_shade_frame(vol, view, opt.shade, values), opt.shade);
   // (classify_params reads the range only for a relative mixture)
-  ValueRange mixture_values = values;
+  // (first with the whole range: the classifier is checked before the
+  // mixture range's pass over the voxels)
+  sv_classify_params cp = classify_params(opt.classifier, values, view.step);
   if (const MaterialMixture& mix = opt.classifier.mixture;
       opt.classifier.kind == Classifier::Kind::mixture && mix.relative &&
       mix.top_percentile < 100.0f) {
+    ValueRange mixture_values;
     if (S.mixture_range && S.mixture_percentile == mix.top_percentile) {
       mixture_values = *S.mixture_range;  // (kept only while `range` is)
     } else {
       mixture_values = mixture_range(vol, mix, values);
-      if (S.range) S.mixture_range = mixture_values, S.mixture_percentile = mix.top_percentile;
+      if (S.range) {
+        S.mixture_range = mixture_values;
+        S.mixture_percentile = mix.top_percentile;
+      }
     }
+    cp = classify_params(opt.classifier, mixture_values, view.step);
   }
-  const sv_classify_params cp = classify_params(opt.classifier, mixture_values, view.step);
   const CompositeMode mode = opt.composite.mode;
 
   // Every launch logged for the frame's timeline (EngineTimes::kernels).

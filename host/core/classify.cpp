@@ -90,6 +90,13 @@ void validate_ramp(const Ramp& r, const std::string& what) {
   }
 }
 
+// MaterialMixture::top_percentile lies in (0, 100].
+void check_top_percentile(float p) {
+  if (!(p > 0.0f && p <= 100.0f))
+    throw ArgumentError("classifier.top_percentile",
+                        "must lie in (0, 100] (got " + number_text(p) + ")");
+}
+
 // 1 / (2 sigma^2) as the kernels keep it, in float.
 float half_inv_var(const Material& m) {
   const double sigma = m.sigma;
@@ -129,9 +136,7 @@ void validate(const Classifier& c) {
   }
   const auto& m = c.mixture.materials;
   if (m.empty()) throw ArgumentError("classifier", "the material mixture has no materials");
-  if (!(c.mixture.top_percentile > 0.0f && c.mixture.top_percentile <= 100.0f))
-    throw ArgumentError("classifier.top_percentile",
-                        "must lie in (0, 100] (got " + number_text(c.mixture.top_percentile) + ")");
+  check_top_percentile(c.mixture.top_percentile);
   for (std::size_t i = 0; i < m.size(); ++i) {
     const Material& mat = m[i];
     const std::string what = "classifier.material '" + mat.name + "'";
@@ -280,10 +285,9 @@ ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix) {
 }
 
 ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix, const ValueRange& full) {
-  if (!mix.relative || !(mix.top_percentile < 100.0f)) return full;
-  if (!(mix.top_percentile > 0.0f))
-    throw ArgumentError("classifier.top_percentile",
-                        "must lie in (0, 100] (got " + number_text(mix.top_percentile) + ")");
+  if (!mix.relative) return full;
+  check_top_percentile(mix.top_percentile);
+  if (mix.top_percentile == 100.0f) return full;
   vol.check_voxel_count();
   // The foreground: finite voxels above a tenth of the range (a head's
   // background, zeros and noise, is half of ch2 and most of brainsmall).
@@ -305,7 +309,9 @@ ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix, const Va
     counted = true;
     for (float v : vol.data()) {
       if (!above(v)) continue;
-      if (v != std::floor(v)) {
+      // (a fraction, or a value outside `full`, which a caller's stale
+      // range can leave: selected below, not counted past the array's end)
+      if (v != std::floor(v) || v < full.min || v > full.max) {
         counted = false;
         break;
       }
@@ -335,6 +341,11 @@ ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix, const Va
     }
   }
   return top > full.min ? ValueRange{full.min, top} : full;
+}
+
+ValueRange classify_range(const Volume& vol, const Classifier& c) {
+  return c.kind == Classifier::Kind::mixture && c.mixture.relative ? mixture_range(vol, c.mixture)
+                                                                   : ValueRange{};
 }
 
 float mixture_range_scale(const ValueRange& range) {
@@ -368,8 +379,7 @@ std::vector<Rgba> classify(const Volume& vol, const std::vector<ShadeSample>& sh
     throw ArgumentError("opacity_step",
                         "must be positive and finite (got " + number_text(opacity_step) + ")");
   validate(c);
-  const bool need_range = c.kind == Classifier::Kind::mixture && c.mixture.relative;
-  const ValueRange range = need_range ? mixture_range(vol, c.mixture) : ValueRange{};
+  const ValueRange range = classify_range(vol, c);
 
   const double step = static_cast<float>(opacity_step);
   std::vector<Rgba> out(vol.voxel_count());
@@ -578,6 +588,8 @@ Classifier load_classifier(const std::filesystem::path& path) {
       material_lines.push_back(ps.line);
       any_material = true;
     } else if (d == "relative") {
+      if (relative_line != 0)  // ('relative 99' then 'relative' took 99)
+        ps.fail("relative is given again (first on line " + std::to_string(relative_line) + ")");
       if (nv > 1) ps.fail("relative takes at most one value (the top's percentile)");
       if (any_transfer) ps.fail("relative applies only to material lines");
       if (nv == 1) {

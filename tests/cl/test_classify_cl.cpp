@@ -119,11 +119,6 @@ Classifier by_name(const std::string& name) {
   return name == "knots" ? many_knots() : classifier_preset(name);
 }
 
-ValueRange range_for(const Classifier& c, const Volume& vol) {
-  return c.kind == Classifier::Kind::mixture && c.mixture.relative ? mixture_range(vol, c.mixture)
-                                                                   : ValueRange{};
-}
-
 struct Case {
   const Volume* vol;
   std::string classifier;
@@ -144,7 +139,7 @@ void check_case(const Case& k) {
   const ViewGeometry view = make_view(vol, k.view, 64, 64, Sampling::voxel);
   const std::vector<ShadeSample> shading = shade(vol, view, k.shade);
   const std::vector<Rgba> ref = classify(vol, shading, c, k.step);
-  const sv_classify_params cp = classify_params(c, range_for(c, vol), k.step);
+  const sv_classify_params cp = classify_params(c, classify_range(vol, c), k.step);
   const sv_shade_params sp = shade_params(make_shade_frame(vol, view, k.shade), k.shade);
 
   PeArray array(dev, pe_grid(k.pes));
@@ -508,7 +503,7 @@ TEST(ClassifyKernel, LiveLeavesUnflaggedPesAndTransparentChunks) {
     for (bool il : {true, false}) {
       SCOPED_TRACE(std::string(name) + (il ? " interleaved" : " planar"));
       const Classifier c = by_name(name);
-      const sv_classify_params cp = classify_params(c, range_for(c, vol), 1.0);
+      const sv_classify_params cp = classify_params(c, classify_range(vol, c), 1.0);
       const VoxelLayout L = make_voxel_layout(cells.layout(), il);
       VoxelBuffer fresh(dev, L), kept(dev, L), poisoned(dev, L);
       enqueue_shade_classify(dev, cells, sb, cp, fresh);
@@ -620,8 +615,8 @@ TEST(ClassifyKernel, KeptClassificationGivesTheSameBits) {
           SCOPED_TRACE(std::string(name) + (il ? " interleaved" : " planar") +
                        (grad ? " with the gradient " : " ") + std::to_string(v->dims()[0]));
           const Classifier c = by_name(name);
-          const sv_classify_params c1 = classify_params(c, range_for(c, *v), 1.0);
-          const sv_classify_params c7 = classify_params(c, range_for(c, *v), 0.7);
+          const sv_classify_params c1 = classify_params(c, classify_range(*v, c), 1.0);
+          const sv_classify_params c7 = classify_params(c, classify_range(*v, c), 0.7);
           const VoxelLayout L = make_voxel_layout(cells.layout(), il);
           const std::size_t bytes = static_cast<std::size_t>(KeptClassification::bytes(L, grad));
           ASSERT_EQ(bytes, static_cast<std::size_t>(L.pes()) * (grad ? 7 : 4) * L.stride * F4);

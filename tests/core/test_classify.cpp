@@ -467,7 +467,7 @@ TEST(Presets, CtMaterials) {
 // mixture_range: the minimum to the top_percentile-th percentile (the lower
 // rank) of the foreground, the finite voxels above min + (max - min) / 10.
 TEST(MixtureRange, PercentileOfTheForeground) {
-  // 1000 voxels at 0, one each of 1 .. 100, one at 255: range 0 .. 255, the
+  // 1001 voxels at 0, one each of 1 .. 100, one at 255: range 0 .. 255, the
   // foreground above 25.5 is 26 .. 100 and 255 (76 voxels); the 99th
   // percentile is rank floor(0.99 x 75) = 74 of them, 100.
   Volume vol({1102, 1, 1}, VoxelType::u8);
@@ -502,6 +502,10 @@ TEST(MixtureRange, PercentileOfTheForeground) {
   // foreground above -800: -799 .. 1000 (1800), rank floor(0.99 x 1799) = 1781: 982
   EXPECT_EQ(mixture_range(h, mix).min, -1000.0f);
   EXPECT_EQ(mixture_range(h, mix).max, 982.0f);
+  // A range that is not the volume's (a caller's stale one; {} here): the
+  // voxels outside it are selected, not counted past the count's end (a
+  // heap overflow under ASan before). Above 0: 1 .. 100 and 255, rank 99.
+  EXPECT_EQ(mixture_range(vol, mix, ValueRange{}).max, 100.0f);
   // No foreground, or not relative: the whole range.
   Volume flat({4, 4, 4}, VoxelType::u8);
   std::fill(flat.data().begin(), flat.data().end(), 7.0f);
@@ -606,6 +610,9 @@ TEST_F(ClassifierFile, RejectsEachMalformedCaseWithItsLine) {
   expect_error("relative\nmaterial a 0 1e-30 1 1 1 0.5\nmaterial b 1 0.1 1 1 1 0.5\n",
                {"line 2", "sigma 1e-30 of 'a' is too small for float arithmetic"});
   expect_error("relative 99 1\nmaterial a 0 1 1 1 1 0.5\n", {"line 1", "at most one value"});
+  // ('relative 99' then 'relative' took 99, the reverse the maximum)
+  expect_error("relative 99\nrelative\nmaterial a 0 1 1 1 1 0.5\n",
+               {"line 2", "relative is given again (first on line 1)"});
   expect_error("relative 0\nmaterial a 0 1 1 1 1 0.5\n",
                {"line 1", "percentile 0 must lie in (0, 100]"});
   expect_error("relative 100.5\nmaterial a 0 1 1 1 1 0.5\n", {"line 1", "(0, 100]"});

@@ -92,6 +92,11 @@ Classifier classifier_from_spec(const std::string& spec);
 ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix);
 ValueRange mixture_range(const Volume& vol, const MaterialMixture& mix, const ValueRange& full);
 
+/// The range classify_params and classify_voxel take for `c` on `vol`:
+/// mixture_range(vol, c.mixture) for a relative mixture, else none (an
+/// absolute mixture and a transfer function read no range; {}).
+ValueRange classify_range(const Volume& vol, const Classifier& c);
+
 /// A relative mixture's scale 1 / (max - min) of `range` in float, 0 when
 /// max == min: what the kernels multiply by (sv_classify_params::range_scale).
 float mixture_range_scale(const ValueRange& range);
