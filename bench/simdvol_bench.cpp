@@ -346,14 +346,14 @@ Options parse_args(int argc, char** argv) {
     } else if (a == "--orders") {
       orders = parse_int_list(next(), a, 0, 3);
     } else if (a == "--compositing") {
-      comps = split_list(next(), a);
-      for (std::size_t i = 0; i < comps->size(); ++i) {
-        const std::string given = (*comps)[i];
-        (*comps)[i] = parse_comp(given).name;
-        for (std::size_t k = 0; k < i; ++k)  // (mc16,mc016: "'mc16' is given twice")
-          if ((*comps)[k] == (*comps)[i] && given != (*comps)[i])
+      const std::vector<std::string> given = split_list(next(), a);
+      comps.emplace();
+      for (std::size_t i = 0; i < given.size(); ++i) {
+        comps->push_back(parse_comp(given[i]).name);
+        for (std::size_t k = 0; k < i; ++k)  // (mc016,mc16: "'mc16' is given twice")
+          if ((*comps)[k] == (*comps)[i] && given[k] != given[i])
             throw ArgumentError(
-                a, "'" + given + "' is '" + (*comps)[i] + "' again: give each compositing once");
+                a, "'" + given[i] + "' is '" + given[k] + "' again: give each compositing once");
       }
     } else if (a == "--pes") {
       o.pes = parse_int_list(next(), a, 1, int64_t(1) << 20);
@@ -1399,7 +1399,9 @@ int main(int argc, char** argv) {
     }
     // A case that threw is a failure, not a figure: a run of such cases
     // exited 0 (a missing data file, which skips its volume, is not one).
-    if (!h.failed.empty()) {
+    // A --scaling child's JSON says so to the parent, whose own cases are
+    // the same (its exit 1 lost the parent's whole run).
+    if (!h.failed.empty() && !o.child) {
       std::string list;
       for (const std::string& id : h.failed) list += (list.empty() ? "" : ", ") + id;
       std::fprintf(stderr, "simdvol-bench: %zu case%s failed (skipped above, saying why): %s\n",
