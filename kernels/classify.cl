@@ -631,7 +631,7 @@ __kernel void simdvol_shade_classify(__global const float* restrict cells,
   if (p >= pes) return;
   const int cvox = rows * cell.x;
   __global float* blk = out + (size_t)p * 4 * (size_t)vstride;
-  /* The tail (< 16 per plane; the group has >= 16 work-items per PE, see
+  /* The tail (< 16 per plane; the range has >= 16 work-items per PE, see
    * cell_range in host/cl/voxel_ranges.hpp), without a loop: a loop would
    * stop PoCL vectorising. */
   const int t = row * (int)get_global_size(0) + lx;

@@ -43,7 +43,7 @@ for args in "${cases[@]}"; do
     continue
   fi
   for ref in "$dir"/ref*.tif; do
-    lim=${ref/\/ref/\/lim}
+    lim="$dir/lim${ref#"$dir"/ref}"
     out=$("$cli" compare "$lim" "$ref" 2>&1)
     if [[ "$out" != *$'max_abs_diff 0\n'* && "$out" != *"max_abs_diff 0" ]]; then
       echo "FAIL: render $args, $(basename "$ref"): limit $limit against none: $out" >&2

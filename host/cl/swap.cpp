@@ -337,6 +337,14 @@ StagesKernel stages_kernel(Device& device) {
   return s;
 }
 
+}  // namespace
+
+int swap_fused_stages_limit(Device& device) {
+  return stages_kernel(device).most_stages;
+}
+
+namespace {
+
 // enqueue_swap_stages with its kernel made and its local buffers' sizes
 // (swap_stages_local_bytes of the same k0, m) already computed and checked.
 cl::Event enqueue_swap_stages_sized(Device& device, const DeviceSwapPlan& d, int k0, int m,

@@ -167,19 +167,4 @@ class ScopedEnv {
   std::optional<std::string> old_;
 };
 
-// The most stages one simdvol_swap_stages launch runs on `dev` (a
-// work-group of 2^m work-items): kSwapFusedStages, or fewer where the device
-// takes fewer work-items in a group (a GPU; POCL_MAX_WORK_GROUP_SIZE, as the
-// tests simdvol_swap_work_groups_16 and simdvol_work_groups_* set it); 0
-// where it takes no group of 2.
-inline int most_fused_stages(Device& dev) {
-  const std::string name = "simdvol_swap_stages";
-  const cl::Kernel k = dev.kernel("swap", name, dev.wgs_defines());
-  const std::size_t most =
-      largest_pow2_group(std::size_t(1) << kSwapFusedStages, dev.work_group_limits(k, name));
-  int m = 0;
-  while ((std::size_t(1) << (m + 1)) <= most) ++m;
-  return m;
-}
-
 }  // namespace simdvol::testing

@@ -572,7 +572,7 @@ TEST(CallerBuffers, ExactSizesAreTakenAByteLessRefused) {
   for (int L = 1; L <= N; ++L) levels.push_back(Frame::sized(dev, plan.plan.level_size(L) * 16));
   // (fewer stages in one launch, or none, where the device takes fewer than
   // 2^4 work-items in a group: POCL_MAX_WORK_GROUP_SIZE)
-  const int m = std::min(kSwapFusedMin, testing::most_fused_stages(dev));
+  const int m = std::min(kSwapFusedMin, swap_fused_stages_limit(dev));
   if (m > 0) {
     EXPECT_NO_THROW(
         enqueue_swap_stages(dev, plan, 0, m, levels[0], levels[static_cast<std::size_t>(m)]));

@@ -114,7 +114,7 @@ TEST(SwapStagesLocal, GroupPixelsAndLocalBytes) {
 // stage, display and warp launches take smaller groups; the same bits.
 TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
   SIMDVOL_TEST_DEVICE(dev);
-  const int most = simdvol::testing::most_fused_stages(dev);
+  const int most = swap_fused_stages_limit(dev);
   const Dims3 d{29, 23, 17};
   int n = 0;
   // The engine's form: one DeviceSwapPlan planned into and uploaded without
@@ -629,7 +629,7 @@ TEST(RenderOpenClSwap, LargerFrame) {
     EXPECT_LE(max_abs_diff(ref, img), 1e-4f);
     // 13 stages: the first 7 in one launch (fewer where the device takes
     // fewer than 128 work-items in a group: 6 at 64), the rest one each
-    const int most = std::min(simdvol::testing::most_fused_stages(dev), kSwapFusedStages);
+    const int most = std::min(swap_fused_stages_limit(dev), kSwapFusedStages);
     EXPECT_EQ(t.swap_stage_ms.size(), most >= kSwapFusedMin ? 1u + (13u - unsigned(most)) : 13u);
   }
 }

@@ -35,7 +35,8 @@ float aitken(const float* f, const int64_t* xs, int order, int64_t floor_x, floa
 float aitken_1d(const std::vector<float>& values, double x, int order);
 
 /// Reference 3-D resampling of a scalar volume at fixed-point coordinates
-/// (see view.hpp), neighbours clamped at the edges.
+/// (see view.hpp), neighbours clamped at the edges. ArgumentError for an
+/// empty volume or one whose data() was resized apart from its dims.
 float resample_scalar(const Volume& vol, const std::array<int64_t, 3>& fixed_pos, int order);
 
 /// Reference 3-D resampling of classified RGBA voxels (dims as `dims`).

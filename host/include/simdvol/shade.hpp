@@ -88,7 +88,8 @@ ShadeFrame make_shade_frame(const Volume& vol, const ViewGeometry& view, const S
 /// Central-difference gradient at voxel (x, y, z), neighbours clamped at the
 /// volume's edges, in value units per smallest voxel spacing; a component is
 /// infinite where the two neighbours' float difference overflows (as in the
-/// kernels), NaN next to a NaN.
+/// kernels), NaN next to a NaN. ArgumentError for a voxel outside the
+/// volume or a volume whose data() was resized apart from its dims.
 Vec3 gradient(const Volume& vol, int64_t x, int64_t y, int64_t z, const Vec3& grad_scale);
 
 /// The shade stage over the whole volume (reference, serial).

@@ -145,8 +145,15 @@ int64_t swap_group_pixels(const SwapPlan& plan, int k0, int m, int L);
 /// of its levels' swap_group_pixels x 16.
 std::array<int64_t, 2> swap_stages_local_bytes(const SwapPlan& plan, int k0, int m);
 /// All the local memory enqueue_swap_stages (k0, m) takes: the two buffers,
-/// the kernel's own tables and room for alignment.
+/// the kernel's own tables and room for alignment (its 6,144 bytes and 1
+/// KiB; on a device whose compiler reports more for simdvol_swap_stages,
+/// CL_KERNEL_LOCAL_MEM_SIZE, the enqueue functions budget that plus 1 KiB
+/// instead: PoCL reports the 6,144).
 int64_t swap_stages_local_need(const SwapPlan& plan, int k0, int m);
+/// The most stages one launch of simdvol_swap_stages runs on this device:
+/// the largest m <= kSwapFusedStages whose 2^m work-items it takes in a
+/// work-group (0 where it takes no group of 2); enqueue_swap fuses no more.
+int swap_fused_stages_limit(Device& device);
 
 /// Display: level N's buffer -> the intermediate image (float4,
 /// width x height, allocated here into `image`). ArgumentError where `last`
