@@ -343,35 +343,29 @@ if(DEFINED VOLPACK AND EXISTS "${BRAINSMALL}")
 endif()
 # A case that fails (an allocation failure injected into the first case's
 # cell buffer) is skipped, saying why, and the run, its JSON written, exits
-# 1 naming it (it exited 0, the run's figures looking whole).
-file(REMOVE ${OUT})
-execute_process(
-  COMMAND ${CMAKE_COMMAND} -E env "SIMDVOL_FAIL_ALLOCATION=cell buffer"
-          ${BENCH} --volumes phantom16 --sizes 32 --compositing direct --pes 64,8 --turntable 0
-          --reference-runs 1 --no-volpack --json ${OUT}
-  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-if(NOT rc EQUAL 1 OR NOT err MATCHES "1 case failed .*: phantom16/32/o1/direct/P64\n$"
-   OR NOT EXISTS ${OUT})
-  message(FATAL_ERROR "a failed case: exit ${rc}, JSON written: ${OUT}\n${out}\n${err}")
-endif()
+# 1 naming it (it exited 0, the run's figures looking whole); with
+# --scaling its child, whose first case fails too, exits 0 and its JSON
+# says so (its exit 1 lost the whole run: no JSON, no summary).
+function(run_failing_case)
+  file(REMOVE ${OUT})
+  execute_process(
+    COMMAND ${CMAKE_COMMAND} -E env "SIMDVOL_FAIL_ALLOCATION=cell buffer"
+            ${BENCH} --volumes phantom16 --sizes 32 --compositing direct --pes 64,8
+            --turntable 0 --no-volpack ${ARGN} --json ${OUT}
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 1 OR NOT err MATCHES "1 case failed .*: phantom16/32/o1/direct/P64\n$"
+     OR NOT EXISTS ${OUT})
+    message(FATAL_ERROR "a failed case (${ARGN}): exit ${rc}, JSON written: ${OUT}\n${out}\n${err}")
+  endif()
+endfunction()
+run_failing_case(--reference-runs 1)
 file(READ ${OUT} text)
 get(skip0 cases 0 skipped)
 string(JSON skip1 ERROR_VARIABLE jerr GET "${text}" cases 1 skipped)
 if(NOT skip0 MATCHES "injected by SIMDVOL_FAIL_ALLOCATION" OR NOT jerr)
   message(FATAL_ERROR "a failed case: case 0 skipped '${skip0}', case 1 '${skip1}'")
 endif()
-# The same with --scaling: its child, whose first case fails too, exits 0
-# and its JSON says so (its exit 1 lost the whole run: no JSON, no summary).
-file(REMOVE ${OUT})
-execute_process(
-  COMMAND ${CMAKE_COMMAND} -E env "SIMDVOL_FAIL_ALLOCATION=cell buffer"
-          ${BENCH} --volumes phantom16 --sizes 32 --compositing direct --pes 64,8 --turntable 0
-          --no-reference --no-volpack --scaling 1 --json ${OUT}
-  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-if(NOT rc EQUAL 1 OR NOT err MATCHES "1 case failed .*: phantom16/32/o1/direct/P64\n$"
-   OR NOT EXISTS ${OUT})
-  message(FATAL_ERROR "a failed case with --scaling: exit ${rc}, JSON written: ${OUT}\n${out}\n${err}")
-endif()
+run_failing_case(--no-reference --scaling 1)
 file(READ ${OUT} text)
 get(t1 scaling 0 stages wall t1)
 file(REMOVE ${OUT})
