@@ -13,14 +13,9 @@
 
 # run_frame(OUT ENV-ARG ARG...): runs the tool under `cmake -E env ENV-ARG`
 # in ${WORK}, fails on a non-zero exit, stdout in OUT.
+include(${CMAKE_CURRENT_LIST_DIR}/run_tool.cmake)
 function(run_frame out env)
-  execute_process(COMMAND ${CMAKE_COMMAND} -E env ${env} ${FRAME} ${ARGN}
-                  WORKING_DIRECTORY ${WORK} RESULT_VARIABLE rc OUTPUT_VARIABLE o ERROR_VARIABLE e
-                  TIMEOUT 250)
-  if(NOT rc STREQUAL "0")
-    string(JOIN " " call simdvol-bench-frame ${ARGN})
-    message(FATAL_ERROR "${call}: exit ${rc}\nstdout: ${o}\nstderr: ${e}")
-  endif()
+  run_tool(o simdvol-bench-frame ${FRAME} 250 ${env} ${ARGN})
   set(${out} "${o}" PARENT_SCOPE)
 endfunction()
 

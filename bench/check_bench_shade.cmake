@@ -7,13 +7,9 @@
 # cannot be given here).
 
 # run_shade(OUT ARG...): runs the tool, fails on a non-zero exit, stdout in OUT.
+include(${CMAKE_CURRENT_LIST_DIR}/run_tool.cmake)
 function(run_shade out)
-  execute_process(COMMAND ${SHADE} ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE o
-                  ERROR_VARIABLE e TIMEOUT 120)
-  if(NOT rc STREQUAL "0")
-    string(JOIN " " call simdvol-bench-shade ${ARGN})
-    message(FATAL_ERROR "${call}: exit ${rc}\nstdout: ${o}\nstderr: ${e}")
-  endif()
+  run_tool(o simdvol-bench-shade ${SHADE} 120 "" ${ARGN})
   set(${out} "${o}" PARENT_SCOPE)
 endfunction()
 

@@ -11,13 +11,9 @@
 set(empty ${WORK}/no-data)
 file(REMOVE_RECURSE ${empty})
 file(MAKE_DIRECTORY ${empty})
-execute_process(COMMAND ${CMAKE_COMMAND} -E env SIMDVOL_DATA_DIR=${empty} ${SWAP} --size 16
-                        --runs 1 --pes 64 --no-reference
-                WORKING_DIRECTORY ${WORK} RESULT_VARIABLE rc OUTPUT_VARIABLE o ERROR_VARIABLE e
-                TIMEOUT 250)
-if(NOT rc STREQUAL "0")
-  message(FATAL_ERROR "simdvol-bench-swap: exit ${rc}\nstdout: ${o}\nstderr: ${e}")
-endif()
+include(${CMAKE_CURRENT_LIST_DIR}/run_tool.cmake)
+run_tool(o simdvol-bench-swap ${SWAP} 250 SIMDVOL_DATA_DIR=${empty} --size 16 --runs 1 --pes 64
+         --no-reference)
 string(FIND "${o}" "(${empty}/brainsmall.den not found: brainsmall skipped" at)
 if(at LESS 0)
   message(FATAL_ERROR "no skip naming ${empty}/brainsmall.den:\n${o}")
