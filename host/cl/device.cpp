@@ -267,6 +267,8 @@ std::string describe_devices(const std::vector<DeviceInfo>& devices, int chosen)
       << "     version: " << d.version << ", driver " << d.driver_version << "\n"
       << "     compute units: " << d.compute_units << ", max work-group size "
       << d.max_work_group_size << "\n"
+      << "     work-items of a group along x, y, z at most: " << d.max_work_item_sizes[0] << " x "
+      << d.max_work_item_sizes[1] << " x " << d.max_work_item_sizes[2] << "\n"
       << "     global memory: " << mib(d.global_mem_bytes) << ", max allocation "
       << mib(d.max_alloc_bytes) << ", local memory " << (d.local_mem_bytes >> 10) << " KiB\n";
   }

@@ -142,6 +142,11 @@ TEST(Devices, ListedWithTheirProperties) {
   std::string table = describe_devices(devs, 0);
   EXPECT_NE(table.find("* 0: " + devs[0].name), std::string::npos) << table;
   EXPECT_NE(table.find("max allocation"), std::string::npos);
+  const auto& sizes = devs[0].max_work_item_sizes;
+  EXPECT_NE(table.find("work-items of a group along x, y, z at most: " + std::to_string(sizes[0]) +
+                       " x " + std::to_string(sizes[1]) + " x " + std::to_string(sizes[2]) + "\n"),
+            std::string::npos)
+      << table;
 }
 
 // With no ICD at all, the error names the package to install. Runs in a
