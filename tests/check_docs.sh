@@ -8,6 +8,8 @@
 # - every option of `simdvol render --help` is named in README.md, and every
 #   option in the first column of README.md's `render` option table is one
 #   that --help lists;
+# - every SIMDVOL_ environment variable host/ reads is named in README.md
+#   (SIMDVOL_VOXEL_WGS and the DICOM and MINC in-process switches were not);
 # - every stage function docs/KERNELS.md names (enqueue_*, upload_*, make_*,
 #   read_*, set_resample_view) is declared in the public headers.
 #   check_docs.sh SIMDVOL    (the built simdvol program)
@@ -66,6 +68,14 @@ for o in $table_opts; do
   printf '%s\n' "$help_opts" | grep -qx -- "$o" || bad "README.md's render table names $o, which render --help does not list"
 done
 
+# Every environment variable the library and the program read.
+envs=$(grep -rhoE '(getenv|env_switch)\("SIMDVOL_[A-Z_]+"' "$root/host" | grep -oE 'SIMDVOL_[A-Z_]+' |
+  sort -u)
+[ -n "$envs" ] || bad "no SIMDVOL_ variables read from host/"
+for e in $envs; do
+  grep -q "\b$e\b" "$root/README.md" || bad "README.md does not name $e, which host/ reads"
+done
+
 funcs=$(grep -oE '\b(enqueue|upload|make|read)_[a-z0-9_]+\(|\bset_resample_view\b' \
   "$root/docs/KERNELS.md" | tr -d '(' | sort -u)
 [ -n "$funcs" ] || bad "no functions read from docs/KERNELS.md"
@@ -74,5 +84,5 @@ for f in $funcs; do
     bad "docs/KERNELS.md names $f(...), which no public header declares"
 done
 
-[ "$fail" -eq 0 ] && echo "docs against the code: ok ($(echo "$deps_script" | wc -l) dependencies, $(echo "$help_opts" | wc -l) render options, $(echo "$funcs" | wc -l) functions)"
+[ "$fail" -eq 0 ] && echo "docs against the code: ok ($(echo "$deps_script" | wc -l) dependencies, $(echo "$help_opts" | wc -l) render options, $(echo "$envs" | wc -l) variables, $(echo "$funcs" | wc -l) functions)"
 exit "$fail"
