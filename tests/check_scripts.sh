@@ -23,6 +23,11 @@ for s in fetch-data install-deps install-peers check-format test embed-check; do
   check 2 "$s: takes no arguments, not '--bogus'" "$root/scripts/$s" --bogus
   check 0 "$(sed -n '2s/^# //p' "$root/scripts/$s")" "$root/scripts/$s" --help
 done
+# scripts/test's help names every step it runs and the variables it takes
+# (it left out embed-check and the ASan build's switches).
+for t in scripts/embed-check "ASan + UBSan" SIMDVOL_SKIP_SANITIZE SIMDVOL_ASAN_BUILD_DIR SIMDVOL_JOBS; do
+  check 0 "$t" "$root/scripts/test" --help
+done
 check 2 "'--target' is a build-step option" "$root/scripts/build" --target simdvol
 check 0 "Configures and builds simdvol" "$root/scripts/build" --help
 check 0 "scripts/demo [render options]" "$root/scripts/demo" -h
