@@ -10,6 +10,7 @@
 #   that --help lists;
 # - every SIMDVOL_ environment variable host/ reads is named in README.md
 #   (SIMDVOL_VOXEL_WGS and the DICOM and MINC in-process switches were not);
+# - README.md names every public header (its list of the headers named 13 of the 27);
 # - every stage function docs/KERNELS.md names (enqueue_*, upload_*, make_*,
 #   read_*, set_resample_view) is declared in the public headers.
 #   check_docs.sh SIMDVOL    (the built simdvol program)
@@ -74,6 +75,10 @@ envs=$(grep -rhoE '(getenv|env_switch)\("SIMDVOL_[A-Z_]+"' "$root/host" | grep -
 [ -n "$envs" ] || bad "no SIMDVOL_ variables read from host/"
 for e in $envs; do
   grep -q "\b$e\b" "$root/README.md" || bad "README.md does not name $e, which host/ reads"
+done
+
+for h in "$root"/host/include/simdvol/*.hpp; do
+  grep -q "\`$(basename "$h")\`" "$root/README.md" || bad "README.md does not name the public header $(basename "$h")"
 done
 
 funcs=$(grep -oE '\b(enqueue|upload|make|read)_[a-z0-9_]+\(|\bset_resample_view\b' \
