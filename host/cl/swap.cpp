@@ -5,6 +5,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <utility>
 
 #include "buffer_checks.hpp"
 #include "simdvol/swap_cl.hpp"
@@ -507,6 +508,27 @@ cl::Event enqueue_display(Device& device, const DeviceSwapPlan& d, const cl::Buf
                     cl::NDRange(64, 4), LocalSize::at_most);
 }
 
+namespace {
+
+// An output pixel's first tap and fraction along one axis of an intermediate
+// image of n pixels. Where both taps fall outside (an image far wider than the
+// volume's sphere, whose empty columns make_view cuts off) they read zeros, as
+// the reference's warp does: they are moved to -2 or n, so that the index
+// stays a small int however far out the pixel lies.
+std::pair<cl_int, cl_float> warp_tap(double f, int n) {
+  double f0 = std::floor(f);
+  float t = static_cast<float>(f - f0);
+  if (f0 < -1.0 || f0 >= n) {
+    f0 = f0 < 0.0 ? -2.0 : double(n);
+    t = 0.0f;
+  }
+  if (!(f0 >= -2.0 && f0 <= double(kInt32Max - 2)))
+    throw ArgumentError("view", "warp out of range");
+  return {static_cast<cl_int>(f0), t};
+}
+
+}  // namespace
+
 cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
                        cl::Buffer& out) {
   const int ow = view.out_width, oh = view.out_height;
@@ -515,16 +537,14 @@ cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffe
   std::vector<cl_int> ix(static_cast<std::size_t>(ow)), iy(static_cast<std::size_t>(oh));
   std::vector<cl_float> tx(ix.size()), ty(iy.size());
   for (int x = 0; x < ow; ++x) {
-    const double fx = view.output_to_intermediate(x, 0)[0], x0 = std::floor(fx);
-    if (x0 < -2.0 || x0 > double(kInt32Max - 2)) throw ArgumentError("view", "warp out of range");
-    ix[static_cast<std::size_t>(x)] = static_cast<cl_int>(x0);
-    tx[static_cast<std::size_t>(x)] = static_cast<float>(fx - x0);
+    const auto [x0, t] = warp_tap(view.output_to_intermediate(x, 0)[0], view.width());
+    ix[static_cast<std::size_t>(x)] = x0;
+    tx[static_cast<std::size_t>(x)] = t;
   }
   for (int y = 0; y < oh; ++y) {
-    const double fy = view.output_to_intermediate(0, y)[1], y0 = std::floor(fy);
-    if (y0 < -2.0 || y0 > double(kInt32Max - 2)) throw ArgumentError("view", "warp out of range");
-    iy[static_cast<std::size_t>(y)] = static_cast<cl_int>(y0);
-    ty[static_cast<std::size_t>(y)] = static_cast<float>(fy - y0);
+    const auto [y0, t] = warp_tap(view.output_to_intermediate(0, y)[1], view.height());
+    iy[static_cast<std::size_t>(y)] = y0;
+    ty[static_cast<std::size_t>(y)] = t;
   }
   cl::Buffer bix = upload(device, ix, "warp x"), btx = upload(device, tx, "warp x"),
              biy = upload(device, iy, "warp y"), bty = upload(device, ty, "warp y");

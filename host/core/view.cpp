@@ -183,6 +183,21 @@ ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<doub
     const double scale = std::min(out_width, out_height) / g.span;
     wd = std::ceil(out_width / scale) + 2;
     hd = std::ceil(out_height / scale) + 2;
+    // A ray more than the radius from the centre holds no sample (the
+    // volume lies in its sphere), so an image far wider or taller than the
+    // framed span (4096x64, 1x512) need not store its empty columns or rows:
+    // both sides are cut alike to ceil(diagonal) + 3 pixels, or + 4 where
+    // that keeps the count's parity, so the rays stay where they were
+    // (pixel centres from -(n - 1) / 2 to (n - 1) / 2 >= radius + 1) and the
+    // warp reads the cut pixels as the zeros they were. A 1x512 image of a
+    // 97x301x33 volume took a 303 x 154,114 pixel image (747 MB) before.
+    const double cut = std::ceil(2.0 * g.radius) + 3;
+    const auto cut_to = [cut](double n) {
+      if (!(n > cut)) return n;
+      return std::fmod(n - cut, 2.0) == 0.0 ? cut : cut + 1;
+    };
+    wd = cut_to(wd);
+    hd = cut_to(hd);
   }
   const double dd = std::max(1.0, std::ceil(2.0 * g.radius / g.step));
   // Voxel sampling steps at the smallest spacing: a strongly anisotropic

@@ -154,3 +154,27 @@ TEST(ExtremesOpenCl, HigherOrdersKeepEveryPixelAValidOpacity) {
       EXPECT_LE(max_abs_diff(ref, img), kTol) << what;
     }
 }
+
+// Images far wider or taller than the volume: voxel sampling's intermediate
+// image is cut to the rays that can hit the volume, and the device's warp
+// reads the columns and rows cut away as zeros, as the reference does (its
+// taps far outside the image are moved next to it). 1000x16 of a 13x11x9
+// volume keeps 33 of 1,002 columns; 1x300 renders the volume into one
+// column. Before the cut the device refused none of these, but after it
+// (without the taps moved) every voxel-sampled one failed "warp out of
+// range".
+TEST(ExtremesOpenCl, ImagesFarWiderOrTallerThanTheVolume) {
+  SIMDVOL_TEST_DEVICE(dev);
+  RenderOptions lit = unlit(0.3f);
+  lit.shade.enabled = true;
+  lit.classifier = classifier_preset("ct");
+  std::vector<Case> cases;
+  for (auto [w, h] : {std::pair{1000, 16}, {7, 900}, {1, 300}, {300, 1}}) {
+    RenderOptions o = lit;
+    o.width = w;
+    o.height = h;
+    cases.push_back({"ramp 13x11x9 at " + std::to_string(w) + "x" + std::to_string(h),
+                     ramp_volume({13, 11, 9}), o});
+  }
+  EXPECT_EQ(compare_all(dev, cases, {1, 8192}, extreme_views()), 4 * 10 * 2 * 2);
+}

@@ -213,3 +213,41 @@ TEST(Extremes, HigherOrdersKeepEveryPixelAValidOpacity) {
           << "order " << order << (mode == CompositeMode::direct ? " direct" : " adaptive");
     }
 }
+
+// An image far wider than the volume: its intermediate image is cut to the
+// rays that can hit the volume (make_view), and the warp reads the columns
+// cut away as zeros. The 1000x16 image of a 16^3 volume (scale 1: 1002
+// columns uncut, 32 kept) holds in its middle 16 columns the 16x16 image
+// (18 columns; both even, so the rays lie alike), and nothing where no ray
+// reaches; at a view on the axes the grid's positions are exact, so the two
+// agree bit for bit.
+TEST(Extremes, ImagesFarWiderThanTheVolumeHoldTheSquareImage) {
+  const Volume vol = ramp_volume({16, 16, 16});
+  RenderOptions lit = unlit(0.3f);
+  lit.shade.enabled = true;
+  lit.classifier = classifier_preset("ct");
+  for (const ViewAngles v : {ViewAngles{0, 0, 0}, ViewAngles{0, 90, 0}, ViewAngles{20, 35, 10}}) {
+    RenderOptions wide = lit, square = lit;
+    wide.width = 1000;
+    wide.height = square.width = square.height = 16;
+    const Image a = render(vol, wide, v), b = render(vol, square, v);
+    ASSERT_EQ(a.width(), 1000);
+    const bool exact = v.theta == 0 && v.varphi == 0;
+    float worst = 0.0f;
+    double outside = 0.0;
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 1000; ++x) {
+        const Rgba p = a.at(x, y);
+        if (x >= 492 && x < 508) {
+          const Rgba q = b.at(x - 492, y);
+          for (float d : {p.r - q.r, p.g - q.g, p.b - q.b, p.a - q.a})
+            worst = std::max(worst, std::fabs(d));
+        } else if (std::abs(x + 0.5 - 500.0) > 14.0) {  // beyond the radius, 13.86
+          outside += p.r + p.g + p.b + p.a;
+        }
+      }
+    EXPECT_LE(worst, exact ? 0.0f : 1e-6f) << v.theta << "," << v.phi << "," << v.varphi;
+    EXPECT_EQ(outside, 0.0);
+    EXPECT_GT(max_alpha(b), 0.05f);  // not an empty picture (0.079 at the axes)
+  }
+}

@@ -198,3 +198,73 @@ TEST(Philox, KnownAnswer) {
   EXPECT_EQ(r1.v[2], 0xa20bc7c6u);
   EXPECT_EQ(r1.v[3], 0x6d5451fdu);
 }
+
+// Voxel sampling's intermediate image covers the output at voxel spacing,
+// but a ray further from the centre than the volume's radius holds no
+// sample: an image far wider or taller than the framed span is cut on both
+// sides alike to ceil(diagonal) + 3 pixels (+ 4 where that keeps the count's
+// parity, so the rays stay where they were). Before, a 1x512 image of a
+// 97x301x33 volume took 303 x 154,114 pixels (747 MB of float4), and a
+// 4096x1 image of the 256^3 phantom (1,048,578 x 258 pixels) was refused as
+// a viewing grid over 2^28 pixels.
+TEST(ViewGeometry, ImagesFarWiderThanTheVolumeKeepOnlyTheRaysThatCanHitIt) {
+  struct Case {
+    std::array<int64_t, 3> dims;
+    std::array<double, 3> sp;
+    int w, h;
+    Framing fit;
+    int want_w, want_h;  // uncut: ceil(W / scale) + 2 and ceil(H / scale) + 2
+  };
+  const std::array<double, 3> one{1, 1, 1};
+  const Case cases[] = {
+      // diagonal 317.96: cut to 321 or 322
+      {{97, 301, 33}, one, 1, 512, Framing::longest, 303, 322},       // 303 x 154114 uncut
+      {{97, 301, 33}, one, 512, 1, Framing::longest, 322, 303},       // 154114 x 303 uncut
+      {{97, 301, 33}, one, 1, 512, Framing::diagonal, 320, 322},      // 320 x 162798 uncut
+      {{256, 256, 256}, one, 4096, 1, Framing::longest, 448, 258},    // diagonal 443.41: 447 / 448
+      {{256, 256, 256}, one, 4096, 64, Framing::longest, 448, 258},   // 16386 x 258 uncut
+      {{256, 256, 256}, one, 4096, 64, Framing::diagonal, 448, 446},  // 28380 x 446 uncut
+      {{16, 16, 16}, one, 1000, 16, Framing::longest, 32, 18},        // diagonal 27.71: 31 / 32
+      {{16, 16, 16}, one, 32, 16, Framing::longest, 32, 18},          // 34 x 18 uncut
+      {{16, 16, 16}, one, 16, 29, Framing::longest, 18, 31},          // 31: not over the cut
+      {{16, 16, 16}, one, 16, 16, Framing::longest, 18, 18},          // square: never cut
+      {{16, 16, 16}, one, 16, 16, Framing::diagonal, 30, 30},
+      // extents 100 x 50 x 50 in the smallest spacing: diagonal 122.47, 126 / 127
+      {{100, 50, 20}, {1, 1, 2.5}, 2000, 30, Framing::longest, 127, 102},  // 6669 x 102 uncut
+  };
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> ang(-180.0, 180.0);
+  for (const Case& c : cases) {
+    const std::string what = std::to_string(c.dims[0]) + "x" + std::to_string(c.dims[1]) + "x" +
+                             std::to_string(c.dims[2]) + " at " + std::to_string(c.w) + "x" +
+                             std::to_string(c.h);
+    for (int n = 0; n < 6; ++n) {
+      const ViewAngles va = n == 0 ? ViewAngles{} : ViewAngles{ang(rng), ang(rng), ang(rng)};
+      const ViewGeometry g = make_view(c.dims, c.sp, va, c.w, c.h, Sampling::voxel, c.fit);
+      ASSERT_EQ(g.width(), c.want_w) << what;
+      ASSERT_EQ(g.height(), c.want_h) << what;
+      // A grid of the cut's size or more holds no sample on its edges:
+      // nothing was cut away.
+      const int cut = static_cast<int>(std::ceil(2.0 * g.radius)) + 3;
+      if (g.height() >= cut)
+        for (int i = 0; i < g.width(); ++i)
+          for (int j : {0, g.height() - 1}) {
+            const auto r = g.ray_range(i, j);
+            EXPECT_GE(r[0], r[1]) << what << " ray " << i << "," << j;
+          }
+      if (g.width() >= cut)
+        for (int j = 0; j < g.height(); ++j)
+          for (int i : {0, g.width() - 1}) {
+            const auto r = g.ray_range(i, j);
+            EXPECT_GE(r[0], r[1]) << what << " ray " << i << "," << j;
+          }
+      // The output's centre still maps to the grid's centre.
+      if (c.w % 2 == 0 && c.h % 2 == 0) {
+        const auto m = g.output_to_intermediate(c.w / 2, c.h / 2);
+        const double half = 0.5 * g.span / std::min(c.w, c.h);  // half a pixel in voxels
+        EXPECT_NEAR(m[0], 0.5 * g.width() - 0.5 + half, 1e-9) << what;
+        EXPECT_NEAR(m[1], 0.5 * g.height() - 0.5 + half, 1e-9) << what;
+      }
+    }
+  }
+}

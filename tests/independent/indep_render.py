@@ -42,7 +42,8 @@ class Conventions:
     #   'half': samples at (i + 1/2) step;  'int': at i step
     zphase: str = 'code'
     # intermediate image grid for voxel sampling:
-    #   'code'   : DOC README: ceil(W / scale) + 2 pixels, centred
+    #   'code'   : DOC README: ceil(W / scale) + 2 pixels, centred, cut to
+    #              ceil(diagonal) + 3 or + 4 (its parity) where larger
     #   'aligned': at the 1:1 image's pixel positions
     igrid: str = 'code'
     # the rotation:
@@ -434,8 +435,15 @@ def geometry(shape, spacing, view, size, sampling, fit, conv):
         cz = np.arange(-m, m) + (0.5 if conv.zphase == 'half' else 0.0)
     if sampling == 'pixel':                      # DOC: the output's pixel centres
         cx, cy = centred(W), centred(H)
-    elif conv.igrid == 'code':                   # DOC README: ceil(W / scale) + 2, centred
-        cx, cy = centred(math.ceil(W / scale) + 2), centred(math.ceil(H / scale) + 2)
+    elif conv.igrid == 'code':                   # DOC README: ceil(W / scale) + 2, centred,
+        # cut alike on both sides to ceil(diagonal) + 3, or + 4 where that
+        # keeps the count's parity
+        cut = math.ceil(2 * R) + 3
+
+        def cut_to(n):
+            return n if n <= cut else cut + (n - cut) % 2
+        cx = centred(cut_to(math.ceil(W / scale) + 2))
+        cy = centred(cut_to(math.ceil(H / scale) + 2))
     else:
         m = math.ceil(W / scale / 2) + 1
         cx = np.arange(-m, m) + 0.5

@@ -453,6 +453,8 @@ def cases(quick):
         add(Case('oblique-voxel', 'b', (45, 45, 45), 1, 'phong2', (60, 50)))
         add(Case('oblique-pixel', 'a', (20, 35, 10), 2, 'phong', (64, 64), 'pixel'))
         add(Case('oblique-pixel', 'b', (-73.4, 151.7, 12.9), 1, 'phong', (72, 60), 'pixel'))
+        # far wider than the volume: the intermediate image's 269 columns cut to 59
+        add(Case('oblique-wide', 'a', (20, 35, 10), 1, 'phong', (200, 24)))
     else:
         for v, vs, ps in (('a', (64, 48), (64, 64)), ('b', (60, 50), (72, 60))):
             for view in ((20, 35, 10), (45, 45, 45), (-73.4, 151.7, 12.9)):
@@ -552,6 +554,8 @@ def composite_cases(quick):
                  comp=mc(8, 5, exact=True, strat=True)))
         add(Case('mc', 'a', (-73.4, 151.7, 12.9), 3, 'phong', (64, 48),
                  comp=mc(8, SEED_BIG, exact=True)))
+        # ray j * width + i on the cut intermediate image (24 x 200: 59 rows of 269)
+        add(Case('mc', 'a', (20, 35, 10), 1, 'phong', (24, 200), comp=mc(8, 7)))
     else:
         for v, vs, ps in (('a', (64, 48), (64, 64)), ('b', (60, 50), (72, 60))):
             for view in ((0, 0, 0), (20, 35, 10), (-73.4, 151.7, 12.9)):
