@@ -23,7 +23,9 @@ usage: python3 run_cases.py --simdvol PATH [--work DIR] [--data DIR] [--quick]
 Writes volumes, classifier files and images under --work (default: a
 temporary directory, removed after); uses brainsmall.den from --data
 (default $SIMDVOL_DATA_DIR, else the repository's data/) where it is there,
-and fails without it when SIMDVOL_REQUIRE_DATA=1.  Exit 1 if a case fails.
+and fails without it when SIMDVOL_REQUIRE_DATA=1; the full set also renders
+ct/cranium.nhdr (0.957 x 0.957 x 1.5 mm) where it is there.  Exit 1 if a
+case fails.
 
 A pixel passes when every channel is within --tol of ours.  Our samples
 lie where simdvol's do: on the 32.32 fixed-point grid that README
@@ -241,6 +243,8 @@ color    0 1 1 1
 """
 
 SPACING_C = (0.8, 1.0, 1.6)
+# data/ct/cranium.nhdr's spacings, as its header writes them
+SPACING_CT = (0.9570312, 0.9570312, 1.5)
 
 
 def load_den(path):
@@ -288,6 +292,14 @@ def write_inputs():
     elif os.environ.get('SIMDVOL_REQUIRE_DATA') == '1':
         raise SystemExit('run_cases.py: %s missing (scripts/fetch-data) and SIMDVOL_REQUIRE_DATA=1'
                          % den)
+    # the real head CT (full set only: tens of seconds a case here), its
+    # slices 1.5 mm apart and its pixels 0.957 mm: the one real volume whose
+    # spacing differs along z; README's absolute mixture
+    ct = os.path.join(DATA, 'ct', 'cranium.nhdr')
+    if os.path.exists(ct):
+        raw = np.fromfile(os.path.join(DATA, 'ct', 'cranium.raw'), '<i2')
+        vols['ct'] = Vol(raw.reshape(108, 256, 256), [ct], {'mat': w('b.mat')}, (64, 64),
+                         SPACING_CT)
     return vols
 
 
@@ -485,6 +497,11 @@ def cases(quick):
             add(Case('spacing', 'c2', view, 1, 'phong'))
             add(Case('spacing', 'c2', view, 3, 'phong', (50, 70), 'pixel'))
         add(Case('spacing', 'c', (20, 35, 10), 1, 'phong', (64, 48), 'voxel', 'diagonal'))
+        add(Case('spacing', 'ct', (20, 35, 10), 1, 'phong', (64, 48)))
+        add(Case('spacing', 'ct', (0, 90, 0), 1, 'phong2', (48, 64), 'pixel'))
+        add(Case('spacing', 'ct', (45, 45, 45), 1, 'phong', (64, 64), 'voxel', 'diagonal'))
+        add(Case('spacing', 'ct', (-73.4, 151.7, 12.9), 1, 'noshade', (64, 48),
+                 comp=Comp('adaptive', threshold=0.8)))
     # -- density / gradient / colour ramps
     if quick:
         add(Case('ramps', 'a', (20, 35, 10), 1, 'phong', cls='tf'))
