@@ -411,7 +411,7 @@ int main(int argc, char** argv) {
   render
       ->add_option("--phong", phong,
                    "KA,KD,KS,N: ambient, diffuse, specular coefficients and the specular "
-                   "exponent (thesis eq 4.2)")
+                   "exponent (thesis eq 4.1)")
       ->capture_default_str();
   render
       ->add_option("--depth-cue", depth_cue,

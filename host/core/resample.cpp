@@ -1,8 +1,12 @@
 // Reference Aitken/Neville resampling (thesis 5.6.3–5.6.4), orders 0–3.
 //
 // 1-D: the stencil of aitken_stencil() is combined with Neville's recurrence
-// in insertion order (the header's form; the thesis's eq 5.17 has a sign
-// slip). After point k is inserted the table column
+// in insertion order (the header's form). The thesis prints the recurrence
+// as the last line of eq 5.16 (its text calls it eq 5.17; the printed
+// eq 5.17 is the error term) with a sign slip: f_{0..n-1} + (x - x0) /
+// (xn - x0) (f_{0..n-1} - f_{1..n}), where the line above it gives
+// f_{1..n} - f_{0..n-1} (test Aitken1D.WeightsAreTheLagrangeWeightsOfEq513).
+// After point k is inserted the table column
 //   q[i] = P_{i..k}, i = k, k-1, ..., 0
 // is updated from the previous column (q[i] = P_{i..k-1}) as
 //   q[k] = f[k]

@@ -327,7 +327,7 @@ TEST_F(MonteCarloRender, SharedStreamShowsCorrelatedArtefactsPerRayDoesNot) {
 // equal without being the same code: on one PE every ray is one sub-ray,
 // so its estimate is the whole-ray estimator's (render_reference, mc), bit
 // for bit, for either stream and with exact opacity; with exact opacity
-// (eq 7.12) every sub-ray's alpha is exact, so the frame's alpha is direct
+// (eq 7.13, ch. 7.5 (a)) every sub-ray's alpha is exact, so the frame's alpha is direct
 // compositing's at any PE count and balancing; and the per sub-ray
 // estimator is unbiased: the mean over seeds approaches direct.
 TEST_F(MonteCarloRender, SubRayReferenceOnOnePeIsTheWholeRayEstimator) {
