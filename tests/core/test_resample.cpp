@@ -158,6 +158,41 @@ TEST(Aitken1D, LevelsEqualDirectLowerOrders) {
   }
 }
 
+// The recurrence against eq 5.13 written out: Aitken's estimate is linear in
+// the values, so feeding it the unit vector e_i gives the weight of node i,
+// which must be the Lagrange polynomial L_i^n(x) = prod_{j != i} (x - x_j) /
+// (x_i - x_j) on the stencil's nodes (eq 5.13 / 5.15), for every order 0..3,
+// both sides of t = 1/2 and the tie itself. The thesis's recurrence as
+// printed (eq 5.16's last line, f_{0..n-1} + (x - x0)/(xn - x0) (f_{0..n-1}
+// - f_{1..n})) fails this: it turns the correction round (order 1, t = 0.25:
+// weights 1.25 and -0.25 where eq 5.13 gives 0.75 and 0.25).
+TEST(Aitken1D, WeightsAreTheLagrangeWeightsOfEq513) {
+  std::mt19937_64 rng(513);
+  std::uniform_real_distribution<float> frac(0.0f, 1.0f);
+  std::vector<float> ts{0.0f, 0.25f, 0.5f, 0.75f, 0.999f};
+  for (int n = 0; n < 200; ++n) ts.push_back(frac(rng));
+  for (int order = 0; order <= kMaxOrder; ++order)
+    for (const float t : ts) {
+      const int64_t f = 7;
+      const auto xs = aitken_stencil(f, t, order);
+      const double x = static_cast<double>(f) + static_cast<double>(t);
+      double sum = 0.0;
+      for (int i = 0; i <= order; ++i) {
+        float e[4] = {0, 0, 0, 0};
+        e[i] = 1.0f;
+        double lagrange = 1.0;
+        for (int j = 0; j <= order; ++j)
+          if (j != i)
+            lagrange *= (x - static_cast<double>(xs[j])) /
+                        static_cast<double>(xs[static_cast<std::size_t>(i)] - xs[j]);
+        const float w = aitken(e, xs.data(), order, f, t);
+        EXPECT_NEAR(w, lagrange, 2e-6) << "order " << order << " t " << t << " node " << i;
+        sum += w;
+      }
+      EXPECT_NEAR(sum, 1.0, 4e-6) << "order " << order << " t " << t;
+    }
+}
+
 TEST(Aitken1D, ClampsAtTheEnds) {
   const std::vector<float> v = {1.5f, 2.0f, -3.0f, 4.0f};
   for (int order = 0; order <= kMaxOrder; ++order) {

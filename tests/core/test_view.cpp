@@ -41,6 +41,20 @@ TEST(Rotation, ZeroAnglesAreIdentityAndPhiTurnsAboutVertical) {
   EXPECT_NEAR(z[2], 1.0, 1e-15);
 }
 
+// Eq 5.2 as printed, T = A(varphi) B(phi) C(theta), at an oblique view whose
+// three angles differ: the matrix below was computed apart from simdvol
+// (numpy, from the thesis's three factors, 2026-12-07), so a swapped angle,
+// a reversed product or a sign flipped in one factor (each still
+// orthonormal with determinant +1, which the tests above cannot tell) fails.
+TEST(Rotation, EqualsTheThesisProductAtAnObliqueView) {
+  const double want[3][3] = {{0.76975113132005724, 0.28016649959323547, -0.57357643635104605},
+                             {-0.43041794645870102, 0.89135120011258873, -0.14224425972292404},
+                             {0.47140596856400402, 0.3563702717168219, 0.80670728411159875}};
+  const Mat3 t = rotation(20, 35, 10);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) EXPECT_NEAR(t[i][j], want[i][j], 1e-15) << i << "," << j;
+}
+
 TEST(ViewGeometry, RayRangeEqualsTestingEverySample) {
   Volume vol({23, 17, 11}, VoxelType::u8, {1.0, 1.5, 2.0});
   std::mt19937 rng(3);
