@@ -132,6 +132,18 @@ foreach(i RANGE ${last})
     if(NOT swapped OR bytes LESS 16)
       message(FATAL_ERROR "${id}: direct compositing without swap bytes (${swapped}, ${bytes})")
     endif()
+    # Thesis ch. 6.2's bound is per PE, in pixels: 32^3 on 64 PEs has cells
+    # of 8 x 8 x 8 voxels, S = (8^2 + 8^2 + 8^2) / 2 = 96 px at voxel
+    # sampling, and 3 + 3 swaps: (M + N) S = 576 px. One PE's sends (16 B a
+    # pixel) stay within it; all PEs' (swap_bytes) need not.
+    get(bound cases ${i} xnet bound_sum_px)
+    get(pe_sent cases ${i} xnet max_pe_sent_bytes)
+    math(EXPR pe_sent_px "${pe_sent} / 16")
+    if(NOT bound EQUAL 576 OR NOT pe_sent_px GREATER 0 OR pe_sent_px GREATER bound
+       OR NOT bytes GREATER pe_sent)
+      message(FATAL_ERROR "${id}: ch. 6.2 bound ${bound} px (576 expected), one PE sent "
+                          "${pe_sent} B = ${pe_sent_px} px, all PEs ${bytes} B")
+    endif()
     if(NOT identical AND (psnr STREQUAL "null" OR psnr LESS 80))
       message(FATAL_ERROR "${id}: PSNR against the reference ${psnr} dB < 80")
     endif()

@@ -179,10 +179,18 @@ struct SwapCost {
   int64_t moved = 0;        ///< pixels, all stages and PEs
   int64_t max_pe_sent = 0;  ///< most pixels one PE sends over all stages
   int64_t bytes_per_pixel = 16;
-  /// The bound of ch. 6.2: a PE holds at most S = (a^2 + b^2 + c^2) / 2
-  /// pixels (a, b, c its cell's extents in viewing-grid units), and sends at
-  /// most that at each of its M + N swaps (M, N the x and y swaps); the
-  /// thesis prints the total as M x N x S.
+  /// The bound of ch. 6.2, per PE: the thesis estimates what a PE holds by
+  /// S = (a^2 + b^2 + c^2) / 2 pixels (a, b, c its cell's extents in
+  /// viewing-grid units; S bounds the cell's largest cross-section), and a
+  /// PE sends at most what it holds at each of its M + N swaps (M, N the x
+  /// and y swaps): (M + N) S in all, bound_sum(); the thesis prints the
+  /// total as M x N x S. S is an estimate, not a bound, of what a PE holds:
+  /// that is the cell's projection (up to sqrt(a^2 b^2 + b^2 c^2 + c^2 a^2),
+  /// 1.15 S for a cube) in its bounding rectangle, 1.39 S at (20, 35, 10) in
+  /// bench/REPRODUCTION.md; a PE sends about half of what it holds, and the
+  /// holdings shrink stage by stage, so the measured sends stay far below
+  /// bound_sum(). Compare bound_sum() with max_pe_sent (one PE's pixels),
+  /// not with moved (all PEs').
   double cell_section = 0;  ///< S in pixels
   int swaps_x = 0, swaps_y = 0;
   double bound_sum() const { return (swaps_x + swaps_y) * cell_section; }
