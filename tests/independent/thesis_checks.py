@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Two computations apart from simdvol behind docs/HARDENING.md's "The
-mathematics against the thesis (thirtieth session)"; run by hand, not by
+mathematics against the thesis (2026-12-07, thirtieth session)"; run by hand, not by
 ctest (minutes on a busy machine).
 
 usage: python3 thesis_checks.py section
