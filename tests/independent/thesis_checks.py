@@ -110,20 +110,27 @@ VARIANTS = {
 }
 
 
-def mc(args):
+def renderer(args, tmp):
+    """render(extra): the 32^3 phantom to 24x24 at (20, 35, 10) with args.engine (64 PEs
+    for opencl) and the options extra, as float64 RGBA."""
     base = ['render', '--phantom-size', '32', '--size', '24x24', '--sampling', 'pixel',
             '--view', '20,35,10', '--engine', args.engine]
     if args.engine == 'opencl':
         base += ['--pe', '64']
+    out = os.path.join(tmp, 'v.tif')
+
+    def render(extra):
+        subprocess.run([args.simdvol] + base + extra + ['-o', out], check=True,
+                       stdout=subprocess.DEVNULL)
+        return read_tiff(out).astype(np.float64)
+
+    return render
+
+
+def mc(args):
     variants = VARIANTS
     with tempfile.TemporaryDirectory() as tmp:
-        out = os.path.join(tmp, 'v.tif')
-
-        def render(extra):
-            subprocess.run([args.simdvol] + base + extra + ['-o', out], check=True,
-                           stdout=subprocess.DEVNULL)
-            return read_tiff(out).astype(np.float64)
-
+        render = renderer(args, tmp)
         direct = render(['--composite', 'direct'])
         for name, extra in variants.items():
             if 'subray' in extra and args.engine == 'reference':
@@ -143,18 +150,8 @@ def mc(args):
 
 
 def walks(args):
-    base = ['render', '--phantom-size', '32', '--size', '24x24', '--sampling', 'pixel',
-            '--view', '20,35,10', '--engine', args.engine]
-    if args.engine == 'opencl':
-        base += ['--pe', '64']
     with tempfile.TemporaryDirectory() as tmp:
-        out = os.path.join(tmp, 'v.tif')
-
-        def render(extra):
-            subprocess.run([args.simdvol] + base + extra + ['-o', out], check=True,
-                           stdout=subprocess.DEVNULL)
-            return read_tiff(out).astype(np.float64)
-
+        render = renderer(args, tmp)
         direct = render(['--composite', 'direct'])
         for name, extra in VARIANTS.items():
             if '--streams' in extra:
