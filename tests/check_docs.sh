@@ -10,7 +10,8 @@
 #   that --help lists;
 # - every SIMDVOL_ environment variable host/ reads is named in README.md
 #   (SIMDVOL_VOXEL_WGS and the DICOM and MINC in-process switches were not);
-# - README.md names every public header (its list of the headers named 13 of the 27);
+# - README.md names every public header (its list of the headers named 13 of the 27),
+#   and simdvol.hpp, which README says includes them all, does;
 # - every stage function docs/KERNELS.md names (enqueue_*, upload_*, make_*,
 #   read_*, set_resample_view) is declared in the public headers.
 #   check_docs.sh SIMDVOL    (the built simdvol program)
@@ -79,6 +80,12 @@ done
 
 for h in "$root"/host/include/simdvol/*.hpp; do
   grep -q "\`$(basename "$h")\`" "$root/README.md" || bad "README.md does not name the public header $(basename "$h")"
+done
+# README.md says simdvol.hpp includes them all (it left out costmodel.hpp).
+for h in "$root"/host/include/simdvol/*.hpp; do
+  b=$(basename "$h")
+  [ "$b" = simdvol.hpp ] || grep -q "^#include \"simdvol/$b\"" "$root/host/include/simdvol/simdvol.hpp" ||
+    bad "host/include/simdvol/simdvol.hpp does not include the public header $b"
 done
 
 funcs=$(grep -oE '\b(enqueue|upload|make|read)_[a-z0-9_]+\(|\bset_resample_view\b' \

@@ -1,7 +1,8 @@
 // The one header to include: simdvol's whole public API.
 //
 //   CPU (simdvol::core):   volumes, I/O, phantoms, views, the serial
-//                          reference stages and renderer
+//                          reference stages and renderer, the cost model of
+//                          the thesis's machine (costmodel.hpp)
 //   OpenCL (simdvol::simdvol): the device layer (device.hpp: a Device of its
 //                          own or wrapping the caller's cl_context and
 //                          cl_command_queue), the per-stage enqueue_*
@@ -16,6 +17,7 @@
 // CPU library
 #include "simdvol/classify.hpp"
 #include "simdvol/composite.hpp"
+#include "simdvol/costmodel.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/image.hpp"
 #include "simdvol/io.hpp"
