@@ -112,7 +112,8 @@ VARIANTS = {
 
 def renderer(args, tmp):
     """render(extra): the 32^3 phantom to 24x24 at (20, 35, 10) with args.engine (64 PEs
-    for opencl) and the options extra, as float64 RGBA."""
+    for opencl, and for the reference's per sub-ray Monte Carlo) and the options extra, as
+    float64 RGBA."""
     base = ['render', '--phantom-size', '32', '--size', '24x24', '--sampling', 'pixel',
             '--view', '20,35,10', '--engine', args.engine]
     if args.engine == 'opencl':
@@ -120,6 +121,8 @@ def renderer(args, tmp):
     out = os.path.join(tmp, 'v.tif')
 
     def render(extra):
+        if '--mc-scope' in extra and args.engine == 'reference':
+            extra = extra + ['--pe', '64']  # the reference cuts the rays at 64 PE cells too
         subprocess.run([args.simdvol] + base + extra + ['-o', out], check=True,
                        stdout=subprocess.DEVNULL)
         return read_tiff(out).astype(np.float64)
@@ -128,13 +131,10 @@ def renderer(args, tmp):
 
 
 def mc(args):
-    variants = VARIANTS
     with tempfile.TemporaryDirectory() as tmp:
         render = renderer(args, tmp)
         direct = render(['--composite', 'direct'])
-        for name, extra in variants.items():
-            if 'subray' in extra and args.engine == 'reference':
-                extra = extra + ['--pe', '64']  # the reference cuts the rays at 64 PE cells
+        for name, extra in VARIANTS.items():
             imgs = np.stack([render(['--composite', 'mc', '--samples', '4', '--seed',
                                      str(9000 + s)] + extra) for s in range(args.seeds)])
             n = args.seeds
@@ -156,8 +156,6 @@ def walks(args):
         for name, extra in VARIANTS.items():
             if '--streams' in extra:
                 continue  # one stream for every ray: the pixels' errors are not independent
-            if 'subray' in extra and args.engine == 'reference':
-                extra = extra + ['--pe', '64']
             e = np.stack([render(['--composite', 'mc', '--samples', str(args.walks), '--seed',
                                   str(777 + s)] + extra) - direct for s in range(args.seeds)])
             k = args.seeds
