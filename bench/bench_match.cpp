@@ -122,7 +122,7 @@ int main(int argc, char** argv) {
 
     const NamedView views[] = {{"0", {0, 0, 0}},           {"90", {0, 90, 0}},
                                {"45", {0, 45, 0}},         {"30", {0, 30, 0}},
-                               {"30,30,30", {30, 30, 30}}, {"random", {37.3, 112.9, -61.4}}};
+                               {"30,30,30", {30, 30, 30}}, {"oblique", {37.3, 112.9, -61.4}}};
     // The random views: three angles uniform in [-180, 180) degrees, one
     // fixed seed, the same views for both framings.
     std::vector<ViewAngles> randoms;

@@ -35,6 +35,10 @@ using namespace simdvol;
 namespace {
 
 // For the uint64_t options: CLI11 would wrap "-1" round to 2^64 - 1.
+// The phantoms' grid sizes, N of an N^3 grid (render --phantom-size, phantom --size).
+constexpr int kPhantomMin = 2, kPhantomMax = 1024;
+const std::string kPhantomRange = std::to_string(kPhantomMin) + ".." + std::to_string(kPhantomMax);
+
 const CLI::Validator kNotNegative(
     [](std::string& v) {
       const auto first = v.find_first_not_of(" \t");
@@ -471,7 +475,9 @@ int main(int argc, char** argv) {
                        "opencl engine: device index as `simdvol devices` lists (default: "
                        "SIMDVOL_DEVICE, else the first CPU device)")
           ->check(decimal_integer());
-  render->add_option("--phantom-size", phantom_size, "size of the built-in CT phantom")
+  render
+      ->add_option("--phantom-size", phantom_size,
+                   "size of the built-in CT phantom, N of an N^3 grid, " + kPhantomRange)
       ->check(decimal_integer())
       ->capture_default_str();
   render->add_option("--frames", frames, "turntable: number of frames")
@@ -501,7 +507,7 @@ int main(int argc, char** argv) {
   phantom->add_option("kind", phantom_kind, "shepp-logan or marschner-lobb")
       ->required()
       ->check(CLI::IsMember({"shepp-logan", "marschner-lobb"}));
-  phantom->add_option("--size", phantom_n, "N (an N^3 grid)")
+  phantom->add_option("--size", phantom_n, "N (an N^3 grid), " + kPhantomRange)
       ->check(decimal_integer())
       ->capture_default_str();
   phantom
@@ -713,9 +719,9 @@ int main(int argc, char** argv) {
       Volume vol;
       if (rv.path.empty()) {
         rv.check_format_options();
-        if (phantom_size < 2 || phantom_size > 1024)
+        if (phantom_size < kPhantomMin || phantom_size > kPhantomMax)
           throw ArgumentError("--phantom-size",
-                              std::to_string(phantom_size) + " is outside 2..1024");
+                              std::to_string(phantom_size) + " is outside " + kPhantomRange);
         vol = shepp_logan(phantom_size, 4);  // partial-volume boundaries
       } else {
         if (render->count("--phantom-size") > 0)
@@ -829,8 +835,8 @@ int main(int argc, char** argv) {
                   << (info->count("--volume-index") > 0 ? iv.volume_index : 0)
                   << "'s (--volume-index N describes another)\n";
     } else if (*phantom) {
-      if (phantom_n < 2 || phantom_n > 1024)
-        throw ArgumentError("--size", std::to_string(phantom_n) + " is outside 2..1024");
+      if (phantom_n < kPhantomMin || phantom_n > kPhantomMax)
+        throw ArgumentError("--size", std::to_string(phantom_n) + " is outside " + kPhantomRange);
       if (phantom_kind != "shepp-logan" && phantom->count("--supersample") > 0)
         throw ArgumentError("--supersample",
                             "applies only to shepp-logan (marschner-lobb is sampled at the grid "

@@ -114,6 +114,13 @@ TEST_F(Cli, HelpAndNoSubcommand) {
     EXPECT_EQ(s.code, 0) << sub;
   }
   EXPECT_NE(run("").code, 0);
+  // The phantoms' sizes give their range in the help, as the refusals do.
+  EXPECT_NE(run("phantom --help").output.find("N (an N^3 grid), 2..1024"), std::string::npos);
+  EXPECT_NE(run("render --help").output.find("N of an N^3 grid, 2..1024"), std::string::npos);
+  const Result big = run("phantom shepp-logan --size 1025 -o " + path("big.nrrd"));
+  EXPECT_NE(big.code, 0);
+  EXPECT_NE(big.output.find("--size: 1025 is outside 2..1024"), std::string::npos) << big.output;
+  EXPECT_FALSE(fs::exists(path("big.nrrd")));
 }
 
 TEST_F(Cli, PhantomRoundTripsThroughInfoAndLoader) {
