@@ -60,7 +60,8 @@ help_opts=$(printf '%s\n' "$help" | grep -oE '^ +(-[a-z],)?--[a-z0-9-]+' | sed '
   grep -vx -- '--help\|--output' | sort -u)
 [ -n "$help_opts" ] || bad "no options read from render --help"
 for o in $help_opts; do
-  grep -q -- "\`$o" "$root/README.md" || bad "README.md does not name render's $o"
+  # the whole name: `--pe` is not named by `--pes`
+  grep -qE -- "\`$o([^a-z0-9-]|\$)" "$root/README.md" || bad "README.md does not name render's $o"
 done
 table_opts=$(sed 's/\\|/ /g' "$root/README.md" | awk -F'|' '/^`render` options/ { on = 1; next } on && /^\| `/ { print $2 }
                   on && /^$/ && seen { exit } on && /^\|/ { seen = 1 }' |
