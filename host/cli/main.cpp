@@ -691,6 +691,10 @@ int main(int argc, char** argv) {
       refuse_unless(!no_shade, {"--light", "--phong", "--depth-cue"},
                     "lit renders (not with --no-shade)");
       refuse_unless(frames > 1, {"--step"}, "turntables (--frames 2 or more)");
+      if (frames > 1 && std::fmod(step, 360.0) == 0.0)  // (for timing the same view, say)
+        std::cerr << "simdvol: note: --step " << step
+                  << " turns the view a whole number of turns a frame: the " << frames
+                  << " frames show one view\n";
       // An empty name (render "$VOL" with VOL unset) is not the phantom.
       if (render->count("volume") > 0 && rv.path.empty())
         throw ArgumentError("volume", "empty name (give no volume for the built-in phantom)");

@@ -179,6 +179,19 @@ TEST_F(Cli, TurntableWritesNumberedFrames) {
   ASSERT_EQ(r.code, 0) << r.output;
   for (const char* f : {"t_0000.png", "t_0001.png", "t_0002.png"})
     EXPECT_TRUE(fs::exists(dir_ / f)) << f;
+  EXPECT_EQ(r.output.find("note: --step"), std::string::npos) << r.output;
+  // A step of whole turns renders one view in every frame: said, not refused.
+  for (const char* step : {"0", "360", "-360"}) {
+    const Result same =
+        run(std::string("render --phantom-size 16 --size 16x16 --frames 2 --step ") + step +
+            " -o " + path("s.png"));
+    ASSERT_EQ(same.code, 0) << same.output;
+    EXPECT_NE(same.output.find(std::string("simdvol: note: --step ") + step +
+                               " turns the view a whole number of turns a frame: the 2 frames "
+                               "show one view"),
+              std::string::npos)
+        << same.output;
+  }
 }
 
 // Over 10,000 frames the numbers take five digits from the first frame on,
