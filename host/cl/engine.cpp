@@ -603,6 +603,8 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
 
   double plan_ms = 0;
   bool swapped = false;  // the frame's plan is S.swap_plan.plan (for `stats`)
+  int swap_level_buffers = 0;
+  int64_t swap_level_bytes = 0;
   std::vector<double> swap_stage_ms;
   cl::Event e_display, e_warp;
   cl::Buffer intermediate, output;
@@ -623,7 +625,12 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     upload_swap_plan(device, S.swap_plan, false);
     const DeviceSwapPlan& plan = S.swap_plan;
     plan_ms = ms_since(tp);
-    const DeviceSwapRun run = enqueue_swap(device, plan, *fp);
+    // (the footprints are read no more: the levels after the first may
+    // take their buffer)
+    const DeviceSwapRun run =
+        enqueue_swap(device, plan, *fp, kSwapFusedStages, 0, FootprintsAfterSwap::overwritten);
+    swap_level_buffers = run.allocated_slots;
+    swap_level_bytes = run.allocated_bytes;
     e_display = enqueue_display(device, plan, run.last, intermediate);
     if (view.sampling == Sampling::pixel) {
       out = read_device_image(device, intermediate, W, H);  // blocking
@@ -683,6 +690,8 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     stats->classification_kept = kept_read;
     stats->classification_let_go = let_go;
     if (swapped) stats->swap = swap_cost(S.swap_plan.plan, split, view, grid);
+    stats->swap_level_buffers = swap_level_buffers;
+    stats->swap_level_bytes = swap_level_bytes;
     if (live_used()) {
       std::vector<cl_uchar> live(static_cast<std::size_t>(dm.pes));
       cl_check(device.queue().enqueueReadBuffer(live_used, CL_TRUE, 0, live.size(), live.data()),

@@ -416,7 +416,7 @@ cl::Event enqueue_swap_stages(Device& device, const DeviceSwapPlan& d, int k0, i
 }
 
 DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const DeviceFootprints& fp,
-                           int max_fused, int64_t local_bytes) {
+                           int max_fused, int64_t local_bytes, FootprintsAfterSwap after) {
   if (fp.rect_offset != d.plan.offset[0])
     throw ArgumentError("footprints", "do not match the swap plan's rectangles");
   if (max_fused < 1 || max_fused > kSwapFusedStages)
@@ -463,11 +463,23 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
     int64_t& m = most[static_cast<std::size_t>((L - 1) % S)];
     m = std::max(m, d.plan.level_size(L));
   }
-  for (int s = 0; s < S; ++s)
-    r.slots.push_back(device.scratch_buffer(
-        CL_MEM_READ_WRITE,
-        static_cast<std::size_t>(most[static_cast<std::size_t>(s)]) * sizeof(cl_float4),
-        "swap level buffer"));
+  // The launch that writes level `first` is the only one that reads the
+  // footprints: the other slot's levels (first + 1, first + 3, ...) are
+  // written after it, so they may go into the footprints' buffer where the
+  // caller reads it no more (FootprintsAfterSwap::overwritten).
+  const int after_first = S == 2 ? first % 2 : -1;
+  for (int s = 0; s < S; ++s) {
+    const std::size_t bytes =
+        static_cast<std::size_t>(most[static_cast<std::size_t>(s)]) * sizeof(cl_float4);
+    if (s == after_first && after == FootprintsAfterSwap::overwritten &&
+        buffer_size(fp.pixels, "clGetMemObjectInfo(fp.pixels)") >= bytes) {
+      r.slots.push_back(fp.pixels);
+      continue;
+    }
+    r.slots.push_back(device.scratch_buffer(CL_MEM_READ_WRITE, bytes, "swap level buffer"));
+    ++r.allocated_slots;
+    r.allocated_bytes += static_cast<int64_t>(bytes);
+  }
   auto slot = [&](int L) -> const cl::Buffer& {
     return r.slots[static_cast<std::size_t>((L - 1) % S)];
   };

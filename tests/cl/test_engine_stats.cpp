@@ -19,6 +19,7 @@
 #include "simdvol/phantom.hpp"
 #include "simdvol/render.hpp"
 #include "simdvol/swap.hpp"
+#include "simdvol/swap_cl.hpp"
 #include "stage_testing.hpp"
 
 using namespace simdvol;
@@ -135,6 +136,67 @@ TEST(EngineStats, BalanceSweepsOption) {
   EXPECT_LT(util_seen[0], util_seen[1]);
   for (int sweeps : {-1, kMaxBalanceSweeps + 1})
     EXPECT_THROW(render_opencl(dev, vol, opt, engine_options(sweeps)), ArgumentError);
+}
+
+// EngineStats::swap_level_buffers / swap_level_bytes: the frame's swap takes
+// one level buffer, the levels after the first one written going into the
+// footprints' buffer (FootprintsAfterSwap::overwritten), of 16 bytes x the
+// largest of the first slot's levels' pixels (a 13-stage swap at 8,192 PEs,
+// pixel sampling, direct and per sub-ray Monte Carlo; the first slot's levels
+// from the reference's plan). Two buffers, first and second slot, before.
+// The image stays the reference's.
+TEST(EngineStats, SwapLevelsAfterTheFirstTakeTheFootprintsBuffer) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 1);
+  RenderOptions opt = frame_options();
+  opt.sampling = Sampling::pixel;
+  opt.width = opt.height = 96;
+  EngineOptions eo = engine_options();
+  eo.pes = 8192;
+  const ViewGeometry view =
+      make_view(vol, opt.view, opt.width, opt.height, opt.sampling, opt.framing);
+  const KdSplit split = kd_split(vol.dims(), eo.pes);
+  const Matching m = balance_reference(
+      match_reference(view, split, simdvol::testing::reference_active(vol, opt, split)), view,
+      split);
+  const SwapPlan plan = plan_swap(m.rects, split, view, pe_grid(eo.pes), eo.layout);
+  const int N = plan.stages();
+  ASSERT_EQ(N, 13);
+  // The first level written to memory (enqueue_swap): after the fused
+  // launch where one runs, else after stage 0.
+  const int64_t local = static_cast<int64_t>(dev.info().local_mem_bytes);
+  int m0 = std::min({kSwapFusedStages, N, swap_fused_stages_limit(dev)});
+  while (m0 >= kSwapFusedMin && swap_stages_local_need(plan, 0, m0) > local) --m0;
+  const int first = m0 >= kSwapFusedMin ? m0 : 1;
+  int64_t most = 1, after = 1;
+  for (int L = first; L <= N; ++L)
+    ((L - first) % 2 ? after : most) = std::max((L - first) % 2 ? after : most, plan.level_size(L));
+  ASSERT_LE(after, plan.level_size(0));  // the footprints hold the second slot's levels
+  const Image ref = render_reference(vol, opt);
+  RenderEngine engine(dev, eo);
+  EngineStats st;
+  Image img = engine.render(vol, opt, nullptr, &st);
+  ASSERT_TRUE(st.swapped);
+  EXPECT_EQ(st.swap_level_buffers, 1);
+  EXPECT_EQ(st.swap_level_bytes, most * 16);
+  EXPECT_GE(psnr(ref, img), 80.0);
+  // Per sub-ray Monte Carlo goes through the same swap.
+  opt.composite.mode = CompositeMode::mc;
+  opt.composite.samples = 2;
+  eo.mc_scope = McScope::subray;
+  eo.balance_sweeps = 0;
+  RenderEngine mc(dev, eo);
+  EngineStats sm;
+  mc.render(vol, opt, nullptr, &sm);
+  ASSERT_TRUE(sm.swapped);
+  EXPECT_EQ(sm.swap_level_buffers, 1);
+  // Whole-ray compositing: no swap, no level buffers.
+  opt.composite.mode = CompositeMode::adaptive;
+  EngineStats sa;
+  engine.render(vol, opt, nullptr, &sa);
+  EXPECT_FALSE(sa.swapped);
+  EXPECT_EQ(sa.swap_level_buffers, 0);
+  EXPECT_EQ(sa.swap_level_bytes, 0);
 }
 
 // EngineTimes::kernels: every kernel of the frame in launch order, each

@@ -264,6 +264,76 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
   EXPECT_EQ(n, 3 * 6 * 2);
 }
 
+// FootprintsAfterSwap::overwritten: the levels after the first one written
+// go into the footprints' buffer (the second slot), one level buffer fewer;
+// the last level bit for bit the kept run's. One launch per stage
+// (max_fused 1): the first slot holds the odd levels, the footprints' buffer
+// the even ones, so the run allocates 16 x the largest odd level's pixels
+// (the kept run that and the even ones' largest too), and `kept` leaves the
+// footprints as they were. With the stages fused, the same levels.
+TEST(SwapKernels, OverwrittenFootprintsHoldTheLaterLevels) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 d{29, 23, 17};
+  int reused = 0;
+  for (const ViewAngles& va : std::vector<ViewAngles>{{0, 0, 0}, {-23.5, 71.25, 133}})
+    for (int64_t P : {1, 2, 8, 512, 8192}) {
+      SCOPED_TRACE("P " + std::to_string(P));
+      const ViewGeometry view = make_view(d, {1, 1, 1}, va, 45, 37, Sampling::pixel);
+      const KdSplit split = kd_split(d, P);
+      const Matching m = balance_reference(match_reference(view, split), view, split);
+      const Footprints f = footprints_reference(m, random_composites(m, unsigned(P) + 7));
+      DeviceSwapPlan plan = upload_swap_plan(
+          dev, plan_swap(m.rects, split, view, pe_grid(P), SwapLayout::cut_and_stack));
+      const int N = plan.plan.stages();
+      std::vector<Rgba> level = f.pixels;
+      for (int k = 0; k < N; ++k) level = swap_stage_reference(plan.plan, k, level);
+      const int64_t last = plan.plan.level_size(N);
+      for (const int fuse : {1, kSwapFusedStages}) {
+        SCOPED_TRACE("max_fused " + std::to_string(fuse));
+        DeviceFootprints fp = make_footprints(dev, m.rects);
+        if (!f.pixels.empty())
+          cl_check(dev.queue().enqueueWriteBuffer(fp.pixels, CL_TRUE, 0,
+                                                  f.pixels.size() * sizeof(Rgba), f.pixels.data()),
+                   "write");
+        const DeviceSwapRun kept = enqueue_swap(dev, plan, fp, fuse);
+        ASSERT_TRUE(bitwise_equal(read_rgba(dev, kept.last, last), level));
+        EXPECT_TRUE(bitwise_equal(read_rgba(dev, fp.pixels, fp.size()), f.pixels));
+        EXPECT_EQ(kept.allocated_slots, static_cast<int>(kept.slots.size()));
+        const DeviceSwapRun over =
+            enqueue_swap(dev, plan, fp, fuse, 0, FootprintsAfterSwap::overwritten);
+        ASSERT_TRUE(bitwise_equal(read_rgba(dev, over.last, last), level));
+        ASSERT_EQ(over.slots.size(), kept.slots.size());
+        int in_fp = 0;
+        for (const cl::Buffer& b : over.slots) in_fp += b() == fp.pixels();
+        EXPECT_EQ(over.allocated_slots + in_fp, static_cast<int>(over.slots.size()));
+        EXPECT_LE(over.allocated_bytes, kept.allocated_bytes);
+        if (fuse != 1) {
+          reused += in_fp;
+          continue;
+        }
+        int64_t odd = 1, even = 1;  // (a slot holds at least one float4)
+        for (int L = 1; L <= N; ++L)
+          (L % 2 ? odd : even) = std::max(L % 2 ? odd : even, plan.plan.level_size(L));
+        const std::size_t fp_bytes = buffer_size(fp.pixels, "size");
+        if (N >= 2) {
+          EXPECT_EQ(kept.allocated_bytes, (odd + even) * 16);
+          const bool fits = fp_bytes >= static_cast<std::size_t>(even) * 16;
+          EXPECT_EQ(in_fp, fits ? 1 : 0);
+          if (fits) {
+            EXPECT_TRUE(over.slots[1]() == fp.pixels());
+            EXPECT_EQ(over.allocated_bytes, odd * 16);
+            EXPECT_EQ(over.allocated_slots, 1);
+          }
+          reused += in_fp;
+        } else {
+          EXPECT_EQ(in_fp, 0);  // one level at most: one slot, never the footprints
+          EXPECT_EQ(over.allocated_bytes, kept.allocated_bytes);
+        }
+      }
+    }
+  EXPECT_GT(reused, 8);
+}
+
 // The engine's upload: the plan's buffer mapped (map_swap_plan: blocking
 // while the queue is idle, or enqueued behind other work), the tables
 // written into it on the host, then unmapped; where they do not fit,

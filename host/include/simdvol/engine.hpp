@@ -114,6 +114,11 @@ struct EngineStats {
   int64_t segments = 0;  ///< ray segments of the matching
   bool swapped = false;  ///< the frame went through the binary swap (direct, mc subray)
   SwapCost swap{};       ///< swap_cost of the frame's plan (when swapped)
+  /// The level buffers the frame's swap allocated and their bytes as asked
+  /// (when swapped; the levels after the first one written go into the
+  /// footprints' buffer where it holds them: FootprintsAfterSwap).
+  int swap_level_buffers = 0;
+  int64_t swap_level_bytes = 0;
   /// PEs the shade + classify left as they were: their cells all zeros and
   /// transparent under the same classification of the kept volume (the
   /// previous frame's PEs without reach; EngineOptions::reuse_layout,

@@ -105,7 +105,21 @@ struct DeviceSwapRun {
   cl::Buffer last;  ///< level N (the footprints when N = 0)
   std::vector<cl::Event> stages;  ///< one event per launch (empty levels alone skip theirs)
   std::vector<int> first_stage;   ///< per launch: its first stage (the next's first ends it)
+  /// The level buffers enqueue_swap allocated and their bytes (a slot that
+  /// is the footprints' buffer, FootprintsAfterSwap::overwritten, is not
+  /// counted).
+  int allocated_slots = 0;
+  int64_t allocated_bytes = 0;
 };
+/// What enqueue_swap may do with the footprints' buffer: leave it as it is
+/// (`kept`), or, where the caller reads the footprints no more
+/// (`overwritten`: the engine's frames), hold later levels in it. Only the
+/// first launch reads the footprints, so the second slot (the levels after
+/// the first one written) is the footprints' buffer where that is large
+/// enough: one level buffer fewer, the largest of those levels' float4
+/// (at 4096x4096 with pixel sampling, 97x301x33 on 8,192 PEs, 432 MB of
+/// the frame's 3.65 GB). The levels are the same bit for bit.
+enum class FootprintsAfterSwap { kept, overwritten };
 /// Enqueues all N stages from the footprints `fp` (whose offsets must be the
 /// plan's level 0): the first m stages in one launch (enqueue_swap_stages),
 /// m the largest of min(max_fused, N), min(max_fused, N) - 1, ... whose
@@ -116,9 +130,10 @@ struct DeviceSwapRun {
 /// swap_stages_local_need) when it is at least kSwapFusedMin, the others one
 /// launch per stage. max_fused in 1 .. kSwapFusedStages. The levels are the
 /// same bit for bit whatever max_fused, local_bytes and the device's
-/// limits.
+/// limits. `after`: FootprintsAfterSwap.
 DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& plan, const DeviceFootprints& fp,
-                           int max_fused = kSwapFusedStages, int64_t local_bytes = 0);
+                           int max_fused = kSwapFusedStages, int64_t local_bytes = 0,
+                           FootprintsAfterSwap after = FootprintsAfterSwap::kept);
 /// Enqueues stage k alone: level k's buffer `in` -> level k + 1's `out`
 /// (another buffer). ArgumentError where `in` holds fewer than
 /// level_size(k) float4 or `out` fewer than level_size(k + 1).
