@@ -614,17 +614,32 @@ std::string describe_work_group_limits(const WorkGroupLimits& limits) {
          std::to_string(limits.kernel_total);
 }
 
-std::size_t fixed_group_size(const DeviceInfo& info) {
+namespace {
+
+// The device's own limits; the kernel's total taken as the device's until
+// a kernel is asked (Device::work_group_limits).
+WorkGroupLimits device_limits(const DeviceInfo& info) {
   WorkGroupLimits limits;
   limits.per_dimension = info.max_work_item_sizes;
   limits.device_total = limits.kernel_total = info.max_work_group_size;
-  return largest_pow2_group(64, limits);
+  return limits;
+}
+
+// A cl::NDRange of the first `dims` (1 .. 3) entries of `n`.
+cl::NDRange nd_range(const std::size_t* n, cl_uint dims) {
+  return dims == 1   ? cl::NDRange(n[0])
+         : dims == 2 ? cl::NDRange(n[0], n[1])
+                     : cl::NDRange(n[0], n[1], n[2]);
+}
+
+}  // namespace
+
+std::size_t fixed_group_size(const DeviceInfo& info) {
+  return largest_pow2_group(64, device_limits(info));
 }
 
 WorkGroupLimits Device::work_group_limits(const cl::Kernel& kernel, const std::string& what) const {
-  WorkGroupLimits limits;
-  limits.per_dimension = info_.max_work_item_sizes;
-  limits.device_total = info_.max_work_group_size;
+  WorkGroupLimits limits = device_limits(info_);
   std::size_t kernel_total = 0;
   const cl_int err = clGetKernelWorkGroupInfo(kernel(), device_(), CL_KERNEL_WORK_GROUP_SIZE,
                                               sizeof kernel_total, &kernel_total, nullptr);
@@ -1137,14 +1152,9 @@ cl::Event Device::run(const cl::Kernel& kernel, const std::string& what, const c
     g[d] = round_up(global.get()[d], l[d]);
     if (g[d] == 0) throw ArgumentError(what, "empty global range");
   }
-  const cl::NDRange rounded = dims == 1   ? cl::NDRange(g[0])
-                              : dims == 2 ? cl::NDRange(g[0], g[1])
-                                          : cl::NDRange(g[0], g[1], g[2]);
-  const cl::NDRange fitted = dims == 1   ? cl::NDRange(l[0])
-                             : dims == 2 ? cl::NDRange(l[0], l[1])
-                                         : cl::NDRange(l[0], l[1], l[2]);
   cl::Event event;
-  cl_int err = queue_.enqueueNDRangeKernel(kernel, cl::NullRange, rounded, fitted, nullptr, &event);
+  cl_int err = queue_.enqueueNDRangeKernel(kernel, cl::NullRange, nd_range(g, dims),
+                                           nd_range(l.data(), dims), nullptr, &event);
   if (err != CL_SUCCESS) throw CLError("clEnqueueNDRangeKernel(" + what + ")", err);
   if (logs_ && logs_->any.load(std::memory_order_relaxed)) {
     std::lock_guard<std::mutex> lock(logs_->mutex);

@@ -34,11 +34,11 @@ using namespace simdvol;
 
 namespace {
 
-// For the uint64_t options: CLI11 would wrap "-1" round to 2^64 - 1.
 // The phantoms' grid sizes, N of an N^3 grid (render --phantom-size, phantom --size).
 constexpr int kPhantomMin = 2, kPhantomMax = 1024;
 const std::string kPhantomRange = std::to_string(kPhantomMin) + ".." + std::to_string(kPhantomMax);
 
+// For the uint64_t options: CLI11 would wrap "-1" round to 2^64 - 1.
 const CLI::Validator kNotNegative(
     [](std::string& v) {
       const auto first = v.find_first_not_of(" \t");

@@ -90,9 +90,14 @@ void validate_ramp(const Ramp& r, const std::string& what) {
   }
 }
 
-// MaterialMixture::top_percentile lies in (0, 100].
+// MaterialMixture::top_percentile lies in (0, 100] (also a classifier
+// file's `relative P`).
+bool top_percentile_valid(float p) {
+  return p > 0.0f && p <= 100.0f;
+}
+
 void check_top_percentile(float p) {
-  if (!(p > 0.0f && p <= 100.0f))
+  if (!top_percentile_valid(p))
     throw ArgumentError("classifier.top_percentile",
                         "must lie in (0, 100] (got " + number_text(p) + ")");
 }
@@ -594,7 +599,7 @@ Classifier load_classifier(const std::filesystem::path& path) {
       if (any_transfer) ps.fail("relative applies only to material lines");
       if (nv == 1) {
         const float pct = ps.number(tok[1]);
-        if (!(pct > 0.0f && pct <= 100.0f))
+        if (!top_percentile_valid(pct))
           ps.fail("relative's percentile " + tok[1] + " must lie in (0, 100]");
         c.mixture.top_percentile = pct;
       }
