@@ -343,6 +343,12 @@ int main(int argc, char** argv) {
       "simdvol: data-parallel volume rendering (Zou 1995) on OpenCL, with a serial reference"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "simdvol 0.1.0");
+  // CLI11's own refusals (an unknown option, a value its validators turn
+  // down) carry the prefix every other error of simdvol's has; their exit
+  // codes stay CLI11's (105-109).
+  app.failure_message([](const CLI::App*, const CLI::Error& e) {
+    return std::string("simdvol: error: ") + e.what() + "\nRun with --help for more information.\n";
+  });
 
   // render
   auto* render = app.add_subcommand("render", "render a volume (the built-in CT phantom if none)");

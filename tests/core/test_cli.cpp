@@ -1303,6 +1303,8 @@ TEST_F(Cli, BadArgumentsFailClearly) {
     // main() did not expect) or a signal (-1).
     EXPECT_TRUE(r.code == 1 || r.code == 105) << c.args << "\n" << r.output;
     EXPECT_NE(r.output.find(c.needle), std::string::npos) << c.args << "\n" << r.output;
+    // CLI11's refusals too say whose error it is.
+    EXPECT_NE(r.output.find("simdvol: error: "), std::string::npos) << c.args << "\n" << r.output;
     EXPECT_EQ(r.output.find("unexpected error"), std::string::npos) << c.args << "\n" << r.output;
   }
   EXPECT_FALSE(fs::exists(dir_ / "x.png"));
