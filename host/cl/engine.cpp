@@ -492,7 +492,7 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   // no copy waits between the resample and the swap (upload_swap_plan).
   if (mode == CompositeMode::direct ||
       (mode == CompositeMode::mc && eo.mc_scope == McScope::subray))
-    map_swap_plan(device, S.swap_plan, false);
+    map_swap_plan(device, S.swap_plan, false, split.bits, view.width(), view.height());
   // Direct compositing's kernels (the segment order, the fused resample +
   // local) read the balanced bounds where the rounds left them: no unpack
   // pass over the segments (BalanceUnpack::deferred; about a third of the

@@ -147,6 +147,9 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
   if (into_map) {
     if (d.map_done()) cl_check(d.map_done.wait(), "clWaitForEvents(swap plan map)");
     base = static_cast<unsigned char*>(d.mapped);
+    // A host image of an earlier upload is read no more (the map waited for
+    // the queue's earlier commands, its write among them): its memory goes.
+    std::vector<cl_int>().swap(d.staging);
   } else {
     d.staging.resize(total / sizeof(cl_int));
     base = reinterpret_cast<unsigned char*>(d.staging.data());
@@ -227,6 +230,28 @@ bool map_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking) {
   d.mapped_bytes = bytes;
   d.map_done = done;
   return true;
+}
+
+void map_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking, int stages, int width,
+                   int height) {
+  if (stages < 0 || stages > 30)
+    throw ArgumentError("stages", std::to_string(stages) + " is outside 0 .. 30");
+  if (width < 1 || height < 1)
+    throw ArgumentError("size", std::to_string(width) + "x" + std::to_string(height) +
+                                    ": width and height must be positive");
+  std::size_t total = 0;
+  (void)plan_regions(device, stages, static_cast<std::size_t>(width),
+                     static_cast<std::size_t>(height), &total);
+  if (d.mapped != nullptr && d.mapped_bytes >= total) return;
+  if (d.mapped != nullptr) (void)unmap_swap_plan(device, d);
+  const std::size_t have =
+      d.packed() ? buffer_size(d.packed, "clGetMemObjectInfo(CL_MEM_SIZE)") : 0;
+  if (have < total) {
+    // (as upload_swap_plan makes it; its regions are cut at the upload)
+    d.packed = device.scratch_buffer(CL_MEM_READ_ONLY | CL_MEM_ALLOC_HOST_PTR, total, "swap plan");
+    d.regions.clear();
+  }
+  (void)map_swap_plan(device, d, blocking);
 }
 
 cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d) {

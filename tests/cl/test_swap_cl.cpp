@@ -454,6 +454,82 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
   }
 }
 
+// The engine's map for a plan's size (map_swap_plan with stages, width and
+// height): a DeviceSwapPlan without a buffer (the first frame), or with one
+// too small for the next plan, gets one large enough before it is mapped,
+// so that every plan is written straight into the mapping: no host image
+// (staging) and no host rectangles (plan.held) kept, where the first frame
+// and every larger one had written both (about 1.4 KB a PE: 1.4 GB at 2^20
+// PEs). The swap and the display as a plan uploaded on its own, bit for bit.
+TEST(SwapKernels, PlanOfAnySizeIsWrittenIntoTheMapping) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 d{29, 23, 17};
+  DeviceSwapPlan kept;
+  struct Case {
+    int64_t P;
+    ViewAngles va;
+    int w, h;
+    int grows;  // 1: a new, larger buffer; 0: the one kept; -1: either
+  };
+  const Case cases[] = {{512, {30, 45, 0}, 45, 37, 1},        {8192, {30, 45, 0}, 45, 37, 1},
+                        {64, {-23.5, 71.25, 133}, 45, 37, 0}, {8192, {0, 0, 0}, 45, 37, 0},
+                        {8192, {10, 20, 30}, 300, 290, -1},   {1, {0, 0, 0}, 7, 5, 0}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE("P " + std::to_string(c.P) + ", " + std::to_string(c.w) + "x" +
+                 std::to_string(c.h));
+    const ViewGeometry view = make_view(d, {1, 1, 1}, c.va, c.w, c.h, Sampling::voxel);
+    const KdSplit split = kd_split(d, c.P);
+    const Matching m = balance_reference(match_reference(view, split), view, split);
+    const Footprints f = footprints_reference(m, random_composites(m, unsigned(c.P) + 3));
+    DeviceFootprints fp = make_footprints(dev, m.rects);
+    if (!f.pixels.empty())
+      cl_check(dev.queue().enqueueWriteBuffer(fp.pixels, CL_TRUE, 0, f.pixels.size() * sizeof(Rgba),
+                                              f.pixels.data()),
+               "write");
+    const SwapPlan plan = plan_swap(m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack);
+    const DeviceSwapPlan alone = upload_swap_plan(dev, plan);
+    const DeviceSwapRun want_run = enqueue_swap(dev, alone, fp);
+    const int N = plan.stages();
+    const std::vector<Rgba> want = read_rgba(dev, want_run.last, plan.level_size(N));
+    const cl_mem before = kept.packed();
+    map_swap_plan(dev, kept, false, N, view.width(), view.height());
+    ASSERT_NE(kept.mapped, nullptr);
+    if (c.grows >= 0) {
+      EXPECT_EQ(kept.packed() != before, c.grows == 1);
+    }
+    std::vector<SwapRect*> held_out;
+    ASSERT_TRUE(swap_plan_held_in_map(dev, kept, N, view.width(), view.height(), held_out));
+    plan_swap_into(kept.plan, m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack,
+                   held_out.data());
+    std::size_t held = 0;
+    for (const auto& h : kept.plan.held) held += h.capacity();
+    EXPECT_EQ(held, 0u);
+    upload_swap_plan(dev, kept, false);
+    EXPECT_EQ(kept.mapped, nullptr);
+    EXPECT_EQ(kept.staging.capacity(), 0u);
+    const DeviceSwapRun run = enqueue_swap(dev, kept, fp);
+    EXPECT_TRUE(bitwise_equal(read_rgba(dev, run.last, plan.level_size(N)), want));
+    cl::Buffer im, im_alone;
+    enqueue_display(dev, kept, run.last, im);
+    enqueue_display(dev, alone, want_run.last, im_alone);
+    EXPECT_TRUE(
+        bitwise_equal(read_device_image(dev, im, view.width(), view.height()).pixels(),
+                      read_device_image(dev, im_alone, view.width(), view.height()).pixels()));
+  }
+  // A map already large enough is kept as it is; sizes outside the plan's
+  // range are refused before anything is mapped.
+  map_swap_plan(dev, kept, true, 3, 8, 8);
+  void* const at = kept.mapped;
+  ASSERT_NE(at, nullptr);
+  map_swap_plan(dev, kept, true, 2, 8, 8);
+  EXPECT_EQ(kept.mapped, at);
+  unmap_swap_plan(dev, kept);
+  EXPECT_THROW(map_swap_plan(dev, kept, true, -1, 8, 8), ArgumentError);
+  EXPECT_THROW(map_swap_plan(dev, kept, true, 31, 8, 8), ArgumentError);
+  EXPECT_THROW(map_swap_plan(dev, kept, true, 3, 0, 8), ArgumentError);
+  EXPECT_EQ(kept.mapped, nullptr);
+}
+
 // read_device_image refuses a size that is not positive and a buffer too
 // small for the image with an ArgumentError naming it (not a mapping error
 // or a read past the buffer), and reads one that fits bit for bit.

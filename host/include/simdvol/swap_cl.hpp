@@ -75,6 +75,16 @@ void upload_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking);
 /// False where d has no buffer yet (the first upload writes). Nothing may
 /// use d's tables until the upload unmaps it.
 bool map_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking = true);
+/// map_swap_plan for a plan of `stages` stages and a width x height
+/// intermediate image: where d has no buffer yet, or one too small for that
+/// plan's tables, a buffer large enough is made first (its regions cut
+/// again at the upload), so that even a first frame's plan is written
+/// straight into the mapping (swap_plan_held_in_map), with no host image
+/// (d.staging) and no host copy of the rectangles (plan.held): about 1.4 KB
+/// a PE of host memory fewer (1.4 GB at 2^20 PEs). ArgumentError for
+/// stages outside 0 .. 30 or a non-positive size.
+void map_swap_plan(Device& device, DeviceSwapPlan& d, bool blocking, int stages, int width,
+                   int height);
 /// Enqueues the unmap of a mapped d (map_swap_plan); a null event where d
 /// is not mapped.
 cl::Event unmap_swap_plan(Device& device, DeviceSwapPlan& d);
