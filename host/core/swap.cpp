@@ -24,10 +24,7 @@ int exact_log2(int64_t n) {
 }
 
 // A half-open pixel box; empty when x0 >= x1 or y0 >= y1.
-struct Box2 {
-  int64_t x0 = 0, x1 = 0, y0 = 0, y1 = 0;
-  bool empty() const { return x0 >= x1 || y0 >= y1; }
-};
+using Box2 = detail::SwapBox;
 
 Box2 bbox(const Box2& a, const Box2& b) {
   if (a.empty()) return b;
@@ -108,16 +105,24 @@ StridedRange strided_range(int64_t lo, int64_t hi, int64_t stride, int64_t resid
   return r;
 }
 
-std::vector<PixelBit> swap_pixel_bits(const PeGrid& grid, int width, int height,
-                                      SwapLayout layout) {
+namespace {
+
+// swap_pixel_bits' arguments checked; the number of stages.
+int pixel_bit_count(const PeGrid& grid, int width, int height) {
   if (!is_pow2(grid.width) || !is_pow2(grid.height) || !is_pow2(grid.count()))
     throw ArgumentError("grid", "W and H must be powers of two");
   if (width < 1 || height < 1) throw ArgumentError("image", "width and height must be positive");
+  return exact_log2(grid.width) + exact_log2(grid.height);
+}
+
+// swap_pixel_bits into `bits` (its storage reused), the arguments checked.
+void pixel_bits_into(std::vector<PixelBit>& bits, const PeGrid& grid, int width, int height,
+                     SwapLayout layout) {
   const int nb[2] = {exact_log2(grid.width), exact_log2(grid.height)};
   const int64_t extent[2] = {width, height};
   int B[2];
   for (int a = 0; a < 2; ++a) B[a] = std::max(ceil_log2(extent[a]), nb[a]);
-  std::vector<PixelBit> bits;
+  bits.clear();
   int used[2] = {0, 0};
   int next = 0;  // axis to take when both have bits left
   while (used[0] < nb[0] || used[1] < nb[1]) {
@@ -127,6 +132,15 @@ std::vector<PixelBit> swap_pixel_bits(const PeGrid& grid, int width, int height,
     bits.push_back({a, layout == SwapLayout::cut_and_stack ? j : B[a] - 1 - j});
     next = 1 - a;
   }
+}
+
+}  // namespace
+
+std::vector<PixelBit> swap_pixel_bits(const PeGrid& grid, int width, int height,
+                                      SwapLayout layout) {
+  (void)pixel_bit_count(grid, width, height);
+  std::vector<PixelBit> bits;
+  pixel_bits_into(bits, grid, width, height, layout);
   return bits;
 }
 
@@ -151,10 +165,11 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
     throw ArgumentError("rects", "one footprint per PE of the split and the grid expected");
   const int N = split.bits;
   const int width = view.width(), height = view.height();
-  std::vector<PixelBit> bits = swap_pixel_bits(grid, width, height, layout);
-  if (static_cast<int>(bits.size()) != N) throw ArgumentError("grid", "PE bits differ");
-  // The footprints, checked before `plan` is touched.
-  std::vector<Box2> F(static_cast<std::size_t>(P));
+  if (pixel_bit_count(grid, width, height) != N) throw ArgumentError("grid", "PE bits differ");
+  // The footprints, checked before the schedule is touched (into the plan's
+  // working storage: no fresh memory where it held as many PEs before).
+  std::vector<Box2>& F = plan.work.boxes;
+  F.resize(static_cast<std::size_t>(P));
   for (int64_t p = 0; p < P; ++p) {
     const sv_rect& r = rects[static_cast<std::size_t>(p)];
     if (r.w < 0 || r.h < 0) throw ArgumentError("rects", "negative footprint size");
@@ -167,7 +182,7 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
   plan.width = width;
   plan.height = height;
   plan.pes = P;
-  plan.bits = std::move(bits);
+  pixel_bits_into(plan.bits, grid, width, height, layout);
   plan.front.clear();
   for (int k = 0; k < N; ++k) plan.front.push_back(swap_front(split, view, k));
 
@@ -177,12 +192,11 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
   // Constraints of the stages before level L, per axis: j[a] constrained
   // levels, and PE p's values of them, which depend only on its bits
   // 0 .. L - 1: v[a][r] for r = p mod 2^L (grown by one stage per level:
-  // entries 2^(L-1) .. 2^L - 1 are those below with bit L - 1 added). And
-  // the pixel counts of a block's rectangles, for the offsets.
+  // entries 2^(L-1) .. 2^L - 1 are those below with bit L - 1 added), in
+  // the plan's working storage.
   int j[2] = {0, 0};
-  std::vector<int32_t> v[2] = {std::vector<int32_t>(static_cast<std::size_t>(P), 0),
-                               std::vector<int32_t>(static_cast<std::size_t>(P), 0)};
-  std::vector<int64_t> counts(static_cast<std::size_t>(P));
+  std::vector<int32_t>(&v)[2] = plan.work.residues;
+  for (std::vector<int32_t>& va : v) va.assign(static_cast<std::size_t>(P), 0);
   int B[2];  // hierarchical: the pixel bits per axis
   for (int a = 0; a < 2; ++a)
     B[a] =
@@ -219,7 +233,7 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
     auto& held = plan.held[static_cast<std::size_t>(L)];
     auto& off = plan.offset[static_cast<std::size_t>(L)];
     if (held_out)
-      held.clear();  // (the level's rectangles go to held_out[L])
+      std::vector<SwapRect>().swap(held);  // (the level's rectangles go to held_out[L])
     else
       held.resize(static_cast<std::size_t>(P));
     off.resize(static_cast<std::size_t>(P + 1));
@@ -239,14 +253,14 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
     int64_t total = 0;
     const int32_t sx = int32_t(1) << lx, sy = int32_t(1) << ly;
     // Block by block (one box each), in 32 bits (every coordinate is inside
-    // the image); the counts' prefix after.
+    // the image); the counts' prefix as they come (PE g * 2^L + r in order).
     const int64_t span = int64_t(1) << L;
     for (int64_t g = 0; g < (P >> L); ++g) {
       const Box2 f = G[static_cast<std::size_t>(g)];
       const int32_t x0 = static_cast<int32_t>(f.x0), x1 = static_cast<int32_t>(f.x1);
       const int32_t y0 = static_cast<int32_t>(f.y0), y1 = static_cast<int32_t>(f.y1);
       SwapRect* hg = h + (g << L);
-      int64_t* cg = counts.data() + (g << L);
+      int64_t* og = o + (g << L) + 1;
       for (int64_t r = 0; r < span; ++r) {
         const int32_t ux = vx[r], uy = vy[r];
         int32_t fx, fy, cx, cy;
@@ -271,12 +285,9 @@ void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdS
         q.sy = sy;
         q.lx = lx;
         q.ly = ly;
-        cg[r] = some ? int64_t(cx) * cy : 0;
+        total += some ? int64_t(cx) * cy : 0;
+        og[r] = total;
       }
-    }
-    for (int64_t p = 0; p < P; ++p) {
-      total += counts[static_cast<std::size_t>(p)];
-      o[p + 1] = total;
     }
   }
   plan.xpe.assign(static_cast<std::size_t>(plan.width), 0);

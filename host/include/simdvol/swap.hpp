@@ -112,6 +112,15 @@ struct StridedRange {
 };
 StridedRange strided_range(int64_t lo, int64_t hi, int64_t stride, int64_t residue);
 
+namespace detail {
+/// A half-open pixel box [x0, x1) x [y0, y1) (plan_swap_into's group
+/// footprints); empty when x0 >= x1 or y0 >= y1.
+struct SwapBox {
+  int64_t x0 = 0, x1 = 0, y0 = 0, y1 = 0;
+  bool empty() const { return x0 >= x1 || y0 >= y1; }
+};
+}  // namespace detail
+
 /// The whole schedule of one frame.
 struct SwapPlan {
   SwapLayout layout = SwapLayout::cut_and_stack;
@@ -122,6 +131,13 @@ struct SwapPlan {
   std::vector<std::vector<SwapRect>> held;   ///< N + 1 levels x P
   std::vector<std::vector<int64_t>> offset;  ///< N + 1 levels x (P + 1): prefix of counts
   std::vector<int64_t> xpe, ype;             ///< display_pe tables (width, height entries)
+  /// plan_swap_into's working storage, not part of the schedule (nothing
+  /// reads it after): kept with the plan, so that a plan made again for as
+  /// many PEs takes no fresh host memory.
+  struct Work {
+    std::vector<detail::SwapBox> boxes;  ///< P: the group footprints
+    std::vector<int32_t> residues[2];    ///< per axis, P: the PEs' constrained bits
+  } work;
 
   int stages() const { return static_cast<int>(bits.size()); }
   /// Pixels stored at level L (offset[L][P]).
@@ -142,13 +158,13 @@ int swap_front(const KdSplit& split, const ViewGeometry& view, int stage);
 SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout);
 /// plan_swap into `plan`, reusing the storage of its vectors: a plan kept
-/// from frame to frame takes no fresh memory (the engine's). The same plan;
-/// on an ArgumentError `plan` is unchanged. With `held_out` (N + 1 pointers,
-/// one per level, each to room for P rectangles) level L's rectangles are
-/// written to held_out[L] instead, and plan.held is left empty: the engine
-/// writes them straight into the device's mapped table buffer
-/// (swap_cl.hpp: swap_plan_held_in_map). What reads plan.held (swap_cost,
-/// the references, display_reference) needs a plan made without it.
+/// from frame to frame takes no fresh memory (the engine's; no allocation
+/// where P, N and the image size are those of the plan's last making). The
+/// same plan; on an ArgumentError `plan` is unchanged (but for `work`). With `held_out` (N + 1
+/// pointers, one per level, each to room for P rectangles) level L's rectangles are written to
+/// held_out[L] instead, and plan.held is left empty (its memory freed): the engine writes them
+/// straight into the device's mapped table buffer (swap_cl.hpp: swap_plan_held_in_map). What reads
+/// plan.held (swap_cost, the references, display_reference) needs a plan made without it.
 void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdSplit& split,
                     const ViewGeometry& view, const PeGrid& grid, SwapLayout layout,
                     SwapRect* const* held_out = nullptr);
