@@ -1102,6 +1102,8 @@ Device::ReuseScope::~ReuseScope() {
     if (unheld[i]) {
       e.busy = false;
       if (++e.idle > pool.keep) continue;  // not used lately: release it
+    } else {
+      e.busy = true;  // (released in the frame, yet someone holds it still)
     }
     kept.push_back(std::move(e));
   }
@@ -1113,6 +1115,28 @@ void Device::set_reuse_keep(int scopes) {
   if (!pool_) throw ArgumentError("device", "was moved from");
   std::lock_guard<std::mutex> lock(pool_->mutex);
   pool_->keep = scopes;
+}
+
+void Device::release(cl::Buffer& buffer) {
+  if (pool_ && buffer()) {
+    std::lock_guard<std::mutex> lock(pool_->mutex);
+    if (pool_->depth(std::this_thread::get_id()) > 0) {
+      for (Pool::Entry& e : pool_->entries) {
+        if (e.buffer() != buffer()) continue;
+        e.busy = false;  // (idle stays 0: handed out in this scope)
+        break;
+      }
+    }
+  }
+  buffer = cl::Buffer();
+}
+
+std::vector<Device::PooledBuffer> Device::pooled_buffers() const {
+  std::vector<PooledBuffer> out;
+  if (!pool_) return out;
+  std::lock_guard<std::mutex> lock(pool_->mutex);
+  for (const Pool::Entry& e : pool_->entries) out.push_back({e.bytes, e.what, !e.busy});
+  return out;
 }
 
 std::size_t Device::pooled_bytes() const {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdlib>
@@ -780,6 +781,57 @@ TEST(DeviceTest, ReleasePooledLetsGoOfUnheldBuffers) {
   held = cl::Buffer();
   EXPECT_EQ(d.release_pooled(), 1u);
   EXPECT_EQ(d.pooled_bytes(), 0u);
+}
+
+// Device::release: a buffer released within a scope is handed out again to a
+// later request of the same scope (the pool's size rule), once; the queue is
+// in order, so what was enqueued on it before (a read here) sees the old
+// contents. A released buffer that someone still holds at the scope's end
+// is not handed out in the next scope; one from outside a scope or over a
+// host pointer is only let go.
+TEST(DeviceTest, ReleaseHandsABufferOutAgainWithinTheScope) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  const auto rw = CL_MEM_READ_WRITE;
+  const std::size_t mib = 1 << 20;
+  std::vector<cl_int> before(mib / 4, -1);
+  cl_mem a_id = nullptr;
+  cl::Buffer copy;
+  {
+    Device::ReuseScope scope(d);
+    cl::Buffer a = d.buffer(rw, mib, nullptr, "a");
+    a_id = a();
+    const cl_int one = 1, two = 2;
+    ASSERT_EQ(d.queue().enqueueFillBuffer(a, one, 0, mib), CL_SUCCESS);
+    ASSERT_EQ(d.queue().enqueueReadBuffer(a, CL_FALSE, 0, mib, before.data()), CL_SUCCESS);
+    d.release(a);
+    EXPECT_EQ(a(), nullptr);
+    // Larger, or less than half (2 * 400,000 + 64 KiB < 1 MiB): fresh ones.
+    EXPECT_NE(d.buffer(rw, mib + 1, nullptr, "larger")(), a_id);
+    EXPECT_NE(d.buffer(rw, 400000, nullptr, "much smaller")(), a_id);
+    cl::Buffer b = d.buffer(rw, 600000, nullptr, "b");
+    EXPECT_EQ(b(), a_id);
+    ASSERT_EQ(d.queue().enqueueFillBuffer(b, two, 0, 600000), CL_SUCCESS);
+    EXPECT_NE(d.buffer(rw, 600000, nullptr, "c")(), a_id);  // b holds it
+    EXPECT_EQ(d.pooled_bytes(), mib + (mib + 1) + 400000 + 600000);
+    copy = b;
+    d.release(b);  // (wrongly: `copy` holds it still)
+    d.finish();
+  }
+  EXPECT_EQ(std::count(before.begin(), before.end(), 1), static_cast<long>(before.size()));
+  {
+    Device::ReuseScope scope(d);
+    EXPECT_NE(d.buffer(rw, mib, nullptr, "after")(), a_id);  // held: not handed out
+    std::vector<int> host(16);
+    cl::Buffer own = d.buffer(rw | CL_MEM_USE_HOST_PTR, 64, host.data(), "host memory");
+    const std::size_t pooled = d.pooled_bytes();
+    d.release(own);
+    EXPECT_EQ(own(), nullptr);
+    EXPECT_EQ(d.pooled_bytes(), pooled);
+  }
+  cl::Buffer outside = d.buffer(rw, mib, nullptr, "outside a scope");
+  d.release(outside);
+  EXPECT_EQ(outside(), nullptr);
 }
 
 // On a CPU device the Device asks for host memory (CL_MEM_ALLOC_HOST_PTR),

@@ -406,8 +406,29 @@ class Device {
   /// which interleaves the frames of its cases) keeps them for k or more,
   /// or each engine's frame finds its buffers gone. ArgumentError if < 0.
   void set_reuse_keep(int scopes);
+  /// Says that the caller's last command on `buffer` is enqueued and that
+  /// neither it nor anything it gave the buffer to holds another handle to
+  /// it: while the calling thread's ReuseScope is open, the pool may hand it
+  /// out again to a later request of the same frame (the same rule as
+  /// between scopes: flags, bytes <= size <= 2 * bytes + 64 KiB). The queue
+  /// is in order, so the new owner's commands run after those enqueued on it
+  /// so far; nothing waits. A frame's peak is then the buffers alive at once
+  /// rather than every buffer it made. Resets `buffer`; a buffer the pool
+  /// did not hand out (one over a host pointer, one made with no scope open)
+  /// is only let go. The device's own queue only: a buffer used on another
+  /// queue must not be released here.
+  void release(cl::Buffer& buffer);
   /// Bytes of buffers the pool holds (handed out or free), for tests.
   std::size_t pooled_bytes() const;
+  /// One buffer of the pool: its size, the request it was last handed out
+  /// for, and whether it is free to be handed out (for tests).
+  struct PooledBuffer {
+    std::size_t bytes = 0;
+    std::string what;
+    bool free = false;
+  };
+  /// The pool's buffers, in the order they were made (for tests).
+  std::vector<PooledBuffer> pooled_buffers() const;
   /// Bytes of host memory that Devices allocated themselves for their
   /// buffers and that are not freed yet (with SIMDVOL_HUGE_PAGES=1, on Linux
   /// CPU devices, buffers of 4 MiB or more: over memory advised for
