@@ -530,11 +530,20 @@ DeviceSwapRun enqueue_swap(Device& device, const DeviceSwapPlan& d, const Device
 
 cl::Event enqueue_display(Device& device, const DeviceSwapPlan& d, const cl::Buffer& last,
                           cl::Buffer& image) {
+  check_uploaded(d);
+  check_level(d, d.plan.stages(), last, "last");
+  image = float4_buffer(device, int64_t(d.plan.width) * d.plan.height, "intermediate image");
+  return enqueue_display_into(device, d, last, image);
+}
+
+cl::Event enqueue_display_into(Device& device, const DeviceSwapPlan& d, const cl::Buffer& last,
+                               const cl::Buffer& image) {
   const int w = d.plan.width, h = d.plan.height;
   const auto N = static_cast<std::size_t>(d.plan.stages());
   check_uploaded(d);
   check_level(d, d.plan.stages(), last, "last");
-  image = float4_buffer(device, int64_t(w) * h, "intermediate image");
+  detail::check_buffer(image, int64_t(w) * h, sizeof(cl_float4), "image",
+                       "float4 pixels (width x height)");
   const std::string name = "simdvol_display";
   cl::Kernel k = swap_kernel(device, name);
   set_args(k, name, last, d.rects[N], d.offsets[N], d.xpe, d.ype, static_cast<cl_int>(w),
@@ -568,9 +577,19 @@ std::pair<cl_int, cl_float> warp_tap(double f, int n) {
 
 cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
                        cl::Buffer& out) {
+  detail::check_buffer(intermediate, int64_t(view.width()) * view.height(), sizeof(cl_float4),
+                       "intermediate", "float4 pixels (width x height)");
+  out = float4_buffer(device, int64_t(view.out_width) * view.out_height, "output image");
+  return enqueue_warp_into(device, view, intermediate, out);
+}
+
+cl::Event enqueue_warp_into(Device& device, const ViewGeometry& view,
+                            const cl::Buffer& intermediate, const cl::Buffer& out) {
   const int ow = view.out_width, oh = view.out_height;
   detail::check_buffer(intermediate, int64_t(view.width()) * view.height(), sizeof(cl_float4),
                        "intermediate", "float4 pixels (width x height)");
+  detail::check_buffer(out, int64_t(ow) * oh, sizeof(cl_float4), "out",
+                       "float4 pixels (out_width x out_height)");
   std::vector<cl_int> ix(static_cast<std::size_t>(ow)), iy(static_cast<std::size_t>(oh));
   std::vector<cl_float> tx(ix.size()), ty(iy.size());
   for (int x = 0; x < ow; ++x) {
@@ -585,7 +604,6 @@ cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffe
   }
   cl::Buffer bix = upload(device, ix, "warp x"), btx = upload(device, tx, "warp x"),
              biy = upload(device, iy, "warp y"), bty = upload(device, ty, "warp y");
-  out = float4_buffer(device, int64_t(ow) * oh, "output image");
   const std::string name = "simdvol_warp";
   cl::Kernel k = swap_kernel(device, name);
   set_args(k, name, intermediate, static_cast<cl_int>(view.width()),
@@ -595,6 +613,50 @@ cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffe
                     cl::NDRange(round_up(static_cast<std::size_t>(ow), 64),
                                 round_up(static_cast<std::size_t>(oh), 4)),
                     cl::NDRange(64, 4), LocalSize::at_most);
+}
+
+HostImage::HostImage(Device& device, int width, int height, const std::string& what)
+    : device_(&device) {
+  if (width <= 0 || height <= 0)
+    throw ArgumentError(what, "width and height must be positive, got " + std::to_string(width) +
+                                  "x" + std::to_string(height));
+  const std::size_t n = image_pixels(width, height);
+  check_allocation(std::uint64_t(n) * sizeof(cl_float4), device.info().max_alloc_bytes, what,
+                   "use a smaller --size");
+  image_ = Image(width, height);
+  static_assert(sizeof(Rgba) == sizeof(cl_float4));
+  // (not through Device::buffer's pool: a buffer over memory of its own)
+  cl_int err = CL_SUCCESS;
+  buffer_ = cl::Buffer(device.context(), CL_MEM_READ_WRITE | CL_MEM_USE_HOST_PTR,
+                       n * sizeof(cl_float4), image_.pixels().data(), &err);
+  if (err != CL_SUCCESS)
+    throw CLError(
+        "clCreateBuffer(" + what + ", " + std::to_string(n * sizeof(cl_float4)) + " bytes)", err,
+        is_allocation_failure(err) ? "the device (for a CPU device, the host) has no "
+                                     "memory left for it"
+                                   : "");
+}
+
+HostImage::~HostImage() {
+  if (!buffer_()) return;
+  // Commands enqueued on the buffer may still write the pixels, which go
+  // with the image: waited for (an error here is the frame's to report).
+  (void)device_->queue().finish();
+}
+
+Image HostImage::take() {
+  if (!buffer_()) throw ArgumentError("image", "was taken already");
+  const std::size_t bytes = image_.pixels().size() * sizeof(cl_float4);
+  cl_int err = CL_SUCCESS;
+  void* p = device_->queue().enqueueMapBuffer(buffer_, CL_TRUE, CL_MAP_READ, 0, bytes, nullptr,
+                                              nullptr, &err);
+  if (err != CL_SUCCESS) throw CLError("clEnqueueMapBuffer(image)", err);
+  // (a buffer made with CL_MEM_USE_HOST_PTR maps at that pointer, its
+  // latest contents there)
+  cl_check(device_->queue().enqueueUnmapMemObject(buffer_, p), "clEnqueueUnmapMemObject(image)");
+  cl_check(device_->queue().finish(), "clFinish");
+  buffer_ = cl::Buffer();
+  return std::move(image_);
 }
 
 Image read_device_image(Device& device, const cl::Buffer& image, int width, int height) {

@@ -590,6 +590,32 @@ TEST(CallerBuffers, ExactSizesAreTakenAByteLessRefused) {
   cl_check(dev.queue().enqueueCopyBuffer(im, inter, 0, 0, static_cast<std::size_t>(W) * H * 16),
            "copy");
   EXPECT_NO_THROW(enqueue_warp(dev, f.view, inter, out));
+  // Into a HostImage (the engine's output): the same pixels, written into
+  // the returned Image's own memory (the buffer's host pointer).
+  const int ow = f.view.out_width, oh = f.view.out_height;
+  {
+    HostImage hd(dev, W, H, "intermediate image"), hw(dev, ow, oh, "output image");
+    void* at = nullptr;
+    ASSERT_EQ(hd.buffer().getInfo(CL_MEM_HOST_PTR, &at), CL_SUCCESS);
+    EXPECT_NO_THROW(enqueue_display_into(dev, plan, run.last, hd.buffer()));
+    EXPECT_NO_THROW(enqueue_warp_into(dev, f.view, inter, hw.buffer()));
+    const Image z = hd.take(), zw = hw.take();
+    EXPECT_EQ(at, static_cast<const void*>(z.pixels().data()));
+    EXPECT_EQ(std::memcmp(z.pixels().data(), y.pixels().data(), y.pixels().size() * sizeof(Rgba)),
+              0);
+    const Image warped = read_device_image(dev, out, ow, oh);
+    ASSERT_EQ(zw.pixels().size(), warped.pixels().size());
+    EXPECT_EQ(std::memcmp(zw.pixels().data(), warped.pixels().data(),
+                          warped.pixels().size() * sizeof(Rgba)),
+              0);
+    EXPECT_REFUSED("image", hd.take());
+  }
+  {
+    // Not taken: its destructor waits for what may still write the pixels.
+    HostImage pending(dev, W, H, "intermediate image");
+    enqueue_display_into(dev, plan, run.last, pending.buffer());
+  }
+  EXPECT_REFUSED("what", HostImage(dev, 0, H, "what"));
 
   // A byte less.
   auto less = [&](int64_t bytes) { return Frame::sized(dev, bytes - 1); };
@@ -604,6 +630,8 @@ TEST(CallerBuffers, ExactSizesAreTakenAByteLessRefused) {
   EXPECT_REFUSED(
       "out", enqueue_swap_stages(dev, plan, 0, mo, levels[0], less(plan.plan.level_size(mo) * 16)));
   EXPECT_REFUSED("intermediate", enqueue_warp(dev, f.view, less(int64_t(W) * H * 16), out));
+  EXPECT_REFUSED("image", enqueue_display_into(dev, plan, run.last, less(int64_t(W) * H * 16)));
+  EXPECT_REFUSED("out", enqueue_warp_into(dev, f.view, inter, less(int64_t(ow) * oh * 16)));
   dev.finish();
 }
 

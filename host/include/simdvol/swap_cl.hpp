@@ -18,6 +18,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "simdvol/device.hpp"
@@ -185,6 +186,10 @@ int swap_fused_stages_limit(Device& device);
 /// holds fewer than level_size(N) float4.
 cl::Event enqueue_display(Device& device, const DeviceSwapPlan& plan, const cl::Buffer& last,
                           cl::Buffer& image);
+/// enqueue_display into a given `image` (a HostImage's buffer, say);
+/// ArgumentError where it holds fewer than width x height float4.
+cl::Event enqueue_display_into(Device& device, const DeviceSwapPlan& plan, const cl::Buffer& last,
+                               const cl::Buffer& image);
 
 /// warp_to_output on the device (voxel sampling): `intermediate`
 /// (view.width() x view.height() float4) -> `out` (out_width x out_height,
@@ -193,6 +198,41 @@ cl::Event enqueue_display(Device& device, const DeviceSwapPlan& plan, const cl::
 /// `intermediate` holds fewer than view.width() x view.height() float4.
 cl::Event enqueue_warp(Device& device, const ViewGeometry& view, const cl::Buffer& intermediate,
                        cl::Buffer& out);
+/// enqueue_warp into a given `out` (a HostImage's buffer, say); ArgumentError
+/// where it holds fewer than out_width x out_height float4.
+cl::Event enqueue_warp_into(Device& device, const ViewGeometry& view,
+                            const cl::Buffer& intermediate, const cl::Buffer& out);
+
+/// An Image that the device writes in place, so that an output is not held
+/// twice (a device buffer and the Image read from it): its buffer() is made
+/// over the image's own pixels (CL_MEM_USE_HOST_PTR). On a CPU device
+/// (PoCL) the kernels write the image's memory itself; a GPU may keep its
+/// own copy, which take() reads back into the image. The buffer is not
+/// pooled. Neither copyable nor movable (the buffer points into it); until
+/// take(), commands enqueued on the buffer may still write the pixels, so
+/// the destructor of one not taken waits for the queue first.
+class HostImage {
+ public:
+  /// A width x height image of zeros and its buffer; ArgumentError naming
+  /// `what` for a size that is not positive or larger than the device's
+  /// largest allocation (as float4_buffer: "use a smaller --size").
+  HostImage(Device& device, int width, int height, const std::string& what);
+  ~HostImage();
+  HostImage(const HostImage&) = delete;
+  HostImage& operator=(const HostImage&) = delete;
+  /// float4[width x height] over the image's pixels (row-major).
+  const cl::Buffer& buffer() const { return buffer_; }
+  /// Waits for the commands enqueued so far (a blocking map of the buffer
+  /// for reading: where the device kept a copy, it is read back into the
+  /// pixels), lets the buffer go and returns the image. Once only
+  /// (ArgumentError after).
+  Image take();
+
+ private:
+  Device* device_;
+  Image image_;
+  cl::Buffer buffer_;
+};
 
 /// Reads a width x height float4 image back (blocking). ArgumentError if the
 /// size is not positive or `image` holds fewer than width x height pixels.
