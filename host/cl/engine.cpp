@@ -501,6 +501,13 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
                   mode == CompositeMode::direct ? BalanceUnpack::deferred : BalanceUnpack::now);
   cl_check(device.queue().flush(), "clFlush");
   LocalSegments segs = finish_segments(reads, dm);  // waits: footprint sizes
+  // The matching's row tables, saved columns and link lists are read by
+  // nothing after the balance (the row sums by the uncovered pixels' zeroing
+  // still): later requests of the frame may take their buffers
+  // (Device::release; the queue is in order).
+  for (cl::Buffer* b : {&dm.rowlinks, &dm.rowoff, &dm.column_scratch, &dm.column_offsets, &dm.petot,
+                        &dm.counts, &dm.link_offset, &dm.link_list, &dm.link_base})
+    device.release(*b);
   // The tables of the cells' layout, made once with them (the origin table
   // is the layout's, already on the device); the frame's view uploaded.
   if (!S.tables)
@@ -518,6 +525,11 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   std::vector<StageEvent> offset_events, walk_events;
   std::vector<StageEvent> ray_events;
   std::optional<DeviceFootprints> fp;
+  // The output image where the device writes it in place (no second copy
+  // read from a device buffer): pixel sampling's intermediate image, or
+  // voxel sampling's warped one. (Before `out`: waits for the queue where a
+  // frame ends in an error before the image is taken.)
+  std::optional<HostImage> host_out;
   bool via_swap = true;  // direct and per sub-ray mc: footprints -> swap -> display
   if (mode == CompositeMode::direct) {
     fp.emplace(make_footprints(device, segs.host_rects));
@@ -585,8 +597,11 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
       // kernels hold references) until the work is done.
     } else {
       via_swap = false;
+      if (view.sampling == Sampling::pixel) host_out.emplace(device, W, H, "intermediate image");
       const cl::Buffer& image =
-          S.image.at_least(device, static_cast<std::size_t>(npx) * 16, "intermediate image");
+          host_out
+              ? host_out->buffer()
+              : S.image.at_least(device, static_cast<std::size_t>(npx) * 16, "intermediate image");
       if (mode == CompositeMode::mc) {
         walk_events.push_back({"mc whole", enqueue_mc_whole(device, segs, soff, samples, *rays,
                                                             opt.composite, image)});
@@ -607,7 +622,7 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
   int64_t swap_level_bytes = 0;
   std::vector<double> swap_stage_ms;
   cl::Event e_display, e_warp;
-  cl::Buffer intermediate, output;
+  cl::Buffer intermediate;
   Image out;
   if (via_swap) {
     // The swap plan on the host while the device resamples (flushed first:
@@ -627,28 +642,37 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     plan_ms = ms_since(tp);
     // (the footprints are read no more: the levels after the first may
     // take their buffer)
+    // The segments, their bounds and order and the row sums are read by
+    // nothing after the local stage (enqueued): the swap's levels and the
+    // display may take their buffers.
+    for (cl::Buffer* b : {&segs.segments, &segs.bounds, &dm.segments, &dm.bounds, &dm.rowsum})
+      device.release(*b);
+    if (lanes) device.release(lanes->order);
     const DeviceSwapRun run =
         enqueue_swap(device, plan, *fp, kSwapFusedStages, 0, FootprintsAfterSwap::overwritten);
     swap_level_buffers = run.allocated_slots;
     swap_level_bytes = run.allocated_bytes;
-    e_display = enqueue_display(device, plan, run.last, intermediate);
     if (view.sampling == Sampling::pixel) {
-      out = read_device_image(device, intermediate, W, H);  // blocking
+      host_out.emplace(device, W, H, "intermediate image");
+      e_display = enqueue_display_into(device, plan, run.last, host_out->buffer());
     } else {
-      e_warp = enqueue_warp(device, view, intermediate, output);
-      out = read_device_image(device, output, view.out_width, view.out_height);  // blocking
+      e_display = enqueue_display(device, plan, run.last, intermediate);
+      host_out.emplace(device, view.out_width, view.out_height, "output image");
+      e_warp = enqueue_warp_into(device, view, intermediate, host_out->buffer());
     }
+    out = host_out->take();  // blocking
     for (const cl::Event& e : run.stages) swap_stage_ms.push_back(ms(e));
     swapped = true;
   } else {
-    const cl::Buffer& image = S.image.buffer;
-    if (view.sampling == Sampling::pixel) {
-      out = read_device_image(device, image, W, H);  // blocking
-    } else {
-      e_warp = enqueue_warp(device, view, image, output);
-      out = read_device_image(device, output, view.out_width, view.out_height);  // blocking
+    if (view.sampling == Sampling::voxel) {
+      host_out.emplace(device, view.out_width, view.out_height, "output image");
+      e_warp = enqueue_warp_into(device, view, S.image.buffer, host_out->buffer());
     }
+    out = host_out->take();  // blocking
   }
+  // (the pool only grows within the frame: its bytes now are the frame's
+  // peak, less what was let go where a request found no memory)
+  const std::size_t pool_bytes = device.pooled_bytes();
   if (times) {
     *times = EngineTimes{};
     times->layout_ms = ms(e_layout);
@@ -692,6 +716,7 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     if (swapped) stats->swap = swap_cost(S.swap_plan.plan, split, view, grid);
     stats->swap_level_buffers = swap_level_buffers;
     stats->swap_level_bytes = swap_level_bytes;
+    stats->pool_bytes = static_cast<int64_t>(pool_bytes);
     if (live_used()) {
       std::vector<cl_uchar> live(static_cast<std::size_t>(dm.pes));
       cl_check(device.queue().enqueueReadBuffer(live_used, CL_TRUE, 0, live.size(), live.data()),

@@ -199,6 +199,60 @@ TEST(EngineStats, SwapLevelsAfterTheFirstTakeTheFootprintsBuffer) {
   EXPECT_EQ(sa.swap_level_bytes, 0);
 }
 
+// The buffers a frame's stages release (Device::release) serve its later
+// requests of a size the pool's rule allows: at pixel sampling (192^2, 8,192
+// PEs) the segment order takes the row links and the swap's level buffer
+// the row sums; at voxel sampling the level buffer takes the PE totals and
+// the intermediate image the segment counts (their sizes match exactly), so
+// no buffer under those names is left in the pool. The output image is the
+// returned Image's own memory (HostImage), no pool buffer beside it: pixel
+// sampling's intermediate image is not in the pool, voxel sampling's
+// warped output neither. EngineStats::pool_bytes is the pool's bytes at the
+// frame's end, and the same frame again takes nothing more (the reuse keeps
+// the pool's size rule: the pool does not grow from frame to frame).
+TEST(EngineStats, ReleasedBuffersServeTheFramesLaterRequests) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Volume vol = shepp_logan(32, 1);
+  for (const Sampling sampling : {Sampling::pixel, Sampling::voxel}) {
+    SCOPED_TRACE(sampling == Sampling::pixel ? "pixel" : "voxel");
+    Device d(dev.info().index);
+    RenderOptions opt = frame_options();
+    opt.sampling = sampling;
+    opt.width = opt.height = 192;
+    EngineOptions eo = engine_options();
+    eo.pes = 8192;
+    RenderEngine engine(d, eo);
+    EngineStats st;
+    const Image first = engine.render(vol, opt, nullptr, &st);
+    std::vector<std::string> names;
+    std::size_t bytes = 0;
+    for (const Device::PooledBuffer& b : d.pooled_buffers()) {
+      names.push_back(b.what);
+      bytes += b.bytes;
+    }
+    const auto has = [&](const char* what) {
+      return std::find(names.begin(), names.end(), what) != names.end();
+    };
+    EXPECT_EQ(st.pool_bytes, static_cast<int64_t>(bytes));
+    EXPECT_TRUE(has("swap level buffer"));
+    if (sampling == Sampling::pixel) {
+      EXPECT_TRUE(has("segment order"));
+      EXPECT_FALSE(has("row links"));
+      EXPECT_FALSE(has("row sums"));
+      EXPECT_FALSE(has("intermediate image"));
+    } else {
+      EXPECT_TRUE(has("intermediate image"));
+      EXPECT_FALSE(has("PE totals"));
+      EXPECT_FALSE(has("segment counts"));
+      EXPECT_FALSE(has("output image"));
+    }
+    EngineStats again;
+    const Image second = engine.render(vol, opt, nullptr, &again);
+    EXPECT_EQ(again.pool_bytes, st.pool_bytes);
+    EXPECT_EQ(max_abs_diff(first, second), 0.0f);
+  }
+}
+
 // EngineTimes::kernels: every kernel of the frame in launch order, each
 // starting after the one before ended (the queue is in order); the stages'
 // times are sums of some of them, so the kernels' sum is at least the

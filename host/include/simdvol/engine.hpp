@@ -119,6 +119,13 @@ struct EngineStats {
   /// footprints' buffer where it holds them: FootprintsAfterSwap).
   int swap_level_buffers = 0;
   int64_t swap_level_bytes = 0;
+  /// Bytes of the buffers the device's pool held at the frame's end (its
+  /// peak: the pool only grows within a frame): those the frame took from it,
+  /// fresh or kept from earlier frames (buffers a stage released, such as
+  /// the matching's once the balance is enqueued, taken again by later
+  /// requests: Device::release), and those it keeps for later frames. Not
+  /// the output image (HostImage: the returned Image's own memory).
+  int64_t pool_bytes = 0;
   /// PEs the shade + classify left as they were: their cells all zeros and
   /// transparent under the same classification of the kept volume (the
   /// previous frame's PEs without reach; EngineOptions::reuse_layout,
