@@ -63,6 +63,10 @@ std::string write_image(const char* path, int fd, int format, int w, int h, cons
   OIIO::ImageSpec spec(w, h, 4, format == 1 ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
   spec.alpha_channel = 3;
   spec.attribute("oiio:UnassociatedAlpha", 0);  // colour is premultiplied
+  // No date: OpenImageIO stamps an EXR (capDate) and a TIFF (DateTime) with
+  // the time of writing unless DateTime is given, and an empty one writes
+  // neither; so the same render is the same bytes whenever it runs.
+  spec.attribute("DateTime", "");
   if (format == 2) spec.attribute("compression", "zip");
   std::string problem;
   if (!(out->set_ioproxy(&proxy) && out->open(path, spec) &&
