@@ -4,6 +4,7 @@
 // are allocated, so a header that claims huge dims fails early.
 #include "simdvol/io.hpp"
 
+#include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -1497,8 +1498,33 @@ VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
   return VolumeFileKind::unknown;
 }
 
-Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
-                   std::optional<int64_t> volume_index, int64_t* volumes) {
+namespace {
+
+// What tells one file at a path from another: which file (device, inode)
+// and its size and last change (content and status, to the nanosecond),
+// or none where the path cannot be looked up. A file renamed over the path
+// is another inode, made (so changed) later.
+struct FileIdentity {
+  dev_t dev = 0;
+  ino_t ino = 0;
+  off_t size = 0;
+  struct timespec mtime {};
+  struct timespec ctime {};
+  bool operator==(const FileIdentity& o) const {
+    return dev == o.dev && ino == o.ino && size == o.size && mtime.tv_sec == o.mtime.tv_sec &&
+           mtime.tv_nsec == o.mtime.tv_nsec && ctime.tv_sec == o.ctime.tv_sec &&
+           ctime.tv_nsec == o.ctime.tv_nsec;
+  }
+};
+
+std::optional<FileIdentity> file_identity(const fs::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return std::nullopt;
+  return FileIdentity{st.st_dev, st.st_ino, st.st_size, st.st_mtim, st.st_ctim};
+}
+
+Volume load_volume_once(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
+                        std::optional<int64_t> volume_index, int64_t* volumes) {
   if (volumes) *volumes = 1;
   const VolumeFileKind kind = volume_file_kind(path);
   // A directory is a DICOM series, unless its name says another format.
@@ -1530,6 +1556,33 @@ Volume load_volume(const std::filesystem::path& path, const std::optional<RawLay
                               : std::string("no such file"));
   throw FileError(path, "unknown volume file extension '" + path.extension().string() +
                             "' (expected " + std::string(kVolumeFileNames) + ")");
+}
+
+}  // namespace
+
+// The loaders open the file by its name several times (its size, a header
+// pass, the data; teem, niftilib and GDCM each by name): a file another
+// program replaces meanwhile, as every careful writer does (a temporary
+// file renamed over it: simdvol's own), was read half from the old file
+// and half from the new, and refused as "truncated data" (the old size
+// against the new header) where neither file is. So the path is looked up
+// before and after: where it names another file (or the same file changed)
+// the volume is read again, up to three times.
+Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
+                   std::optional<int64_t> volume_index, int64_t* volumes) {
+  constexpr int kReads = 3;
+  for (int read = 1;; ++read) {
+    const std::optional<FileIdentity> before = file_identity(path);
+    try {
+      Volume vol = load_volume_once(path, raw, volume_index, volumes);
+      if (file_identity(path) == before) return vol;
+    } catch (const FileError&) {
+      if (file_identity(path) == before) throw;  // the file's own fault
+    }
+    if (read == kReads)
+      throw FileError(path, "changed while being read, " + std::to_string(kReads) +
+                                " times running (is another program writing it?)");
+  }
 }
 
 void refuse_non_regular_file(const fs::path& path, const char* noun) {

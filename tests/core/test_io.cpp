@@ -16,6 +16,7 @@
 #include <atomic>
 #include <bit>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdint>
@@ -27,6 +28,7 @@
 #include <random>
 #include <set>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <sys/wait.h>
@@ -810,6 +812,65 @@ TEST_F(IoTest, SaveNrrdIsAtomicAndLeavesNoTemporaries) {
   // An empty volume has nothing to save.
   expect_file_error([&] { simdvol::save_nrrd(Volume{}, file("e.nrrd")); }, file("e.nrrd"),
                     {"empty"});
+}
+
+// A volume that another program replaces while it is read (a temporary
+// file renamed over it, as simdvol's own writers and most careful ones do)
+// is read whole, the old file or the new: the loaders open it by name
+// several times (its size, the header, the data), and a load that met the
+// rename between two of them mixed the files and was refused ("truncated
+// data: 13824 bytes of raw data cannot hold the 64000 bytes the header
+// (dims 40 x 40 x 40) needs"). A thread renames one of two NRRD files (24^3
+// of 1s, 40^3 of 2s) over the path every 3 ms, 200 times, while this one
+// loads it as fast as it can; every load must give one of the two. Without
+// the look-up of the path before and after (load_volume) 27 to 52 loads of
+// some 5,000-7,700 failed here, in each of six runs.
+TEST_F(IoTest, AVolumeReplacedWhileItIsReadIsReadWhole) {
+  const fs::path p = file("v.nrrd");
+  std::vector<Bytes> contents;
+  for (const int n : {24, 40}) {
+    Volume v({n, n, n}, VoxelType::u8);
+    std::fill(v.data().begin(), v.data().end(), static_cast<float>(n / 16));  // 1 or 2
+    simdvol::save_nrrd(v, p);
+    contents.push_back(read_file(p));
+  }
+  std::atomic<bool> done{false};
+  std::atomic<int> replaced{0};
+  std::thread writer([&] {
+    for (int i = 0; i < 200; ++i) {
+      const fs::path tmp = file("v.tmp");
+      {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        const Bytes& b = contents[static_cast<std::size_t>(i % 2)];
+        out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+      }
+      fs::rename(tmp, p);
+      ++replaced;
+      std::this_thread::sleep_for(std::chrono::milliseconds(3));
+    }
+    done = true;
+  });
+  // (No ASSERT while the writer runs: its thread must be joined.)
+  int loads = 0, failures = 0, mixed = 0;
+  std::string first_failure;
+  while (!done) {
+    ++loads;
+    try {
+      const Volume v = simdvol::load_volume(p);
+      const int64_t n = v.dims()[0];
+      const float want = static_cast<float>(n / 16);
+      if ((n != 24 && n != 40) || v.dims() != std::array<int64_t, 3>{n, n, n} ||
+          !std::all_of(v.data().begin(), v.data().end(), [&](float x) { return x == want; }))
+        ++mixed;
+    } catch (const simdvol::FileError& e) {
+      if (failures++ == 0) first_failure = e.what();
+    }
+  }
+  writer.join();
+  EXPECT_EQ(replaced, 200);
+  EXPECT_GT(loads, 200);
+  EXPECT_EQ(failures, 0) << "of " << loads << " loads; the first: " << first_failure;
+  EXPECT_EQ(mixed, 0) << "volumes neither file holds, of " << loads << " loads";
 }
 
 // The writers' files take a new file's mode, 0666 less the umask, as any

@@ -158,7 +158,11 @@ inline constexpr std::string_view kSeriesFileNames =
 
 /// Chooses the loader by volume_file_kind (.raw needs `raw`). Throws
 /// FileError for an unknown extension, and for a `volume_index` given with
-/// a file other than NIfTI, NRRD, MetaImage, MGH, MINC or DICOM.
+/// a file other than NIfTI, NRRD, MetaImage, MGH, MINC or DICOM. A file
+/// replaced (or changed) at `path` while it is read is read again, so that
+/// the volume is one file's, old or new (up to three reads; then a
+/// FileError saying it changed while being read); a detached header's data
+/// files are not watched.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
