@@ -194,6 +194,43 @@ TEST_F(Cli, TurntableWritesNumberedFrames) {
   }
 }
 
+// Frame k of a turntable is the render of its view alone (--view THETA,
+// PHI + k STEP, VARPHI), bit for bit in all four channels: the frames after
+// the first keep the volume's cells and its mixture classification
+// (RenderEngine's layout and classification kept), and Monte Carlo draws
+// from the same seed in every frame. With --trace and --times: one times
+// line and one traced frame per frame.
+TEST_F(Cli, TurntableFramesEqualSingleRenders) {
+  const std::string base =
+      "render --phantom-size 32 --size 32x32 --classify mri --composite mc --samples 8 "
+      "--mc-scope subray --allocate --seed 9 ";
+  const Result t = run(base + "--view 20,35,10 --frames 3 --step 12.5 --times --trace " +
+                       path("t.json") + " -o " + path("t.tif"));
+  ASSERT_EQ(t.code, 0) << t.output;
+  for (int f = 0; f < 3; ++f)
+    EXPECT_NE(t.output.find("frame " + std::to_string(f) + " (opencl"), std::string::npos)
+        << t.output;
+  EXPECT_NE(t.output.find("classification kept"), std::string::npos) << t.output;
+  std::ifstream trace(path("t.json"));
+  const std::string json((std::istreambuf_iterator<char>(trace)), {});
+  EXPECT_NE(json.find("\"args\": {\"frame\": 2}"), std::string::npos) << json.substr(0, 400);
+  EXPECT_EQ(json.find("\"args\": {\"frame\": 3}"), std::string::npos);
+  const char* phis[] = {"35", "47.5", "60"};
+  for (int f = 0; f < 3; ++f) {
+    const std::string one = path("one" + std::to_string(f) + ".tif");
+    const Result r = run(base + "--view 20," + phis[f] + ",10 -o " + one);
+    ASSERT_EQ(r.code, 0) << r.output;
+    const simdvol::Image a = simdvol::read_image(path("t_000" + std::to_string(f) + ".tif"));
+    const simdvol::Image b = simdvol::read_image(one);
+    ASSERT_EQ(a.pixels().size(), b.pixels().size());
+    EXPECT_GT(alpha_sum(a), 1.0);
+    EXPECT_EQ(std::memcmp(a.pixels().data(), b.pixels().data(),
+                          a.pixels().size() * sizeof(a.pixels()[0])),
+              0)
+        << "frame " << f;
+  }
+}
+
 // Over 10,000 frames the numbers take five digits from the first frame on,
 // so that the names sort in frame order (before: t_0000 ... t_9999, then
 // t_10000, which sorts between t_1000 and t_1001). The reference engine on
@@ -1503,6 +1540,59 @@ TEST_F(Cli, PoclVariablesThatStopPoclAreRefused) {
             std::string::npos)
       << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "y.png"));
+}
+
+// The image does not depend on how many threads PoCL runs the work-groups
+// on: every kernel's work-group size is fixed (reqd_work_group_size), the
+// only atomics count or claim slots that are sorted afterwards
+// (simdvol_mc_ray_fill) or set a flag (SV_MARK), and no reduction runs in
+// the order work-groups finish. Checked bit for bit, all four channels of
+// the float TIFF, at 1, 2 and 3 threads (2 and 3 on a machine of 2 cores:
+// more threads than cores, and an odd split), over the stages whose
+// results could depend on an order: Monte Carlo walks per sub-ray with the
+// walks allocated, whole rays (the ray lists built by atomics), adaptive
+// termination with balancing and the hierarchical layout, pixel sampling
+// at 65,536 PEs. The --times line's counts (samples, PEs, utilisation)
+// must agree too.
+TEST_F(Cli, SameImageAtEveryThreadCount) {
+  const std::string base = "render --phantom-size 32 --size 32x32 --view 20,35,10 --times ";
+  const std::vector<std::string> cases = {
+      "--composite mc --samples 8 --mc-scope subray --allocate --exact-opacity --seed 3",
+      "--composite mc --samples 8 --pe 64",
+      "--composite adaptive --layout hierarchical --order 3",
+      "--sampling pixel --pe 65536 --balance-sweeps 0",
+  };
+  const auto counts = [](const std::string& out) {  // "N samples on P of Q PEs, utilisation U"
+    const std::size_t at = out.find(" samples on ");
+    if (at == std::string::npos) return std::string();
+    const std::size_t begin = out.rfind("; ", at) + 2, end = out.find('\n', at);
+    return out.substr(begin, end - begin);
+  };
+  for (std::size_t c = 0; c < cases.size(); ++c) {
+    std::vector<simdvol::Image> images;
+    std::string first_counts;
+    for (const char* threads : {"1", "2", "3"}) {
+      const std::string out = path("c" + std::to_string(c) + "_t" + threads + ".tif");
+      const Result r =
+          run(base + cases[c] + " -o " + out, std::string("POCL_MAX_PTHREAD_COUNT=") + threads);
+      ASSERT_EQ(r.code, 0) << cases[c] << "\n" << r.output;
+      const std::string n = counts(r.output);
+      EXPECT_FALSE(n.empty()) << r.output;
+      if (images.empty())
+        first_counts = n;
+      else
+        EXPECT_EQ(n, first_counts) << cases[c] << " at " << threads << " threads";
+      images.push_back(simdvol::read_image(out));
+    }
+    EXPECT_GT(alpha_sum(images[0]), 1.0) << cases[c];
+    for (std::size_t t = 1; t < images.size(); ++t) {
+      ASSERT_EQ(images[t].pixels().size(), images[0].pixels().size());
+      EXPECT_EQ(std::memcmp(images[t].pixels().data(), images[0].pixels().data(),
+                            images[0].pixels().size() * sizeof(simdvol::Rgba)),
+                0)
+          << cases[c] << ": " << t + 1 << " threads against 1";
+    }
+  }
 }
 
 // SIMDVOL_CACHE_DIR that cannot keep programs: the render goes on (built
