@@ -1520,6 +1520,9 @@ struct FileIdentity {
 std::optional<FileIdentity> file_identity(const fs::path& path) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) return std::nullopt;
+  // A directory (a DICOM series) by which it is alone: its times change
+  // with any file made or removed in it, the series' or not.
+  if (S_ISDIR(st.st_mode)) return FileIdentity{st.st_dev, st.st_ino, 0, {}, {}};
   return FileIdentity{st.st_dev, st.st_ino, st.st_size, st.st_mtim, st.st_ctim};
 }
 

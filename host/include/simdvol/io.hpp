@@ -162,7 +162,7 @@ inline constexpr std::string_view kSeriesFileNames =
 /// replaced (or changed) at `path` while it is read is read again, so that
 /// the volume is one file's, old or new (up to three reads; then a
 /// FileError saying it changed while being read); a detached header's data
-/// files are not watched.
+/// files are not watched, nor a directory's files (a DICOM series).
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
