@@ -611,9 +611,15 @@ TEST(CallerBuffers, ExactSizesAreTakenAByteLessRefused) {
     EXPECT_REFUSED("image", hd.take());
   }
   {
-    // Not taken: its destructor waits for what may still write the pixels.
-    HostImage pending(dev, W, H, "intermediate image");
-    enqueue_display_into(dev, plan, run.last, pending.buffer());
+    // Not taken: its destructor waits for what may still write the pixels
+    // (the display has run once it is gone; PoCL starts a command at a
+    // flush or a wait, and nothing else here flushes).
+    cl::Event display;
+    {
+      HostImage pending(dev, W, H, "intermediate image");
+      display = enqueue_display_into(dev, plan, run.last, pending.buffer());
+    }
+    EXPECT_EQ(display.getInfo<CL_EVENT_COMMAND_EXECUTION_STATUS>(), CL_COMPLETE);
   }
   EXPECT_REFUSED("what", HostImage(dev, 0, H, "what"));
 
