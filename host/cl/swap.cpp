@@ -625,16 +625,12 @@ HostImage::HostImage(Device& device, int width, int height, const std::string& w
                    "use a smaller --size");
   image_ = Image(width, height);
   static_assert(sizeof(Rgba) == sizeof(cl_float4));
-  // (not through Device::buffer's pool: a buffer over memory of its own)
-  cl_int err = CL_SUCCESS;
-  buffer_ = cl::Buffer(device.context(), CL_MEM_READ_WRITE | CL_MEM_USE_HOST_PTR,
-                       n * sizeof(cl_float4), image_.pixels().data(), &err);
-  if (err != CL_SUCCESS)
-    throw CLError(
-        "clCreateBuffer(" + what + ", " + std::to_string(n * sizeof(cl_float4)) + " bytes)", err,
-        is_allocation_failure(err) ? "the device (for a CPU device, the host) has no "
-                                     "memory left for it"
-                                   : "");
+  // Through Device::buffer (never pooled: a host pointer), as the output's
+  // device buffer was: SIMDVOL_FAIL_ALLOCATION reaches it by `what`, and
+  // where the device has no memory left the pool's unheld buffers are let
+  // go and the buffer asked for once more.
+  buffer_ = device.buffer(CL_MEM_READ_WRITE | CL_MEM_USE_HOST_PTR, n * sizeof(cl_float4),
+                          image_.pixels().data(), what);
 }
 
 HostImage::~HostImage() {

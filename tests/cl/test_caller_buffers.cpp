@@ -641,6 +641,64 @@ TEST(CallerBuffers, ExactSizesAreTakenAByteLessRefused) {
   dev.finish();
 }
 
+// A HostImage's buffer is the Device's request under the HostImage's name
+// (Device::buffer with the image's pixels as its host pointer, never
+// pooled), as the output's device buffer was before it: the test hook
+// SIMDVOL_FAIL_ALLOCATION fails it by that name (and where the device has
+// no memory left, the pool's unheld buffers are let go and it is asked for
+// again). It was made with clCreateBuffer directly: the engine's "output
+// image" (voxel sampling) and pixel sampling's "intermediate image" were
+// out of the hook's reach, and a frame rendered where the hook asked for
+// the failure.
+TEST(CallerBuffers, HostImageBufferIsTheDevicesRequest) {
+  SIMDVOL_TEST_DEVICE(dev);
+  struct Env {
+    explicit Env(const char* v) { setenv("SIMDVOL_FAIL_ALLOCATION", v, 1); }
+    ~Env() { unsetenv("SIMDVOL_FAIL_ALLOCATION"); }
+  };
+  {
+    Env env("output image:2");
+    Device d(dev.info().index);
+    HostImage first(d, 4, 3, "output image");
+    try {
+      HostImage second(d, 4, 3, "output image");
+      ADD_FAILURE() << "the second request did not fail";
+    } catch (const CLError& e) {
+      EXPECT_EQ(e.code(), CL_MEM_OBJECT_ALLOCATION_FAILURE);
+      EXPECT_NE(std::string(e.what()).find("clCreateBuffer(output image, 192 bytes)"),
+                std::string::npos)
+          << e.what();
+    }
+    Device::ReuseScope scope(d);  // (never pooled, even with a scope open)
+    HostImage third(d, 4, 3, "output image");
+    EXPECT_EQ(d.pooled_bytes(), 0u);
+    EXPECT_EQ(third.take().width(), 4);
+  }
+  // The engine's outputs: each sampling's frame fails at its image.
+  const Volume vol = shepp_logan(16);
+  for (const Sampling sampling : {Sampling::pixel, Sampling::voxel}) {
+    const char* what = sampling == Sampling::pixel ? "intermediate image" : "output image";
+    SCOPED_TRACE(what);
+    Env env(what);
+    Device d(dev.info().index);
+    EngineOptions eo;
+    eo.pes = 8;
+    RenderEngine engine(d, eo);
+    RenderOptions opt;
+    opt.width = opt.height = 16;
+    opt.sampling = sampling;
+    opt.classifier = classifier_preset("ct");
+    try {
+      engine.render(vol, opt);
+      ADD_FAILURE() << "the frame rendered";
+    } catch (const CLError& e) {
+      EXPECT_NE(std::string(e.what()).find("clCreateBuffer(" + std::string(what)),
+                std::string::npos)
+          << e.what();
+    }
+  }
+}
+
 // A moved-from RenderEngine holds no state: render and options refuse it
 // (they dereferenced a null state before).
 TEST(CallerBuffers, MovedFromEngineIsRefused) {

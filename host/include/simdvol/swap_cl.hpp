@@ -207,10 +207,12 @@ cl::Event enqueue_warp_into(Device& device, const ViewGeometry& view,
 /// twice (a device buffer and the Image read from it): its buffer() is made
 /// over the image's own pixels (CL_MEM_USE_HOST_PTR). On a CPU device
 /// (PoCL) the kernels write the image's memory itself; a GPU may keep its
-/// own copy, which take() reads back into the image. The buffer is not
-/// pooled. Neither copyable nor movable (the buffer points into it); until
-/// take(), commands enqueued on the buffer may still write the pixels, so
-/// the destructor of one not taken waits for the queue first.
+/// own copy, which take() reads back into the image. The buffer is the
+/// Device's request named `what` (Device::buffer with the pixels as its
+/// host pointer: not pooled). Neither copyable nor movable (the buffer
+/// points into it); until take(), commands enqueued on the buffer may still
+/// write the pixels, so the destructor of one not taken waits for the queue
+/// first.
 class HostImage {
  public:
   /// A width x height image of zeros and its buffer; ArgumentError naming
