@@ -55,6 +55,54 @@ bool bitwise_equal(const std::vector<Rgba>& a, const std::vector<Rgba>& b) {
          (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Rgba)) == 0);
 }
 
+// A case of the plan's uploads: random composites (`seed`) of the balanced
+// matching of `view` on P PEs as footprints on the device, the plan, and
+// the plan uploaded on its own (a fresh DeviceSwapPlan, a blocking write)
+// with its swap's last level: what every other way of uploading the plan
+// must give.
+struct SwapCase {
+  KdSplit split;
+  Matching m;
+  DeviceFootprints fp;
+  SwapPlan plan;
+  DeviceSwapPlan alone;
+  DeviceSwapRun want_run;
+  std::vector<Rgba> want;
+};
+
+SwapCase swap_case(Device& dev, const Dims3& d, const ViewGeometry& view, int64_t P,
+                   unsigned seed) {
+  SwapCase c;
+  c.split = kd_split(d, P);
+  c.m = balance_reference(match_reference(view, c.split), view, c.split);
+  const Footprints f = footprints_reference(c.m, random_composites(c.m, seed));
+  c.fp = make_footprints(dev, c.m.rects);
+  if (!f.pixels.empty())
+    cl_check(dev.queue().enqueueWriteBuffer(c.fp.pixels, CL_TRUE, 0, f.pixels.size() * sizeof(Rgba),
+                                            f.pixels.data()),
+             "write");
+  c.plan = plan_swap(c.m.rects, c.split, view, pe_grid(P), SwapLayout::cut_and_stack);
+  c.alone = upload_swap_plan(dev, c.plan);
+  c.want_run = enqueue_swap(dev, c.alone, c.fp);
+  c.want = read_rgba(dev, c.want_run.last, c.plan.level_size(c.plan.stages()));
+  return c;
+}
+
+// `d` (the case's plan uploaded another way): its swap of the case's
+// footprints and its display equal those of the plan uploaded on its own,
+// bit for bit.
+void expect_as_alone(Device& dev, const DeviceSwapPlan& d, const SwapCase& c,
+                     const ViewGeometry& view) {
+  const DeviceSwapRun run = enqueue_swap(dev, d, c.fp);
+  EXPECT_TRUE(bitwise_equal(read_rgba(dev, run.last, c.plan.level_size(c.plan.stages())), c.want));
+  cl::Buffer im, im_alone;
+  enqueue_display(dev, d, run.last, im);
+  enqueue_display(dev, c.alone, c.want_run.last, im_alone);
+  EXPECT_TRUE(
+      bitwise_equal(read_device_image(dev, im, view.width(), view.height()).pixels(),
+                    read_device_image(dev, im_alone, view.width(), view.height()).pixels()));
+}
+
 }  // namespace
 
 // swap_group_pixels: the largest sum of level L's pixel counts over a
@@ -356,25 +404,13 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
   for (const Case& c : cases) {
     SCOPED_TRACE("P " + std::to_string(c.P));
     const ViewGeometry view = make_view(d, {1, 1, 1}, c.va, 45, 37, Sampling::voxel);
-    const KdSplit split = kd_split(d, c.P);
-    const Matching m = balance_reference(match_reference(view, split), view, split);
-    const Footprints f = footprints_reference(m, random_composites(m, unsigned(c.P)));
-    DeviceFootprints fp = make_footprints(dev, m.rects);
-    if (!f.pixels.empty())
-      cl_check(dev.queue().enqueueWriteBuffer(fp.pixels, CL_TRUE, 0, f.pixels.size() * sizeof(Rgba),
-                                              f.pixels.data()),
-               "write");
-    const SwapPlan plan = plan_swap(m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack);
-    // On its own: a fresh DeviceSwapPlan, a blocking write.
-    const DeviceSwapPlan alone = upload_swap_plan(dev, plan);
-    const DeviceSwapRun want_run = enqueue_swap(dev, alone, fp);
-    const int N = plan.stages();
-    const std::vector<Rgba> want = read_rgba(dev, want_run.last, plan.level_size(N));
+    const SwapCase sc = swap_case(dev, d, view, c.P, unsigned(c.P));
+    const int N = sc.plan.stages();
     // The engine's way: the map not blocking (enqueued behind a swap of the
     // plan on its own, so that it waits for it) in every other case.
     const bool blocking = (&c - cases) % 2 == 0;
     const cl_mem before = reused.packed();
-    if (!blocking) enqueue_swap(dev, alone, fp);
+    if (!blocking) enqueue_swap(dev, sc.alone, sc.fp);
     EXPECT_EQ(map_swap_plan(dev, reused, blocking), c.mapped != 0);
     EXPECT_EQ(reused.mapped != nullptr, c.mapped != 0);
     EXPECT_EQ(reused.map_done() != nullptr, c.mapped != 0 && !blocking);
@@ -390,7 +426,7 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
       EXPECT_TRUE(in_map);
     }
     planned_in_map += in_map;
-    plan_swap_into(reused.plan, m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack,
+    plan_swap_into(reused.plan, sc.m.rects, sc.split, view, pe_grid(c.P), SwapLayout::cut_and_stack,
                    in_map ? held_out.data() : nullptr);
     EXPECT_EQ(reused.plan.held[0].empty(), in_map);
     upload_swap_plan(dev, reused, false);
@@ -400,14 +436,7 @@ TEST(SwapKernels, PlanWrittenIntoTheMappedBufferOrCopied) {
       EXPECT_EQ(reused.packed() == before, c.same == 1);
     }
     wrote_into_map += c.mapped && reused.packed() == before;
-    const DeviceSwapRun run = enqueue_swap(dev, reused, fp);
-    EXPECT_TRUE(bitwise_equal(read_rgba(dev, run.last, plan.level_size(N)), want));
-    cl::Buffer im, im_alone;
-    enqueue_display(dev, reused, run.last, im);
-    enqueue_display(dev, alone, want_run.last, im_alone);
-    EXPECT_TRUE(
-        bitwise_equal(read_device_image(dev, im, view.width(), view.height()).pixels(),
-                      read_device_image(dev, im_alone, view.width(), view.height()).pixels()));
+    expect_as_alone(dev, reused, sc, view);
   }
   EXPECT_GE(wrote_into_map, 3);
   EXPECT_GE(planned_in_map, 1);
@@ -478,19 +507,8 @@ TEST(SwapKernels, PlanOfAnySizeIsWrittenIntoTheMapping) {
     SCOPED_TRACE("P " + std::to_string(c.P) + ", " + std::to_string(c.w) + "x" +
                  std::to_string(c.h));
     const ViewGeometry view = make_view(d, {1, 1, 1}, c.va, c.w, c.h, Sampling::voxel);
-    const KdSplit split = kd_split(d, c.P);
-    const Matching m = balance_reference(match_reference(view, split), view, split);
-    const Footprints f = footprints_reference(m, random_composites(m, unsigned(c.P) + 3));
-    DeviceFootprints fp = make_footprints(dev, m.rects);
-    if (!f.pixels.empty())
-      cl_check(dev.queue().enqueueWriteBuffer(fp.pixels, CL_TRUE, 0, f.pixels.size() * sizeof(Rgba),
-                                              f.pixels.data()),
-               "write");
-    const SwapPlan plan = plan_swap(m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack);
-    const DeviceSwapPlan alone = upload_swap_plan(dev, plan);
-    const DeviceSwapRun want_run = enqueue_swap(dev, alone, fp);
-    const int N = plan.stages();
-    const std::vector<Rgba> want = read_rgba(dev, want_run.last, plan.level_size(N));
+    const SwapCase sc = swap_case(dev, d, view, c.P, unsigned(c.P) + 3);
+    const int N = sc.plan.stages();
     const cl_mem before = kept.packed();
     map_swap_plan(dev, kept, false, N, view.width(), view.height());
     ASSERT_NE(kept.mapped, nullptr);
@@ -499,7 +517,7 @@ TEST(SwapKernels, PlanOfAnySizeIsWrittenIntoTheMapping) {
     }
     std::vector<SwapRect*> held_out;
     ASSERT_TRUE(swap_plan_held_in_map(dev, kept, N, view.width(), view.height(), held_out));
-    plan_swap_into(kept.plan, m.rects, split, view, pe_grid(c.P), SwapLayout::cut_and_stack,
+    plan_swap_into(kept.plan, sc.m.rects, sc.split, view, pe_grid(c.P), SwapLayout::cut_and_stack,
                    held_out.data());
     std::size_t held = 0;
     for (const auto& h : kept.plan.held) held += h.capacity();
@@ -507,14 +525,7 @@ TEST(SwapKernels, PlanOfAnySizeIsWrittenIntoTheMapping) {
     upload_swap_plan(dev, kept, false);
     EXPECT_EQ(kept.mapped, nullptr);
     EXPECT_EQ(kept.staging.capacity(), 0u);
-    const DeviceSwapRun run = enqueue_swap(dev, kept, fp);
-    EXPECT_TRUE(bitwise_equal(read_rgba(dev, run.last, plan.level_size(N)), want));
-    cl::Buffer im, im_alone;
-    enqueue_display(dev, kept, run.last, im);
-    enqueue_display(dev, alone, want_run.last, im_alone);
-    EXPECT_TRUE(
-        bitwise_equal(read_device_image(dev, im, view.width(), view.height()).pixels(),
-                      read_device_image(dev, im_alone, view.width(), view.height()).pixels()));
+    expect_as_alone(dev, kept, sc, view);
   }
   // A map already large enough is kept as it is; sizes outside the plan's
   // range are refused before anything is mapped.
