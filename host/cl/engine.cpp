@@ -671,7 +671,8 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     out = host_out->take();  // blocking
   }
   // (the pool only grows within the frame: its bytes now are the frame's
-  // peak, less what was let go where a request found no memory)
+  // peak, less what was let go where a request found no memory; with other
+  // threads' engines on the device, theirs too)
   const std::size_t pool_bytes = device.pooled_bytes();
   if (times) {
     *times = EngineTimes{};

@@ -409,14 +409,15 @@ class Device {
   /// Says that the caller's last command on `buffer` is enqueued and that
   /// neither it nor anything it gave the buffer to holds another handle to
   /// it: while the calling thread's ReuseScope is open, the pool may hand it
-  /// out again to a later request of the same frame (the same rule as
-  /// between scopes: flags, bytes <= size <= 2 * bytes + 64 KiB). The queue
-  /// is in order, so the new owner's commands run after those enqueued on it
-  /// so far; nothing waits. A frame's peak is then the buffers alive at once
-  /// rather than every buffer it made. Resets `buffer`; a buffer the pool
-  /// did not hand out (one over a host pointer, one made with no scope open)
-  /// is only let go. The device's own queue only: a buffer used on another
-  /// queue must not be released here.
+  /// out again to a later request of the same frame, or of another thread's
+  /// frame on this Device (any request made with a scope open; the same rule
+  /// as between scopes: flags, bytes <= size <= 2 * bytes + 64 KiB). The
+  /// queue is one and in order, so the new owner's commands run after those
+  /// enqueued on it so far; nothing waits. A frame's peak is then the
+  /// buffers alive at once rather than every buffer it made. Resets
+  /// `buffer`; a buffer the pool did not hand out (one over a host pointer,
+  /// one made with no scope open) is only let go. The device's own queue
+  /// only: a buffer used on another queue must not be released here.
   void release(cl::Buffer& buffer);
   /// Bytes of buffers the pool holds (handed out or free), for tests.
   std::size_t pooled_bytes() const;

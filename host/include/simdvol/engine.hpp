@@ -124,7 +124,10 @@ struct EngineStats {
   /// fresh or kept from earlier frames (buffers a stage released, such as
   /// the matching's once the balance is enqueued, taken again by later
   /// requests: Device::release), and those it keeps for later frames. Not
-  /// the output image (HostImage: the returned Image's own memory).
+  /// the output image (HostImage: the returned Image's own memory). With
+  /// engines rendering on one Device from several threads, the pool is
+  /// theirs together: their buffers are counted too, and another thread's
+  /// frame end may free some during this frame.
   int64_t pool_bytes = 0;
   /// PEs the shade + classify left as they were: their cells all zeros and
   /// transparent under the same classification of the kept volume (the
