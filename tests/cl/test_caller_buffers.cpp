@@ -448,13 +448,17 @@ TEST(CallerBuffers, MonteCarloStagesRefuseUndersizedBuffers) {
   EXPECT_REFUSED(
       "segs.segments",
       enqueue_ray_lists(dev, with_buffer(f.segs, &LocalSegments::segments, small), f.view));
-  for (const auto& [member, name] :
+  for (const auto& [member_binding, name] :
        std::vector<std::pair<cl::Buffer LocalSegments::*, std::string>>{
            {&LocalSegments::segments, "segs.segments"},
            {&LocalSegments::seg_offset, "segs.seg_offset"},
-           {&LocalSegments::rects, "segs.rects"}})
+           {&LocalSegments::rects, "segs.rects"}}) {
+    // A plain variable for the lambda of EXPECT_REFUSED: capturing a
+    // structured binding is C++20 that clang implements only from 16.
+    const auto member = member_binding;
     EXPECT_REFUSED(name, enqueue_mc_local(dev, with_buffer(f.segs, member, small), f.soff,
                                           f.samples, W, p, nullptr, fp));
+  }
   {
     DeviceRayLists bad = rays;
     bad.offset = Frame::sized(dev, int64_t(W) * H * 4);

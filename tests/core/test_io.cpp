@@ -3130,7 +3130,8 @@ TEST_F(IoTest, MetaImageMalformed) {
                                                         {"format.mhd", "z%s%s%s%n.raw"}}) {
     SCOPED_TRACE(name);
     write_file(file(name), mha_header(3, "5 4 3", "MET_UCHAR", "", where));
-    expect_file_error([&] { simdvol::load_metaimage(file(name)); }, file(name),
+    // name by value: capturing a structured binding (C++20) needs clang 16.
+    expect_file_error([&, name = name] { simdvol::load_metaimage(file(name)); }, file(name),
                       {"slice files, which simdvol does not read"});
   }
   // Compressed voxels after the header without a CompressedDataSize: MetaIO
