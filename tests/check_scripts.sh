@@ -30,6 +30,20 @@ for t in scripts/embed-check "ASan + UBSan" SIMDVOL_SKIP_SANITIZE SIMDVOL_ASAN_B
 done
 check 2 "'--target' is a build-step option" "$root/scripts/build" --target simdvol
 check 0 "Configures and builds simdvol" "$root/scripts/build" --help
+# A CC or CXX that is not the compiler an existing build directory has is
+# refused before CMake runs (CMake ignored it and built with the old one).
+# A stand-in cmake on PATH fails at once should the script get that far.
+cached=$(mktemp -d)
+printf 'CMAKE_C_COMPILER:FILEPATH=/usr/bin/cc\nCMAKE_CXX_COMPILER:FILEPATH=/usr/bin/c++\n' \
+  >"$cached/CMakeCache.txt"
+mkdir "$cached/bin"
+printf '#!/bin/sh\necho "cmake ran"\nexit 1\n' >"$cached/bin/cmake"
+chmod +x "$cached/bin/cmake"
+check 2 "$cached was configured with /usr/bin/c++, not CXX=/bin/true" \
+  env PATH="$cached/bin:$PATH" CXX=/bin/true SIMDVOL_BUILD_DIR="$cached" "$root/scripts/build"
+check 2 "$cached was configured with /usr/bin/cc, not CC=/bin/true" \
+  env PATH="$cached/bin:$PATH" CC=/bin/true SIMDVOL_BUILD_DIR="$cached" "$root/scripts/build"
+rm -rf "$cached"
 check 0 "scripts/demo [render options]" "$root/scripts/demo" -h
 check 0 "scripts/reproduce [--no-build]" "$root/scripts/reproduce" --help
 check 2 "unknown argument '--bogus'" "$root/scripts/reproduce" --bogus
