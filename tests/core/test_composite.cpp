@@ -51,6 +51,24 @@ TEST(Over, IsNotCommutative) {
   EXPECT_EQ(over(blue, red).r, 0.5f);
 }
 
+// The references round each product and sum on its own, as the kernels do
+// under FP_CONTRACT OFF, so that the tests can compare the two bit for bit:
+// the build passes -ffp-contract=off. Without it a build for a target with
+// FMA (-march=native) fused 0.1 + 0.9 * 0.6 into one rounding (0x1.47ae14p-1
+// against 0x1.47ae16p-1). The inputs are volatile: computed at run time.
+TEST(Over, RoundsProductAndSumApart) {
+  volatile float front = 0.1f, alpha = 0.1f, back = 0.6f;
+  const Rgba f{front, front, front, alpha}, b{back, back, back, back};
+  const volatile float product = (1.0f - alpha) * back;
+  const float apart = front + product;
+  ASSERT_NE(apart,
+            std::fma(1.0f - alpha, float(back), float(front)));  // the inputs tell them apart
+  const Rgba o = over(f, b);
+  EXPECT_EQ(o.r, apart);
+  EXPECT_EQ(o.g, apart);
+  EXPECT_EQ(o.b, apart);
+}
+
 TEST(Composite, TransparentRayIsBlack) {
   const std::vector<Rgba> ray(100, Rgba{0, 0, 0, 0});
   for (CompositeMode m : {CompositeMode::direct, CompositeMode::adaptive, CompositeMode::mc}) {
