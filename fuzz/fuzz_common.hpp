@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -133,7 +134,10 @@ void run_loader(F&& load) {
         v.voxel_count() != static_cast<std::size_t>(d[0] * d[1] * d[2]))
       std::abort();
     for (double s : v.spacing())
-      if (!(s > 0.0) || s != s || s > 1e308) std::abort();
+      // (positive and finite, as Volume holds it; a NIfTI-2 double may be
+      // near DBL_MAX: 1.2e308 is a spacing, the view refuses what it cannot
+      // frame)
+      if (!(s > 0.0) || !(s <= std::numeric_limits<double>::max())) std::abort();
   } catch (const simdvol::Error&) {
   }
 }

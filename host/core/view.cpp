@@ -160,7 +160,9 @@ ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<doub
   Vec3 extent{};
   double diag2 = 0;
   for (int a = 0; a < 3; ++a) {
-    extent[a] = static_cast<double>(dims[a]) * sp[a] / smin;
+    // (the ratio first: dims * spacing overflowed to inf for a spacing near
+    // DBL_MAX, refused as too anisotropic though every spacing was alike)
+    extent[a] = static_cast<double>(dims[a]) * (sp[a] / smin);
     diag2 += extent[a] * extent[a];
     g.longest = std::max(g.longest, extent[a]);
   }
@@ -226,7 +228,7 @@ ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<doub
   const double grid_n[3] = {static_cast<double>(wi), static_cast<double>(hi),
                             static_cast<double>(depth)};
   for (int a = 0; a < 3; ++a) {
-    const double f = g.step * smin / sp[a];
+    const double f = g.step * (smin / sp[a]);
     double reach = 0.5 * static_cast<double>(dims[a]);
     for (int b = 0; b < 3; ++b) reach += std::fabs(tt[a][b] * f) * (std::fabs(c0[b]) + grid_n[b]);
     if (!(std::ldexp(reach, SV_FRAC_BITS) < 0x1p61))
@@ -235,7 +237,7 @@ ViewGeometry make_view(const std::array<int64_t, 3>& dims, const std::array<doub
                                         "at this image size");
   }
   for (int a = 0; a < 3; ++a) {
-    const double f = g.step * smin / sp[a];
+    const double f = g.step * (smin / sp[a]);
     double o = 0.5 * static_cast<double>(dims[a]);
     for (int b = 0; b < 3; ++b) {
       g.grid.step[a][b] = to_fixed(tt[a][b] * f);

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <random>
+#include <string>
 
 #include "simdvol/error.hpp"
 #include "simdvol/view.hpp"
@@ -194,6 +195,37 @@ TEST(ViewGeometry, RejectsBadSizes) {
   // A strongly anisotropic volume still fits at pixel sampling.
   const ViewGeometry ok = make_view({4, 4, 4}, {1, 1, 1e4}, {0, 30, 0}, 16, 16, Sampling::pixel);
   EXPECT_EQ(ok.width(), 16);
+}
+
+// The geometry is in units of the smallest spacing, so a volume whose
+// spacings are all alike has the geometry of spacing 1, however large or
+// small they are: a NIfTI-2 file's doubles can hold 1.5e308, and dims x
+// spacing overflowed to inf there (refused as "its largest over its smallest
+// is too large to render", though the ratio was 1).
+TEST(ViewGeometry, SpacingsAllAlikeGiveTheGeometryOfSpacingOne) {
+  for (const Sampling sampling : {Sampling::voxel, Sampling::pixel}) {
+    const ViewGeometry one = make_view({16, 12, 9}, {1, 1, 1}, {20, 35, 10}, 48, 40, sampling);
+    for (const double s : {1.5e308, 1.7e308, 1e-300, 5e-324}) {
+      const ViewGeometry g = make_view({16, 12, 9}, {s, s, s}, {20, 35, 10}, 48, 40, sampling);
+      EXPECT_EQ(g.width(), one.width()) << s;
+      EXPECT_EQ(g.height(), one.height()) << s;
+      EXPECT_EQ(g.depth(), one.depth()) << s;
+      EXPECT_EQ(g.step, one.step) << s;
+      EXPECT_EQ(g.radius, one.radius) << s;
+      for (int a = 0; a < 3; ++a) {
+        EXPECT_EQ(g.grid.origin[a], one.grid.origin[a]) << s;
+        for (int b = 0; b < 3; ++b) EXPECT_EQ(g.grid.step[a][b], one.grid.step[a][b]) << s;
+      }
+    }
+  }
+  // Spacings whose ratio overflows are still refused, naming the ratio.
+  try {
+    (void)make_view({2, 2, 2}, {8e-317, 1.2e308, 7e182}, {0, 0, 0}, 16, 16, Sampling::voxel);
+    ADD_FAILURE() << "a ratio of 1e624 was not refused";
+  } catch (const ArgumentError& e) {
+    EXPECT_NE(std::string(e.what()).find("its largest over its smallest"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(Philox, KnownAnswer) {

@@ -417,7 +417,7 @@ def geometry(shape, spacing, view, size, sampling, fit, conv):
     sp = np.array(spacing, float)
     unit = sp.min() if conv.spacing_unit == 'smallest' else sp.max()
     s = sp / unit
-    ext = dims * sp / unit                       # extents in unit lengths
+    ext = dims * s                               # extents in unit lengths
     longest = ext.max()
     R = 0.5 * math.sqrt(float((ext * ext).sum()))
     # DOC README --size / --fit: the longest side (or the diagonal) spans min(W, H)
