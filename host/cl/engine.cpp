@@ -640,14 +640,14 @@ Image RenderEngine::render_frame(const Volume& vol, const RenderOptions& opt, En
     upload_swap_plan(device, S.swap_plan, false);
     const DeviceSwapPlan& plan = S.swap_plan;
     plan_ms = ms_since(tp);
-    // (the footprints are read no more: the levels after the first may
-    // take their buffer)
     // The segments, their bounds and order and the row sums are read by
     // nothing after the local stage (enqueued): the swap's levels and the
     // display may take their buffers.
     for (cl::Buffer* b : {&segs.segments, &segs.bounds, &dm.segments, &dm.bounds, &dm.rowsum})
       device.release(*b);
     if (lanes) device.release(lanes->order);
+    // (the footprints are read no more: the levels after the first may
+    // take their buffer)
     const DeviceSwapRun run =
         enqueue_swap(device, plan, *fp, kSwapFusedStages, 0, FootprintsAfterSwap::overwritten);
     swap_level_buffers = run.allocated_slots;

@@ -154,6 +154,7 @@ SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout) {
   SwapPlan plan;
   plan_swap_into(plan, rects, split, view, grid, layout);
+  plan.work = {};  // (a plan made once keeps no working storage)
   return plan;
 }
 

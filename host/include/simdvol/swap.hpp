@@ -159,12 +159,14 @@ SwapPlan plan_swap(const std::vector<sv_rect>& rects, const KdSplit& split,
                    const ViewGeometry& view, const PeGrid& grid, SwapLayout layout);
 /// plan_swap into `plan`, reusing the storage of its vectors: a plan kept
 /// from frame to frame takes no fresh memory (the engine's; no allocation
-/// where P, N and the image size are those of the plan's last making). The
-/// same plan; on an ArgumentError `plan` is unchanged (but for `work`). With `held_out` (N + 1
-/// pointers, one per level, each to room for P rectangles) level L's rectangles are written to
-/// held_out[L] instead, and plan.held is left empty (its memory freed): the engine writes them
-/// straight into the device's mapped table buffer (swap_cl.hpp: swap_plan_held_in_map). What reads
-/// plan.held (swap_cost, the references, display_reference) needs a plan made without it.
+/// where P, N, the image size and whether `held_out` is given are those of
+/// the plan's last making). The same plan; on an ArgumentError `plan` is
+/// unchanged (but for `work`). With `held_out` (N + 1 pointers, one per
+/// level, each to room for P rectangles) level L's rectangles are written
+/// to held_out[L] instead, and plan.held is left empty (its memory freed):
+/// the engine writes them straight into the device's mapped table buffer
+/// (swap_cl.hpp: swap_plan_held_in_map). What reads plan.held (swap_cost,
+/// the references, display_reference) needs a plan made without it.
 void plan_swap_into(SwapPlan& plan, const std::vector<sv_rect>& rects, const KdSplit& split,
                     const ViewGeometry& view, const PeGrid& grid, SwapLayout layout,
                     SwapRect* const* held_out = nullptr);
