@@ -1,9 +1,14 @@
 #include "simdvol/composite.hpp"
 
+#include "over_inline.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol_shared.h"
 
 namespace simdvol {
+
+Rgba over(const Rgba& f, const Rgba& b) {
+  return detail::over_inline(f, b);
+}
 
 namespace {
 // Over's alpha recurrence along the ray (ch. 7.5 (a): the exact opacity).
@@ -17,7 +22,7 @@ float exact_alpha(const RaySamples& ray) {
 Rgba composite_direct(const RaySamples& ray) {
   // Eq 7.2 in associative colour: front to back, acc = over(acc, sample).
   Rgba acc{};
-  for (const Rgba& s : ray.rgba) acc = over(acc, s);
+  for (const Rgba& s : ray.rgba) acc = detail::over_inline(acc, s);
   return acc;
 }
 
@@ -28,7 +33,7 @@ Rgba composite_adaptive(const RaySamples& ray, float threshold) {
   Rgba acc{};
   for (const Rgba& s : ray.rgba) {
     if (acc.a >= threshold) break;  // Levoy's adaptive termination
-    acc = over(acc, s);
+    acc = detail::over_inline(acc, s);
   }
   return acc;
 }

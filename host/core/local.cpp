@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <string>
 
+#include "over_inline.hpp"
 #include "simdvol/composite.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/resample.hpp"
@@ -134,7 +135,7 @@ Image composite_segments(const Matching& m, const std::vector<Rgba>& composites,
     std::sort(b, e);
     Rgba acc{};
     for (auto it = b; it != e; ++it)
-      acc = over(acc, composites[static_cast<std::size_t>(it->second)]);
+      acc = detail::over_inline(acc, composites[static_cast<std::size_t>(it->second)]);
     im.pixels()[q] = acc;
   }
   return im;

@@ -15,6 +15,11 @@
 #include "simdvol/error.hpp"
 
 namespace simdvol {
+
+double phantom_subsample(int64_t i, int64_t n, int m, int s) {
+  const double h = n <= 1 ? 2.0 : 2.0 / static_cast<double>(n - 1);
+  return phantom_coord(i, n) + h * ((static_cast<double>(m) + 0.5) / static_cast<double>(s) - 0.5);
+}
 namespace {
 
 // One ellipsoid of the phantom: centre, semi-axes, rotation about z (degrees,

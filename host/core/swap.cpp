@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 
+#include "over_inline.hpp"
 #include "simdvol/composite.hpp"
 #include "simdvol/error.hpp"
 
@@ -350,7 +351,7 @@ std::vector<Rgba> swap_stage_reference(const SwapPlan& plan, int k, const std::v
                 ? in[static_cast<std::size_t>(oin[static_cast<std::size_t>(q)] + hq.index(x, y))]
                 : Rgba{};
         out[static_cast<std::size_t>(oout[static_cast<std::size_t>(p)] + b * ho.nx + a)] =
-            p_front ? over(vp, vq) : over(vq, vp);
+            p_front ? detail::over_inline(vp, vq) : detail::over_inline(vq, vp);
       }
   }
   return out;

@@ -9,6 +9,10 @@
 
 #include "simdvol/composite.hpp"
 #include "simdvol/error.hpp"
+#include "simdvol/phantom.hpp"
+#ifdef SIMDVOL_FMA_CALLER
+#include "fma_caller.hpp"
+#endif
 
 using namespace simdvol;
 
@@ -67,6 +71,39 @@ TEST(Over, RoundsProductAndSumApart) {
   EXPECT_EQ(o.r, apart);
   EXPECT_EQ(o.g, apart);
   EXPECT_EQ(o.b, apart);
+}
+
+// The public headers hold no float code that a caller's build could
+// contract: over() and phantom_subsample() are compiled in the library. An
+// embedding program built with -march=native (FMA; GCC contracts by default)
+// got over() inline from composite.hpp and fused 0.1 + 0.9 * 0.6 into
+// 0x1.47ae14p-1, where the library's composite() and the kernels give
+// 0x1.47ae16p-1; phantom_subsample(1, 4, 3, 4) -0x1.5555555555559p-4 for
+// -0x1.5555555555558p-4. fma_caller.cpp is built with -mfma
+// -ffp-contract=fast (x86-64, GCC or Clang; skipped elsewhere and on a CPU
+// without FMA).
+TEST(PublicHeaders, SameBitsInACallerBuiltWithFma) {
+#ifndef SIMDVOL_FMA_CALLER
+  GTEST_SKIP() << "fma_caller.cpp is built only for x86-64 with GCC or Clang";
+#else
+  if (!__builtin_cpu_supports("fma")) GTEST_SKIP() << "this CPU has no FMA";
+  volatile float front = 0.1f, alpha = 0.1f, back = 0.6f;
+  const Rgba f{front, front, front, alpha}, b{back, back, back, back};
+  const Rgba o = simdvol_test::over_in_fma_caller(f, b);
+  const std::vector<Rgba> ray{f, b};
+  const Rgba c = composite({ray, 0}, 0, CompositeParams{});
+  EXPECT_EQ(c.r, 0x1.47ae16p-1f);
+  EXPECT_EQ(o.r, c.r);
+  EXPECT_EQ(o.g, c.g);
+  EXPECT_EQ(o.b, c.b);
+  EXPECT_EQ(o.a, c.a);
+  volatile int64_t i = 1, n = 4;
+  volatile int m = 3, s = 4;
+  const double h = 2.0 / 3.0, q = (3.0 + 0.5) / 4.0 - 0.5;
+  ASSERT_NE(phantom_coord(1, 4) + h * q, std::fma(h, q, phantom_coord(1, 4)));  // tells them apart
+  EXPECT_EQ(simdvol_test::phantom_subsample_in_fma_caller(i, n, m, s), phantom_coord(1, 4) + h * q);
+  EXPECT_EQ(simdvol_test::phantom_subsample_in_fma_caller(i, n, m, s), -0x1.5555555555558p-4);
+#endif
 }
 
 TEST(Composite, TransparentRayIsBlack) {

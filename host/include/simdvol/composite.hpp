@@ -10,10 +10,10 @@ namespace simdvol {
 
 /// over(front, back): C' = C'_f + (1 - a_f) C'_b, a = a_f + (1 - a_f) a_b.
 /// Associative. (The thesis's diamond, eq 7.8–7.10, takes the front second.)
-inline Rgba over(const Rgba& f, const Rgba& b) {
-  const float t = 1.0f - f.a;
-  return {f.r + t * b.r, f.g + t * b.g, f.b + t * b.b, f.a + t * b.a};
-}
+/// Each product and sum rounded on its own, as in the references and the
+/// kernels (FP_CONTRACT OFF): compiled in the library, not inline here, so
+/// that a caller built with FMA contraction (-march=native) gets the same bits.
+Rgba over(const Rgba& f, const Rgba& b);
 
 enum class CompositeMode {
   direct,    ///< front-to-back over every sample (eq 7.2)

@@ -41,10 +41,9 @@ inline double phantom_coord(int64_t i, int64_t n) {
 /// Coordinate of sub-sample m (0 <= m < s) of voxel i of an n-point axis:
 /// the s points splitting the voxel's footprint [c - h/2, c + h/2] into equal
 /// parts, at their midpoints (c = phantom_coord(i, n), h = 2 / (n - 1), or 2
-/// when n = 1). shepp_logan(n, s) uses exactly these coordinates.
-inline double phantom_subsample(int64_t i, int64_t n, int m, int s) {
-  const double h = n <= 1 ? 2.0 : 2.0 / static_cast<double>(n - 1);
-  return phantom_coord(i, n) + h * ((static_cast<double>(m) + 0.5) / static_cast<double>(s) - 0.5);
-}
+/// when n = 1). shepp_logan(n, s) uses exactly these coordinates. Compiled
+/// in the library (under -ffp-contract=off), not inline here: a caller built
+/// with FMA contraction would fuse the product and the sum.
+double phantom_subsample(int64_t i, int64_t n, int m, int s);
 
 }  // namespace simdvol
