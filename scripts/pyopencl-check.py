@@ -25,7 +25,8 @@ import numpy as np  # noqa: E402
 import pyopencl as cl  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cl_program import pick_device, program_source, round_up  # noqa: E402
+from cl_program import (WorkGroupLimits, fit_work_group, pick_device,  # noqa: E402
+                        program_source, round_up)
 
 TOL = 1e-6
 CHUNK_WGS = 64  # chunks of 16 voxels per work-group (host/cl/chunk_ranges.hpp)
@@ -85,8 +86,12 @@ def main():
     chunks = vstride // 16
     l0 = min(CHUNK_WGS, pow2_at_least(chunks))
     l1 = max(1, min(CHUNK_WGS // l0, pes))
+    # (KERNELS.md section 1: a smaller group where the device or the kernel
+    # takes fewer work-items; the global size rounded up to the one asked for)
+    g = (round_up(chunks, l0), round_up(pes, l1))
+    l0, l1 = fit_work_group((l0, l1), WorkGroupLimits(dev, kernel))
     kernel.set_args(b_in, b_out, np.int32(vstride), np.int32(pes), b_par)
-    cl.enqueue_nd_range_kernel(queue, kernel, (round_up(chunks, l0), round_up(pes, l1)), (l0, l1))
+    cl.enqueue_nd_range_kernel(queue, kernel, (round_up(g[0], l0), round_up(g[1], l1)), (l0, l1))
     cl.enqueue_copy(queue, got, b_out)
     queue.finish()
 

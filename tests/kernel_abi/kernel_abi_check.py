@@ -69,6 +69,12 @@ tables (geo, stepc, koff, the pair list, capacity, H) made here:
               unpack: balance_reference's bounds (before the unpack: the direct frame's
               deferred one), segments and loads, and the moves flags: the sweeps after
               which balance_reference changed.
+Work-group sizes as section 1 says: the reqd_work_group_size kernels
+(layout, match, balance) built and launched with WGS = 64 or the device's
+smaller limit, simdvol_swap_stages in runs of no more stages than 2^m
+work-items fit, the others in smaller groups (fit_work_group) where the
+device or the kernel takes fewer than section 5 asks for; scripts/embed-check
+runs it again under POCL_MAX_WORK_GROUP_SIZE=16.
 Prints one line per stage (with the largest difference where a tolerance
 applies); a disagreement names the case, the check and the first differing
 value.
@@ -89,9 +95,14 @@ import pyopencl as cl  # noqa: E402
 import pyopencl.cltypes  # noqa: E402,F401
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts"))
-from cl_program import pick_device, program_source, round_up  # noqa: E402
+from cl_program import (WorkGroupLimits, fit_work_group, fixed_group_size,  # noqa: E402
+                        pick_device, program_source, round_up)
 
 LAYOUTS = ("cut-and-stack", "hierarchical")
+# Section 1's local size of the reqd_work_group_size kernels (layout, match,
+# balance), exactly: 64, or the largest power of two the device takes
+# (Host.wgs). Host.run takes it as a local size (and a global one).
+WGS = "WGS"
 FUSED_MAX = 7  # simdvol_swap_stages: 1 <= m <= 7 stages a launch
 FUSED_FIXED_LOCAL = 7168  # section 5: the host budgets la + lb + 7,168 bytes of local memory
 SEG = np.dtype([("i", "<i4"), ("j", "<i4"), ("k0", "<i4"), ("k1", "<i4")])  # sv_segment
@@ -187,6 +198,8 @@ class Host:
         self.ctx = cl.Context([self.dev])
         self.q = cl.CommandQueue(self.ctx)
         self.local_mem = self.dev.local_mem_size
+        self.wgs = fixed_group_size(self.dev)
+        self.fitted = {}  # kernel name -> (local size asked, local size launched)
         self.programs = {}
 
     def program(self, stage, defines=(), more=(), options=()):
@@ -197,9 +210,9 @@ class Host:
         return self.programs[key]
 
     def layout_group(self):
-        """Section 1's third program (layout, match, balance, swap; WGS = 64):
-        the swap, display and warp kernels."""
-        return self.program("layout", [("WGS", 64)], ("match", "balance", "swap"))
+        """Section 1's third program (layout, match, balance, swap; WGS = 64,
+        or the device's smaller limit): the swap, display and warp kernels."""
+        return self.program("layout", [("WGS", self.wgs)], ("match", "balance", "swap"))
 
     def mc(self, shared=0, exact=0, strat=0, alloc=0, lists=False):
         """mc.cl, always with its option; with no defines for the ray-list,
@@ -223,9 +236,38 @@ class Host:
     def empty(self, nbytes):
         return cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, max(int(nbytes), 16))
 
-    def run(self, kernel, g, l, *args):
-        """Section 1: an explicit local size, each global size rounded up to it."""
+    def limits(self, kernel):
+        return WorkGroupLimits(self.dev, kernel)
+
+    def run(self, kernel, g, l, *args, exact=False):
+        """Section 1: an explicit local size, each global size rounded up to
+        it. A kernel declared with reqd_work_group_size takes exactly WGS (the
+        local size WGS, asked for by name); with `exact` (simdvol_swap_stages'
+        2^m) the local size must fit, else this refuses it as the library
+        does; any other kernel takes a smaller group where the device or the
+        kernel takes fewer work-items (fit_work_group)."""
         g, l = (g, l) if isinstance(g, tuple) else ((g,), (l,))
+        reqd = tuple(kernel.get_work_group_info(
+            cl.kernel_work_group_info.COMPILE_WORK_GROUP_SIZE, self.dev))
+        name = kernel.function_name
+        if any(reqd) != (l == (WGS,)):
+            raise RuntimeError(f"{name}: reqd_work_group_size {reqd}, launched with local size "
+                               f"{l} (the WGS kernels take WGS, the others a number)")
+        if l == (WGS,):
+            if reqd[0] != self.wgs:
+                raise RuntimeError(f"{name}: built with WGS {reqd[0]}, not the device's {self.wgs}")
+            g, l = tuple(self.wgs if a == WGS else a for a in g), (self.wgs,)
+        limits = self.limits(kernel)
+        if not limits.fits(l):
+            if exact or any(reqd):
+                raise RuntimeError(f"{name}: needs work-groups of {' x '.join(map(str, l))} "
+                                   f"work-items, more than this device takes for it "
+                                   f"({limits.describe()})")
+            asked = l
+            l = fit_work_group(l, limits)
+            # (the global size rounded up to the size asked for first: section 1)
+            g = tuple(round_up(max(a, 1), b) for a, b in zip(g, asked))
+            self.fitted[name] = (asked, l)
         kernel.set_args(*args)
         rounded = tuple(round_up(max(a, 1), b) for a, b in zip(g, l))
         cl.enqueue_nd_range_kernel(self.q, kernel, rounded, l)
@@ -347,17 +389,23 @@ def local_bytes(off, P, k0, m):
 def run_swap(host, held, off, front, foot, fused):
     """Levels 0 .. N on the device: simdvol_swap_stage per stage, or (fused)
     simdvol_swap_stages in runs of up to 7 stages, fewer where local memory
-    is short. Returns level N's buffer, rectangles, offsets and pixels."""
+    is short or the device takes fewer than 2^m work-items in a group for it
+    (section 1: its local size is its contract). Returns level N's buffer,
+    rectangles, offsets and pixels."""
     prog = host.layout_group()
+    most = FUSED_MAX  # (0 where the device takes no 2 work-items: stage by stage then)
+    while most > 0 and not host.limits(prog.simdvol_swap_stages).fits((1 << most,)):
+        most -= 1
     P, N = held[0].shape[0], len(front)
     R, O = [host.buf(h) for h in held], [host.buf(o) for o in off]
     lv = [host.buf(foot)] + [host.empty(16 * int(o[-1])) for o in off[1:]]
     k = 0
     while k < N:
-        m = min(FUSED_MAX, N - k) if fused else 1
+        m = min(most, N - k) if fused and most else 1
         while m > 1 and sum(local_bytes(off, P, k, m)) + FUSED_FIXED_LOCAL > host.local_mem:
             m -= 1
-        if not fused:  # (in, in_rect, in_off, out, out_rect, out_off, pes, k, front): P / 64
+        # simdvol_swap_stage (in, in_rect, in_off, out, out_rect, out_off, pes, k, front): P / 64
+        if not fused or not most:
             host.run(prog.simdvol_swap_stage, P, 64, lv[k], R[k], O[k], lv[k + 1], R[k + 1],
                      O[k + 1], *i32(P, k, front[k]))
         else:  # P / 2^m; r_s, o_s past m repeat level k + m; bit s of fronts = front[k + s]
@@ -365,7 +413,7 @@ def run_swap(host, held, off, front, foot, fused):
             host.run(prog.simdvol_swap_stages, P, 1 << m, lv[k], lv[k + m],
                      cl.LocalMemory(max(la, 16)), cl.LocalMemory(max(lb, 16)),
                      *[R[k + min(s, m)] for s in range(8)], *[O[k + min(s, m)] for s in range(8)],
-                     *i32(k, m, sum(front[k + s] << s for s in range(m))))
+                     *i32(k, m, sum(front[k + s] << s for s in range(m))), exact=True)
         k += m
     return lv[N], R[N], O[N], host.read(lv[N], np.float32, 4 * int(off[N][-1]))
 
@@ -806,15 +854,15 @@ def check_direct(host, tally, d):
     b_poc, n_cells = host.buf(g.pe_of_cell), P * g.stride
     geo_args = [g.args(k) for k in ("dims", "cell", "block")]
     cells = host.buf(np.full(n_cells, NAN))
-    host.run(L.simdvol_layout, int(g.splits[1] * g.splits[2] * g.block[1] * g.block[2]), 64,
+    host.run(L.simdvol_layout, int(g.splits[1] * g.splits[2] * g.block[1] * g.block[2]), WGS,
              b_vol, cells, b_org, b_poc, *geo_args, g.args("splits"))
     tally.same("layout", case, "simdvol_layout", host.read(cells, np.float32, n_cells), cells_ref)
     cells_v = host.buf(np.full(n_cells, NAN))
-    host.run(L.simdvol_layout_voxel, n_cells, 64, b_vol, cells_v, b_org, *geo_args, np.int32(P))
+    host.run(L.simdvol_layout_voxel, n_cells, WGS, b_vol, cells_v, b_org, *geo_args, np.int32(P))
     tally.same("layout", case, "simdvol_layout_voxel", host.read(cells_v, np.float32, n_cells),
                cells_ref)
     flat = host.buf(np.full(vol.size, NAN))
-    host.run(L.simdvol_gather, P * int(g.cell[1] * g.cell[2]), 64, cells, flat, b_org, *geo_args,
+    host.run(L.simdvol_gather, P * int(g.cell[1] * g.cell[2]), WGS, cells, flat, b_org, *geo_args,
              np.int32(P))
     tally.same("layout", case, "simdvol_gather", host.read(flat, np.float32, vol.size), vol)
 
@@ -961,7 +1009,7 @@ def check_direct(host, tally, d):
     rowsum = host.empty(16 * P * H)
     # (view, geo, stepc, cand, cidx, cell, splits, pe_of, active, pes, H, rowsum, rowlk, kscr,
     # koff, save): every PE active; rowlk, kscr and koff unused here (save 0).
-    host.run(L.simdvol_match_rows_nolinks, P * H // 8, 64, host.buf(view), host.buf(geo),
+    host.run(L.simdvol_match_rows_nolinks, P * H // 8, WGS, host.buf(view), host.buf(geo),
              host.buf(stepc), host.buf(cand), host.buf(g.cidx4), g.args("cell0"), g.args("splits"),
              b_poc, host.buf(np.ones(P, np.uint8)), *i32(P, H), rowsum, host.empty(16 * P * H),
              host.empty(16), host.zeros(4 * P), np.int32(0))
@@ -970,7 +1018,7 @@ def check_direct(host, tally, d):
         """Footprint buffer: NaN, then zero_uncovered; or zeroed (simdvol_zero4, n / 256)."""
         fp = host.buf(np.full(4 * max(npix, 1), NAN))
         if zero_uncovered:
-            host.run(L.simdvol_zero_uncovered, P * H // 8, 64, host.buf(cand), b_rects, rowsum,
+            host.run(L.simdvol_zero_uncovered, P * H // 8, WGS, host.buf(cand), b_rects, rowsum,
                      *i32(P, H), b_roff, fp)
         else:
             host.run(R[1].simdvol_zero4, npix, 256, fp, np.int32(npix))
@@ -1168,7 +1216,7 @@ def check_match(host, tally, d):
     if int(M["skip"]):
         nb, active = [int(x) for x in M["bricks"].split()], load(d, "active.u8", np.uint8)
         b_active = host.empty(P)
-        host.run(L.simdvol_match_active, P, 64, b_cidx, cell0, g.args("dims"), np.int32(P),
+        host.run(L.simdvol_match_active, P, WGS, b_cidx, cell0, g.args("dims"), np.int32(P),
                  host.buf(load(d, "reach.u8", np.uint8)), int4(*nb), b_active)
         tally.same("match", case, "simdvol_match_active: match_active_reference",
                    host.read(b_active, np.uint8, P), active)
@@ -1198,23 +1246,23 @@ def check_match(host, tally, d):
         # kscr, koff, save)
         head = (b_view, b_geo, b_stepc, b_cand, b_cidx, cell0, splits, b_poc, b_active,
                 *i32(P, H))
-        host.run(getattr(L, "simdvol_match_rows" + sfx), P * H // 8, 64, *head, rowsum, rowlk,
+        host.run(getattr(L, "simdvol_match_rows" + sfx), P * H // 8, WGS, *head, rowsum, rowlk,
                  kscr, b_koff, np.int32(save))
         # (cand, active, pes, H, rowsum, rowlk, rowoff, petot, counts, rects, loads)
         b = {k: host.empty(n) for k, n in (("petot", 16 * P), ("counts", 4 * P),
                                           ("rects", 16 * P), ("loads", 4 * P),
                                           ("seg_offset", 4 * (P + 1)), ("lofs", 16 * (P + 1)),
                                           ("segments", 16 * cap))}
-        host.run(L.simdvol_match_pe, P, 64, b_cand, b_active, *i32(P, H), rowsum, rowlk, rowoff,
+        host.run(L.simdvol_match_pe, P, WGS, b_cand, b_active, *i32(P, H), rowsum, rowlk, rowoff,
                  b["petot"], b["counts"], b["rects"], b["loads"])
-        host.run(L.simdvol_match_scan, 64, 64, b["petot"], np.int32(P), b["seg_offset"],
+        host.run(L.simdvol_match_scan, WGS, WGS, b["petot"], np.int32(P), b["seg_offset"],
                  b["lofs"])
         b["bounds"] = host.empty(4 * cap) if bounds_on else guard()
         b["llist"] = host.empty((4 if narrow_on else 8) * cap) if links_on else guard()
         b["lbase"] = host.empty(16 * P) if narrow_on else guard()
         # (view .. H, rowsum, rowlk, rowoff, seg_offset, lofs, segments, bounds, fill_bounds,
         # llist, narrow, lbase, kscr, koff, saved)
-        host.run(getattr(L, "simdvol_match_fill" + sfx), P * H // 8, 64, *head, rowsum, rowlk,
+        host.run(getattr(L, "simdvol_match_fill" + sfx), P * H // 8, WGS, *head, rowsum, rowlk,
                  rowoff, b["seg_offset"], b["lofs"], b["segments"], b["bounds"],
                  np.int32(bounds_on), b["llist"], np.int32(narrow_on), b["lbase"], kscr, b_koff,
                  np.int32(save))
@@ -1259,7 +1307,7 @@ def check_match(host, tally, d):
         r = host.read(b["rects"], np.int32, 4 * P).reshape(P, 4)
         off = np.r_[0, np.cumsum(r[:, 2].astype(np.int64) * r[:, 3])]
         fp = host.buf(np.full(4 * max(int(off[-1]), 1), NAN))
-        host.run(L.simdvol_zero_uncovered, P * H // 8, 64, b_cand, b["rects"], b["rowsum"],
+        host.run(L.simdvol_zero_uncovered, P * H // 8, WGS, b_cand, b["rects"], b["rowsum"],
                  *i32(P, H), host.buf(off[:P].astype(np.int32)), fp)
         tally.same("match", case, f"zero_uncovered on the {what} rows",
                    host.read(fp, np.float32, 4 * int(off[-1])), want_fp, channels=4)
@@ -1309,7 +1357,7 @@ def check_match(host, tally, d):
         kk = b["bounds"]
         if not b16:
             kk = host.empty(8 * cap)
-            host.run(L.simdvol_balance_pack, cap, 64, b["seg_offset"], np.int32(P),
+            host.run(L.simdvol_balance_pack, cap, WGS, b["seg_offset"], np.int32(P),
                      b["segments"], kk)
         # The rounds: per sweep, balanced axis and parity (pair_list, first, npairs, axis, dir,
         # lofs, llist, kk, loads, moves, sweep), ceil(npairs / SV_BAL_PES) / 64; moves
@@ -1323,7 +1371,7 @@ def check_match(host, tally, d):
                     first, n = pfirst[2 * a + par], pfirst[2 * a + par + 1] - pfirst[2 * a + par]
                     if n == 0:  # (a global size of 0 is CL_INVALID_GLOBAL_WORK_SIZE)
                         continue
-                    host.run(rnd, -(-n // per), 64, b_pairs[save], *i32(first, n, a, dr),
+                    host.run(rnd, -(-n // per), WGS, b_pairs[save], *i32(first, n, a, dr),
                              b["lofs"], b["llist"], kk, b["loads"], moves, np.int32(s))
         tally.same("balance", case, f"{bname}: loads", host.read(b["loads"], np.int32, P),
                    load(d, "bal_loads.i64"))
@@ -1334,7 +1382,7 @@ def check_match(host, tally, d):
         tally.same("balance", case, f"{bname}: bounds" + (" (deferred unpack)" if b16 else ""),
                    got, bal_kk)
         # Unpack (seg_offset, pes, kk, segments), capacity / 64.
-        host.run(getattr(L, f"simdvol_balance_unpack{w}"), cap, 64, b["seg_offset"],
+        host.run(getattr(L, f"simdvol_balance_unpack{w}"), cap, WGS, b["seg_offset"],
                  np.int32(P), kk, b["segments"])
         tally.same("balance", case, f"{bname}: unpacked segments",
                    host.read(b["segments"], np.int32, 4 * nseg), bal.view(np.int32))
@@ -1400,7 +1448,7 @@ def main():
         raise RuntimeError(f"no cases in {args.cases}")
     host, tally = Host(args.kernels), Tally(args.verbose)
     print(f"kernel-abi-check: pyopencl {cl.VERSION_TEXT} on {host.dev.name.strip()}, "
-          f"kernels from {args.kernels}")
+          f"kernels from {args.kernels}; WGS {host.wgs} ({WorkGroupLimits(host.dev).describe()})")
     kinds = [read_meta(d)["kind"] for d in cases]
     checks = {"swap": check_swap, "mc": check_mc, "direct": check_direct, "match": check_match}
     for d, kind in zip(cases, kinds):
@@ -1411,6 +1459,11 @@ def main():
     for key, stage, text in SUMMARY:
         big = f" (largest difference {tally.largest[key]:.2g})" if key in tally.largest else ""
         print(f"kernel-abi-check: {stage:10s} {tally.ok.get(key, 0):4d} equal  {text}{big}")
+    if host.fitted:
+        print(f"kernel-abi-check: {len(host.fitted)} kernels launched with smaller work-groups "
+              "than asked (section 1), e.g. " + ", ".join(
+                  f"{k} {'x'.join(map(str, a))} -> {'x'.join(map(str, l))}"
+                  for k, (a, l) in sorted(host.fitted.items())[:3]))
     if tally.failed:
         print(f"kernel-abi-check: FAILED: {len(tally.failed)} differ, the first: {tally.failed[0]}")
         return 1
