@@ -15,6 +15,7 @@
 #include <string>
 
 #include "file_checks.hpp"
+#include "read_watch.hpp"
 #include "simdvol/error.hpp"
 #include "temp_files.hpp"
 
@@ -30,10 +31,47 @@ struct Reply {
   int64_t dims[3] = {0, 0, 0};
   double spacing[3] = {1, 1, 1};
   char orientation[4] = {0, 0, 0, 0};
-  int64_t volumes = 1;      ///< 3-D volumes in the file (status 0 and 1)
-  uint32_t text_bytes = 0;  ///< status 1: the error's path, a NUL, its problem
-  uint32_t note_bytes = 0;  ///< status 0: the notes after the voxels, each ending in a NUL
+  int64_t volumes = 1;       ///< 3-D volumes in the file (status 0 and 1)
+  uint32_t text_bytes = 0;   ///< status 1: the error's path, a NUL, its problem
+  uint32_t note_bytes = 0;   ///< status 0: the notes after the voxels, each ending in a NUL
+  uint32_t watch_bytes = 0;  ///< status 0 and 1: the files read (watched_files), last
 };
+
+/// The files the read met (watched_files), for the parent's load_volume to
+/// watch: each its identity (a byte saying whether it has one, then the
+/// struct), its name's length (uint32) and its name.
+std::string watched_files_bytes() {
+  std::string b;
+  for (const WatchedFile& f : watched_files()) {
+    const FileIdentity id = f.identity.value_or(FileIdentity{});
+    const std::string name = f.path.string();
+    const auto length = static_cast<uint32_t>(name.size());
+    b += f.identity ? '\1' : '\0';
+    b.append(reinterpret_cast<const char*>(&id), sizeof id);
+    b.append(reinterpret_cast<const char*>(&length), sizeof length);
+    b += name;
+  }
+  return b;
+}
+
+/// Reads watched_files_bytes' `bytes` bytes from `fd` and watches the files
+/// (watch_file: nothing unless a load_volume reads on this thread).
+void watch_files_from(int fd, uint32_t bytes) {
+  if (bytes == 0 || bytes >= (1u << 30)) return;
+  std::string b(bytes, '\0');
+  if (!read_fully(fd, b.data(), b.size())) return;
+  constexpr std::size_t fixed = 1 + sizeof(FileIdentity) + sizeof(uint32_t);
+  for (std::size_t at = 0; b.size() - at >= fixed;) {
+    FileIdentity id;
+    uint32_t length = 0;
+    std::memcpy(&id, b.data() + at + 1, sizeof id);
+    std::memcpy(&length, b.data() + at + 1 + sizeof id, sizeof length);
+    if (b.size() - at - fixed < length) return;
+    watch_file(fs::path(b.substr(at + fixed, length)),
+               b[at] ? std::optional<FileIdentity>(id) : std::nullopt);
+    at += fixed + length;
+  }
+}
 
 /// The reading process: loads, sends the volume or the error down `fd`.
 [[noreturn]] void child(const std::function<Volume(int64_t*)>& read, int fd) {
@@ -50,9 +88,12 @@ struct Reply {
     std::string notes;
     for (const std::string& n : v.notes()) notes += n + '\0';
     reply.note_bytes = static_cast<uint32_t>(notes.size());
+    const std::string watched = watched_files_bytes();
+    reply.watch_bytes = static_cast<uint32_t>(watched.size());
     const bool ok = write_fully(fd, &reply, sizeof reply) &&
                     write_fully(fd, v.data().data(), v.data().size() * sizeof(float)) &&
-                    write_fully(fd, notes.data(), notes.size());
+                    write_fully(fd, notes.data(), notes.size()) &&
+                    write_fully(fd, watched.data(), watched.size());
     ::_exit(ok ? 0 : 3);
   } catch (const FileError& e) {
     reply.status = 1;
@@ -60,8 +101,11 @@ struct Reply {
     text += '\0';
     text += e.problem();
     reply.text_bytes = static_cast<uint32_t>(text.size());
-    const bool ok =
-        write_fully(fd, &reply, sizeof reply) && write_fully(fd, text.data(), text.size());
+    const std::string watched = watched_files_bytes();
+    reply.watch_bytes = static_cast<uint32_t>(watched.size());
+    const bool ok = write_fully(fd, &reply, sizeof reply) &&
+                    write_fully(fd, text.data(), text.size()) &&
+                    write_fully(fd, watched.data(), watched.size());
     ::_exit(ok ? 0 : 3);
   } catch (const std::bad_alloc&) {
     reply.status = 2;
@@ -133,6 +177,7 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
     if (reply.note_bytes < (1u << 20) &&
         read_fully(f.mem, vol.data().data(), vol.data().size() * sizeof(float)) &&
         read_fully(f.mem, notes.data(), notes.size())) {
+      watch_files_from(f.mem, reply.watch_bytes);
       vol.set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
       for (std::size_t at = 0; at < notes.size();) {
         const std::size_t end = notes.find('\0', at);
@@ -144,6 +189,7 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
   } else if (got && reply.status == 1 && reply.text_bytes < (1u << 20)) {
     std::string text(reply.text_bytes, '\0');
     if (read_fully(f.mem, text.data(), text.size())) {
+      watch_files_from(f.mem, reply.watch_bytes);
       const std::size_t nul = text.find('\0');
       throw FileError(fs::path(text.substr(0, nul)), text.substr(nul + 1));
     }

@@ -13,7 +13,9 @@ namespace simdvol {
 /// Runs `read` in a child process (fork) and returns what it loaded: the
 /// child sends the volume (dims, type, spacing, orientation, notes, voxels)
 /// or its FileError back in a memory file (memfd), its stderr into a
-/// temporary file. A child that dies (an assert() in `library`, a signal)
+/// temporary file; and the files it read beside the path (watched_files,
+/// with what each was when first read), which this process's load_volume
+/// then watches as if it had read them. A child that dies (an assert() in `library`, a signal)
 /// is a FileError of `path` quoting the last line it wrote ("GDCM stopped
 /// on it (signal 6: ...): a file GDCM cannot read"); std::bad_alloc in the
 /// child is one here. `volumes`, if given, receives what `read` put in its

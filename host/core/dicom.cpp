@@ -32,6 +32,7 @@
 
 #include "child_read.hpp"
 #include "file_checks.hpp"
+#include "read_watch.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
 
@@ -513,10 +514,16 @@ bool dicom_lengths_fit(const fs::path& path, const fs::path& file, bool* rows = 
 }
 
 /// One series found in a directory: its images' files (in name order),
-/// and what it is, for a list of several.
+/// what each was when the scan first read it (where load_volume watches:
+/// watch_file), and what it is, for a list of several.
 struct SeriesFiles {
   std::vector<fs::path> files;
+  std::vector<std::optional<FileIdentity>> identities;
   std::string modality, description;
+  /// Has load_volume watch the files (read again if one changes).
+  void watch() const {
+    for (std::size_t i = 0; i < files.size(); ++i) watch_file(files[i], identities[i]);
+  }
 };
 
 /// Trims the blanks and NULs DICOM pads its values with.
@@ -535,6 +542,8 @@ std::map<std::string, SeriesFiles> scan_series(const fs::path& path, const fs::p
                                                bool strict, bool recursive) {
   constexpr std::size_t kMaxFiles = 100000;
   std::vector<fs::path> files;
+  std::map<fs::path, std::optional<FileIdentity>> identities;  // (watched only)
+  const bool watching = watching_files();
   std::size_t seen = 0;
   std::error_code ec;
   auto take = [&](const fs::directory_entry& e) {
@@ -555,6 +564,9 @@ std::map<std::string, SeriesFiles> scan_series(const fs::path& path, const fs::p
     // A sibling cut so had stopped the file asked for from loading (GDCM's
     // reader stopped the process on some, an assert).
     bool rows = false, pixels = false;
+    // (before the first read of it: a file replaced after it is a change)
+    const std::optional<FileIdentity> identity =
+        watching ? file_identity(e.path()) : std::optional<FileIdentity>();
     try {
       if (!dicom_lengths_fit(path, e.path(), &rows, &pixels)) return;
     } catch (const FileError&) {
@@ -563,6 +575,7 @@ std::map<std::string, SeriesFiles> scan_series(const fs::path& path, const fs::p
     }
     if (!strict && !(rows && pixels)) return;
     files.push_back(e.path());
+    if (watching) identities[e.path()] = identity;
   };
   if (recursive) {
     for (fs::recursive_directory_iterator
@@ -597,6 +610,8 @@ std::map<std::string, SeriesFiles> scan_series(const fs::path& path, const fs::p
       s.description = trim_value(scanner.GetValue(f.c_str(), kSeriesDescription));
     }
     s.files.push_back(f);
+    const auto id = identities.find(f);
+    s.identities.push_back(id != identities.end() ? id->second : std::nullopt);
   }
   return series;
 }
@@ -849,6 +864,7 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
                                 " DICOM series; give one file of the series to load:" + list);
     }
     files = series.begin()->second.files;
+    series.begin()->second.watch();
   } else {
     gdcm::Scanner scanner;
     scanner.AddTag(kSeriesUid);
@@ -866,6 +882,7 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
       const auto series = scan_series(path, dir, false, false);
       const auto it = series.find(trim_value(uid));
       files = it != series.end() ? it->second.files : std::vector<fs::path>{path};
+      if (it != series.end()) it->second.watch();
     }
   }
 

@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <bit>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -22,9 +23,12 @@
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <thread>
+#include <unordered_set>
 #include <vector>
 
 #include "file_checks.hpp"
+#include "read_watch.hpp"
 #include "simdvol/error.hpp"
 #include "temp_files.hpp"
 
@@ -798,6 +802,7 @@ void nifti_count_bytes(const fs::path& path, const fs::path& data, uint64_t need
 /// the volumes up to it). Errors name `path`, the file asked for.
 NiftiHeaderInfo nifti_precheck(const fs::path& path, const fs::path& header,
                                std::optional<int64_t> index) {
+  watch_file(header);  // (load_volume: read again if a half of the pair changes)
   if (header != path) require_regular_file(header);  // (load_nifti checked `path`)
   const bool pair_named = pair_name(lower(header.filename().string()));
   const std::string in = header == path ? std::string() : " (in " + header.string() + ")";
@@ -961,6 +966,7 @@ NiftiHeaderInfo nifti_precheck(const fs::path& path, const fs::path& header,
                                 header.filename().string() + ", or .img.gz) is missing");
     info.data = fs::path(img.get());
   }
+  watch_file(info.data);
   nifti_count_bytes(path, info.data, need, "header (dims " + dims_text(info.dims) + ")");
   return info;
 }
@@ -1170,6 +1176,7 @@ Volume load_nrrd(const std::filesystem::path& path, std::optional<int64_t> volum
     uint64_t available = 0;
     const std::vector<fs::path> files = nrrd_data_files(path, nio.get());
     data_files = files;
+    for (const fs::path& f : files) watch_file(f);  // (load_volume: read again if one changes)
     if (files.empty()) {
       // attached: the data follow the header in this file
       const std::optional<uint64_t> off = nrrd_header_end(path);
@@ -1500,32 +1507,6 @@ VolumeFileKind volume_file_kind(const std::filesystem::path& path) {
 
 namespace {
 
-// What tells one file at a path from another: which file (device, inode)
-// and its size and last change (content and status, to the nanosecond),
-// or none where the path cannot be looked up. A file renamed over the path
-// is another inode, made (so changed) later.
-struct FileIdentity {
-  dev_t dev = 0;
-  ino_t ino = 0;
-  off_t size = 0;
-  struct timespec mtime {};
-  struct timespec ctime {};
-  bool operator==(const FileIdentity& o) const {
-    return dev == o.dev && ino == o.ino && size == o.size && mtime.tv_sec == o.mtime.tv_sec &&
-           mtime.tv_nsec == o.mtime.tv_nsec && ctime.tv_sec == o.ctime.tv_sec &&
-           ctime.tv_nsec == o.ctime.tv_nsec;
-  }
-};
-
-std::optional<FileIdentity> file_identity(const fs::path& path) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return std::nullopt;
-  // A directory (a DICOM series) by which it is alone: its times change
-  // with any file made or removed in it, the series' or not.
-  if (S_ISDIR(st.st_mode)) return FileIdentity{st.st_dev, st.st_ino, 0, {}, {}};
-  return FileIdentity{st.st_dev, st.st_ino, st.st_size, st.st_mtim, st.st_ctim};
-}
-
 Volume load_volume_once(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
                         std::optional<int64_t> volume_index, int64_t* volumes) {
   if (volumes) *volumes = 1;
@@ -1563,28 +1544,104 @@ Volume load_volume_once(const std::filesystem::path& path, const std::optional<R
 
 }  // namespace
 
+std::optional<FileIdentity> file_identity(const std::filesystem::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return std::nullopt;
+  if (S_ISDIR(st.st_mode)) return FileIdentity{st.st_dev, st.st_ino, 0, {}, {}};
+  return FileIdentity{st.st_dev, st.st_ino, st.st_size, st.st_mtim, st.st_ctim};
+}
+
+namespace {
+
+/// The files one load_volume's read has met (watch_file), on its thread.
+struct ReadWatch {
+  std::vector<WatchedFile> files;
+  std::unordered_set<std::string> names;
+};
+thread_local ReadWatch* t_read_watch = nullptr;
+
+/// Makes `w` this thread's watch while it lives (the one before after).
+class WatchScope {
+ public:
+  explicit WatchScope(ReadWatch& w) : before_(t_read_watch) { t_read_watch = &w; }
+  ~WatchScope() { t_read_watch = before_; }
+  WatchScope(const WatchScope&) = delete;
+  WatchScope& operator=(const WatchScope&) = delete;
+
+ private:
+  ReadWatch* before_;
+};
+
+/// The first of `w`'s files that is not what it was when the read met it.
+const WatchedFile* changed_file(const ReadWatch& w) {
+  for (const WatchedFile& f : w.files)
+    if (file_identity(f.path) != f.identity) return &f;
+  return nullptr;
+}
+
+}  // namespace
+
+bool watching_files() {
+  return t_read_watch != nullptr;
+}
+
+void watch_file(const std::filesystem::path& file, const std::optional<FileIdentity>& identity) {
+  if (!t_read_watch || !t_read_watch->names.insert(file.string()).second) return;
+  t_read_watch->files.push_back({file, identity});
+}
+
+void watch_file(const std::filesystem::path& file) {
+  if (t_read_watch && !t_read_watch->names.contains(file.string()))
+    watch_file(file, file_identity(file));
+}
+
+std::vector<WatchedFile> watched_files() {
+  return t_read_watch ? t_read_watch->files : std::vector<WatchedFile>{};
+}
+
 // The loaders open the file by its name several times (its size, a header
 // pass, the data; teem, niftilib and GDCM each by name): a file another
 // program replaces meanwhile, as every careful writer does (a temporary
 // file renamed over it: simdvol's own), was read half from the old file
 // and half from the new, and refused as "truncated data" (the old size
-// against the new header) where neither file is. So the path is looked up
-// before and after: where it names another file (or the same file changed)
-// the volume is read again, up to three times.
+// against the new header) where neither file is. And they read other files
+// beside it (a detached header's data files, a pair's other half, a DICOM
+// series' slices, one after another), which a writer replacing them mixed
+// into a volume the files never held together. So the path is looked up
+// before the read, and every other file the read met (watch_file) when it
+// first met it, and all of them again after: where one names another file
+// (or the same file changed) the volume is read again, up to three times.
+// (One stat a file each time: a series of 300 slices is 600 more.)
 Volume load_volume(const std::filesystem::path& path, const std::optional<RawLayout>& raw,
                    std::optional<int64_t> volume_index, int64_t* volumes) {
   constexpr int kReads = 3;
   for (int read = 1;; ++read) {
-    const std::optional<FileIdentity> before = file_identity(path);
-    try {
-      Volume vol = load_volume_once(path, raw, volume_index, volumes);
-      if (file_identity(path) == before) return vol;
-    } catch (const FileError&) {
-      if (file_identity(path) == before) throw;  // the file's own fault
+    ReadWatch watch;
+    const WatchedFile* changed = nullptr;
+    {
+      const WatchScope scope(watch);
+      watch_file(path);
+      try {
+        Volume vol = load_volume_once(path, raw, volume_index, volumes);
+        changed = changed_file(watch);
+        if (!changed) return vol;
+      } catch (const FileError&) {
+        changed = changed_file(watch);
+        if (!changed) throw;  // the files' own fault
+      }
     }
-    if (read == kReads)
-      throw FileError(path, "changed while being read, " + std::to_string(kReads) +
-                                " times running (is another program writing it?)");
+    if (read < kReads) {
+      // A file renamed over the path is replaced at once: read it again at
+      // once. A writer of several files (a series' slices) takes a while:
+      // the next read waits for it, 10 ms, then 100 ms.
+      if (changed->path != path)
+        std::this_thread::sleep_for(std::chrono::milliseconds(read == 1 ? 10 : 100));
+      continue;
+    }
+    throw FileError(
+        path, (changed->path == path ? std::string() : "its file " + changed->path.string() + " ") +
+                  "changed while being read, " + std::to_string(kReads) +
+                  " times running (is another program writing it?)");
   }
 }
 

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "file_checks.hpp"
+#include "read_watch.hpp"
 #include "simdvol/error.hpp"
 #include "simdvol/io.hpp"
 
@@ -400,6 +401,7 @@ Volume load_metaimage(const std::filesystem::path& path, std::optional<int64_t> 
       st = fs::status(data_path, ec);
       compressed = true;
     }
+    watch_file(data_path);  // (load_volume: read again if it changes)
     if (!fs::exists(st)) throw FileError(path, named + " is missing");
     if (fs::is_directory(st)) throw FileError(path, named + " is a directory");
     // (a FIFO would block the read, a device such as /dev/zero fill memory)

@@ -158,11 +158,17 @@ inline constexpr std::string_view kSeriesFileNames =
 
 /// Chooses the loader by volume_file_kind (.raw needs `raw`). Throws
 /// FileError for an unknown extension, and for a `volume_index` given with
-/// a file other than NIfTI, NRRD, MetaImage, MGH, MINC or DICOM. A file
-/// replaced (or changed) at `path` while it is read is read again, so that
-/// the volume is one file's, old or new (up to three reads; then a
-/// FileError saying it changed while being read); a detached header's data
-/// files are not watched, nor a directory's files (a DICOM series).
+/// a file other than NIfTI, NRRD, MetaImage, MGH, MINC or DICOM. Every
+/// file the read meets is watched: `path`, and the files read beside it (a
+/// detached header's data files, a pair's other half, a DICOM series'
+/// slices), each looked up (one stat) when first met and again after the
+/// read. Where one was replaced (or changed) meanwhile, the volume is read
+/// again, so that it is what the files held at one moment (up to three
+/// reads, the later ones 10 ms, then 100 ms, after a change beside `path`,
+/// where a writer of several files may still be at work; then a FileError
+/// naming the file that changed while being read). A directory (a DICOM
+/// series) is watched as which directory it is, not by its times: files
+/// made or removed beside a series' own are not changes.
 Volume load_volume(const std::filesystem::path& path,
                    const std::optional<RawLayout>& raw = std::nullopt,
                    std::optional<int64_t> volume_index = std::nullopt, int64_t* volumes = nullptr);
