@@ -431,8 +431,11 @@ struct Device::Pool {
     cl_mem_flags flags = 0;
     std::size_t bytes = 0;
     bool busy = false;  // handed out in the open scope, or still held by someone
-    int idle = 0;       // closed scopes since it was last handed out
-    std::string what;   // the request it was last handed out for
+    // Busy only because someone held it when the last scope closed: handed
+    // out again once its reference count says only the pool holds it.
+    bool held_at_close = false;
+    int idle = 0;      // closed scopes since it was last handed out
+    std::string what;  // the request it was last handed out for
   };
   std::mutex mutex;
   // Open scopes per thread (one entry per thread with a scope open): each
@@ -995,7 +998,22 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
       // as their sizes drift, instead of taking each other's.
       Pool::Entry* best = nullptr;
       for (Pool::Entry& e : pool_->entries) {
-        if (e.busy || e.flags != flags || e.bytes < bytes || e.bytes > 2 * bytes + 65536) continue;
+        if (e.flags != flags || e.bytes < bytes || e.bytes > 2 * bytes + 65536) continue;
+        if (e.busy) {
+          // Held at the last close, perhaps only by the implementation:
+          // PoCL drops a finished command's references to its buffers a
+          // moment after clFinish returns, so on a loaded machine the
+          // frame's last buffers (the footprints, a swap level) could read
+          // as held and the next frame made them afresh (25.8 MB of new
+          // pages at 192^2). Dropped since, it is the pool's alone: nobody
+          // can enqueue on it, and the one in-order queue runs whatever
+          // was enqueued before the next user's commands.
+          cl_uint refs = 0;
+          if (!e.held_at_close || e.buffer.getInfo(CL_MEM_REFERENCE_COUNT, &refs) != CL_SUCCESS ||
+              refs > 1)
+            continue;
+          e.busy = e.held_at_close = false;
+        }
         if (!best) {
           best = &e;
           continue;
@@ -1005,6 +1023,7 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
       }
       if (best) {
         best->busy = true;
+        best->held_at_close = false;
         best->idle = 0;
         best->what = what;
         return best->buffer;
@@ -1045,7 +1064,7 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
                                                "memory left for it"
                                              : "");
   if (pooled && pool_->depth(std::this_thread::get_id()) > 0)
-    pool_->entries.push_back({b, flags, fresh_bytes, true, 0, what});
+    pool_->entries.push_back({b, flags, fresh_bytes, true, false, 0, what});
   return b;
 }
 
@@ -1100,10 +1119,10 @@ Device::ReuseScope::~ReuseScope() {
     Pool::Entry& e = pool.entries[i];
     if (unheld[i] == 2) continue;
     if (unheld[i]) {
-      e.busy = false;
+      e.busy = e.held_at_close = false;
       if (++e.idle > pool.keep) continue;  // not used lately: release it
     } else {
-      e.busy = true;  // (released in the frame, yet someone holds it still)
+      e.busy = e.held_at_close = true;  // (released in the frame, yet someone holds it still)
     }
     kept.push_back(std::move(e));
   }
@@ -1123,7 +1142,7 @@ void Device::release(cl::Buffer& buffer) {
     if (pool_->depth(std::this_thread::get_id()) > 0) {
       for (Pool::Entry& e : pool_->entries) {
         if (e.buffer() != buffer()) continue;
-        e.busy = false;  // (idle stays 0: handed out in this scope)
+        e.busy = e.held_at_close = false;  // (idle stays 0: handed out in this scope)
         break;
       }
     }

@@ -384,11 +384,13 @@ class Device {
   /// only the pool's), for the next scope. A kept buffer not handed out again
   /// in the next two scopes (set_reuse_keep) is released. Buffers still held
   /// by the caller (a RenderEngine's persistent cells, say) are never handed
-  /// out twice. Scopes are per thread (RenderEngine::render opens one per
-  /// frame): engines rendering on one Device from several threads free each
-  /// other's released buffers at each of their frames' ends, so the pool
-  /// stays bounded while their frames overlap. Close a scope on the thread
-  /// that opened it.
+  /// out twice; one held at the close and dropped since (PoCL keeps a
+  /// finished command's references a moment after clFinish returns) is
+  /// handed out once its reference count is 1. Scopes are per thread
+  /// (RenderEngine::render opens one per frame): engines rendering on one
+  /// Device from several threads free each other's released buffers at each
+  /// of their frames' ends, so the pool stays bounded while their frames
+  /// overlap. Close a scope on the thread that opened it.
   class ReuseScope {
    public:
     explicit ReuseScope(Device& device);
