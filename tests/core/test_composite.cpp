@@ -163,6 +163,27 @@ TEST(Composite, AdaptiveStopsAtThreshold) {
     EXPECT_THROW(composite_adaptive({ray, 0}, bad), ArgumentError) << bad;
 }
 
+// Levoy's termination is alpha >= threshold: a ray whose alpha reaches the
+// threshold exactly stops there. Two samples of alpha 1/2 give 3/4 exactly
+// in float; a threshold of 3/4 keeps the third (green) sample out. With
+// alpha > threshold (a mutant the suite let through) it was composited:
+// alpha 0.875 and green 0.125.
+TEST(Composite, AdaptiveStopsWhereAlphaEqualsTheThresholdExactly) {
+  const std::vector<Rgba> ray{{0.5f, 0.0f, 0.0f, 0.5f},
+                              {0.5f, 0.0f, 0.0f, 0.5f},
+                              {0.0f, 0.5f, 0.0f, 0.5f},
+                              {0.0f, 0.5f, 0.0f, 0.5f}};
+  const Rgba c = composite_adaptive({ray, 0}, 0.75f);
+  EXPECT_EQ(c.r, 0.75f);
+  EXPECT_EQ(c.g, 0.0f);
+  EXPECT_EQ(c.b, 0.0f);
+  EXPECT_EQ(c.a, 0.75f);
+  // Just above 3/4 the third sample is taken, and the fourth is not.
+  const Rgba d = composite_adaptive({ray, 0}, std::nextafter(0.75f, 1.0f));
+  EXPECT_EQ(d.g, 0.125f);
+  EXPECT_EQ(d.a, 0.875f);
+}
+
 TEST(MonteCarlo, EstimatorMeanEqualsDirect) {
   // Each walk's pick X is one of the sample colours (or black) with the
   // probabilities of eq 7.3, so E[X] = over-composite exactly. With N walks
