@@ -312,6 +312,49 @@ TEST(SwapKernels, StagesDisplayWarpEqualReferences) {
   EXPECT_EQ(n, 3 * 6 * 2);
 }
 
+// The warp (enqueue_warp, the taps warp_tap precomputes) bit for bit the
+// reference's warp_to_output on output images taller than wide and far wider
+// or taller than the volume (whose intermediate image make_view cuts to the
+// volume's sphere, so that output pixels map before its first column and
+// past its last row), from an intermediate image with no zero pixel. The
+// mutation testing of the thirty-second session moved warp_tap's first tap
+// at -1 out as if both taps were outside (fraction x pixel 0 lost), and the
+// whole suite passed: the engine's own intermediate images are empty there
+// (make_view's margins), so only a caller's image (the public enqueue_warp)
+// shows it. The y taps bounded by the width instead of the height (rows past
+// the width read with fraction 0) failed only ExtremesOpenCl's 7x900 render
+// and the independent check, not the swap tests; this test fails with each.
+TEST(SwapKernels, WarpEqualsTheReferenceOnTallAndFarWiderImages) {
+  SIMDVOL_TEST_DEVICE(dev);
+  const Dims3 d{9, 7, 5};
+  int n = 0;
+  for (const std::array<int, 2> size :
+       std::vector<std::array<int, 2>>{{16, 64}, {64, 16}, {200, 12}, {12, 200}, {37, 45}})
+    for (const ViewAngles& va : std::vector<ViewAngles>{{0, 0, 0}, {30, 45, 0}}) {
+      SCOPED_TRACE(std::to_string(size[0]) + "x" + std::to_string(size[1]));
+      const ViewGeometry view = make_view(d, {1, 1, 1}, va, size[0], size[1], Sampling::voxel);
+      Image inter(view.width(), view.height());
+      for (int y = 0; y < inter.height(); ++y)
+        for (int x = 0; x < inter.width(); ++x) {
+          const float a = 0.25f + 0.5f * static_cast<float>((x * 7 + y * 13) % 17) / 16.0f;
+          inter.at(x, y) = {a * 0.5f,
+                            a * static_cast<float>(x + 1) / static_cast<float>(inter.width()),
+                            a * static_cast<float>(y + 1) / static_cast<float>(inter.height()), a};
+        }
+      std::vector<Rgba> px = inter.pixels();
+      cl::Buffer im = dev.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, px.size() * sizeof(Rgba),
+                                 px.data(), "intermediate");
+      cl::Buffer out;
+      enqueue_warp(dev, view, im, out);
+      const Image got = read_device_image(dev, out, size[0], size[1]);
+      const Image want = warp_to_output(inter, view);
+      EXPECT_TRUE(bitwise_equal(got.pixels(), want.pixels()))
+          << "max |difference| " << max_abs_diff(got, want);
+      ++n;
+    }
+  EXPECT_EQ(n, 5 * 2);
+}
+
 // FootprintsAfterSwap::overwritten: the levels after the first one written
 // go into the footprints' buffer (the second slot), one level buffer fewer;
 // the last level bit for bit the kept run's. One launch per stage
