@@ -851,7 +851,11 @@ TEST_F(IoTest, AVolumeReplacedWhileItIsReadIsReadWhole) {
     done = true;
   });
   // (No ASSERT while the writer runs: its thread must be joined.)
-  int loads = 0, failures = 0, mixed = 0;
+  // A load that three reads running found replaced gives up, as it should
+  // for a file rewritten without pause: on a loaded machine (a read
+  // descheduled for a few ms) 1 of about 30 runs met one such refusal.
+  // Those are counted apart and bounded; any other error fails.
+  int loads = 0, failures = 0, mixed = 0, refused = 0;
   std::string first_failure;
   while (!done) {
     ++loads;
@@ -863,13 +867,18 @@ TEST_F(IoTest, AVolumeReplacedWhileItIsReadIsReadWhole) {
           !std::all_of(v.data().begin(), v.data().end(), [&](float x) { return x == want; }))
         ++mixed;
     } catch (const simdvol::FileError& e) {
-      if (failures++ == 0) first_failure = e.what();
+      if (std::string(e.what()).find("changed while being read, 3 times running") !=
+          std::string::npos)
+        ++refused;
+      else if (failures++ == 0)
+        first_failure = e.what();
     }
   }
   writer.join();
   EXPECT_EQ(replaced, 200);
   EXPECT_GT(loads, 200);
   EXPECT_EQ(failures, 0) << "of " << loads << " loads; the first: " << first_failure;
+  EXPECT_LE(refused, loads / 50) << "loads refused as changed while being read, of " << loads;
   EXPECT_EQ(mixed, 0) << "volumes neither file holds, of " << loads << " loads";
 }
 
