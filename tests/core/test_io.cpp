@@ -3690,6 +3690,18 @@ TEST_F(IoTest, ANrrdsDataFilesReplacedWhileReadAreReadAtOneMoment) {
 // the file ends inside the header of the element at byte 982 (in IM107)":
 // the versions differ in length, and the scan met two of them).
 TEST_F(IoTest, ADicomSeriesReplacedWhileReadIsReadAtOneMoment) {
+  // DICOM reads in a forked child while the writer thread allocates: GCC
+  // 12's AddressSanitizer does not hold its allocator's locks across fork,
+  // so a child forked while the writer held one waited on it for ever (the
+  // clean-clone CI's sanitizer run, 2026-12-07: the child in
+  // SizeClassAllocator64::GetFromAllocator). glibc's malloc is fork-safe.
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "fork beside an allocating thread deadlocks in GCC 12's AddressSanitizer";
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+  GTEST_SKIP() << "fork beside an allocating thread deadlocks in AddressSanitizer's allocator";
+#endif
+#endif
   constexpr int nx = 8, ny = 6, nz = 12;
   const fs::path dir = file("series");
   fs::create_directories(dir);
