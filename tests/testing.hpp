@@ -22,6 +22,21 @@ inline bool data_required() {
   return r && std::string(r) == "1";
 }
 
+/// Whether the tests run under AddressSanitizer (GCC's __SANITIZE_ADDRESS__,
+/// Clang's __has_feature): for the few that its shadow memory or its
+/// allocator rule out, each saying why it skips.
+#if defined(__SANITIZE_ADDRESS__)
+inline constexpr bool kUnderAsan = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+inline constexpr bool kUnderAsan = true;
+#else
+inline constexpr bool kUnderAsan = false;
+#endif
+#else
+inline constexpr bool kUnderAsan = false;
+#endif
+
 }  // namespace simdvol::testing
 
 /// Skips (or, when data is required, fails) a test whose real-data file is missing.

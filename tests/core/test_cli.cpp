@@ -984,13 +984,8 @@ TEST_F(Cli, OutOfMemoryIsAnErrorNamingTheBuffer) {
   EXPECT_EQ(bad.code, 1) << bad.output;
   EXPECT_NE(bad.output.find("SIMDVOL_FAIL_ALLOCATION"), std::string::npos) << bad.output;
 
-#if defined(__SANITIZE_ADDRESS__)
-  GTEST_SKIP() << "an address space limit and AddressSanitizer's shadow memory do not mix";
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-  GTEST_SKIP() << "an address space limit and AddressSanitizer's shadow memory do not mix";
-#endif
-#endif
+  if (simdvol::testing::kUnderAsan)
+    GTEST_SKIP() << "an address space limit and AddressSanitizer's shadow memory do not mix";
   const Result dev = run("devices");
   if (dev.output.find("CPU") == std::string::npos)
     GTEST_SKIP() << "the default device is not a CPU device: " << dev.output;

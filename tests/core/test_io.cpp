@@ -95,6 +95,15 @@ Bytes read_file(const fs::path& p) {
   return Bytes(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
+/// The bytes `write` puts in the file `made`, which is removed after.
+template <typename Write>
+Bytes written_bytes(const fs::path& made, Write&& write) {
+  write(made);
+  Bytes b = read_file(made);
+  fs::remove(made);
+  return b;
+}
+
 Bytes concat(const Bytes& a, const Bytes& b) {
   Bytes r = a;
   r.insert(r.end(), b.begin(), b.end());
@@ -3695,13 +3704,8 @@ TEST_F(IoTest, ADicomSeriesReplacedWhileReadIsReadAtOneMoment) {
   // so a child forked while the writer held one waited on it for ever (the
   // clean-clone CI's sanitizer run, 2026-12-07: the child in
   // SizeClassAllocator64::GetFromAllocator). glibc's malloc is fork-safe.
-#if defined(__SANITIZE_ADDRESS__)
-  GTEST_SKIP() << "fork beside an allocating thread deadlocks in GCC 12's AddressSanitizer";
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-  GTEST_SKIP() << "fork beside an allocating thread deadlocks in AddressSanitizer's allocator";
-#endif
-#endif
+  if (simdvol::testing::kUnderAsan)
+    GTEST_SKIP() << "fork beside an allocating thread deadlocks in GCC 12's AddressSanitizer";
   constexpr int nx = 8, ny = 6, nz = 12;
   const fs::path dir = file("series");
   fs::create_directories(dir);
@@ -3712,12 +3716,10 @@ TEST_F(IoTest, ADicomSeriesReplacedWhileReadIsReadAtOneMoment) {
       [&](std::size_t z, int value) {
         DicomSlice s;
         s.position = {0, 0, 2.0 * static_cast<double>(z)};
-        const fs::path made = file("made.dcm");
-        write_dicom_slice(made, nx, ny, std::vector<int16_t>(nx * ny, static_cast<int16_t>(value)),
-                          s);
-        const Bytes b = read_file(made);
-        fs::remove(made);
-        return b;
+        return written_bytes(file("made.dcm"), [&](const fs::path& made) {
+          write_dicom_slice(made, nx, ny,
+                            std::vector<int16_t>(nx * ny, static_cast<int16_t>(value)), s);
+        });
       },
       60, 1000, [&](const Volume& v) { return slices_of_one_moment(v, nx, ny, nz); });
   expect_read_at_one_moment(c, 60);
@@ -3752,21 +3754,18 @@ TEST_F(IoTest, ADetachedHeadersDataFileReplacedWhileReadIsReadWhole) {
   };
   // (the pair's header with slope `value`: the voxels, all 1, read as it)
   const auto header = [&](std::size_t, int value) {
-    const fs::path made = file("made.hdr");
-    write_nifti_by_hand(made, NiftiForm::nifti1, false, DT_UINT8, {n, n, n, 1},
-                        std::vector<uint8_t>(count, 1), {1, 1, 1}, {double(value), 0});
-    Bytes b = read_file(made);
-    fs::remove(made);
+    const Bytes b = written_bytes(file("made.hdr"), [&](const fs::path& made) {
+      write_nifti_by_hand(made, NiftiForm::nifti1, false, DT_UINT8, {n, n, n, 1},
+                          std::vector<uint8_t>(count, 1), {1, 1, 1}, {double(value), 0});
+    });
     fs::remove(file("made.img"));
     return b;
   };
   const auto single = [&](std::size_t, int value) {
-    const fs::path made = file("made.nii.gz");
-    write_nifti_by_hand(made, NiftiForm::nifti1, false, DT_UINT8, {n, n, n, 1},
-                        std::vector<uint8_t>(count, static_cast<uint8_t>(value)));
-    Bytes b = read_file(made);
-    fs::remove(made);
-    return b;
+    return written_bytes(file("made.nii.gz"), [&](const fs::path& made) {
+      write_nifti_by_hand(made, NiftiForm::nifti1, false, DT_UINT8, {n, n, n, 1},
+                          std::vector<uint8_t>(count, static_cast<uint8_t>(value)));
+    });
   };
   struct Case {
     const char* load;
