@@ -198,6 +198,30 @@ __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
  * same times on the 2-core EPYC (simdvol-bench-frame), so the portable form
  * stays.) */
 
+/* Without AVX-512 (PoCL's haswell target: AVX2) the order-1 sampler on
+ * interleaved cells with the cell bits (sv_sample8_il1, cb: the _ilc
+ * kernels) takes its lanes' corner offsets through memory as with AVX-512:
+ * stored as vectors, loaded back as scalars, instead of vextracti128 /
+ * vpextrd / vmovd and a movslq per offset; -DSV_OFFS_EXTRACT extracts them,
+ * as before (on either target). Without the cell bits it reads the pair
+ * table's entries (one 64-bit word per lane and axis) by two AVX2 gathers
+ * (vpgatherdq, 4 lanes each) instead of 8 extracted indices and 8 scalar
+ * loads inserted one by one: the same entries (indices clamped into the
+ * table, every lane read). The builtin takes a plain pointer: the table's
+ * __global one is passed through an integer, which CPU devices (one address
+ * space) allow. -DSV_NO_GATHER_AVX2 loads them one by one, as before; the
+ * offsets are extracted there (with the gathers, the round trip through
+ * memory measured no faster). The general sampler (orders 0, 2, 3) keeps
+ * the extracts and scalar loads on AVX2: both forms measured slower there
+ * at order 3. Measured in docs/PERFORMANCE.md (Zen 3, 2026-12-07,
+ * thirty-third session). */
+#if defined(__clang__) && defined(__AVX2__) && !defined(__AVX512F__) && !defined(SV_OFFS_EXTRACT)
+#define SV_OFFS_AVX2 1
+#endif
+#if defined(__clang__) && defined(__AVX2__) && !defined(__AVX512F__) && !defined(SV_NO_GATHER_AVX2)
+#define SV_GATHER_AVX2 1
+#endif
+
 /* The fixed-point positions X as their floors F = X >> 32 and fractions
  * L = X & (2^32 - 1) (SV_FRAC_BITS = 32): the float8 kernels step them so
  * (sv_step8, the same integers as the 64-bit sums), and the samplers and the
@@ -459,8 +483,15 @@ SV_FN_INLINE void sv_sample8_il1(const int8* F, const uint8* L, int nx, int ny, 
        * -> pairs: the phantom 29.3 / 28.7 -> 27.1 / 28.0 ms, at (0, 45, 0)
        * 29.4 -> 27.5, ch2 25.7 -> 24.9, brainsmall 4.37 -> 4.22 ms. */
       const int8 e = clamp(f, (int8)(-1), (int8)(n[a])) + 1;
+#ifdef SV_GATHER_AVX2
+      /* (AVX2: two vpgatherdq; SV_GATHER_AVX2 above) */
+      const long* pp = (const long*)(size_t)pt;
+      const long8 q = (long8)(__builtin_ia32_gatherd_q256((long4)(0), pp, e.lo, (long4)(-1), 8),
+                              __builtin_ia32_gatherd_q256((long4)(0), pp, e.hi, (long4)(-1), 8));
+#else
       const long8 q =
           (long8)(pt[e.s0], pt[e.s1], pt[e.s2], pt[e.s3], pt[e.s4], pt[e.s5], pt[e.s6], pt[e.s7]);
+#endif
       t0 = convert_int8(q & 0xFFFFFFFFL);
       t1 = convert_int8(q >> 32);
 #else
@@ -498,6 +529,19 @@ SV_FN_INLINE void sv_sample8_il1(const int8* F, const uint8* L, int nx, int ny, 
 #endif
 #undef SV_LD4
 #define SV_LD4(l) vload4(0, vox + ofs[r][l]), vload4(0, vox + ofs[r][l] + ofs[4][l])
+#elif defined(SV_OFFS_AVX2)
+  /* AVX2: the same round trip (each offset loaded once), the corners
+   * loaded as ints as SV_LD4 loads them; with the cell bits (cb) only: with
+   * the pair table's gathers the extracts measured as fast (above) */
+  volatile int ofs[5][8];
+  int dxs[8];
+  if (cb) {
+#pragma unroll
+    for (int r = 0; r < 4; ++r) *(volatile int8*)ofs[r] = rows[r];
+    *(volatile int8*)ofs[4] = dx;
+#pragma unroll
+    for (int l = 0; l < 8; ++l) dxs[l] = ofs[4][l];
+  }
 #endif
 #pragma unroll
   for (int h = 0; h < 2; ++h) {
@@ -523,17 +567,30 @@ SV_FN_INLINE void sv_sample8_il1(const int8* F, const uint8* L, int nx, int ny, 
       l2 = (float8)(vload4(0, vox + a2), vload4(0, vox + a2 + dxs[b + 2]));
       l3 = (float8)(vload4(0, vox + a3), vload4(0, vox + a3 + dxs[b + 3]));
 #else
-      const int8 o = rows[r]; /* (SV_LD4 without AVX-512: the extracts) */
-      if (h == 0) {
-        l0 = (float8)(SV_LD4(0));
-        l1 = (float8)(SV_LD4(1));
-        l2 = (float8)(SV_LD4(2));
-        l3 = (float8)(SV_LD4(3));
-      } else {
-        l0 = (float8)(SV_LD4(4));
-        l1 = (float8)(SV_LD4(5));
-        l2 = (float8)(SV_LD4(6));
-        l3 = (float8)(SV_LD4(7));
+#ifdef SV_OFFS_AVX2
+      if (cb) {
+        const int b = 4 * h, a0 = ofs[r][b], a1 = ofs[r][b + 1], a2 = ofs[r][b + 2],
+                  a3 = ofs[r][b + 3];
+        __global const int* vi = (__global const int*)vox;
+        l0 = as_float8((int8)(vload4(0, vi + a0), vload4(0, vi + a0 + dxs[b])));
+        l1 = as_float8((int8)(vload4(0, vi + a1), vload4(0, vi + a1 + dxs[b + 1])));
+        l2 = as_float8((int8)(vload4(0, vi + a2), vload4(0, vi + a2 + dxs[b + 2])));
+        l3 = as_float8((int8)(vload4(0, vi + a3), vload4(0, vi + a3 + dxs[b + 3])));
+      } else
+#endif
+      {
+        const int8 o = rows[r]; /* (SV_LD4 without AVX-512: the extracts) */
+        if (h == 0) {
+          l0 = (float8)(SV_LD4(0));
+          l1 = (float8)(SV_LD4(1));
+          l2 = (float8)(SV_LD4(2));
+          l3 = (float8)(SV_LD4(3));
+        } else {
+          l0 = (float8)(SV_LD4(4));
+          l1 = (float8)(SV_LD4(5));
+          l2 = (float8)(SV_LD4(6));
+          l3 = (float8)(SV_LD4(7));
+        }
       }
 #endif
       const float16 v0 = (float16)((float8)(l0.lo, l1.lo), (float8)(l2.lo, l3.lo));

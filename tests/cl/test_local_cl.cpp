@@ -1150,11 +1150,14 @@ TEST(RenderOpenClFrame, SkipEmptyGivesTheSameImage) {
 // The resample's earlier forms, kept as kernel switches for timing
 // comparisons, give the frame's image bit for bit: the corner offsets
 // extracted from their vectors instead of stored and loaded back
-// (SV_OFFS_EXTRACT; the default without AVX-512), loaded back once per use
-// (SV_OFFS_RELOAD), the lanes trimmed to their samples in reach before
-// stepping (SV_TRIM), the prefetch's PE found by a second search
-// (SV_PE_SEARCH2). Orders 1 (the interleaved order-1 sampler) and 3 (the
-// general one), an axis view and an oblique one, with balancing.
+// (SV_OFFS_EXTRACT; AVX-512 targets, and AVX2 ones at order 1 since
+// 2026-12-07), loaded back once per use (SV_OFFS_RELOAD, AVX-512), the
+// order-1 pair table's entries loaded one by one instead of by AVX2 gathers
+// (SV_NO_GATHER_AVX2; AVX2 targets), the
+// lanes trimmed to their samples in reach before stepping (SV_TRIM), the
+// prefetch's PE found by a second search (SV_PE_SEARCH2). Orders 1 (the
+// interleaved order-1 sampler) and 3 (the general one), an axis view and an
+// oblique one, with balancing.
 TEST(RenderOpenClFrame, KernelSwitchesGiveTheSameImage) {
   Device* dp = test_device();
   if (!dp) GTEST_SKIP() << "no OpenCL platform";
@@ -1173,9 +1176,10 @@ TEST(RenderOpenClFrame, KernelSwitchesGiveTheSameImage) {
       eo.fused = true;  // interleaved voxel cells, as the CLI's frames
       unsetenv("SIMDVOL_CL_OPTIONS");
       const Image want = RenderEngine(*dp, eo).render(vol, opt);
-      // (one build of the frame's programs per switch set: all three of the
+      // (one build of the frame's programs per switch set: all the
       // default's later forms at once, and the reload alone)
-      for (const char* sw : {"-DSV_OFFS_EXTRACT -DSV_TRIM -DSV_PE_SEARCH2", "-DSV_OFFS_RELOAD"}) {
+      for (const char* sw : {"-DSV_OFFS_EXTRACT -DSV_NO_GATHER_AVX2 -DSV_TRIM -DSV_PE_SEARCH2",
+                             "-DSV_OFFS_RELOAD"}) {
         SCOPED_TRACE(sw);
         setenv("SIMDVOL_CL_OPTIONS", sw, 1);
         const Image got = RenderEngine(*dp, eo).render(vol, opt);
