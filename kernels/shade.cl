@@ -323,10 +323,28 @@ SV_FN void sv_grad16(__constant const sv_shade_params* sp, float16 xm, float16 x
 }
 
 /* Its second half, the lighting (Id, Is) from sv_grad16's results at global
- * voxel coordinates (ix, iy, iz). */
-SV_FN void sv_light16(__constant const sv_shade_params* sp, float16 gx, float16 gy, float16 gz,
-                      float16 g2, float16 m, float16 ix, float16 iy, float16 iz, float16* id,
-                      float16* is) {
+ * voxel coordinates (ix, iy, iz). With AVX2 and no AVX-512 (PoCL's
+ * `haswell` target) it is always inlined (SV_SHADE_FN): LLVM kept it a
+ * call there, and a float16 argument without AVX-512 goes through memory,
+ * so each chunk stored its nine float16 into PoCL's per-work-item context
+ * arrays, copied them to the call's stack arguments and the callee loaded
+ * them again (perf: the fused shade + classify spent a fifth of its samples
+ * in the call and about a quarter of the rest on those copies). With
+ * sv_light_rows and sv_grad_rows (below) inlined too, on a 2-core Zen 3
+ * EPYC (2026-12-07, simdvol-bench-options --frames 12, alternated twice,
+ * -DSV_NO_SHADE_INLINE against this, both with the interleaved stores'
+ * AVX2 transpose of classify.cl off): shade + classify of the 256^3
+ * phantom at (20, 35, 10) 61.0 -> 46.8 ms mean (0.77; a loaded machine).
+ * SV_NO_SHADE_INLINE leaves them to LLVM (for comparison); AVX-512
+ * targets are left as they were (not measured there). */
+#if defined(__clang__) && defined(__AVX2__) && !defined(__AVX512F__) && !defined(SV_NO_SHADE_INLINE)
+#define SV_SHADE_FN SV_FN_INLINE
+#else
+#define SV_SHADE_FN SV_FN
+#endif
+SV_SHADE_FN void sv_light16(__constant const sv_shade_params* sp, float16 gx, float16 gy,
+                            float16 gz, float16 g2, float16 m, float16 ix, float16 iy, float16 iz,
+                            float16* id, float16* is) {
   const float16 d =
       sp->depth_dir[0] * ix + sp->depth_dir[1] * iy + sp->depth_dir[2] * iz + sp->depth_offset;
   const float16 cue = 1.0f / (sp->k1 + sp->k2 * d);
@@ -534,19 +552,22 @@ SV_FN void sv_chunk_rows(__global const int4* origins, int4 cell, int4 block, in
 }
 
 /* The gradient of the chunk given by sv_chunk_rows (sv_grad16); c = the
- * start of the PE's block. */
-SV_FN void sv_grad_rows(__constant const sv_shade_params* sp, __global const float* c, int4 block,
-                        const int* rb, float16* gx, float16* gy, float16* gz, float16* g2,
-                        float16* mag) {
+ * start of the PE's block. (SV_SHADE_FN: with SV_RW 1, LLVM kept it a call
+ * on AVX2, its five float16 results through memory.) */
+SV_SHADE_FN void sv_grad_rows(__constant const sv_shade_params* sp, __global const float* c,
+                              int4 block, const int* rb, float16* gx, float16* gy, float16* gz,
+                              float16* g2, float16* mag) {
   const int bx = block.x, bxy = block.x * block.y;
   sv_grad16(sp, SV_LD16(c, rb, -1), SV_LD16(c, rb, 1), SV_LD16(c, rb, -bx), SV_LD16(c, rb, bx),
             SV_LD16(c, rb, -bxy), SV_LD16(c, rb, bxy), gx, gy, gz, g2, mag);
 }
 
-/* The lighting of that chunk from its gradient (sv_light16). */
-SV_FN void sv_light_rows(__constant const sv_shade_params* sp, const float* fx, const float* fy,
-                         const float* fz, float16 gx, float16 gy, float16 gz, float16 g2,
-                         float16 mag, float16* id, float16* is) {
+/* The lighting of that chunk from its gradient (sv_light16; inlined as it
+ * is, SV_SHADE_FN: with sv_light16 inlined alone, LLVM made this one the
+ * call, the same float16 arguments through memory). */
+SV_SHADE_FN void sv_light_rows(__constant const sv_shade_params* sp, const float* fx,
+                               const float* fy, const float* fz, float16 gx, float16 gy, float16 gz,
+                               float16 g2, float16 mag, float16* id, float16* is) {
 #if SV_RW == 1
   const float16 x = SV_ROWS16(fx);
 #else
