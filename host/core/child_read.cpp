@@ -3,16 +3,25 @@
 #include "child_read.hpp"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <sys/mman.h>
+#include <sys/syscall.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
+#include <climits>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <new>
 #include <string>
+#include <string_view>
+#include <thread>
+#include <vector>
 
 #include "file_checks.hpp"
 #include "read_watch.hpp"
@@ -115,6 +124,38 @@ void watch_files_from(int fd, uint32_t bytes) {
   }
 }
 
+using Clock = std::chrono::steady_clock;
+
+/// Waits for the child `pid` to end, until `deadline`: true, with its
+/// `status`, once it has ended (and been reaped); false where it still
+/// runs then. `pidfd` (pidfd_open's, or -1 where the kernel has none)
+/// becomes readable as the child ends; without it the child is looked at
+/// every 0.1 ms at first, every 10 ms at most.
+bool wait_until(pid_t pid, int pidfd, Clock::time_point deadline, int* status) {
+  auto nap = std::chrono::microseconds(100);
+  for (;;) {
+    const pid_t r = ::waitpid(pid, status, WNOHANG);
+    if (r == pid) return true;
+    if (r < 0 && errno != EINTR) {
+      // ECHILD: reaped by the system (SIGCHLD ignored), so it has ended;
+      // its status is lost, and what it wrote is read as before.
+      *status = 0;
+      return true;
+    }
+    const Clock::time_point now = Clock::now();
+    if (now >= deadline) return false;
+    const auto left = std::chrono::ceil<std::chrono::milliseconds>(deadline - now);
+    if (pidfd >= 0) {
+      pollfd p{pidfd, POLLIN, 0};
+      ::poll(&p, 1,
+             static_cast<int>(std::min<long long>(left.count(), INT_MAX)));  // (EINTR: again)
+    } else {
+      std::this_thread::sleep_for(std::min<Clock::duration>(nap, left));
+      nap = std::min<std::chrono::microseconds>(nap * 2, std::chrono::milliseconds(10));
+    }
+  }
+}
+
 /// The last line a crashed reader wrote (GDCM's assertion, say), trimmed.
 std::string last_line(int fd) {
   std::string all;
@@ -130,17 +171,49 @@ std::string last_line(int fd) {
 
 }  // namespace
 
+double default_read_time_limit(ReadSize size, double base_seconds) {
+  constexpr uint64_t mib = uint64_t{1} << 20;
+  const uint64_t started = size.bytes / mib + (size.bytes % mib != 0);
+  return base_seconds + static_cast<double>(started) * kReadSecondsPerMiB +
+         static_cast<double>(size.files) * kReadSecondsPerFile;
+}
+
+std::optional<long> read_timeout_setting() {
+  constexpr const char* kName = "SIMDVOL_READ_TIMEOUT";
+  constexpr long kMost = 10000000;
+  const char* e = std::getenv("SIMDVOL_READ_TIMEOUT");
+  if (!e || !*e) return std::nullopt;
+  std::string_view text(e);
+  while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
+  while (!text.empty() && (text.back() == ' ' || text.back() == '\t')) text.remove_suffix(1);
+  long value = 0;
+  bool ok = !text.empty() && text.find_first_not_of("0123456789") == std::string_view::npos;
+  for (std::size_t i = 0; ok && i < text.size(); ++i) {
+    value = value * 10 + (text[i] - '0');
+    ok = value <= kMost;
+  }
+  if (!ok || value < 1)
+    throw ArgumentError(kName, std::string("\"") + e +
+                                   "\" is not a time limit in whole seconds, 1 .. 10000000 (the "
+                                   "longest a DICOM or MINC file's read may take)");
+  return value;
+}
+
 Volume read_in_child(const std::filesystem::path& path, const char* library,
-                     const std::function<Volume(int64_t* volumes)>& read, int64_t* volumes) {
+                     const std::function<Volume(int64_t* volumes)>& read, int64_t* volumes,
+                     const std::function<ReadSize()>& size, double base_seconds) {
   if (volumes) *volumes = 1;
+  // (a bad SIMDVOL_READ_TIMEOUT is refused before a child is started)
+  const std::optional<long> set_limit = read_timeout_setting();
   // The child writes its reply and the voxels into a memory file that this
   // process reads once the child has ended (through a pipe, the two
   // processes took turns over each MiB: 0.4 s more for a 300-slice CT).
   struct Files {
-    int mem = -1;
+    int mem = -1, pidfd = -1;
     std::FILE* log = nullptr;
     ~Files() {
       if (mem >= 0) ::close(mem);
+      if (pidfd >= 0) ::close(pidfd);
       if (log) std::fclose(log);
     }
   } f;
@@ -151,6 +224,7 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
   f.log = std::tmpfile();
   std::fflush(stdout);
   std::fflush(stderr);
+  const Clock::time_point start = Clock::now();
   const pid_t pid = ::fork();
   if (pid < 0)
     throw FileError(path,
@@ -162,8 +236,38 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
     if (f.log) ::dup2(::fileno(f.log), 2);
     child(read, f.mem);
   }
+  // The child is given its time limit, then killed: a library looping on
+  // a file (or a child deadlocked) had hung the load for ever. Without the
+  // user's limit it is `base_seconds` at first, and once those have
+  // passed, what the files' size gives: an honest read of a large series
+  // is not stopped, and the files are looked up only for a long read.
+  f.pidfd = static_cast<int>(::syscall(SYS_pidfd_open, pid, 0));
+  double limit = set_limit ? static_cast<double>(*set_limit) : base_seconds;
+  bool sized = set_limit.has_value();
   int status = 0;
-  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  for (;;) {
+    // (past some 290 years, the limit is none)
+    const auto ends = start + std::chrono::duration_cast<Clock::duration>(
+                                  std::chrono::duration<double>(std::min(limit, 9e9)));
+    if (wait_until(pid, f.pidfd, ends, &status)) break;
+    if (!sized) {
+      sized = true;
+      ReadSize met;
+      try {
+        if (size) met = size();
+      } catch (...) {  // (a size not found: the base limit alone)
+      }
+      limit = default_read_time_limit(met, base_seconds);
+      continue;
+    }
+    ::kill(pid, SIGKILL);
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    char text[32];
+    std::snprintf(text, sizeof text, "%.10g", limit);
+    throw FileError(path, std::string(library) + " did not finish reading it within " + text +
+                              " s (looping on the file?), and was stopped; "
+                              "SIMDVOL_READ_TIMEOUT=SECONDS sets the limit");
   }
   Reply reply;
   const bool got = WIFEXITED(status) && WEXITSTATUS(status) == 0 &&

@@ -1151,6 +1151,44 @@ Volume load_dicom_here(const fs::path& path, std::optional<int64_t> index, int64
   }
 }
 
+/// The files a read of `path` may meet, for read_in_child's time limit:
+/// those below a directory (or a DICOMDIR's), as scan_series walks them
+/// (hidden ones left out, 16 deep, 100,000 files at most); a file's own
+/// and those beside it (its series' slices).
+ReadSize dicom_read_size(const fs::path& path) {
+  std::error_code ec;
+  const bool is_dir = fs::is_directory(path, ec);
+  const bool tree = is_dir || path.filename() == "DICOMDIR";
+  const fs::path where = is_dir                   ? path
+                         : path.has_parent_path() ? path.parent_path()
+                                                  : fs::path(".");
+  ReadSize size;
+  const auto add = [&](const fs::directory_entry& e) {
+    std::error_code sec;
+    if (!e.is_regular_file(sec)) return;
+    ++size.files;
+    const uintmax_t n = e.file_size(sec);
+    if (!sec) size.bytes += n;
+  };
+  if (tree) {
+    for (fs::recursive_directory_iterator
+             it(where, fs::directory_options::skip_permission_denied, ec),
+         end;
+         !ec && it != end && size.files < 100000; it.increment(ec)) {
+      std::error_code sec;
+      if (it->is_directory(sec) &&
+          (it.depth() >= 16 || it->path().filename().string().starts_with(".")))
+        it.disable_recursion_pending();
+      add(*it);
+    }
+  } else {
+    for (fs::directory_iterator it(where, ec), end; !ec && it != end && size.files < 100000;
+         it.increment(ec))
+      add(*it);
+  }
+  return size;
+}
+
 }  // namespace
 
 Volume load_dicom(const std::filesystem::path& path, std::optional<int64_t> volume_index,
@@ -1165,7 +1203,7 @@ Volume load_dicom(const std::filesystem::path& path, std::optional<int64_t> volu
     return load_dicom_here(path, volume_index, volumes);
   return read_in_child(
       path, "GDCM", [&](int64_t* count) { return load_dicom_here(path, volume_index, count); },
-      volumes);
+      volumes, [&] { return dicom_read_size(path); });
 }
 
 }  // namespace simdvol

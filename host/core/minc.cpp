@@ -257,7 +257,10 @@ Volume load_minc(const std::filesystem::path& path, std::optional<int64_t> volum
     return load_minc_here(path, bytes, volume_index, volumes);
   return read_in_child(
       path, "libminc",
-      [&](int64_t* count) { return load_minc_here(path, bytes, volume_index, count); }, volumes);
+      [&](int64_t* count) { return load_minc_here(path, bytes, volume_index, count); }, volumes,
+      [bytes] {
+        return ReadSize{bytes, 1};
+      });
 }
 
 }  // namespace simdvol

@@ -25,6 +25,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <random>
 #include <set>
 #include <string>
@@ -1235,6 +1236,189 @@ TEST_F(IoTest, AReadingChildEndedBySigtermLeavesTheParentsFiles) {
   EXPECT_NE(WEXITSTATUS(status), 2) << "the read was not a FileError naming signal 15";
   EXPECT_EQ(WEXITSTATUS(status), 0) << "the child removed the parent's marked file";
   EXPECT_TRUE(fs::exists(marked));
+}
+
+namespace {
+
+/// Sets (or, with nullptr, unsets) an environment variable while it lives;
+/// what it was before afterwards.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const char* value) : name_(name) {
+    if (const char* e = std::getenv(name)) before_ = e;
+    if (value)
+      ::setenv(name, value, 1);
+    else
+      ::unsetenv(name);
+  }
+  ~ScopedEnv() {
+    if (before_)
+      ::setenv(name_, before_->c_str(), 1);
+    else
+      ::unsetenv(name_);
+  }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  const char* name_;
+  std::optional<std::string> before_;
+};
+
+/// Seconds since `t`.
+double seconds_since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+/// read_in_child of a `read` that never ends (a library looping on a file):
+/// what it threw (what()), how long it took, and the child's pid (which the
+/// child sends first).
+struct HungRead {
+  std::string what;
+  double seconds = 0;
+  pid_t child = 0;
+};
+HungRead hung_read(const fs::path& path, const std::function<simdvol::ReadSize()>& size = {},
+                   double base_seconds = simdvol::kReadTimeBase) {
+  HungRead h;
+  int fds[2];
+  if (::pipe(fds) != 0) return h;
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    simdvol::read_in_child(
+        path, "a library",
+        [&](int64_t*) -> Volume {
+          const pid_t me = ::getpid();
+          if (::write(fds[1], &me, sizeof me) != sizeof me) ::_exit(5);
+          for (;;) ::pause();
+        },
+        nullptr, size, base_seconds);
+    h.what = "(returned)";
+  } catch (const simdvol::FileError& e) {
+    h.what = e.what();
+  }
+  h.seconds = seconds_since(start);
+  ::close(fds[1]);
+  if (::read(fds[0], &h.child, sizeof h.child) != sizeof h.child) h.child = 0;
+  ::close(fds[0]);
+  return h;
+}
+
+/// Whether `pid` names no process at all: not running, not a zombie left
+/// unreaped (a zombie answers kill(pid, 0)), and no child of this one.
+bool gone(pid_t pid) {
+  errno = 0;
+  const bool no_process = ::kill(pid, 0) == -1 && errno == ESRCH;
+  errno = 0;
+  const bool no_child = ::waitpid(pid, nullptr, WNOHANG) == -1 && errno == ECHILD;
+  return no_process && no_child;
+}
+
+}  // namespace
+
+// A reading child that never ends (GDCM or HDF5 looping on a crafted file)
+// hung the load for ever: read_in_child waited for it without a limit. It
+// is now killed at its time limit (SIMDVOL_READ_TIMEOUT=1 here) and reaped
+// (no zombie, no stray process), and the read is a FileError naming the
+// file, the library and the limit. (Without the limit this test never
+// ends: run under `timeout 60`, it was killed at 60 s.)
+TEST_F(IoTest, AReadingChildThatHangsIsStoppedAtItsTimeLimit) {
+  const ScopedEnv limit("SIMDVOL_READ_TIMEOUT", "1");
+  const HungRead h = hung_read(file("x.dcm"));
+  EXPECT_EQ(h.what, file("x.dcm").string() +
+                        ": a library did not finish reading it within 1 s (looping on the "
+                        "file?), and was stopped; SIMDVOL_READ_TIMEOUT=SECONDS sets the limit");
+  EXPECT_GE(h.seconds, 1.0);
+  EXPECT_LT(h.seconds, 10.0);  // (a loaded machine; the ctest limit is 900 s)
+  ASSERT_GT(h.child, 0) << "the child never ran";
+  EXPECT_TRUE(gone(h.child)) << "the child " << h.child << " was left behind";
+}
+
+// Without SIMDVOL_READ_TIMEOUT the limit is a base (60 s; 0.2 s here), 10 s
+// for each MiB of the files read and 1 s for each file, the files asked
+// for only once a read has run past the base: a read of 0.6 s that meets 3
+// files is not stopped (at the base alone it was), one that never ends is
+// stopped at 3.2 s, and a quick read never asks.
+TEST_F(IoTest, AReadingChildsTimeLimitGrowsWithItsFiles) {
+  const ScopedEnv unset("SIMDVOL_READ_TIMEOUT", nullptr);
+  using simdvol::default_read_time_limit;
+  using simdvol::ReadSize;
+  EXPECT_EQ(default_read_time_limit(ReadSize{0, 0}), 60.0);
+  EXPECT_EQ(default_read_time_limit(ReadSize{1, 1}), 71.0);
+  EXPECT_EQ(default_read_time_limit(ReadSize{uint64_t{1} << 20, 1}), 71.0);
+  EXPECT_EQ(default_read_time_limit(ReadSize{(uint64_t{1} << 20) + 1, 2}), 82.0);
+  EXPECT_EQ(default_read_time_limit(ReadSize{uint64_t{1} << 30, 300}), 60.0 + 10240 + 300);
+  EXPECT_EQ(default_read_time_limit(ReadSize{0, 5}, 0.25), 5.25);
+
+  int asked = 0;
+  const auto three_files = [&asked] {
+    ++asked;
+    return ReadSize{0, 3};
+  };
+  const auto read_for = [](std::chrono::milliseconds ms) {
+    return [ms](int64_t*) {
+      std::this_thread::sleep_for(ms);
+      Volume v({2, 3, 4}, VoxelType::f32, {1, 1, 1});
+      v.data()[5] = 7;
+      return v;
+    };
+  };
+  Volume v =
+      simdvol::read_in_child(file("x.dcm"), "a library", read_for(std::chrono::milliseconds(600)),
+                             nullptr, three_files, 0.2);
+  EXPECT_EQ(v.dims(), (std::array<int64_t, 3>{2, 3, 4}));
+  EXPECT_EQ(v.data()[5], 7.0f);
+  EXPECT_EQ(asked, 1);
+  asked = 0;
+  v = simdvol::read_in_child(file("x.dcm"), "a library", read_for(std::chrono::milliseconds(0)),
+                             nullptr, three_files, 0.2);
+  EXPECT_EQ(v.data()[5], 7.0f);
+  EXPECT_EQ(asked, 0);
+  asked = 0;
+  const HungRead h = hung_read(file("x.dcm"), three_files, 0.2);
+  EXPECT_EQ(h.what, file("x.dcm").string() +
+                        ": a library did not finish reading it within 3.2 s (looping on the "
+                        "file?), and was stopped; SIMDVOL_READ_TIMEOUT=SECONDS sets the limit");
+  EXPECT_GE(h.seconds, 3.2);
+  EXPECT_LT(h.seconds, 12.0);
+  EXPECT_EQ(asked, 1);
+  ASSERT_GT(h.child, 0);
+  EXPECT_TRUE(gone(h.child));
+}
+
+// SIMDVOL_READ_TIMEOUT is whole seconds, 1 .. 10,000,000; any other value
+// is an ArgumentError naming the variable, before any child is started.
+TEST_F(IoTest, ReadTimeoutIsWholeSecondsOrRefusedNamingTheVariable) {
+  {
+    const ScopedEnv unset("SIMDVOL_READ_TIMEOUT", nullptr);
+    EXPECT_EQ(simdvol::read_timeout_setting(), std::nullopt);
+  }
+  for (const auto& [text, want] : std::vector<std::pair<const char*, std::optional<long>>>{
+           {"", std::nullopt}, {"1", 1}, {" 90\t", 90}, {"10000000", 10000000}}) {
+    const ScopedEnv set("SIMDVOL_READ_TIMEOUT", text);
+    EXPECT_EQ(simdvol::read_timeout_setting(), want) << '"' << text << '"';
+  }
+  for (const char* bad : {"0", "-1", "1.5", "2s", "abc", " ", "10000001", "99999999999999999999"}) {
+    SCOPED_TRACE(bad);
+    const ScopedEnv set("SIMDVOL_READ_TIMEOUT", bad);
+    const fs::path ran = file("child-ran");
+    try {
+      simdvol::read_in_child(
+          file("x.dcm"), "a library",
+          [&](int64_t*) -> Volume {
+            std::ofstream(ran) << "ran";
+            return Volume({1, 1, 1}, VoxelType::f32, {1, 1, 1});
+          },
+          nullptr);
+      ADD_FAILURE() << "not refused";
+    } catch (const simdvol::ArgumentError& e) {
+      EXPECT_EQ(std::string(e.what()),
+                std::string("SIMDVOL_READ_TIMEOUT: \"") + bad +
+                    "\" is not a time limit in whole seconds, 1 .. 10000000 (the longest a "
+                    "DICOM or MINC file's read may take)");
+    }
+    EXPECT_FALSE(fs::exists(ran));
+  }
 }
 
 TEST_F(IoTest, EndingSignalsRemoveTheTemporaryFiles) {
