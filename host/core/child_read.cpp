@@ -40,10 +40,11 @@ struct Reply {
   int64_t dims[3] = {0, 0, 0};
   double spacing[3] = {1, 1, 1};
   char orientation[4] = {0, 0, 0, 0};
-  int64_t volumes = 1;       ///< 3-D volumes in the file (status 0 and 1)
-  uint32_t text_bytes = 0;   ///< status 1: the error's path, a NUL, its problem
-  uint32_t note_bytes = 0;   ///< status 0: the notes after the voxels, each ending in a NUL
-  uint32_t watch_bytes = 0;  ///< status 0 and 1: the files read (watched_files), last
+  int64_t volumes = 1;           ///< 3-D volumes in the file (status 0 and 1)
+  uint32_t text_bytes = 0;       ///< status 1: the error's path, a NUL, its problem
+  uint32_t note_bytes = 0;       ///< status 0: the notes after the voxels, each ending in a NUL
+  uint32_t watch_bytes = 0;      ///< status 0 and 1: the files read (watched_files), last
+  uint32_t companion_bytes = 0;  ///< status 0: companion_files after the notes, each + NUL
 };
 
 /// The files the read met (watched_files), for the parent's load_volume to
@@ -97,11 +98,15 @@ void watch_files_from(int fd, uint32_t bytes) {
     std::string notes;
     for (const std::string& n : v.notes()) notes += n + '\0';
     reply.note_bytes = static_cast<uint32_t>(notes.size());
+    std::string companions;
+    for (const fs::path& c : v.companion_files()) companions += c.string() + '\0';
+    reply.companion_bytes = static_cast<uint32_t>(companions.size());
     const std::string watched = watched_files_bytes();
     reply.watch_bytes = static_cast<uint32_t>(watched.size());
     const bool ok = write_fully(fd, &reply, sizeof reply) &&
                     write_fully(fd, v.data().data(), v.data().size() * sizeof(float)) &&
                     write_fully(fd, notes.data(), notes.size()) &&
+                    write_fully(fd, companions.data(), companions.size()) &&
                     write_fully(fd, watched.data(), watched.size());
     ::_exit(ok ? 0 : 3);
   } catch (const FileError& e) {
@@ -122,6 +127,17 @@ void watch_files_from(int fd, uint32_t bytes) {
   } catch (...) {
     ::_exit(4);
   }
+}
+
+/// The NUL-ended strings of `text`, in order.
+std::vector<std::string> nul_ended(const std::string& text) {
+  std::vector<std::string> out;
+  for (std::size_t at = 0; at < text.size();) {
+    const std::size_t end = text.find('\0', at);
+    out.push_back(text.substr(at, end - at));
+    at = end == std::string::npos ? text.size() : end + 1;
+  }
+  return out;
 }
 
 using Clock = std::chrono::steady_clock;
@@ -277,17 +293,16 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
     const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
     Volume vol(dims, static_cast<VoxelType>(reply.type),
                {reply.spacing[0], reply.spacing[1], reply.spacing[2]});
-    std::string notes(reply.note_bytes < (1u << 20) ? reply.note_bytes : 0, '\0');
-    if (reply.note_bytes < (1u << 20) &&
-        read_fully(f.mem, vol.data().data(), vol.data().size() * sizeof(float)) &&
-        read_fully(f.mem, notes.data(), notes.size())) {
+    const bool sane = reply.note_bytes < (1u << 20) && reply.companion_bytes < (1u << 30);
+    std::string notes(sane ? reply.note_bytes : 0, '\0');
+    std::string companions(sane ? reply.companion_bytes : 0, '\0');
+    if (sane && read_fully(f.mem, vol.data().data(), vol.data().size() * sizeof(float)) &&
+        read_fully(f.mem, notes.data(), notes.size()) &&
+        read_fully(f.mem, companions.data(), companions.size())) {
       watch_files_from(f.mem, reply.watch_bytes);
       vol.set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
-      for (std::size_t at = 0; at < notes.size();) {
-        const std::size_t end = notes.find('\0', at);
-        vol.add_note(notes.substr(at, end - at));
-        at = end == std::string::npos ? notes.size() : end + 1;
-      }
+      for (const std::string& n : nul_ended(notes)) vol.add_note(n);
+      for (const std::string& c : nul_ended(companions)) vol.add_companion_file(c);
       return vol;
     }
   } else if (got && reply.status == 1 && reply.text_bytes < (1u << 20)) {

@@ -42,8 +42,9 @@ struct ReadSize {
 /// still running after `base_seconds`; none where `size` is empty). A
 /// child still reading at its limit is killed (SIGKILL) and reaped, and
 /// the read is a FileError of `path`: "LIBRARY did not finish reading it
-/// within N s ...". `base_seconds` other than kReadTimeBase: for the
-/// tests.
+/// within N s ...". The volume's other files (Volume::companion_files: a
+/// series' other slices) come back with it. `base_seconds` other than
+/// kReadTimeBase: for the tests.
 Volume read_in_child(const std::filesystem::path& path, const char* library,
                      const std::function<Volume(int64_t* volumes)>& read, int64_t* volumes,
                      const std::function<ReadSize()>& size = {},

@@ -1135,6 +1135,11 @@ Volume load_dicom_files(const fs::path& path, std::optional<int64_t> index, int6
   if (said && (placed || frames.size() == 1))
     vol.set_orientation(closest_orientation({row, col, normal}, "LPS"));
   if (!shear_note.empty()) vol.add_note(shear_note);
+  // A series' other slices, so that no output is written over one
+  // (check_not_an_input: a slice without DICOM's preamble, under any name,
+  // was not told as DICOM by its contents).
+  for (const fs::path& f : files)
+    if (f.lexically_normal() != path.lexically_normal()) vol.add_companion_file(f);
   return vol;
 }
 

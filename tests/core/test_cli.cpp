@@ -1384,9 +1384,9 @@ TEST_F(Cli, OutputNeverReplacesAnInput) {
       {"render " + s0 + " --size 8 -o " + s0,
        "-o: writing " + s0 + " would replace " + s0 + ", which this command reads"},
       {"render " + s0 + " --size 8 -o " + s1,
-       "-o: writing " + s1 + " would replace a DICOM file of the series being read"},
+       "-o: writing " + s1 + " would replace " + s1 + ", which this command reads"},
       {"render " + ser.string() + " --size 8 -o " + s1,
-       "-o: writing " + s1 + " would replace a DICOM file of the series being read"},
+       "-o: writing " + s1 + " would replace " + s1 + ", which this command reads"},
       {"render " + vol + " --size 8 --classify " + path("c.tf") + " -o " + path("tf.png"),
        "would replace " + path("c.tf")},
       {"render " + vol + " --size 8 --trace " + path("link.json") + " -o " + path("ok.png"),
@@ -1401,6 +1401,78 @@ TEST_F(Cli, OutputNeverReplacesAnInput) {
   EXPECT_FALSE(fs::exists(dir_ / "ok.png"));
   const Result r = run("render " + s0 + " --size 8 -o " + (ser / "new.png").string());
   EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::is_regular_file(ser / "new.png"));
+  // A DICOM file below the series' directory that the read left alone (of
+  // another series) is not replaced either.
+  fs::create_directories(ser / "sub");
+  simdvol::testing::DicomSlice other;
+  other.series = "1.2.826.0.1.3680043.10.1.7";
+  const fs::path o = ser / "sub" / "other.tif";
+  write_dicom_slice(o, 8, 8, std::vector<int16_t>(64, 5), other);
+  const std::string before = bytes(o);
+  const Result again = run("render " + s0 + " --size 8 -o " + o.string());
+  EXPECT_EQ(again.code, 1) << again.output;
+  EXPECT_NE(again.output.find("-o: writing " + o.string() +
+                              " would replace a DICOM file of the series being read"),
+            std::string::npos)
+      << again.output;
+  EXPECT_EQ(bytes(o), before);
+}
+
+// A series' slice without DICOM's preamble (a bare data set, as old
+// ACR-NEMA files and some exporters write them; GDCM reads them) is not
+// told as DICOM by its contents, so an output that named it (through a
+// symbolic link, or as IM3.tif) replaced it with exit 0: "wrote
+// .../o.png", the slice an image and the series one slice short. The
+// series' slices are now the volume's companion files, refused as any
+// file the command reads (the directory named, or a DICOMDIR beside it).
+TEST_F(Cli, OutputNeverReplacesASliceOfTheSeries) {
+  const fs::path ser = dir_ / "ser";
+  fs::create_directories(ser);
+  const auto bytes = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), {});
+  };
+  const char* names[4] = {"IM0", "IM1", "IM2", "IM3.tif"};
+  for (int z = 0; z < 4; ++z) {
+    simdvol::testing::DicomSlice sl;
+    sl.position = {0, 0, 1.0 * z};
+    write_dicom_slice(ser / names[z], 8, 8, std::vector<int16_t>(64, static_cast<int16_t>(100 * z)),
+                      sl);
+    // The preamble, "DICM" and the file meta group (its length at 140) cut off.
+    const std::string b = bytes(ser / names[z]);
+    ASSERT_EQ(b.compare(128, 4, "DICM"), 0);
+    uint32_t meta = 0;
+    std::memcpy(&meta, b.data() + 140, 4);
+    std::ofstream(ser / names[z], std::ios::binary | std::ios::trunc) << b.substr(144 + meta);
+  }
+  std::ofstream(ser / "DICOMDIR") << std::string(200, '\0');  // (only its name counts)
+  ASSERT_EQ(simdvol::volume_file_kind(ser / "IM1"), simdvol::VolumeFileKind::unknown);
+  ASSERT_EQ(simdvol::load_volume(ser).dims()[2], 4);  // (read as a series of four)
+  fs::create_symlink(ser / "IM1", dir_ / "o.png");
+  std::vector<std::pair<fs::path, std::string>> kept;
+  for (const char* n : names) kept.emplace_back(ser / n, bytes(ser / n));
+  struct Case {
+    std::string volume, out, replaced;
+  };
+  const Case cases[] = {
+      {ser.string(), path("o.png"), (ser / "IM1").string()},
+      {ser.string(), (ser / "IM3.tif").string(), (ser / "IM3.tif").string()},
+      {(ser / "DICOMDIR").string(), path("o.png"), (ser / "IM1").string()},
+  };
+  for (const Case& c : cases) {
+    const Result r = run("render " + c.volume + " --size 8 -o " + c.out);
+    EXPECT_EQ(r.code, 1) << c.volume << " -o " << c.out << "\n" << r.output;
+    EXPECT_NE(r.output.find("-o: writing " + c.out + " would replace " + c.replaced +
+                            ", which this command reads"),
+              std::string::npos)
+        << c.volume << " -o " << c.out << "\n"
+        << r.output;
+  }
+  for (const auto& [p, b] : kept) EXPECT_EQ(bytes(p), b) << p;
+  // Beside the slices, under a name of its own, it renders.
+  const Result ok = run("render " + ser.string() + " --size 8 -o " + (ser / "new.png").string());
+  EXPECT_EQ(ok.code, 0) << ok.output;
   EXPECT_TRUE(fs::is_regular_file(ser / "new.png"));
 }
 

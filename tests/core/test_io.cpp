@@ -1421,6 +1421,23 @@ TEST_F(IoTest, ReadTimeoutIsWholeSecondsOrRefusedNamingTheVariable) {
   }
 }
 
+// The volume a reading child sends back keeps its other files
+// (Volume::companion_files, what no output may replace), as its notes.
+TEST_F(IoTest, AReadingChildSendsBackTheVolumesOtherFiles) {
+  const Volume v = simdvol::read_in_child(
+      file("x.dcm"), "a library",
+      [](int64_t*) {
+        Volume r({2, 2, 2}, VoxelType::u8, {1, 1, 1});
+        r.add_note("a note");
+        r.add_companion_file("/a/b/IM2");
+        r.add_companion_file("c d/IM 3");
+        return r;
+      },
+      nullptr);
+  EXPECT_EQ(v.notes(), std::vector<std::string>{"a note"});
+  EXPECT_EQ(v.companion_files(), (std::vector<fs::path>{"/a/b/IM2", "c d/IM 3"}));
+}
+
 TEST_F(IoTest, EndingSignalsRemoveTheTemporaryFiles) {
   for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) {
     SCOPED_TRACE(strsignal(sig));
@@ -2528,6 +2545,36 @@ TEST_F(IoTest, DicomTreesAndDicomdir) {
   write_file(file("bare/a/b/notes.txt"), Bytes(10, 0x41));
   expect_file_error([&] { simdvol::load_volume(file("bare")); }, file("bare"),
                     {"holds no DICOM image (nor do the directories below it)"});
+}
+
+// A series' slices are the volume's other files (Volume::companion_files,
+// which no output may replace: check_not_an_input), where the directory,
+// a DICOMDIR beside them or one slice is named; a file the read skips (not
+// DICOM) is not one. The same read in a child process (as the CLI reads)
+// and in this one (SIMDVOL_DICOM_IN_PROCESS=1).
+TEST_F(IoTest, ADicomSeriesSlicesAreItsCompanionFiles) {
+  const fs::path ser = file("ser");
+  fs::create_directories(ser);
+  for (int k = 0; k < 3; ++k) {
+    DicomSlice s;
+    s.position = {0, 0, 2.0 * k};
+    write_dicom_slice(ser / ("IM" + std::to_string(k)), 4, 3, std::vector<int16_t>(12, 10 + k), s);
+  }
+  write_file(ser / "notes.txt", std::string("not DICOM"));
+  write_file(ser / "DICOMDIR", Bytes(200, 0));  // (only its name counts)
+  const auto companions = [](const fs::path& p) {
+    std::vector<fs::path> c = simdvol::load_volume(p).companion_files();
+    std::sort(c.begin(), c.end());
+    return c;
+  };
+  const std::vector<fs::path> all{ser / "IM0", ser / "IM1", ser / "IM2"};
+  for (const char* in_process : {"0", "1"}) {
+    SCOPED_TRACE(std::string("SIMDVOL_DICOM_IN_PROCESS=") + in_process);
+    const ScopedEnv env("SIMDVOL_DICOM_IN_PROCESS", in_process);
+    EXPECT_EQ(companions(ser), all);
+    EXPECT_EQ(companions(ser / "DICOMDIR"), all);
+    EXPECT_EQ(companions(ser / "IM1"), (std::vector<fs::path>{ser / "IM0", ser / "IM2"}));
+  }
 }
 
 // A series of several acquisitions (time points, echoes): every position
