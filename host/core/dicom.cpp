@@ -1158,7 +1158,7 @@ Volume load_dicom_here(const fs::path& path, std::optional<int64_t> index, int64
 
 /// The files a read of `path` may meet, for read_in_child's time limit:
 /// those below a directory (or a DICOMDIR's), as scan_series walks them
-/// (hidden ones left out, 16 deep, 100,000 files at most); a file's own
+/// (hidden directories left out, 16 deep, 100,000 files at most); a file's own
 /// and those beside it (its series' slices).
 ReadSize dicom_read_size(const fs::path& path) {
   std::error_code ec;
