@@ -533,6 +533,29 @@ std::string trim_value(const char* v) {
   return s;
 }
 
+/// Calls take(entry) for each entry of `dir` (below it, where `recursive`:
+/// hidden directories left out, at most 16 deep) while more() holds, as
+/// scan_series walks a series' directory; a listing error is left in `ec`.
+template <class Take, class More>
+void walk_series_dir(const fs::path& dir, bool recursive, std::error_code& ec, Take&& take,
+                     More&& more) {
+  if (recursive) {
+    for (fs::recursive_directory_iterator
+             it(dir, fs::directory_options::skip_permission_denied, ec),
+         end;
+         !ec && it != end && more(); it.increment(ec)) {
+      std::error_code sec;
+      if (it->is_directory(sec) &&
+          (it.depth() >= 16 || it->path().filename().string().starts_with(".")))
+        it.disable_recursion_pending();
+      take(*it);
+    }
+  } else {
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end && more(); it.increment(ec))
+      take(*it);
+  }
+}
+
 /// The series a directory's images belong to, by Series Instance UID, with
 /// their files; files GDCM does not read as DICOM, and DICOMDIR, are
 /// skipped (and where not `strict`, those cut short). `recursive`: the
@@ -577,20 +600,7 @@ std::map<std::string, SeriesFiles> scan_series(const fs::path& path, const fs::p
     files.push_back(e.path());
     if (watching) identities[e.path()] = identity;
   };
-  if (recursive) {
-    for (fs::recursive_directory_iterator
-             it(dir, fs::directory_options::skip_permission_denied, ec),
-         end;
-         !ec && it != end; it.increment(ec)) {
-      std::error_code sec;
-      if (it->is_directory(sec) &&
-          (it.depth() >= 16 || it->path().filename().string().starts_with(".")))
-        it.disable_recursion_pending();
-      take(*it);
-    }
-  } else {
-    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) take(*it);
-  }
+  walk_series_dir(dir, recursive, ec, take, [] { return true; });
   if (ec) throw FileError(path, "cannot list the directory " + dir.string() + ": " + ec.message());
   std::sort(files.begin(), files.end());
   gdcm::Scanner scanner;
@@ -1175,22 +1185,7 @@ ReadSize dicom_read_size(const fs::path& path) {
     const uintmax_t n = e.file_size(sec);
     if (!sec) size.bytes += n;
   };
-  if (tree) {
-    for (fs::recursive_directory_iterator
-             it(where, fs::directory_options::skip_permission_denied, ec),
-         end;
-         !ec && it != end && size.files < 100000; it.increment(ec)) {
-      std::error_code sec;
-      if (it->is_directory(sec) &&
-          (it.depth() >= 16 || it->path().filename().string().starts_with(".")))
-        it.disable_recursion_pending();
-      add(*it);
-    }
-  } else {
-    for (fs::directory_iterator it(where, ec), end; !ec && it != end && size.files < 100000;
-         it.increment(ec))
-      add(*it);
-  }
+  walk_series_dir(where, tree, ec, add, [&] { return size.files < 100000; });
   return size;
 }
 
