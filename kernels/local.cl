@@ -237,6 +237,39 @@ SV_FN_INLINE void sv_resample_local8(
   uint8 L[3];
   sv_split8(X, F, L);
   const int pf_k = T > 0 ? (pf.r1 - pf.r + T - 1) / T : 0; /* rows a step */
+#ifdef SV_PIPE_AVX2
+  if (il && !cb) {
+    /* AVX2 with the pair table (resample.cl: SV_PIPE_AVX2): step t + 1's
+     * gathers and corner offsets (into the other of two buffers) come
+     * before step t's corners are loaded and interpolated, so that they run
+     * beside this step's arithmetic. Step t's weights are taken from its
+     * fractions before the positions step on. The same positions, offsets
+     * and samples as the loop below, so the same bits (a step left out
+     * there is left out here); the offsets found after the last step are
+     * not used (the gathers' indices are clamped into the table). */
+    volatile int ofs[2][5][8];
+    if (T > 0) sv_addr8_il1(F, nx, ny, nz, pairs, ofs[0]);
+    for (int t = 0; t < T; ++t) {
+      const int8 on = (int8)(t) < N;
+      if (pf.r < pf.r1) {
+        sv_pf_row(&pf, table, vox, cs, il);
+        for (int i = 1; i < pf_k && pf.r < pf.r1; ++i) sv_pf_row(&pf, table, vox, cs, il);
+      }
+      const int none = steps && !any(sv_reach8(F, nx, ny, nz, nbx, nby, reach, on));
+      float8 tt[3];
+#pragma unroll
+      for (int a = 0; a < 3; ++a) tt[a] = convert_float8(L[a]) * (1.0f / 4294967296.0f);
+      sv_step8(F, L, on, s_0, s_1, s_2);
+      sv_addr8_il1(F, nx, ny, nz, pairs, ofs[(t + 1) & 1]);
+      /* every stepping lane's sample +-0: over keeps the composite */
+      if (none) continue;
+      float16 u[2];
+      sv_interp8_il1(tt, vox, ofs[t & 1], u);
+      sv_over_lanes16(acc, u, on, alpha);
+    }
+    T = 0; /* (the loop below steps none) */
+  }
+#endif
   for (int t = 0; t < T; ++t) {
     const int8 on = (int8)(t) < N;
     if (pf.r < pf.r1) {

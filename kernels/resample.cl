@@ -221,6 +221,22 @@ __kernel void simdvol_resample(__global const sv_segment* segs, const int nseg,
 #if defined(__clang__) && defined(__AVX2__) && !defined(__AVX512F__) && !defined(SV_NO_GATHER_AVX2)
 #define SV_GATHER_AVX2 1
 #endif
+/* With the pair table's gathers (SV_GATHER_AVX2: the _il kernels at order 1)
+ * the fused resample + local's step loop is pipelined (local.cl): step
+ * t + 1's gathers and corner offsets (sv_addr8_il1) come before step t's
+ * loads and interpolation (sv_interp8_il1), so that the next step's gathers
+ * run beside this step's arithmetic instead of ahead of its own loads. The
+ * same offsets, loads and arithmetic, so the same samples. -DSV_NO_PIPE
+ * samples each step whole (sv_sample8_il1), as before; -DSV_NO_GATHER_AVX2
+ * implies it. simdvol-bench-options --frames 10, 2-core Zen 3 EPYC, three
+ * alternations, -DSV_NO_PIPE -> this, resample + local: ch2 0.940 / 0.957 /
+ * 0.946, the cranium (data/ct/cranium.nhdr, classifier ct) 0.936 / 0.921 /
+ * 0.914; the same images (docs/PERFORMANCE.md, thirty-fourth session). The
+ * cell bits' kernels (_ilc) step as before: pipelined the same way they
+ * measured no faster on the 256^3 phantom. */
+#if defined(SV_GATHER_AVX2) && !defined(SV_NO_PIPE) && ORDER == 1 && !defined(SV_IL1_GENERIC)
+#define SV_PIPE_AVX2 1
+#endif
 
 /* The fixed-point positions X as their floors F = X >> 32 and fractions
  * L = X & (2^32 - 1) (SV_FRAC_BITS = 32): the float8 kernels step them so
@@ -602,6 +618,68 @@ SV_FN_INLINE void sv_sample8_il1(const int8* F, const uint8* L, int nx, int ny, 
   }
 }
 #undef SV_LD4
+#ifdef SV_PIPE_AVX2
+/* sv_sample8_il1 without the cell bits (cb = 0) in two parts, for
+ * local.cl's pipelined step loop (SV_PIPE_AVX2 above): sv_addr8_il1 gathers
+ * the lanes' pair-table entries as sv_sample8_il1 does and stores the 4
+ * rows' offsets and dx in ofs[0..4] (the same integers); sv_interp8_il1
+ * loads each offset back once (as SV_OFFS_AVX2 does with the cell bits),
+ * loads the corners there and interpolates with the weights tt
+ * (convert_float8(L) * 2^-32, as sv_sample8_il1 computes them): the same
+ * loads and the same element-wise operations, so the same samples bit for
+ * bit. */
+SV_FN_INLINE void sv_addr8_il1(const int8* F, int nx, int ny, int nz, __global const long* pairs,
+                               volatile int (*ofs)[8]) {
+  const int n[3] = {nx, ny, nz};
+  int8 base = (int8)(0), dd[3];
+  __global const long* pt = pairs;
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    const int8 e = clamp(F[a], (int8)(-1), (int8)(n[a])) + 1;
+    const long* pp = (const long*)(size_t)pt;
+    const long8 q = (long8)(__builtin_ia32_gatherd_q256((long4)(0), pp, e.lo, (long4)(-1), 8),
+                            __builtin_ia32_gatherd_q256((long4)(0), pp, e.hi, (long4)(-1), 8));
+    const int8 t0 = convert_int8(q & 0xFFFFFFFFL), t1 = convert_int8(q >> 32);
+    base += t0;
+    dd[a] = t1 - t0;
+    pt += n[a] + 2;
+  }
+  *(volatile int8*)ofs[0] = base;
+  *(volatile int8*)ofs[1] = base + dd[1];
+  *(volatile int8*)ofs[2] = base + dd[2];
+  *(volatile int8*)ofs[3] = base + dd[1] + dd[2];
+  *(volatile int8*)ofs[4] = dd[0];
+}
+SV_FN_INLINE void sv_interp8_il1(const float8* tt, __global const float* vox,
+                                 volatile int (*ofs)[8], float16* u) {
+  int dxs[8];
+#pragma unroll
+  for (int l = 0; l < 8; ++l) dxs[l] = ofs[4][l];
+  __global const int* vi = (__global const int*)vox;
+#pragma unroll
+  for (int h = 0; h < 2; ++h) {
+    const uint hb = 4 * h;
+    const float16 w1x = sv_spread4(tt[0], hb), w0x = sv_spread4(tt[0] - 1.0f, hb);
+    const float16 w1y = sv_spread4(tt[1], hb), w0y = sv_spread4(tt[1] - 1.0f, hb);
+    const float16 w1z = sv_spread4(tt[2], hb), w0z = sv_spread4(tt[2] - 1.0f, hb);
+    float16 q[4];
+#pragma unroll
+    for (int r = 0; r < 4; ++r) {
+      const int b = 4 * h, a0 = ofs[r][b], a1 = ofs[r][b + 1], a2 = ofs[r][b + 2],
+                a3 = ofs[r][b + 3];
+      const float8 l0 = as_float8((int8)(vload4(0, vi + a0), vload4(0, vi + a0 + dxs[b])));
+      const float8 l1 = as_float8((int8)(vload4(0, vi + a1), vload4(0, vi + a1 + dxs[b + 1])));
+      const float8 l2 = as_float8((int8)(vload4(0, vi + a2), vload4(0, vi + a2 + dxs[b + 2])));
+      const float8 l3 = as_float8((int8)(vload4(0, vi + a3), vload4(0, vi + a3 + dxs[b + 3])));
+      const float16 v0 = (float16)((float8)(l0.lo, l1.lo), (float8)(l2.lo, l3.lo));
+      const float16 v1 = (float16)((float8)(l0.hi, l1.hi), (float8)(l2.hi, l3.hi));
+      q[r] = w1x * v1 - w0x * v0;
+    }
+    const float16 y0 = w1y * q[1] - w0y * q[0], y1 = w1y * q[3] - w0y * q[2];
+    u[h] = w1z * y1 - w0z * y0;
+  }
+}
+#endif
 #endif
 
 /* The samples of 8 lanes at F, L [0..2]: u[h] = lanes 4h .. 4h + 3, each its
