@@ -776,10 +776,18 @@ int main(int argc, char** argv) {
           std::cerr << "simdvol: note: " << *p << "\n";
       }
       const double phi0 = opt.view.phi;
+      // The frames replace their files together: each is written to a
+      // temporary file beside its name, and only once every frame has
+      // rendered and been written are they renamed into place. A render,
+      // write or signal that ends the run before then leaves every file of
+      // an earlier run as it was (the batch's destructor, or the signal
+      // handler, removes the temporary files); the renames are the one
+      // window left (ImageBatch::commit names the frames replaced).
+      ImageBatch frames_written(static_cast<std::size_t>(frames));
       // A turntable writes frame f while frame f + 1 renders (one write in
       // flight): get() waits for it and rethrows its error; on an error
-      // elsewhere the future's destructor waits for the write to finish, so
-      // no temporary file is left behind.
+      // elsewhere the future's destructor waits for the write to finish
+      // before the batch (declared before it) removes the temporary files.
       std::future<void> writing;
       // A frame that fails (out of memory, a frame it cannot write) still
       // leaves the trace of the frames rendered before it: that is where
@@ -817,13 +825,14 @@ int main(int argc, char** argv) {
             writing.get();
             progress(f, frames);
           }
-          writing = std::async(
-              std::launch::async,
-              [im = std::move(img), p = numbered(outp, f, frames)] { write_image(im, p); });
+          writing = std::async(std::launch::async,
+                               [&frames_written, im = std::move(img),
+                                p = numbered(outp, f, frames)] { frames_written.write(im, p); });
         }
         writing.get();
+        frames_written.commit();
       } catch (...) {
-        if (writing.valid()) writing.wait();  // its temporary file gone before the trace
+        if (writing.valid()) writing.wait();  // (its write done before the trace)
         write_trace_of_frames_before_error();
         throw;
       }

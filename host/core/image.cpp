@@ -16,6 +16,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <string>
 #include <system_error>
 
@@ -284,29 +285,97 @@ void check_image_extension(const fs::path& path) {
   (void)format_of(path);
 }
 
-void write_image(const Image& img, const fs::path& path) {
+namespace {
+
+// `img` written for `path` to a temporary file beside it (or beside its
+// symbolic link's target: the link stays a link), not yet to disk or in
+// place; marked as entry `index` of `marks` where given. FileError on a
+// failure, the temporary file removed.
+std::unique_ptr<TempFile> write_temporary(const Image& img, const fs::path& path,
+                                          TempFileMarks* marks, std::size_t index) {
   const Format format = format_of(path);
   if (img.width() <= 0 || img.height() <= 0 ||
       img.pixels().size() != static_cast<std::size_t>(img.width()) * img.height())
     throw FileError(path, "cannot write an empty image");
 
-  // Written beside the file replaced: path, or its symbolic link's target
-  // (the link stays a link).
   const fs::path target = write_target(path);
   const fs::path dir = target.parent_path().empty() ? fs::path(".") : target.parent_path();
   std::error_code ec;
   if (!fs::is_directory(dir, ec))
     throw FileError(path, "output directory '" + dir.string() + "' does not exist");
 
-  TempFile tmp(target, path);
+  auto tmp = marks ? std::make_unique<TempFile>(target, path, *marks, index)
+                   : std::make_unique<TempFile>(target, path);
   std::string problem;
   try {
-    problem = write_file(img, tmp.fd(), path, format);
+    problem = write_file(img, tmp->fd(), path, format);
   } catch (const std::exception& e) {
     problem = e.what();
   }
-  if (!problem.empty()) tmp.fail(problem);
-  tmp.commit();
+  if (!problem.empty()) tmp->fail(problem);
+  return tmp;
+}
+
+}  // namespace
+
+void write_image(const Image& img, const fs::path& path) {
+  write_temporary(img, path, nullptr, 0)->commit();
+}
+
+struct ImageBatch::Impl {
+  explicit Impl(std::size_t count) : marks(count) {}
+  TempFileMarks marks;
+  std::vector<std::unique_ptr<TempFile>> files;  // (destroyed first: they unmark)
+  std::vector<fs::path> paths;
+  bool committed = false;
+};
+
+ImageBatch::ImageBatch(std::size_t count) : impl_(std::make_unique<Impl>(count)) {}
+
+ImageBatch::~ImageBatch() {
+  // The temporary files not renamed into place are removed (TempFile's
+  // destructor), in reverse order.
+  while (!impl_->files.empty()) impl_->files.pop_back();
+}
+
+void ImageBatch::write(const Image& img, const fs::path& path) {
+  Impl& b = *impl_;
+  if (b.committed) throw ArgumentError("ImageBatch::write", "the batch was committed already");
+  if (b.files.size() >= b.marks.size())
+    throw ArgumentError("ImageBatch::write",
+                        "more than the batch's " + std::to_string(b.marks.size()) + " images");
+  b.files.reserve(b.marks.size());
+  b.paths.reserve(b.marks.size());
+  std::unique_ptr<TempFile> tmp = write_temporary(img, path, &b.marks, b.files.size());
+  // To disk and closed now (a batch of 100,000 would run out of
+  // descriptors), so that commit() is the renames alone.
+  tmp->finish();
+  b.paths.push_back(path);
+  b.files.push_back(std::move(tmp));
+}
+
+void ImageBatch::commit() {
+  Impl& b = *impl_;
+  if (b.committed) throw ArgumentError("ImageBatch::commit", "the batch was committed already");
+  b.committed = true;
+  for (std::size_t i = 0; i < b.files.size(); ++i) {
+    try {
+      b.files[i]->commit();
+    } catch (const FileError& e) {
+      const std::size_t after = b.files.size() - i - 1;
+      std::string said = e.problem() + "; ";
+      if (i == 0)
+        said += "no file of the batch was replaced";
+      else if (i == 1)
+        said += "the file before it, " + b.paths[0].string() + ", was replaced already";
+      else
+        said += "the " + std::to_string(i) + " files before it, " + b.paths[0].string() + " .. " +
+                b.paths[i - 1].filename().string() + ", were replaced already";
+      said += after == 0 ? std::string("; it keeps its file")
+                         : "; it and the " + std::to_string(after) + " after it keep their files";
+      throw FileError(e.path(), said);
+    }
+  }
 }
 
 Image read_image(const fs::path& path) {

@@ -11,6 +11,7 @@
 #include <cerrno>
 #include <csignal>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 #include <string>
@@ -38,10 +39,34 @@ static_assert(std::atomic<int>::is_always_lock_free);
 
 constexpr std::array<int, 4> kEndingSignals = {SIGINT, SIGTERM, SIGHUP, SIGQUIT};
 
+}  // namespace
+
+// A batch's marks (TempFileMarks): each entry a path of its own (malloc'd,
+// so that 100,000 of them are not 400 MB of fixed slots), swapped in and
+// out atomically; the batches in a fixed table of 8 for the handler.
+struct TempFileMarks::Entry {
+  std::atomic<char*> path{nullptr};
+};
+struct TempFileMarks::Table {
+  const Entry* entries = nullptr;
+  std::size_t count = 0;
+};
+
+namespace {
+
+constexpr int kBatches = 8;
+std::array<std::atomic<const TempFileMarks::Table*>, kBatches> g_batches{};
+static_assert(std::atomic<char*>::is_always_lock_free);
+static_assert(std::atomic<const TempFileMarks::Table*>::is_always_lock_free);
+
 extern "C" void remove_temporary_files_and_end(int sig) {
   const int saved = errno;
   for (Slot& s : g_slots)
     if (s.state.load(std::memory_order_acquire) == 2) ::unlink(s.path);
+  for (const auto& b : g_batches)
+    if (const TempFileMarks::Table* t = b.load(std::memory_order_acquire))
+      for (std::size_t i = 0; i < t->count; ++i)
+        if (const char* p = t->entries[i].path.load(std::memory_order_acquire)) ::unlink(p);
   // The handler was installed with SA_RESETHAND: the signal's default action
   // is back, and the signal raised again ends the process when the handler
   // returns (it is blocked until then), as it would have without us.
@@ -81,6 +106,17 @@ std::string random_tag() {
 
 TempFile::TempFile(const std::filesystem::path& target, const std::filesystem::path& named)
     : target_(target), named_(named) {
+  make();
+}
+
+TempFile::TempFile(const std::filesystem::path& target, const std::filesystem::path& named,
+                   TempFileMarks& marks, std::size_t index)
+    : target_(target), named_(named), marks_(&marks), mark_index_(index) {
+  make();
+}
+
+void TempFile::make() {
+  const std::filesystem::path& target = target_;
   const std::filesystem::path dir =
       target.parent_path().empty() ? std::filesystem::path(".") : target.parent_path();
   // At most the first 64 bytes of the name, so that a name near the file
@@ -101,14 +137,20 @@ TempFile::TempFile(const std::filesystem::path& target, const std::filesystem::p
   int e = 0;
   for (int attempt = 0; attempt < 100; ++attempt) {
     std::filesystem::path candidate = dir / (stem + ".tmp-" + random_tag());
-    mark_.emplace(candidate);
+    if (marks_)
+      marks_->mark(mark_index_, candidate);
+    else
+      mark_.emplace(candidate);
     fd_ = ::open(candidate.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
     e = errno;
     if (fd_ >= 0) {
       path_ = std::move(candidate);
       return;
     }
-    mark_.reset();
+    if (marks_)
+      marks_->unmark(mark_index_);
+    else
+      mark_.reset();
     if (e != EEXIST) break;
   }
   throw FileError(named_, "cannot create a temporary file in " + dir.string() + ": " +
@@ -118,6 +160,7 @@ TempFile::TempFile(const std::filesystem::path& target, const std::filesystem::p
 TempFile::~TempFile() {
   if (fd_ >= 0) ::close(fd_);
   if (!done_) ::unlink(path_.c_str());
+  if (marks_) marks_->unmark(mark_index_);
 }
 
 void TempFile::fail(const std::string& problem) {
@@ -135,7 +178,8 @@ int TempFile::remove() noexcept {
   return ::unlink(path_.c_str()) == 0 ? 0 : errno;
 }
 
-void TempFile::commit() {
+void TempFile::finish() {
+  if (finished_) return;
   if (::fsync(fd_) != 0 && errno != EINVAL) {
     const int e = errno;
     fail("fsync failed: " + errno_text(e));
@@ -143,6 +187,11 @@ void TempFile::commit() {
   const int closed = ::close(fd_), e = errno;
   fd_ = -1;
   if (closed != 0) fail("close failed: " + errno_text(e));
+  finished_ = true;
+}
+
+void TempFile::commit() {
+  finish();
   std::error_code ec;
   std::filesystem::rename(path_, target_, ec);
   if (ec) fail("cannot rename the temporary file into place: " + ec.message());
@@ -162,8 +211,41 @@ TempFileMark::TempFileMark(const std::filesystem::path& path) noexcept {
   }
 }
 
+TempFileMarks::TempFileMarks(std::size_t count)
+    : entries_(new Entry[count]), table_(new Table{nullptr, count}), count_(count) {
+  table_->entries = entries_.get();
+  for (int i = 0; i < kBatches; ++i) {
+    const Table* expected = nullptr;
+    if (g_batches[i].compare_exchange_strong(expected, table_.get(), std::memory_order_acq_rel)) {
+      slot_ = i;
+      return;
+    }
+  }
+}
+
+TempFileMarks::~TempFileMarks() {
+  if (slot_ >= 0) g_batches[slot_].store(nullptr, std::memory_order_release);
+  for (std::size_t i = 0; i < count_; ++i) std::free(entries_[i].path.exchange(nullptr));
+}
+
+void TempFileMarks::mark(std::size_t i, const std::filesystem::path& path) noexcept {
+  if (i >= count_) return;
+  const std::string& p = path.native();
+  char* copy = static_cast<char*>(std::malloc(p.size() + 1));
+  if (copy) std::memcpy(copy, p.c_str(), p.size() + 1);
+  // (A handler on another thread that read the old path a moment before
+  // may unlink it after the free: the process is ending then, and it is,
+  // as TempFileMark's slot rewritten under a handler, best effort.)
+  std::free(entries_[i].path.exchange(copy, std::memory_order_acq_rel));
+}
+
+void TempFileMarks::unmark(std::size_t i) noexcept {
+  if (i < count_) std::free(entries_[i].path.exchange(nullptr, std::memory_order_acq_rel));
+}
+
 void forget_temporary_files() noexcept {
   for (Slot& s : g_slots) s.state.store(0, std::memory_order_release);
+  for (auto& b : g_batches) b.store(nullptr, std::memory_order_release);
 }
 
 TempFileMark::~TempFileMark() {

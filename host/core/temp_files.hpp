@@ -2,7 +2,9 @@
 // handlers of remove_temporary_files_on_signals() (internal: not installed).
 #pragma once
 
+#include <cstddef>
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -25,6 +27,37 @@ class TempFileMark {
   int slot_ = -1;
 };
 
+/// Marks for the temporary files of a batch of writes that exist together
+/// until they are renamed into place together (ImageBatch: a turntable's
+/// frames, as many as 100,000, beyond TempFileMark's 64): `count` entries,
+/// each marked (mark) and let go (unmark) by its index; a signal that
+/// remove_temporary_files_on_signals() handles removes every marked file,
+/// as TempFileMark's. At most 8 batches at once; a ninth, and a path that
+/// cannot be copied (no memory), is not marked (best effort, as
+/// TempFileMark).
+class TempFileMarks {
+ public:
+  explicit TempFileMarks(std::size_t count);
+  ~TempFileMarks();
+  TempFileMarks(const TempFileMarks&) = delete;
+  TempFileMarks& operator=(const TempFileMarks&) = delete;
+
+  std::size_t size() const { return count_; }
+  /// Marks entry `i` (< size()) as `path`, in place of what it marked.
+  void mark(std::size_t i, const std::filesystem::path& path) noexcept;
+  /// Lets entry `i` go (the file is renamed into place or removed).
+  void unmark(std::size_t i) noexcept;
+
+  struct Entry;
+  struct Table;
+
+ private:
+  std::unique_ptr<Entry[]> entries_;
+  std::unique_ptr<Table> table_;
+  std::size_t count_ = 0;
+  int slot_ = -1;
+};
+
 /// The temporary file of a write that replaces a file at once: a new file
 /// beside `target` (in its directory, so that the rename is atomic), made
 /// exclusively (O_EXCL: never someone's existing file) with mode 0666, so
@@ -42,6 +75,10 @@ class TempFile {
   /// FileError "cannot create a temporary file in DIR: ..." when it cannot
   /// be made.
   TempFile(const std::filesystem::path& target, const std::filesystem::path& named);
+  /// The same, marked as entry `index` of `marks` (a batch's file) instead
+  /// of by a TempFileMark of its own; `marks` outlives it.
+  TempFile(const std::filesystem::path& target, const std::filesystem::path& named,
+           TempFileMarks& marks, std::size_t index);
   ~TempFile();
   TempFile(const TempFile&) = delete;
   TempFile& operator=(const TempFile&) = delete;
@@ -50,8 +87,13 @@ class TempFile {
   /// Open for reading and writing until commit() or fail().
   int fd() const { return fd_; }
   /// To disk (fsync), closed, renamed over the target; on a failure
-  /// removed, and FileError.
+  /// removed, and FileError. (finish() then rename: where finish() was
+  /// called already, the rename alone.)
   void commit();
+  /// To disk (fsync) and closed, not yet renamed: a batch's file, which
+  /// waits for the others (and holds no descriptor meanwhile); on a failure
+  /// removed, and FileError.
+  void finish();
   /// Removes the file and throws FileError(named, problem + the note).
   [[noreturn]] void fail(const std::string& problem);
   /// Closes and removes the file (a probe's: output_checks); 0, or the
@@ -60,10 +102,14 @@ class TempFile {
   int remove() noexcept;
 
  private:
+  void make();
+
   std::filesystem::path target_, named_, path_;
   int fd_ = -1;
-  bool done_ = false;
+  bool done_ = false, finished_ = false;
   std::optional<TempFileMark> mark_;
+  TempFileMarks* marks_ = nullptr;
+  std::size_t mark_index_ = 0;
 };
 
 /// Lets go of every mark, without removing the files: for a forked child

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
+#include <map>
 #include <random>
 #include <regex>
 #include <set>
@@ -467,9 +468,6 @@ TEST_F(Cli, RendersADicomSeries) {
   EXPECT_NE(info.output.find("range:    -1000 .. "), std::string::npos) << info.output;
 }
 
-// A turntable writes each frame while the next renders: a frame that cannot
-// be written (its name taken by a directory) stops the run with an error
-// naming it, after the frames before it; no temporary file is left.
 TEST_F(Cli, RendersAMetaImage) {
   // The phantom in Hounsfield units as MET_SHORT, written by hand: a 4-D
   // .mha whose volume 0 is air (raw and compressed), and a .mhd whose
@@ -618,6 +616,107 @@ TEST_F(Cli, TurntableStopsAtAFrameItCannotWrite) {
   fs::create_directories(dir_ / "t.png");
   ASSERT_EQ(run("render --phantom-size 16 --size 16x16 --frames 2 -o " + path("t.png")).code, 0);
   EXPECT_EQ(simdvol::read_image(path("t_0001.png")).width(), 16);
+}
+
+namespace {
+
+/// Every file in `dir` by name, with its bytes.
+std::map<std::string, std::string> files_of(const fs::path& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    std::ifstream in(e.path(), std::ios::binary);
+    files[e.path().filename().string()] = std::string(std::istreambuf_iterator<char>(in), {});
+  }
+  return files;
+}
+
+}  // namespace
+
+// A turntable replaces its frames together, once the last has rendered and
+// been written: a write or a render that fails part way (at frame 1 here)
+// leaves an earlier run's frames byte for byte as they were, and no
+// temporary file. Before, frame 0 had replaced its file by then and the
+// later frames were the earlier run's: a mixed set, part of it lost. The
+// write: frame 1 of these views (29,456 bytes, frame 0 26,022) past a
+// file-size limit of 27,648 bytes; the render: frame 1's footprints (the
+// allocation hook).
+TEST_F(Cli, ATurntableThatFailsLeavesAnEarlierRunsFramesAsTheyWere) {
+  const std::string tf = path("tf.txt");
+  std::ofstream(tf) << "density 0 0 24 1 255 1\ngradient 0 0 5 0 20 1 221 1\ncolor 0 1 1 1\n";
+  const std::string common = " --phantom-size 32 --size 256x256 --frames 4 -o " + path("t.png");
+  // The earlier run: other views, so that every frame's bytes differ.
+  ASSERT_EQ(run("render --engine reference --view 0,5,0 --step 10" + common).code, 0);
+  const std::map<std::string, std::string> before = files_of(dir_);
+  ASSERT_EQ(before.size(), 5u);
+  // (sh's ulimit -f counts 512-byte blocks)
+  const Result w = run_once("render --engine reference --step 45" + common, "", "ulimit -f 54;");
+  EXPECT_EQ(w.code, 1) << w.output;
+  EXPECT_NE(w.output.find("simdvol: error: " + path("t_0001.png") + ": "), std::string::npos)
+      << w.output;
+  EXPECT_NE(w.output.find("(the file-size limit, ulimit -f, is 27648 bytes)"), std::string::npos)
+      << w.output;
+  EXPECT_TRUE(files_of(dir_) == before) << "a failed write changed or left files";
+  const Result r =
+      run("render --step 45 --classify " + tf + common, "SIMDVOL_FAIL_ALLOCATION=footprints:2");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("clCreateBuffer(footprints, "), std::string::npos) << r.output;
+  EXPECT_TRUE(files_of(dir_) == before) << "a failed render changed or left files";
+  // Without a failure every frame is replaced.
+  ASSERT_EQ(run("render --engine reference --step 45" + common).code, 0);
+  const std::map<std::string, std::string> after = files_of(dir_);
+  ASSERT_EQ(after.size(), 5u);
+  for (const char* f : {"t_0000.png", "t_0001.png", "t_0002.png", "t_0003.png"})
+    EXPECT_TRUE(after.at(f) != before.at(f)) << f << " not replaced";
+}
+
+// A turntable ended by a signal (SIGTERM after frame 1 is written, frames
+// 2 to 4 still to render) leaves an earlier run's frames as they were and
+// no temporary file: the handlers remove the batch's temporary files
+// (ImageBatch), and no frame has replaced its file yet. Before, frames 0
+// and 1 had replaced theirs. Started directly (no shell between), so that
+// the signal reaches it.
+TEST_F(Cli, ATurntableEndedBySignalLeavesAnEarlierRunsFramesAsTheyWere) {
+  const std::string out = path("t.png");
+  ASSERT_EQ(run("render --engine reference --phantom-size 32 --size 256x256 --frames 5 --view "
+                "0,5,0 --step 10 -o " +
+                out)
+                .code,
+            0);
+  const std::map<std::string, std::string> before = files_of(dir_);
+  ASSERT_EQ(before.size(), 5u);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    // Slow frames: pixel sampling of the reference engine (about 1 s each).
+    ::execl(SIMDVOL_CLI, SIMDVOL_CLI, "render", "--engine", "reference", "--phantom-size", "64",
+            "--sampling", "pixel", "--size", "256x256", "--frames", "5", "--step", "45", "-o",
+            out.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ASSERT_GT(pid, 0);
+  // Frame 1 written: two temporary files (frames 0 and 1), or, as before,
+  // frame 1 in place.
+  bool written = false;
+  for (int i = 0; i < 24000 && !written; ++i) {
+    ::usleep(5000);
+    int temps = 0;
+    for (const auto& e : fs::directory_iterator(dir_))
+      temps += e.path().filename().string().find(".tmp-") != std::string::npos;
+    std::ifstream in(path("t_0001.png"), std::ios::binary);
+    written = temps >= 2 ||
+              std::string(std::istreambuf_iterator<char>(in), {}) != before.at("t_0001.png");
+  }
+  EXPECT_TRUE(written) << "frame 1 was not written within 120 s";
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFSIGNALED(status)) << status;
+  EXPECT_EQ(WTERMSIG(status), SIGTERM);
+  const std::map<std::string, std::string> after = files_of(dir_);
+  EXPECT_EQ(after.size(), before.size());
+  for (const auto& [name, bytes] : after) {
+    const auto was = before.find(name);
+    EXPECT_TRUE(was != before.end() && was->second == bytes) << name << " changed or left";
+  }
 }
 
 // A file-size limit (ulimit -f) that cuts the image short: before, SIGXFSZ
@@ -933,8 +1032,11 @@ TEST_F(Cli, TraceKeepsTheFramesBeforeAnError) {
   EXPECT_NE(json.find("\"name\": \"simdvol_layout\""), std::string::npos) << json.substr(0, 400);
   EXPECT_NE(json.find("\"frame\": 0"), std::string::npos);
   EXPECT_EQ(json.find("\"frame\": 1"), std::string::npos);
-  EXPECT_TRUE(fs::exists(path("t_0000.png")));
-  EXPECT_FALSE(fs::exists(path("t_0001.png")));
+  // No frame is written (they replace their files together, after the last
+  // frame), and no temporary file is left.
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir_)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"tf.txt", "t.json"}));
   // Without the failure all four frames are in it.
   const Result ok = run("render --phantom-size 32 --size 32x32 --classify " + tf +
                         " --frames 4 --step 30 --trace " + path("t.json") + " -o " + path("t.png"));

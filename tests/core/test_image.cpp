@@ -283,6 +283,89 @@ TEST_F(ImageFiles, OverwriteReplacesTheFile) {
   EXPECT_EQ(listing(dir_), (std::set<std::string>{"out.tif"}));
 }
 
+// An ImageBatch (a turntable's frames) replaces its files together: until
+// commit() every existing file keeps its bytes and the images wait in
+// temporary files beside them; a batch dropped before commit() (a render
+// or write that failed) removes them and leaves the files as they were.
+TEST_F(ImageFiles, ImageBatchReplacesItsFilesOnlyAtCommit) {
+  const std::vector<fs::path> paths = {dir_ / "f_0.tif", dir_ / "f_1.png", dir_ / "f_2.tif"};
+  for (const fs::path& p : paths) std::ofstream(p) << "old " << p.filename().string();
+  const Image a = pattern(8, 6), b = constant(5, 3, {0.5f, 0.25f, 0.0f, 1.0f});
+  {
+    ImageBatch batch(3);
+    batch.write(a, paths[0]);
+    batch.write(b, paths[1]);
+    for (const fs::path& p : paths)
+      EXPECT_EQ(read_bytes(p), "old " + p.filename().string()) << "replaced before commit()";
+    EXPECT_EQ(listing(dir_).size(), 5u);  // the two temporary files beside them
+  }                                       // dropped: the temporary files removed, nothing replaced
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"f_0.tif", "f_1.png", "f_2.tif"}));
+  for (const fs::path& p : paths) EXPECT_EQ(read_bytes(p), "old " + p.filename().string());
+
+  // A write that fails (a name with no image extension) keeps the others'
+  // temporary files for the batch, and the files as they were.
+  {
+    ImageBatch batch(3);
+    batch.write(a, paths[0]);
+    EXPECT_THROW(batch.write(b, dir_ / "f_1.bmp"), FileError);
+  }
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"f_0.tif", "f_1.png", "f_2.tif"}));
+  EXPECT_EQ(read_bytes(paths[0]), "old f_0.tif");
+
+  ImageBatch batch(3);
+  batch.write(a, paths[0]);
+  batch.write(b, paths[1]);
+  batch.write(a, paths[2]);
+  EXPECT_THROW(batch.write(a, dir_ / "f_3.tif"), ArgumentError);  // past its 3
+  batch.commit();
+  EXPECT_EQ(max_abs_diff(read_image(paths[0]), a), 0.0f);
+  EXPECT_EQ(read_image(paths[1]).width(), 5);
+  EXPECT_EQ(max_abs_diff(read_image(paths[2]), a), 0.0f);
+  EXPECT_EQ(listing(dir_), (std::set<std::string>{"f_0.tif", "f_1.png", "f_2.tif"}));
+}
+
+// The renames are the one window in which a batch can end half done: a
+// name taken by a directory after the images were written fails its
+// rename, and the error names it and says which files were replaced
+// before it; the ones after it keep their bytes, and no temporary file is
+// left.
+TEST_F(ImageFiles, ImageBatchSaysWhichFilesARenameThatFailedLeftReplaced) {
+  std::vector<fs::path> paths;
+  for (int i = 0; i < 5; ++i) {
+    paths.push_back(dir_ / ("f_" + std::to_string(i) + ".tif"));
+    std::ofstream(paths.back()) << "old " << i;
+  }
+  const Image img = pattern(8, 6);
+  {
+    ImageBatch batch(5);
+    for (const fs::path& p : paths) batch.write(img, p);
+    fs::remove(paths[2]);
+    fs::create_directory(paths[2]);
+    try {
+      batch.commit();
+      ADD_FAILURE() << "the rename over a directory did not fail";
+    } catch (const FileError& e) {
+      EXPECT_EQ(e.path(), paths[2]);
+      const std::string what = e.what();
+      EXPECT_EQ(
+          what.rfind(paths[2].string() + ": cannot rename the temporary file into place: ", 0), 0u)
+          << what;
+      EXPECT_NE(what.find("; the 2 files before it, " + paths[0].string() +
+                          " .. f_1.tif, were replaced already; it and the 2 after it keep their "
+                          "files"),
+                std::string::npos)
+          << what;
+    }
+  }
+  EXPECT_EQ(max_abs_diff(read_image(paths[0]), img), 0.0f);
+  EXPECT_EQ(max_abs_diff(read_image(paths[1]), img), 0.0f);
+  EXPECT_TRUE(fs::is_directory(paths[2]));
+  EXPECT_EQ(read_bytes(paths[3]), "old 3");
+  EXPECT_EQ(read_bytes(paths[4]), "old 4");
+  EXPECT_EQ(listing(dir_),
+            (std::set<std::string>{"f_0.tif", "f_1.tif", "f_2.tif", "f_3.tif", "f_4.tif"}));
+}
+
 TEST_F(ImageFiles, WritesThroughASymbolicLink) {
   // The link's target is replaced (the temporary beside it), the link kept.
   fs::create_directory(dir_ / "real");

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <memory>
 #include <vector>
 
 namespace simdvol {
@@ -48,6 +49,40 @@ class Image {
 /// extension, missing directory, libpng or OpenImageIO error, the OpenImageIO
 /// module not found for .exr/.tif).
 void write_image(const Image& img, const std::filesystem::path& path);
+
+/// Images that replace their files together (a turntable's frames): write()
+/// puts each in a temporary file beside its path, as write_image does (to
+/// disk, closed), and commit(), once every one is written, renames them
+/// into place in the order written. Until commit(), and where the batch
+/// ends without it (a write that failed, a render that failed, a signal
+/// that remove_temporary_files_on_signals() handles), every file at the
+/// paths keeps its bytes and the temporary files are removed. All the
+/// temporary files exist at once: the disk needs room for every image
+/// beside the files they replace. One write() at a time (from any thread,
+/// each after the one before has returned).
+class ImageBatch {
+ public:
+  /// A batch of at most `count` images.
+  explicit ImageBatch(std::size_t count);
+  ~ImageBatch();
+  ImageBatch(const ImageBatch&) = delete;
+  ImageBatch& operator=(const ImageBatch&) = delete;
+
+  /// Writes `img` for `path`; FileError as write_image's (that image's
+  /// temporary file removed, the others kept for commit() or the end), and
+  /// ArgumentError past `count` images or after commit().
+  void write(const Image& img, const std::filesystem::path& path);
+  /// Renames every image written into place, in order. The renames are the
+  /// one window in which the batch can end half done: a rename that fails
+  /// (the name taken by a directory since, say) is a FileError naming its
+  /// path and saying which of the batch's paths were replaced before it,
+  /// the rest keeping their files (their temporary files removed).
+  void commit();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 /// Throws FileError (as write_image would) unless `path` ends in an extension
 /// write_image writes: for checking an output name before the work.

@@ -183,8 +183,9 @@ void write_file_atomically(const std::filesystem::path& path,
 
 /// For programs (the library installs no handler unless asked): SIGINT,
 /// SIGTERM, SIGHUP and SIGQUIT first remove the temporary files of the
-/// writes in progress (write_file_atomically, write_image, save_nrrd, the
-/// program cache), then end the process as before; and a write past the
+/// writes in progress (write_file_atomically, write_image, an ImageBatch's
+/// images not yet renamed into place, save_nrrd, the program cache), then
+/// end the process as before; and a write past the
 /// file-size limit (ulimit -f) fails as a FileError ("File too large")
 /// instead of SIGXFSZ ending the process. A signal the program already
 /// ignores or handles keeps its disposition. The simdvol program and the
