@@ -5,11 +5,13 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <sys/mman.h>
+#include <sys/stat.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <climits>
@@ -18,6 +20,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <new>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <thread>
@@ -33,19 +36,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-/// What the reading process sends back before the voxels.
-struct Reply {
-  int32_t status = 0;  ///< 0 a volume follows, 1 a FileError, 2 out of memory
-  int32_t type = 0;
-  int64_t dims[3] = {0, 0, 0};
-  double spacing[3] = {1, 1, 1};
-  char orientation[4] = {0, 0, 0, 0};
-  int64_t volumes = 1;           ///< 3-D volumes in the file (status 0 and 1)
-  uint32_t text_bytes = 0;       ///< status 1: the error's path, a NUL, its problem
-  uint32_t note_bytes = 0;       ///< status 0: the notes after the voxels, each ending in a NUL
-  uint32_t watch_bytes = 0;      ///< status 0 and 1: the files read (watched_files), last
-  uint32_t companion_bytes = 0;  ///< status 0: companion_files after the notes, each + NUL
-};
+using Reply = ChildReply;
 
 /// The files the read met (watched_files), for the parent's load_volume to
 /// watch: each its identity (a byte saying whether it has one, then the
@@ -172,6 +163,31 @@ bool wait_until(pid_t pid, int pidfd, Clock::time_point deadline, int* status) {
   }
 }
 
+/// Kills the child `pid` (SIGKILL): through `pidfd` where there is one
+/// (pidfd_send_signal, Linux 5.1: the signal reaches the process the pidfd
+/// was opened for and no other, even one that has ended since), else by
+/// its pid. The pid is safe as it is used here: the last look
+/// (wait_until's waitpid) found the child running, and a child that ends
+/// after it stays a zombie, its pid kept from any other process, until
+/// this process reaps it (after the kill). Not so where the program
+/// ignores SIGCHLD (SIG_IGN: the kernel reaps a child as it ends), where a
+/// child ending between that look and the kill could free its pid for
+/// another process: the pidfd closes that window. A pidfd the kernel
+/// cannot signal through (ENOSYS: a kernel before 5.1, or a seccomp filter)
+/// falls back to the pid.
+void kill_child(pid_t pid, int pidfd) {
+#ifdef SYS_pidfd_send_signal
+  // (ESRCH: the child has ended since the last look; nothing to kill, and
+  // its pid, where the kernel reaped it, no longer its own)
+  if (pidfd >= 0 &&
+      (::syscall(SYS_pidfd_send_signal, pidfd, SIGKILL, nullptr, 0) == 0 || errno == ESRCH))
+    return;
+#else
+  (void)pidfd;
+#endif
+  ::kill(pid, SIGKILL);
+}
+
 /// The last line a crashed reader wrote (GDCM's assertion, say), trimmed.
 std::string last_line(int fd) {
   std::string all;
@@ -185,7 +201,113 @@ std::string last_line(int fd) {
   return line;
 }
 
+// The byte counts of a reply that is not what the child writes (a child
+// whose memory file was cut short or written over, or a bug of ours) are
+// checked against what the memory file holds before anything is allocated
+// for them or read: before, a reply that claimed 1 GiB of companion files
+// was given 1 GiB, then failed to read as "the process reading it failed
+// (exit status 0)", and one that claimed dims of 2^20 each asked for
+// 2^62 bytes of voxels (std::bad_alloc: "out of memory").
+FileError malformed_reply(const fs::path& path, const char* library, const std::string& problem) {
+  return FileError(
+      path, std::string(library) + "'s reading process sent back a malformed reply: " + problem);
+}
+
 }  // namespace
+
+Volume volume_from_reply(int fd, const std::filesystem::path& path, const char* library,
+                         int64_t* volumes) {
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    const int e = errno;
+    throw FileError(path, "cannot look up the memory file it was read into: " + errno_text(e));
+  }
+  const auto held = static_cast<uint64_t>(std::max<off_t>(st.st_size, 0));
+  const auto bad = [&](const std::string& problem) {
+    return malformed_reply(path, library, problem);
+  };
+  const auto count = [](uint64_t n) { return std::to_string(n) + (n == 1 ? " byte" : " bytes"); };
+  Reply reply;
+  if (held < sizeof reply)
+    throw bad("its memory file holds " + count(held) + ", less than the reply's " +
+              count(sizeof reply));
+  if (::lseek(fd, 0, SEEK_SET) != 0 || !read_fully(fd, &reply, sizeof reply))
+    throw bad("its reply could not be read back");
+  const uint64_t after = held - sizeof reply;  // what follows the reply
+  // What the counts come to, against what follows: equal, or refused.
+  const auto check_total = [&](uint64_t total, const char* what) {
+    if (total != after)
+      throw bad("its reply gives " + count(total) + " of " + what + " after it, its memory file " +
+                "holds " + count(after));
+  };
+  constexpr uint32_t kMostText = 1u << 20, kMostList = 1u << 30;
+  const auto check_cap = [&](uint32_t bytes, uint32_t most, const char* what) {
+    if (bytes >= most)
+      throw bad("its reply gives " + count(bytes) + " of " + what + " (less than " + count(most) +
+                " allowed)");
+  };
+  check_cap(reply.watch_bytes, kMostList, "files read");
+  if (reply.status == 0) {
+    if (reply.type < 0 || reply.type > static_cast<int32_t>(VoxelType::f32))
+      throw bad("voxel type " + std::to_string(reply.type) + " is none of simdvol's");
+    check_cap(reply.note_bytes, kMostText, "notes");
+    check_cap(reply.companion_bytes, kMostList, "companion files");
+    // The voxels' bytes, each dimension at least 1 and the product no more
+    // than what follows (checked before it is multiplied: no overflow).
+    const uint64_t most_voxels = after / sizeof(float);
+    uint64_t voxels = 1;
+    for (int a = 0; a < 3; ++a) {
+      const int64_t d = reply.dims[a];
+      if (d < 1 || static_cast<uint64_t>(d) > most_voxels / voxels)
+        throw bad("its dims " + std::to_string(reply.dims[0]) + " x " +
+                  std::to_string(reply.dims[1]) + " x " + std::to_string(reply.dims[2]) +
+                  (d < 1 ? std::string(" are not all positive")
+                         : " need more voxels than its memory file's " + count(after) + " hold"));
+      voxels *= static_cast<uint64_t>(d);
+    }
+    check_total(
+        voxels * sizeof(float) + reply.note_bytes + reply.companion_bytes + reply.watch_bytes,
+        "voxels, notes, companion files and files read");
+    if (volumes && reply.volumes >= 1) *volumes = reply.volumes;
+    const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
+    std::optional<Volume> vol;
+    try {
+      vol.emplace(dims, static_cast<VoxelType>(reply.type),
+                  std::array<double, 3>{reply.spacing[0], reply.spacing[1], reply.spacing[2]});
+      vol->set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
+    } catch (const ArgumentError& e) {  // (a spacing or orientation that is none)
+      throw bad(e.what());
+    }
+    std::string notes(reply.note_bytes, '\0');
+    std::string companions(reply.companion_bytes, '\0');
+    if (!read_fully(fd, vol->data().data(), vol->data().size() * sizeof(float)) ||
+        !read_fully(fd, notes.data(), notes.size()) ||
+        !read_fully(fd, companions.data(), companions.size()))
+      throw bad("its memory file could not be read back");
+    watch_files_from(fd, reply.watch_bytes);
+    for (const std::string& n : nul_ended(notes)) vol->add_note(n);
+    for (const std::string& c : nul_ended(companions)) vol->add_companion_file(c);
+    return std::move(*vol);
+  }
+  if (reply.status == 1) {
+    check_cap(reply.text_bytes, kMostText, "error message");
+    check_total(uint64_t{reply.text_bytes} + reply.watch_bytes, "error message and files read");
+    if (volumes && reply.volumes >= 1) *volumes = reply.volumes;
+    std::string text(reply.text_bytes, '\0');
+    if (!read_fully(fd, text.data(), text.size()))
+      throw bad("its memory file could not be read back");
+    watch_files_from(fd, reply.watch_bytes);
+    const std::size_t nul = text.find('\0');
+    if (nul == std::string::npos) throw bad("its error message has no path");
+    throw FileError(fs::path(text.substr(0, nul)), text.substr(nul + 1));
+  }
+  if (reply.status == 2) {
+    check_total(0, "anything");
+    throw std::bad_alloc();
+  }
+  throw bad("status " + std::to_string(reply.status) + " is none of 0 (a volume), 1 (an error) " +
+            "and 2 (out of memory)");
+}
 
 double default_read_time_limit(ReadSize size, double base_seconds) {
   constexpr uint64_t mib = uint64_t{1} << 20;
@@ -257,7 +379,11 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
   // user's limit it is `base_seconds` at first, and once those have
   // passed, what the files' size gives: an honest read of a large series
   // is not stopped, and the files are looked up only for a long read.
+#ifdef SYS_pidfd_open
   f.pidfd = static_cast<int>(::syscall(SYS_pidfd_open, pid, 0));
+#else
+  f.pidfd = -1;  // (headers older than Linux 5.3's: the child is polled)
+#endif
   double limit = set_limit ? static_cast<double>(*set_limit) : base_seconds;
   bool sized = set_limit.has_value();
   int status = 0;
@@ -276,7 +402,7 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
       limit = default_read_time_limit(met, base_seconds);
       continue;
     }
-    ::kill(pid, SIGKILL);
+    kill_child(pid, f.pidfd);
     while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
     }
     char text[32];
@@ -285,36 +411,8 @@ Volume read_in_child(const std::filesystem::path& path, const char* library,
                               " s (looping on the file?), and was stopped; "
                               "SIMDVOL_READ_TIMEOUT=SECONDS sets the limit");
   }
-  Reply reply;
-  const bool got = WIFEXITED(status) && WEXITSTATUS(status) == 0 &&
-                   ::lseek(f.mem, 0, SEEK_SET) == 0 && read_fully(f.mem, &reply, sizeof reply);
-  if (got && volumes && reply.volumes >= 1) *volumes = reply.volumes;
-  if (got && reply.status == 0) {
-    const std::array<int64_t, 3> dims{reply.dims[0], reply.dims[1], reply.dims[2]};
-    Volume vol(dims, static_cast<VoxelType>(reply.type),
-               {reply.spacing[0], reply.spacing[1], reply.spacing[2]});
-    const bool sane = reply.note_bytes < (1u << 20) && reply.companion_bytes < (1u << 30);
-    std::string notes(sane ? reply.note_bytes : 0, '\0');
-    std::string companions(sane ? reply.companion_bytes : 0, '\0');
-    if (sane && read_fully(f.mem, vol.data().data(), vol.data().size() * sizeof(float)) &&
-        read_fully(f.mem, notes.data(), notes.size()) &&
-        read_fully(f.mem, companions.data(), companions.size())) {
-      watch_files_from(f.mem, reply.watch_bytes);
-      vol.set_orientation(std::string(reply.orientation, ::strnlen(reply.orientation, 3)));
-      for (const std::string& n : nul_ended(notes)) vol.add_note(n);
-      for (const std::string& c : nul_ended(companions)) vol.add_companion_file(c);
-      return vol;
-    }
-  } else if (got && reply.status == 1 && reply.text_bytes < (1u << 20)) {
-    std::string text(reply.text_bytes, '\0');
-    if (read_fully(f.mem, text.data(), text.size())) {
-      watch_files_from(f.mem, reply.watch_bytes);
-      const std::size_t nul = text.find('\0');
-      throw FileError(fs::path(text.substr(0, nul)), text.substr(nul + 1));
-    }
-  } else if (got && reply.status == 2) {
-    throw std::bad_alloc();
-  }
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 0)
+    return volume_from_reply(f.mem, path, library, volumes);
   const std::string said = f.log ? last_line(::fileno(f.log)) : std::string();
   if (WIFSIGNALED(status))
     throw FileError(path, std::string(library) + " stopped on it (signal " +

@@ -1445,6 +1445,167 @@ TEST_F(IoTest, AReadingChildSendsBackTheVolumesOtherFiles) {
   EXPECT_EQ(v.companion_files(), (std::vector<fs::path>{"/a/b/IM2", "c d/IM 3"}));
 }
 
+namespace {
+
+/// read_in_child of a `read` that forges the child's reply: it writes
+/// `bytes` as the whole of the memory file the child answers in (found as
+/// /proc/self/fd's "memfd:simdvol-read") and exits 0, as a child whose
+/// reply was cut short or written over would. What the read gave: "volume
+/// AxBxC type T", or the exception's kind and what().
+std::string forged_reply_read(const fs::path& path, const std::string& bytes) {
+  try {
+    const Volume v = simdvol::read_in_child(
+        path, "a library",
+        [&](int64_t*) -> Volume {
+          for (const auto& e : fs::directory_iterator("/proc/self/fd")) {
+            std::error_code ec;
+            if (fs::read_symlink(e.path(), ec).string().rfind("/memfd:simdvol-read", 0) != 0)
+              continue;
+            const int fd = std::stoi(e.path().filename().string());
+            if (::ftruncate(fd, 0) != 0 ||
+                ::pwrite(fd, bytes.data(), bytes.size(), 0) != static_cast<ssize_t>(bytes.size()))
+              ::_exit(5);
+            ::_exit(0);
+          }
+          ::_exit(6);  // (no memory file found)
+        },
+        nullptr);
+    return "volume " + std::to_string(v.nx()) + "x" + std::to_string(v.ny()) + "x" +
+           std::to_string(v.nz()) + " type " + std::to_string(static_cast<int>(v.type()));
+  } catch (const simdvol::FileError& e) {
+    return std::string("FileError ") + e.what();
+  } catch (const std::bad_alloc&) {
+    return "bad_alloc";
+  } catch (const std::exception& e) {
+    return std::string("other ") + e.what();
+  }
+}
+
+/// A reply's bytes, then `rest`.
+std::string reply_bytes(const simdvol::ChildReply& r, const std::string& rest = "") {
+  return std::string(reinterpret_cast<const char*>(&r), sizeof r) + rest;
+}
+
+}  // namespace
+
+// A reading child's reply is checked against what its memory file holds
+// (fstat) before anything is allocated for its counts or read: a reply cut
+// short or written over is a FileError naming the file and the problem.
+// Before, a claim of nearly 1 GiB of companion files (under the cap) was
+// given 1 GiB and then read past the file's end ("the process reading it
+// failed (exit status 0)"), dims of 2^20 each asked for 2^62 bytes of
+// voxels (std::bad_alloc: "out of memory"), zero dims were an
+// ArgumentError of "volume", and a voxel type that is none was returned as
+// a volume.
+TEST_F(IoTest, AReadingChildsMalformedReplyIsAFileErrorNamingTheFile) {
+  const fs::path x = file("x.dcm");
+  const std::string head =
+      "FileError " + x.string() + ": a library's reading process sent back a malformed reply: ";
+  simdvol::ChildReply ok;
+  ok.type = static_cast<int32_t>(VoxelType::u8);
+  ok.dims[0] = ok.dims[1] = ok.dims[2] = 2;
+  const std::string voxels(8 * sizeof(float), '\0');
+  // The honest reply of a 2 x 2 x 2 volume reads back.
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(ok, voxels)), "volume 2x2x2 type 0");
+
+  simdvol::ChildReply r = ok;
+  r.companion_bytes = (1u << 30) - 1;  // under the cap, and not there
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(r, voxels)),
+            head +
+                "its reply gives 1073741855 bytes of voxels, notes, companion files and files "
+                "read after it, its memory file holds 32 bytes");
+  r = ok;
+  r.companion_bytes = 1u << 30;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(r, voxels)),
+            head +
+                "its reply gives 1073741824 bytes of companion files (less than 1073741824 "
+                "bytes allowed)");
+  r = ok;
+  r.note_bytes = 5;  // notes cut short: 3 of them there
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(r, voxels + std::string("ab\0", 3))),
+            head +
+                "its reply gives 37 bytes of voxels, notes, companion files and files read "
+                "after it, its memory file holds 35 bytes");
+  r = ok;
+  r.dims[0] = r.dims[1] = r.dims[2] = int64_t{1} << 20;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(r, voxels)),
+            head +
+                "its dims 1048576 x 1048576 x 1048576 need more voxels than its memory file's "
+                "32 bytes hold");
+  r = ok;
+  r.dims[1] = 0;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(r, voxels)),
+            head + "its dims 2 x 0 x 2 are not all positive");
+  r = ok;
+  r.type = 9;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(r, voxels)),
+            head + "voxel type 9 is none of simdvol's");
+  r = ok;
+  r.spacing[2] = -1;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(r, voxels)),
+            head + "spacing: voxel spacing -1 along axis 2 must be positive and finite");
+  r = ok;
+  r.status = 7;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(r, voxels)),
+            head + "status 7 is none of 0 (a volume), 1 (an error) and 2 (out of memory)");
+  // Cut inside the reply itself.
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(ok).substr(0, 10)),
+            head + "its memory file holds 10 bytes, less than the reply's " +
+                std::to_string(sizeof(simdvol::ChildReply)) + " bytes");
+  // An error's text longer than the file, and one with no path.
+  simdvol::ChildReply err;
+  err.status = 1;
+  err.text_bytes = 1000;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(err, "y.dcm")),
+            head +
+                "its reply gives 1000 bytes of error message and files read after it, its "
+                "memory file holds 5 bytes");
+  err.text_bytes = 5;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(err, "y.dcm")),
+            head + "its error message has no path");
+  err.text_bytes = 7;
+  EXPECT_EQ(forged_reply_read(x, reply_bytes(err, std::string("y.dcm\0z", 7))),
+            "FileError y.dcm: z");
+}
+
+// A batch's temporary files (ImageBatch: a turntable's frames, all there
+// at once until they are renamed into place together) are removed by an
+// ending signal, beyond TempFileMark's 64: a child writes 100 frames of a
+// batch, an earlier run's first frame beside them, and raises SIGTERM:
+// ended by it, no temporary file left, the earlier frame as it was.
+TEST_F(IoTest, EndingSignalsRemoveABatchsTemporaryFiles) {
+  const fs::path d = file("frames");
+  fs::create_directories(d);
+  write_file(d / "f_000.png", std::string("an earlier run's frame"));
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    simdvol::remove_temporary_files_on_signals();
+    simdvol::Image img(2, 2);
+    simdvol::ImageBatch batch(100);
+    for (int i = 0; i < 100; ++i) {
+      char name[16];
+      std::snprintf(name, sizeof name, "f_%03d.png", i);
+      batch.write(img, d / name);
+    }
+    int temps = 0;
+    for (const auto& e : fs::directory_iterator(d))
+      temps += e.path().filename().string().find(".tmp-") != std::string::npos;
+    if (temps != 100) ::_exit(3);
+    ::raise(SIGTERM);
+    ::_exit(7);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFSIGNALED(status)) << status;
+  EXPECT_EQ(WTERMSIG(status), SIGTERM);
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(d)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, std::set<std::string>{"f_000.png"}) << names.size() << " files";
+  const Bytes kept = read_file(d / "f_000.png");
+  EXPECT_EQ(std::string(kept.begin(), kept.end()), "an earlier run's frame");
+}
+
 TEST_F(IoTest, EndingSignalsRemoveTheTemporaryFiles) {
   for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) {
     SCOPED_TRACE(strsignal(sig));
