@@ -444,6 +444,7 @@ struct Device::Pool {
   std::vector<std::pair<std::thread::id, int>> depths;
   int keep = 2;  // closed scopes a released buffer waits to be handed out again
   std::vector<Entry> entries;
+  std::size_t misses = 0;  // fresh buffers made for requests with a scope open
 
   // The open scopes of thread `id` (0 when none).
   int depth(std::thread::id id) const {
@@ -885,7 +886,7 @@ std::size_t Device::cached_programs() const {
 
 cl::Buffer Device::buffer(cl_mem_flags flags, std::size_t bytes, void* host_ptr,
                           const std::string& what) {
-  return allocate(flags, bytes, bytes, host_ptr, what);
+  return allocate(flags, bytes, bytes, host_ptr, what, false);
 }
 
 cl::Buffer Device::scratch_buffer(cl_mem_flags flags, std::size_t bytes, const std::string& what) {
@@ -898,7 +899,7 @@ cl::Buffer Device::scratch_buffer(cl_mem_flags flags, std::size_t bytes, const s
     room = std::max(bytes,
                     static_cast<std::size_t>(std::min<std::uint64_t>(room, info_.max_alloc_bytes)));
   }
-  return allocate(flags, bytes, room, nullptr, what);
+  return allocate(flags, bytes, room, nullptr, what, true);
 }
 
 namespace {
@@ -973,7 +974,7 @@ std::size_t Device::own_host_bytes() {
 }
 
 cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t fresh_bytes,
-                            void* host_ptr, const std::string& what) {
+                            void* host_ptr, const std::string& what, bool scratch) {
   check_allocation(bytes, info_.max_alloc_bytes, what);
   if (fail_at_ > 0 && what == fail_what_ && fail_count_ && ++*fail_count_ == fail_at_)
     throw CLError("clCreateBuffer(" + what + ", " + std::to_string(bytes) + " bytes)",
@@ -996,9 +997,18 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
       // The smallest that fits, preferring one last handed out for the same
       // `what`: a frame's requests keep their buffers from frame to frame
       // as their sizes drift, instead of taking each other's.
+      // A scratch request takes its own buffer (last handed out for the
+      // same `what`) up to four times its size: the turntable's views ask
+      // for the matching's segments in sizes that differ by more than the
+      // rule's two (the 256^3 phantom at 256^2: 31.1 to 50.1 MB over a
+      // half turn, made 1.25 times that), so each half turn dropped the
+      // largest and made three fresh ones (about 1 MB of new pages a frame
+      // in the matching's kernels; PERFORMANCE.md, "page faults in a frame").
+      const std::size_t most = 2 * bytes + 65536, own_most = 4 * bytes + 65536;
       Pool::Entry* best = nullptr;
       for (Pool::Entry& e : pool_->entries) {
-        if (e.flags != flags || e.bytes < bytes || e.bytes > 2 * bytes + 65536) continue;
+        if (e.flags != flags || e.bytes < bytes) continue;
+        if (e.bytes > (scratch && e.what == what ? own_most : most)) continue;
         if (e.busy) {
           // Held at the last close, perhaps only by the implementation:
           // PoCL drops a finished command's references to its buffers a
@@ -1063,8 +1073,10 @@ cl::Buffer Device::allocate(cl_mem_flags flags, std::size_t bytes, std::size_t f
                   is_allocation_failure(err) ? "the device (for a CPU device, the host) has no "
                                                "memory left for it"
                                              : "");
-  if (pooled && pool_->depth(std::this_thread::get_id()) > 0)
+  if (pooled && pool_->depth(std::this_thread::get_id()) > 0) {
     pool_->entries.push_back({b, flags, fresh_bytes, true, false, 0, what});
+    ++pool_->misses;
+  }
   return b;
 }
 
@@ -1156,6 +1168,12 @@ std::vector<Device::PooledBuffer> Device::pooled_buffers() const {
   std::lock_guard<std::mutex> lock(pool_->mutex);
   for (const Pool::Entry& e : pool_->entries) out.push_back({e.bytes, e.what, !e.busy});
   return out;
+}
+
+std::size_t Device::pool_misses() const {
+  if (!pool_) return 0;
+  std::lock_guard<std::mutex> lock(pool_->mutex);
+  return pool_->misses;
 }
 
 std::size_t Device::pooled_bytes() const {

@@ -1056,6 +1056,51 @@ TEST(DeviceTest, ReuseKeepSetsHowLongReleasedBuffersWait) {
   EXPECT_EQ(d.pooled_bytes(), 0u);  // four without it: released
 }
 
+// A scratch request takes its own buffer (last handed out for the same
+// `what`) up to 4 * bytes + 64 KiB, where any other request's bound is
+// 2 * bytes + 64 KiB: the turntable's matching asks for its segments in
+// sizes that drift by more than twice over a half turn (the 256^3 phantom
+// at 256^2: 31.1 to 50.1 MB), and with the bound of two the smallest view
+// dropped the largest buffer, so every half turn made three fresh ones
+// (tens of MB of new pages, a page fault per 4 KiB). Counted by
+// Device::pool_misses: a second turn makes none.
+TEST(DeviceTest, ScratchRequestsKeepTheirOwnBuffersOverATurn) {
+  SIMDVOL_REQUIRE_OPENCL();
+  Device d;
+  const auto rw = CL_MEM_READ_WRITE;
+  const std::size_t mib = std::size_t(1) << 20, grain = 65536;
+  auto size_of = [](const cl::Buffer& b) { return b.getInfo<CL_MEM_SIZE>(); };
+  // A turn's requests, one scope a frame, as the phantom's segments in MB
+  // scaled to MiB: up quickly, then slowly down. Fresh, 3.0 MiB makes 3.75
+  // (1.25 times, in 64 KiB), 3.9 makes 4.875 and 5.0 makes 6.25, more than
+  // twice 3.0 plus 64 KiB; the two smaller ones idle and are released while
+  // the requests are larger.
+  std::vector<std::size_t> turn;
+  for (const int tenths : {30, 30, 30, 39, 39, 39, 39, 50, 50, 50, 50, 45, 40, 35})
+    turn.push_back(tenths * mib / 10);
+  for (int t = 0; t < 3; ++t) {
+    const std::size_t before = d.pool_misses();
+    for (const std::size_t bytes : turn) {
+      Device::ReuseScope scope(d);
+      EXPECT_GE(size_of(d.scratch_buffer(rw, bytes, "segments")), bytes);
+    }
+    // The first turn makes the three; the rule of two made them again each turn.
+    EXPECT_EQ(d.pool_misses() - before, t == 0 ? 3u : 0u) << "fresh buffers in turn " << t;
+  }
+  EXPECT_EQ(d.pooled_bytes(), 100 * grain);  // the 6.25 MiB alone
+  {
+    Device::ReuseScope scope(d);
+    const std::size_t before = d.pool_misses();
+    // buffer() of the same `what`: the rule of two, a fresh one.
+    EXPECT_EQ(size_of(d.buffer(rw, 3 * mib, nullptr, "segments")), 3 * mib);
+    // Another scratch request: the rule of two, a fresh one.
+    EXPECT_EQ(size_of(d.scratch_buffer(rw, 3 * mib, "other")), 60 * grain);
+    // Less than a quarter of it (4 * 1.5 MiB + 64 KiB < 6.25 MiB): a fresh one.
+    EXPECT_EQ(size_of(d.scratch_buffer(rw, 3 * mib / 2, "segments")), 30 * grain);
+    EXPECT_EQ(d.pool_misses(), before + 3);
+  }
+}
+
 // The pool prefers the buffer last handed out for the same `what`, so
 // requests whose sizes drift keep their own buffers: without the
 // preference, "y" would take "x"'s smaller buffer and "x" would get none.

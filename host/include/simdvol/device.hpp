@@ -371,7 +371,10 @@ class Device {
   /// buffer fits, the fresh one is a quarter larger than asked (within the
   /// device's largest allocation), so that the next frames' slightly larger
   /// requests find it in the pool instead of touching new pages (on PoCL a
-  /// fresh buffer is new host memory: a page fault per 4 KiB in the kernels).
+  /// fresh buffer is new host memory: a page fault per 4 KiB in the kernels);
+  /// and a pooled buffer last handed out for the same `what` fits it up to
+  /// 4 * bytes + 64 KiB (not only 2 * bytes + 64 KiB), so that the views of a
+  /// turntable, whose requests drift by more than twice, keep theirs.
   cl::Buffer scratch_buffer(cl_mem_flags flags, std::size_t bytes, const std::string& what);
 
   /// Reuse of scratch buffers from frame to frame. A frame allocates tens of
@@ -423,6 +426,10 @@ class Device {
   void release(cl::Buffer& buffer);
   /// Bytes of buffers the pool holds (handed out or free), for tests.
   std::size_t pooled_bytes() const;
+  /// How many fresh buffers requests without a host pointer made while a
+  /// ReuseScope was open (none fitting in the pool), for tests: a frame
+  /// whose requests the pool met makes none.
+  std::size_t pool_misses() const;
   /// One buffer of the pool: its size, the request it was last handed out
   /// for, and whether it is free to be handed out (for tests).
   struct PooledBuffer {
@@ -473,7 +480,7 @@ class Device {
   void describe_self(int index, int platform_index, const std::string& platform);
   void read_fail_allocation();
   cl::Buffer allocate(cl_mem_flags flags, std::size_t bytes, std::size_t fresh_bytes,
-                      void* host_ptr, const std::string& what);
+                      void* host_ptr, const std::string& what, bool scratch);
 
   DeviceInfo info_;
   std::size_t wgs_ = 64;
